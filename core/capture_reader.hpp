@@ -1,0 +1,100 @@
+// Reads UDP payloads out of pcap and pcapng capture files (libpcap does the file formats).
+//
+// Link types: Ethernet (with any number of 802.1Q / 802.1ad VLAN tags), Linux cooked capture v1
+// (SLL) and v2 (SLL2), and raw IPv4. Network layer: IPv4 / UDP. Everything else (IPv6, ARP,
+// TCP, IP fragments, malformed headers) is skipped and counted in CaptureStats, never an error.
+//
+// End of input has three distinct outcomes:
+//   kEnd        the file ended cleanly after its last record;
+//   kTruncated  the file ends in the middle of a record (a recording cut off by a crash or a full
+//               disk): every complete record before it was yielded;
+//   kError      the file is corrupt (bad record header, ...): error() says what and where.
+// A file that cannot be opened or is not a capture at all makes the constructor throw.
+//
+// Not thread-safe; one reader per thread. A record's payload span is valid until the next call.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <stdexcept>
+#include <string>
+
+struct pcap;  // libpcap's handle, kept out of this header
+
+namespace pandarcap {
+
+class CaptureError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// IPv4 address and port, both in host byte order (192.168.1.201 = 0xC0A801C9).
+struct Endpoint {
+  std::uint32_t ip = 0;
+  std::uint16_t port = 0;
+  friend bool operator==(const Endpoint&, const Endpoint&) = default;
+};
+
+// "192.168.1.201:2368"
+std::string to_string(const Endpoint& endpoint);
+
+struct CaptureRecord {
+  std::span<const std::uint8_t> payload;  // UDP payload bytes present in the file
+  std::int64_t timestamp_ns = 0;          // record time, ns since the Unix epoch
+  Endpoint source;
+  Endpoint destination;
+  std::uint32_t udp_payload_length = 0;  // length the UDP header declares
+  bool snapped = false;  // the record holds fewer bytes than the datagram had (snaplen)
+};
+
+enum class CaptureStatus { kRecord, kEnd, kTruncated, kError };
+
+struct CaptureStats {
+  std::uint64_t records = 0;          // every record read from the file
+  std::uint64_t udp_datagrams = 0;    // records yielded (after the port filter)
+  std::uint64_t port_filtered = 0;    // UDP datagrams to another destination port
+  std::uint64_t non_ipv4 = 0;         // ARP, IPv6, unknown ethertypes / link protocols
+  std::uint64_t non_udp = 0;          // IPv4 but not UDP
+  std::uint64_t ip_fragments = 0;     // IPv4 fragments (not reassembled)
+  std::uint64_t malformed = 0;        // headers cut short or inconsistent
+  std::uint64_t snapped = 0;          // yielded datagrams with snapped == true
+};
+
+class CaptureReader {
+ public:
+  struct Options {
+    std::optional<std::uint16_t> destination_port;  // yield only datagrams to this port
+  };
+
+  // Opens `path` (pcap or pcapng). Throws CaptureError naming the file when it cannot be opened,
+  // is not a capture, or has an unsupported link type.
+  explicit CaptureReader(const std::string& path, Options options = {});
+  ~CaptureReader();
+  CaptureReader(const CaptureReader&) = delete;
+  CaptureReader& operator=(const CaptureReader&) = delete;
+
+  // Advances to the next UDP datagram. kRecord fills `out`; anything else is final.
+  CaptureStatus next(CaptureRecord& out);
+
+  const std::string& path() const noexcept { return path_; }
+  // Human-readable reason for kTruncated / kError (includes the file name).
+  const std::string& error() const noexcept { return error_; }
+  const CaptureStats& stats() const noexcept { return stats_; }
+  int link_type() const noexcept { return link_type_; }
+
+ private:
+  CaptureStatus finish(int pcap_status);  // records the final status of a failed pcap_next_ex
+
+  std::string path_;
+  Options options_;
+  pcap* handle_ = nullptr;
+  int link_type_ = 0;
+  bool nanosecond_ = false;
+  std::string error_;
+  CaptureStats stats_;
+  std::optional<CaptureStatus> final_status_;  // set once next() has returned a final status
+};
+
+}  // namespace pandarcap

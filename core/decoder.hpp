@@ -1,0 +1,96 @@
+// Scalar reference decoder: one validated packet -> points (spec §1.5, §2, §4.1).
+//
+// Per point: r = raw distance x 4 mm, elevation ω and azimuth offset from the calibration,
+//   α = block azimuth + offset [- RPM x 6e-6 x Δt(channel) when firing-time correction is on]
+//   x = r cos ω sin α,  y = r cos ω cos α,  z = r sin ω
+//   time = t0 + block offset - Δt(channel)
+// Worked example: channel 12 (index 11, nominal elevation 0°, offset -1.042°), block azimuth
+// 9104 (91.04°), raw distance 2500 (10 m): α = 90°, point (10, 0, 0).
+//
+// Filtering, counted by reason: raw distance 0 (no return), below min_range, above max_range.
+// Dual return (0x39): blocks (2k, 2k+1) are one firing, even = last, odd = strongest. When both
+// echoes of a channel survive the range filter and are byte-identical, or closer together than
+// dual_return_distance_threshold, only the odd block's copy is kept, labelled kLastStrongest.
+//
+// This decoder is deliberately plain (double precision, std::sin/cos per point): it is the
+// reference the SIMD decoder must match. It never allocates and never fails on a valid packet.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string_view>
+
+#include "calibration.hpp"
+#include "packet.hpp"
+#include "point.hpp"
+
+namespace pandarcap {
+
+inline constexpr int kMaxPointsPerPacket = kBlocks * kChannels;  // 400
+
+struct DecoderConfig {
+  double min_range_m = 0.3;
+  double max_range_m = 200.0;
+  double dual_return_distance_threshold_m = 0.1;
+  bool firing_time_correction = false;  // spec §2.4: <= 0.2° at 600 RPM
+};
+
+enum class FilterReason : std::uint8_t {
+  kNoReturn,       // raw distance 0
+  kBelowMinRange,
+  kAboveMaxRange,
+  kDualDuplicate,  // dual: identical to the strongest echo
+  kDualTooClose,   // dual: within dual_return_distance_threshold of the strongest echo
+};
+inline constexpr std::size_t kFilterReasonCount = 5;
+std::string_view to_string(FilterReason reason) noexcept;  // "no_return", ...
+
+struct FilterCounts {
+  std::array<std::uint64_t, kFilterReasonCount> by_reason{};
+  void add(FilterReason reason, std::uint64_t n = 1) noexcept {
+    by_reason[static_cast<std::size_t>(reason)] += n;
+  }
+  std::uint64_t operator[](FilterReason reason) const noexcept {
+    return by_reason[static_cast<std::size_t>(reason)];
+  }
+  std::uint64_t total() const noexcept;
+  FilterCounts& operator+=(const FilterCounts& other) noexcept;
+};
+
+// Where a packet's points went: points of block b are out[block_begin[b] .. block_begin[b+1]).
+struct DecodedPacket {
+  std::uint16_t point_count = 0;
+  std::array<std::uint16_t, kBlocks + 1> block_begin{};
+};
+
+class ScalarDecoder {
+ public:
+  ScalarDecoder(const Calibration& calibration, const DecoderConfig& config);
+
+  // Decodes a validated packet whose absolute time is t0_ns. Adds filtered counts to `filtered`.
+  DecodedPacket decode(const PacketView& packet, std::int64_t t0_ns,
+                       std::span<Point, kMaxPointsPerPacket> out, FilterCounts& filtered) const;
+
+  // Range of (corrected azimuth - block azimuth) over channels, in 0.01°, including the
+  // firing-time correction at up to `max_rpm`. The frame assembler uses it to know when no
+  // later point can still fall before the cut.
+  std::pair<int, int> relative_azimuth_bounds_cdeg(int max_rpm = 1500) const noexcept;
+
+  const DecoderConfig& config() const noexcept { return config_; }
+
+ private:
+  struct Channel {
+    double cos_elevation, sin_elevation, azimuth_offset_deg;
+    double firing_offset_us;
+  };
+  std::array<Channel, kChannels> channels_{};
+  DecoderConfig config_;
+  std::uint32_t min_range_raw_, max_range_raw_;  // inclusive limits in 4 mm units
+
+  bool in_range(std::uint16_t raw, FilterCounts& filtered) const noexcept;
+  Point make_point(const PacketView& packet, int block, int channel, std::int64_t t0_ns,
+                   ReturnType type) const noexcept;
+};
+
+}  // namespace pandarcap

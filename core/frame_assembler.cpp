@@ -1,0 +1,174 @@
+#include "frame_assembler.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace pandarcap {
+
+namespace {
+
+constexpr std::int64_t kFullCircle = 36000;
+// An azimuth step larger than this between consecutive blocks is not rotation but a
+// discontinuity (long loss, a restarted sensor, a foreign stream).
+constexpr int kMaxStepCdeg = 9000;
+
+std::int64_t floor_div(std::int64_t a, std::int64_t b) {
+  const std::int64_t q = a / b;
+  return (a % b != 0 && (a < 0) != (b < 0)) ? q - 1 : q;
+}
+
+// a - b on the circle, in [-18000, 18000).
+int signed_step(int a, int b) {
+  int d = (a - b) % 36000;
+  if (d < -18000) d += 36000;
+  if (d >= 18000) d -= 36000;
+  return d;
+}
+
+}  // namespace
+
+FrameAssembler::FrameAssembler(const FrameAssemblerConfig& config, FrameSink& sink)
+    : config_(config), sink_(sink) {
+  double cut = std::fmod(config.cut_angle_deg, 360.0);
+  if (cut < 0) cut += 360.0;
+  cut_cdeg_ = static_cast<int>(std::lround(cut * 100)) % 36000;
+}
+
+void FrameAssembler::start_stream(std::uint16_t azimuth_cdeg) {
+  started_ = true;
+  position_ = (azimuth_cdeg - cut_cdeg_ + kFullCircle) % kFullCircle;
+  start_position_ = position_;
+  next_open_index_ = floor_div(position_ + config_.relative_azimuth_min_cdeg, kFullCircle);
+}
+
+void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> points,
+                                const DecodedPacket& layout) {
+  ++packet_counter_;
+  if (started_ && meta.time_valid && previous_time_valid_ && meta.motor_rpm > 0) {
+    // More than half a revolution without packets: whole revolutions may be missing, which the
+    // azimuth alone cannot tell.
+    const std::int64_t half_revolution_ns = 30'000'000'000LL / meta.motor_rpm;
+    const std::int64_t gap = meta.t0_ns - previous_t0_ns_;
+    if (gap > half_revolution_ns || gap < -half_revolution_ns) {
+      ++stats_.discontinuities;
+      flush();
+    }
+  }
+  previous_t0_ns_ = meta.t0_ns;
+  previous_time_valid_ = meta.time_valid;
+
+  for (int b = 0; b < kBlocks; ++b) {
+    const std::uint16_t azimuth = meta.block_azimuth_cdeg[b];
+    if (!started_) {
+      start_stream(azimuth);
+    } else {
+      const int step = signed_step(azimuth, previous_azimuth_);
+      if (std::abs(step) > kMaxStepCdeg) {
+        ++stats_.discontinuities;
+        flush();
+        start_stream(azimuth);
+      } else {
+        if (step < 0) ++stats_.azimuth_backward_steps;
+        position_ += step;
+      }
+    }
+    previous_azimuth_ = azimuth;
+
+    for (std::size_t i = layout.block_begin[b]; i < layout.block_begin[b + 1]; ++i) {
+      const Point& point = points[i];
+      const std::int64_t u = position_ + signed_step(point.azimuth_cdeg, azimuth);
+      Slot* slot = slot_for(floor_div(u, kFullCircle));
+      if (slot == nullptr) {
+        ++stats_.points_late;
+      } else {
+        add_point(*slot, point, meta);
+      }
+    }
+
+    // Frames that no channel can reach any more are done.
+    const std::int64_t reachable =
+        floor_div(position_ + config_.relative_azimuth_min_cdeg, kFullCircle);
+    if (reachable > next_open_index_) close_through(reachable - 1, false);
+  }
+}
+
+FrameAssembler::Slot* FrameAssembler::slot_for(std::int64_t frame_index) {
+  if (frame_index < next_open_index_) return nullptr;
+  for (Slot& slot : slots_) {
+    if (slot.in_use && slot.index == frame_index) return &slot;
+  }
+  // Only two frames can be open; a point beyond them means the older one is finished.
+  if (frame_index >= next_open_index_ + 2) close_through(frame_index - 2, false);
+  Slot* slot = slots_[0].in_use ? &slots_[1] : &slots_[0];
+  *slot = Slot{};
+  slot->in_use = true;
+  slot->index = frame_index;
+  slot->frame = sink_.acquire_frame();
+  const std::uint64_t sequence = frame_sequence_++;
+  if (slot->frame == nullptr) {
+    slot->dropped = true;
+    ++stats_.frames_dropped;
+  } else {
+    slot->frame->reset();
+    slot->frame->info.sequence = sequence;
+  }
+  return slot;
+}
+
+void FrameAssembler::add_point(Slot& slot, const Point& point, const PacketMeta& meta) {
+  if (slot.dropped) {
+    ++stats_.points_dropped_no_frame;
+    return;
+  }
+  Frame& frame = *slot.frame;
+  FrameInfo& info = frame.info;
+  if (slot.last_packet != packet_counter_) {
+    slot.last_packet = packet_counter_;
+    slot.rpm_sum += meta.motor_rpm;
+    ++info.packets;
+    info.return_mode = meta.return_mode;
+    info.time_valid = info.time_valid && meta.time_valid;
+  }
+  if (frame.size == frame.points.size()) {
+    ++stats_.points_dropped_full;
+    ++info.points_dropped;
+    return;
+  }
+  frame.points[frame.size++] = point;
+  if (info.points == 0 || point.timestamp_ns < info.start_ns) info.start_ns = point.timestamp_ns;
+  if (info.points == 0 || point.timestamp_ns > info.end_ns) info.end_ns = point.timestamp_ns;
+  ++info.points;
+}
+
+void FrameAssembler::close_slot(Slot& slot, bool partial) {
+  // A frame is whole only if the stream had started before the frame began for every channel.
+  const bool started_late =
+      slot.index * kFullCircle < start_position_ + config_.relative_azimuth_max_cdeg;
+  if (!slot.dropped) {
+    FrameInfo& info = slot.frame->info;
+    info.partial = partial || started_late;
+    info.rpm = info.packets > 0 ? slot.rpm_sum / info.packets : 0;
+    ++(info.partial ? stats_.frames_partial : stats_.frames_complete);
+    sink_.frame_done(*slot.frame);
+  }
+  slot = Slot{};
+}
+
+void FrameAssembler::close_through(std::int64_t frame_index, bool partial) {
+  // Oldest first, so frames leave in the order they were started.
+  Slot* order[2] = {&slots_[0], &slots_[1]};
+  if (slots_[1].in_use && (!slots_[0].in_use || slots_[1].index < slots_[0].index)) {
+    std::swap(order[0], order[1]);
+  }
+  for (Slot* slot : order) {
+    if (slot->in_use && slot->index <= frame_index) close_slot(*slot, partial);
+  }
+  next_open_index_ = std::max(next_open_index_, frame_index + 1);
+}
+
+void FrameAssembler::flush() {
+  if (started_) close_through(next_open_index_ + 2, true);
+  started_ = false;
+}
+
+}  // namespace pandarcap

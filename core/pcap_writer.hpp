@@ -1,0 +1,49 @@
+// Writes UDP payloads as a classic pcap file (LINKTYPE_ETHERNET, microsecond timestamps) with
+// synthesised Ethernet / IPv4 / UDP headers, so that Wireshark, tcpdump, tcpreplay and LidarView
+// read the recording like one taken on the wire.
+//
+// Synthesised headers: Ethernet 02:00:00:00:00:02 <- 02:00:00:00:00:01, ethertype IPv4; IPv4 with
+// a correct header checksum, TTL 64, DF set, incrementing identification; UDP checksum 0 ("not
+// computed", legal for IPv4).
+//
+// Errors: every failing write throws std::system_error carrying errno and the file name. Nothing
+// is buffered past flush(); close() (or the destructor) flushes. Not thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <span>
+#include <string>
+
+#include "capture_reader.hpp"
+
+namespace pandarcap {
+
+class PcapWriter {
+ public:
+  // Creates (truncates) `path` and writes the pcap global header. Throws std::system_error.
+  explicit PcapWriter(const std::string& path);
+  ~PcapWriter();
+  PcapWriter(const PcapWriter&) = delete;
+  PcapWriter& operator=(const PcapWriter&) = delete;
+
+  // Appends one record. `timestamp_ns` is truncated to microseconds. Payloads longer than a UDP
+  // datagram can carry (65507 bytes) throw std::invalid_argument.
+  void write(std::span<const std::uint8_t> udp_payload, std::int64_t timestamp_ns,
+             Endpoint source, Endpoint destination);
+  void flush();
+  void close();
+
+  std::uint64_t records() const noexcept { return records_; }
+  std::uint64_t bytes() const noexcept { return bytes_; }  // file size so far
+  const std::string& path() const noexcept { return path_; }
+
+ private:
+  std::string path_;
+  std::FILE* file_ = nullptr;
+  std::uint16_t ip_id_ = 0;
+  std::uint64_t records_ = 0;
+  std::uint64_t bytes_ = 0;
+};
+
+}  // namespace pandarcap

@@ -1,0 +1,66 @@
+#include "stream_decoder.hpp"
+
+#include <algorithm>
+
+namespace pandarcap {
+
+std::uint64_t StreamStats::rejected() const noexcept {
+  std::uint64_t sum = 0;
+  for (std::size_t i = 1; i < kRejectReasonCount; ++i) sum += rejects[i];
+  return sum;
+}
+
+namespace {
+
+FrameAssemblerConfig assembler_config(const ScalarDecoder& decoder, double cut_angle_deg) {
+  const auto [lo, hi] = decoder.relative_azimuth_bounds_cdeg();
+  return {cut_angle_deg, lo, hi};
+}
+
+}  // namespace
+
+StreamDecoder::StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
+                             FrameSink& sink)
+    : decoder_(calibration, config.decoder),
+      assembler_(assembler_config(decoder_, config.cut_angle_deg), sink) {}
+
+RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
+  ++stats_.packets;
+  const RejectReason reason = validate(payload);
+  ++stats_.rejects[static_cast<std::size_t>(reason)];
+  if (reason != RejectReason::kNone) return reason;
+  ++stats_.accepted;
+
+  const PacketView packet = PacketView::assume_valid(payload);
+  const std::uint16_t rpm = packet.motor_rpm();
+  const ReturnMode mode = packet.return_mode();
+  stats_.rpm_min = stats_.accepted == 1 ? rpm : std::min(stats_.rpm_min, rpm);
+  stats_.rpm_max = stats_.accepted == 1 ? rpm : std::max(stats_.rpm_max, rpm);
+  if (stats_.return_mode && *stats_.return_mode != mode) ++stats_.return_mode_changes;
+  stats_.return_mode = mode;
+  if (packet.tail_bytes()[5] != 0) ++stats_.high_temperature;
+  if (const auto sequence = packet.sequence()) {
+    ++stats_.sequence_packets;
+    sequence_.observe(*sequence);
+  }
+
+  const PacketTime time = clock_.convert(packet.utc(), packet.timestamp_us());
+  if (time.status == PacketTimeStatus::kBadDate) ++stats_.bad_date;
+  if (time.status == PacketTimeStatus::kBadMicroseconds) ++stats_.bad_microseconds;
+  if (previous_t0_ns_ && *previous_t0_ns_ == time.t0_ns) ++stats_.static_timestamps;
+  previous_t0_ns_ = time.t0_ns;
+
+  const DecodedPacket decoded = decoder_.decode(packet, time.t0_ns, points_, stats_.filtered);
+  stats_.points += decoded.point_count;
+
+  PacketMeta meta;
+  for (int b = 0; b < kBlocks; ++b) meta.block_azimuth_cdeg[b] = packet.azimuth_cdeg(b);
+  meta.t0_ns = time.t0_ns;
+  meta.time_valid = time.valid();
+  meta.motor_rpm = rpm;
+  meta.return_mode = mode;
+  assembler_.add_packet(meta, std::span<const Point>(points_).first(decoded.point_count), decoded);
+  return RejectReason::kNone;
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,76 @@
+// The decode path for a stream of payloads, as one pure object: validate -> tail -> packet time
+// -> scalar decode -> frame assembly, counting everything on the way. The daemon's decode worker,
+// pandarcap-inspect and the tests all run packets through this.
+//
+// Counting rules (so every payload is accounted for):
+//   packets = accepted + sum(rejects)
+//   every channel slot of an accepted packet is a point or a filtered count (by reason).
+// Not thread-safe; one per decode thread. No allocation after construction.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+
+#include "calibration.hpp"
+#include "decoder.hpp"
+#include "frame_assembler.hpp"
+#include "packet.hpp"
+#include "packet_time.hpp"
+#include "sequence_tracker.hpp"
+
+namespace pandarcap {
+
+struct StreamDecoderConfig {
+  DecoderConfig decoder;
+  double cut_angle_deg = 0.0;
+};
+
+struct StreamStats {
+  std::uint64_t packets = 0;
+  std::uint64_t accepted = 0;
+  std::array<std::uint64_t, kRejectReasonCount> rejects{};  // indexed by RejectReason
+  std::uint64_t bad_date = 0;            // accepted, absolute time invalid (date out of range)
+  std::uint64_t bad_microseconds = 0;    // accepted, µs field > 1'000'000
+  std::uint64_t static_timestamps = 0;   // packet time did not advance from the previous packet
+  std::uint64_t high_temperature = 0;    // packets with the shutdown flag set
+  std::uint64_t return_mode_changes = 0;
+  std::uint64_t sequence_packets = 0;    // accepted packets that carried a UDP sequence
+  std::optional<ReturnMode> return_mode;  // of the last accepted packet
+  std::uint16_t rpm_min = 0, rpm_max = 0;  // over accepted packets (0 before the first)
+  std::uint64_t points = 0;
+  FilterCounts filtered;
+
+  std::uint64_t rejected() const noexcept;
+  std::uint64_t rejects_for(RejectReason r) const noexcept {
+    return rejects[static_cast<std::size_t>(r)];
+  }
+};
+
+class StreamDecoder {
+ public:
+  StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
+                FrameSink& sink);
+
+  // Processes one UDP payload; returns why it was rejected, or kNone.
+  RejectReason process(std::span<const std::uint8_t> payload);
+  // End of stream: open frames are finished as partial.
+  void flush() { assembler_.flush(); }
+
+  const StreamStats& stats() const noexcept { return stats_; }
+  const SequenceStats& sequence() const noexcept { return sequence_.stats(); }
+  const AssemblerStats& frames() const noexcept { return assembler_.stats(); }
+  const ScalarDecoder& decoder() const noexcept { return decoder_; }
+
+ private:
+  ScalarDecoder decoder_;
+  FrameAssembler assembler_;
+  PacketClock clock_;
+  SequenceTracker sequence_;
+  StreamStats stats_;
+  std::optional<std::int64_t> previous_t0_ns_;
+  std::array<Point, kMaxPointsPerPacket> points_{};
+};
+
+}  // namespace pandarcap

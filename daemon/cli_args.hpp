@@ -1,0 +1,80 @@
+// A small command-line reader shared by the binaries: walks argv, takes option values, and turns
+// every mistake into one line on stderr plus exit status 64 (EX_USAGE). `-h`/`--help` print the
+// usage text and exit 0.
+#pragma once
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <string_view>
+
+#include <fmt/format.h>
+
+namespace pandarcap {
+
+class CliArgs {
+ public:
+  CliArgs(int argc, char** argv, std::string_view usage)
+      : argc_(argc), argv_(argv), usage_(usage), program_(argc > 0 ? argv[0] : "pandarcap") {
+    if (const auto slash = program_.rfind('/'); slash != std::string_view::npos) {
+      program_.remove_prefix(slash + 1);
+    }
+  }
+
+  bool more() const { return index_ < argc_; }
+
+  // The next argument; handles --help itself.
+  std::string_view next() {
+    std::string_view arg = argv_[index_++];
+    if (arg == "-h" || arg == "--help") {
+      std::fwrite(usage_.data(), 1, usage_.size(), stdout);
+      std::exit(0);
+    }
+    return arg;
+  }
+
+  std::string_view value(std::string_view option) {
+    if (!more()) usage_error(fmt::format("{} needs a value", option));
+    return argv_[index_++];
+  }
+
+  long long integer(std::string_view option, long long min, long long max) {
+    const std::string_view text = value(option);
+    long long result = 0;
+    const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), result);
+    if (ec != std::errc() || ptr != text.data() + text.size() || result < min || result > max) {
+      usage_error(fmt::format("{} takes a whole number from {} to {}, got '{}'", option, min, max,
+                              text));
+    }
+    return result;
+  }
+
+  double number(std::string_view option, double min, double max) {
+    const std::string_view text = value(option);
+    double result = 0;
+    const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), result);
+    if (ec != std::errc() || ptr != text.data() + text.size() || !std::isfinite(result) ||
+        result < min || result > max) {
+      usage_error(fmt::format("{} takes a number from {} to {}, got '{}'", option, min, max, text));
+    }
+    return result;
+  }
+
+  [[noreturn]] void usage_error(const std::string& message) const {
+    std::fprintf(stderr, "%.*s: %s\nTry '%.*s --help'.\n", static_cast<int>(program_.size()),
+                 program_.data(), message.c_str(), static_cast<int>(program_.size()),
+                 program_.data());
+    std::exit(64);
+  }
+
+ private:
+  int argc_;
+  char** argv_;
+  std::string_view usage_;
+  std::string_view program_;
+  int index_ = 1;
+};
+
+}  // namespace pandarcap

@@ -1,0 +1,300 @@
+// pandarcap-inspect: per-packet field dump and summary of a Pandar40P capture (pcap / pcapng).
+//
+// Exit status: 0 the capture was read to its end (cleanly or truncated: see "capture_status"),
+// 1 the capture is corrupt part-way (what was read is still summarised), 2 the capture or the
+// calibration file cannot be used, 64 bad command line.
+#include <cstdio>
+#include <cstdlib>
+#include <exception>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/calibration.hpp"
+#include "core/capture_reader.hpp"
+#include "core/frame_collector.hpp"
+#include "core/packet.hpp"
+#include "core/stream_decoder.hpp"
+#include "daemon/cli_args.hpp"
+
+namespace {
+
+using namespace pandarcap;
+using nlohmann::json;
+
+constexpr std::string_view kUsage = R"(Usage: pandarcap-inspect [options] FILE
+
+Dumps the fields of every Pandar40P packet in a pcap or pcapng capture, then a summary
+(packets, rejects by reason, frames, points per frame, RPM range, sequence gaps).
+
+Options:
+  --json                 one JSON object: {"packets": [...], "frames": [...], "summary": {...}}
+  --summary              print only the summary (no per-packet lines)
+  --calibration FILE     angle-correction CSV (default: the nominal Pandar40P table)
+  --port N               only UDP datagrams to destination port N (default: any port)
+  --cut-angle DEG        frame cut angle in degrees (default 0)
+  --min-range M          drop points closer than M metres (default 0.3)
+  --max-range M          drop points farther than M metres (default 200)
+  --dual-return-distance-threshold M
+                         merge dual echoes closer than M metres (default 0.1)
+  --firing-time-correction
+                         correct each channel's azimuth for its firing time (default off)
+  -h, --help             this text
+
+Exit status: 0 read to the end (see capture_status: "end" or "truncated"), 1 the capture is
+corrupt part-way (what was read is summarised), 2 the capture or calibration cannot be used,
+64 bad command line.
+)";
+
+struct Options {
+  std::string file;
+  bool json_output = false;
+  bool summary_only = false;
+  std::optional<std::string> calibration;
+  std::optional<std::uint16_t> port;
+  StreamDecoderConfig decode;
+};
+
+Options parse_options(int argc, char** argv) {
+  Options options;
+  CliArgs args(argc, argv, kUsage);
+  while (args.more()) {
+    const std::string_view arg = args.next();
+    if (arg == "--json") {
+      options.json_output = true;
+    } else if (arg == "--summary") {
+      options.summary_only = true;
+    } else if (arg == "--calibration") {
+      options.calibration = std::string(args.value(arg));
+    } else if (arg == "--port") {
+      options.port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
+    } else if (arg == "--cut-angle") {
+      options.decode.cut_angle_deg = args.number(arg, 0.0, 360.0);
+    } else if (arg == "--min-range") {
+      options.decode.decoder.min_range_m = args.number(arg, 0.0, 262.14);
+    } else if (arg == "--max-range") {
+      options.decode.decoder.max_range_m = args.number(arg, 0.0, 262.14);
+    } else if (arg == "--dual-return-distance-threshold") {
+      options.decode.decoder.dual_return_distance_threshold_m = args.number(arg, 0.0, 262.14);
+    } else if (arg == "--firing-time-correction") {
+      options.decode.decoder.firing_time_correction = true;
+    } else if (!arg.empty() && arg[0] == '-') {
+      args.usage_error(fmt::format("unknown option '{}'", arg));
+    } else if (options.file.empty()) {
+      options.file = arg;
+    } else {
+      args.usage_error(fmt::format("unexpected argument '{}'", arg));
+    }
+  }
+  if (options.file.empty()) args.usage_error("no capture file given");
+  if (options.decode.decoder.min_range_m > options.decode.decoder.max_range_m) {
+    args.usage_error("--min-range is larger than --max-range");
+  }
+  return options;
+}
+
+std::string format_utc(const TailDateTime& utc) {
+  return fmt::format("{:04}-{:02}-{:02}T{:02}:{:02}:{:02}Z", 2000 + utc.year_since_2000, utc.month,
+                     utc.day, utc.hour, utc.minute, utc.second);
+}
+
+json packet_json(std::uint64_t index, const CaptureRecord& record, RejectReason reason) {
+  json j;
+  j["index"] = index;
+  j["record_time_ns"] = record.timestamp_ns;
+  j["source"] = to_string(record.source);
+  j["destination"] = to_string(record.destination);
+  j["size"] = record.payload.size();
+  j["status"] = reason == RejectReason::kNone ? "ok" : std::string(to_string(reason));
+  // Fields are shown for accepted packets only: a rejected payload's bytes mean nothing.
+  if (reason != RejectReason::kNone) return j;
+  const PacketView packet = PacketView::assume_valid(record.payload);
+  const Tail tail = packet.tail();
+  j["markers_ok"] = true;
+  j["azimuth_first_cdeg"] = packet.azimuth_cdeg(0);
+  j["azimuth_last_cdeg"] = packet.azimuth_cdeg(kBlocks - 1);
+  j["rpm"] = tail.motor_rpm;
+  j["timestamp_us"] = tail.timestamp_us;
+  j["return_mode"] = to_string(packet.return_mode());
+  j["factory"] = tail.factory;
+  j["utc"] = format_utc(tail.utc);
+  j["sequence"] = tail.sequence ? json(*tail.sequence) : json(nullptr);
+  j["status_id"] = tail.status_id;
+  j["status_value"] = tail.status_value;
+  j["high_temperature"] = tail.high_temperature;
+  return j;
+}
+
+std::string packet_line(const json& p) {
+  if (p["status"] != "ok") {
+    return fmt::format("{:>6} {:>5} REJECTED {}", p["index"].get<std::uint64_t>(),
+                       p["size"].get<std::size_t>(), p["status"].get<std::string>());
+  }
+  const std::string sequence = p["sequence"].is_null()
+                                   ? std::string("-")
+                                   : std::to_string(p["sequence"].get<std::uint32_t>());
+  return fmt::format("{:>6} {:>5} {:>7.2f} {:>7.2f} {:>5} {:>8} {:>9} 0x{:02x} {} {:>10} {:>3} {:>5}{}",
+                     p["index"].get<std::uint64_t>(), p["size"].get<std::size_t>(),
+                     p["azimuth_first_cdeg"].get<int>() / 100.0,
+                     p["azimuth_last_cdeg"].get<int>() / 100.0, p["rpm"].get<int>(),
+                     p["timestamp_us"].get<std::uint32_t>(), p["return_mode"].get<std::string>(),
+                     p["factory"].get<int>(), p["utc"].get<std::string>(), sequence,
+                     p["status_id"].get<int>(), p["status_value"].get<int>(),
+                     p["high_temperature"].get<bool>() ? " HIGH-TEMP" : "");
+}
+
+json frame_json(const FrameInfo& info) {
+  return {{"sequence", info.sequence},     {"points", info.points},
+          {"packets", info.packets},       {"rpm", info.rpm},
+          {"start_ns", info.start_ns},     {"end_ns", info.end_ns},
+          {"partial", info.partial},       {"time_valid", info.time_valid},
+          {"return_mode", to_string(info.return_mode)}};
+}
+
+std::string_view status_name(CaptureStatus status) {
+  switch (status) {
+    case CaptureStatus::kEnd:
+      return "end";
+    case CaptureStatus::kTruncated:
+      return "truncated";
+    case CaptureStatus::kError:
+      return "error";
+    case CaptureStatus::kRecord:
+      break;
+  }
+  return "reading";
+}
+
+int run(const Options& options) {
+  Calibration calibration = Calibration::nominal();
+  if (options.calibration) calibration = Calibration::load(*options.calibration);
+  CaptureReader reader(options.file, CaptureReader::Options{options.port});
+
+  json frames = json::array();
+  json points_per_complete_frame = json::array();
+  json packets_per_frame = json::array();
+  FrameCollector collector(3, kDefaultFrameCapacityPoints, [&](const Frame& frame) {
+    frames.push_back(frame_json(frame.info));
+    if (!frame.info.partial) points_per_complete_frame.push_back(frame.info.points);
+    packets_per_frame.push_back(frame.info.packets);
+  });
+  StreamDecoder decoder(calibration, options.decode, collector);
+
+  const bool per_packet = !options.summary_only;
+  if (per_packet && !options.json_output) {
+    fmt::print("{:>6} {:>5} {:>7} {:>7} {:>5} {:>8} {:>9} {:>4} {:20} {:>10} {:>3} {:>5}\n", "#",
+               "size", "az0", "az9", "rpm", "us", "mode", "fac", "utc", "sequence", "sid",
+               "svalue");
+  }
+  json packets = json::array();
+  CaptureRecord record;
+  CaptureStatus status;
+  std::uint64_t index = 0;
+  std::uint64_t snapped = 0;
+  while ((status = reader.next(record)) == CaptureStatus::kRecord) {
+    if (record.snapped) ++snapped;
+    const RejectReason reason = decoder.process(record.payload);
+    if (per_packet) {
+      json p = packet_json(index, record, reason);
+      if (options.json_output) {
+        packets.push_back(std::move(p));
+      } else {
+        fmt::print("{}\n", packet_line(p));
+      }
+    }
+    ++index;
+  }
+  decoder.flush();
+
+  const StreamStats& s = decoder.stats();
+  const SequenceStats& seq = decoder.sequence();
+  const AssemblerStats& fs = decoder.frames();
+  json rejects = json::object();
+  for (std::size_t r = 1; r < kRejectReasonCount; ++r) {
+    rejects[std::string(to_string(static_cast<RejectReason>(r)))] = s.rejects[r];
+  }
+  json filtered = json::object();
+  for (std::size_t r = 0; r < kFilterReasonCount; ++r) {
+    filtered[std::string(to_string(static_cast<FilterReason>(r)))] = s.filtered.by_reason[r];
+  }
+  const CaptureStats& cs = reader.stats();
+  json summary = {
+      {"file", options.file},
+      {"capture_status", status_name(status)},
+      {"capture_error", reader.error()},
+      {"calibration", calibration.source},
+      {"packets", s.packets},
+      {"accepted", s.accepted},
+      {"rejected", s.rejected()},
+      {"rejects", rejects},
+      {"rpm_min", s.rpm_min},
+      {"rpm_max", s.rpm_max},
+      {"return_mode", s.return_mode ? json(to_string(*s.return_mode)) : json(nullptr)},
+      {"return_mode_changes", s.return_mode_changes},
+      {"sequence_present", s.sequence_packets > 0},
+      {"sequence_gaps", seq.gaps},
+      {"sequence_lost", seq.lost},
+      {"sequence_duplicates", seq.duplicates},
+      {"sequence_reordered", seq.reordered},
+      {"sequence_resets", seq.resets},
+      {"bad_date", s.bad_date},
+      {"bad_microseconds", s.bad_microseconds},
+      {"static_timestamps", s.static_timestamps},
+      {"high_temperature_packets", s.high_temperature},
+      {"points", s.points},
+      {"filtered", filtered},
+      {"frames_complete", fs.frames_complete},
+      {"frames_partial", fs.frames_partial},
+      {"frames_dropped", fs.frames_dropped},
+      {"points_per_complete_frame", points_per_complete_frame},
+      {"packets_per_frame", packets_per_frame},
+      {"discontinuities", fs.discontinuities},
+      {"points_late", fs.points_late},
+      {"capture",
+       {{"records", cs.records},
+        {"udp_datagrams", cs.udp_datagrams},
+        {"port_filtered", cs.port_filtered},
+        {"non_ipv4", cs.non_ipv4},
+        {"non_udp", cs.non_udp},
+        {"ip_fragments", cs.ip_fragments},
+        {"malformed", cs.malformed},
+        {"snapped", snapped}}},
+  };
+
+  if (options.json_output) {
+    json out = {{"summary", summary}, {"frames", frames}};
+    if (per_packet) out["packets"] = std::move(packets);
+    fmt::print("{}\n", out.dump(2));
+  } else {
+    fmt::print("\nsummary of {} ({}){}\n", options.file, status_name(status),
+               reader.error().empty() ? "" : ": " + reader.error());
+    fmt::print("  packets {}  accepted {}  rejected {}", s.packets, s.accepted, s.rejected());
+    for (auto& [name, count] : rejects.items()) {
+      if (count.get<std::uint64_t>() > 0) fmt::print("  {} {}", name, count.get<std::uint64_t>());
+    }
+    fmt::print("\n  return mode {}  rpm {}..{}  sequence {}", summary["return_mode"].dump(),
+               s.rpm_min, s.rpm_max, s.sequence_packets > 0 ? "present" : "absent");
+    if (s.sequence_packets > 0) fmt::print(" (gaps {}, lost {})", seq.gaps, seq.lost);
+    fmt::print("\n  frames complete {}  partial {}  points per complete frame {}\n",
+               fs.frames_complete, fs.frames_partial, points_per_complete_frame.dump());
+    fmt::print("  packets per frame {}\n  calibration {}\n", packets_per_frame.dump(),
+               calibration.source);
+  }
+  return status == CaptureStatus::kError ? 1 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Options options = parse_options(argc, argv);
+  try {
+    return run(options);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "pandarcap-inspect: %s\n", e.what());
+    return 2;
+  }
+}
