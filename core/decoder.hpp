@@ -4,8 +4,8 @@
 //   α = block azimuth + offset [- RPM x 6e-6 x Δt(channel) when firing-time correction is on]
 //   x = r cos ω sin α,  y = r cos ω cos α,  z = r sin ω
 //   time = t0 + block offset - Δt(channel)
-// Worked example: channel 12 (index 11, nominal elevation 0°, offset -1.042°), block azimuth
-// 9104 (91.04°), raw distance 2500 (10 m): α = 90°, point (10, 0, 0).
+// Worked example: channel 1 (index 0, nominal elevation 15°, offset -1.042°), block azimuth
+// 9104 (91.04°), raw distance 2500 (10 m): α = 89.998°, point ≈ (9.659, 0.0003, 2.588) m.
 //
 // Filtering, counted by reason: raw distance 0 (no return), below min_range, above max_range.
 // Dual return (0x39): blocks (2k, 2k+1) are one firing, even = last, odd = strongest. When both

@@ -15,7 +15,7 @@ namespace pandarcap {
 inline constexpr std::size_t kDefaultFrameCapacityPoints = 1800 * 40 * 2 * 5 / 4;
 
 struct FrameInfo {
-  std::uint64_t sequence = 0;      // 0, 1, 2, ... in the order frames were started
+  std::uint64_t sequence = 0;      // 0, 1, 2, ... in revolution order; a gap = a dropped frame
   std::int64_t start_ns = 0;       // earliest point time
   std::int64_t end_ns = 0;         // latest point time
   std::uint32_t points = 0;

@@ -104,13 +104,11 @@ FrameAssembler::Slot* FrameAssembler::slot_for(std::int64_t frame_index) {
   slot->in_use = true;
   slot->index = frame_index;
   slot->frame = sink_.acquire_frame();
-  const std::uint64_t sequence = frame_sequence_++;
   if (slot->frame == nullptr) {
     slot->dropped = true;
     ++stats_.frames_dropped;
   } else {
     slot->frame->reset();
-    slot->frame->info.sequence = sequence;
   }
   return slot;
 }
@@ -144,8 +142,11 @@ void FrameAssembler::close_slot(Slot& slot, bool partial) {
   // A frame is whole only if the stream had started before the frame began for every channel.
   const bool started_late =
       slot.index * kFullCircle < start_position_ + config_.relative_azimuth_max_cdeg;
+  // Numbered when finished, i.e. in revolution order; a dropped frame uses up its number too.
+  const std::uint64_t sequence = frame_sequence_++;
   if (!slot.dropped) {
     FrameInfo& info = slot.frame->info;
+    info.sequence = sequence;
     info.partial = partial || started_late;
     info.rpm = info.packets > 0 ? slot.rpm_sum / info.packets : 0;
     ++(info.partial ? stats_.frames_partial : stats_.frames_complete);

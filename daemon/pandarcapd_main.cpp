@@ -5,6 +5,7 @@
 // printing one line per frame and a summary. Live UDP capture is not implemented yet.
 //
 // Start-up order: options -> logging -> calibration -> source -> decode -> summary.
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
@@ -14,6 +15,7 @@
 #include <system_error>
 
 #include <fmt/format.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include "core/calibration.hpp"
@@ -155,7 +157,8 @@ std::filesystem::path record_simulation(const Options& o, const Calibration& cal
   PcapWriter writer(path.string());
   const Endpoint source{0xC0A801C9, 2368};       // 192.168.1.201, the sensor's factory address
   const Endpoint destination{0xC0A8010A, 2368};  // 192.168.1.10
-  const auto packets = static_cast<std::uint64_t>(o.duration_s * 1e9 / static_cast<double>(sensor.packet_period_ns()));
+  const auto packets =
+      static_cast<std::uint64_t>(std::llround(o.duration_s * 1e9 / static_cast<double>(sensor.packet_period_ns())));
   std::array<std::uint8_t, kMaxPacketBytes> buffer{};
   for (std::uint64_t i = 0; i < packets; ++i) {
     const std::size_t size = sensor.next(buffer);
@@ -222,6 +225,8 @@ int run(const Options& o) {
 
 int main(int argc, char** argv) {
   const Options options = parse_options(argc, argv);
+  // Logs go to stderr; stdout carries the frame lines and the summary.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("pandarcapd"));
   spdlog::set_level(options.log_level);
   try {
     return run(options);

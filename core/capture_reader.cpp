@@ -1,0 +1,236 @@
+#include "capture_reader.hpp"
+
+#include <pcap/pcap.h>
+
+#include <algorithm>
+#include <limits>
+
+namespace pandarcap {
+namespace {
+
+constexpr std::uint16_t kEthertypeIpv4 = 0x0800;
+constexpr std::uint16_t kEthertypeVlan = 0x8100;        // 802.1Q C-tag
+constexpr std::uint16_t kEthertypeQinQ = 0x88A8;        // 802.1ad S-tag
+constexpr std::uint16_t kEthertypeQinQLegacy = 0x9100;  // pre-802.1ad S-tag, still seen
+constexpr std::size_t kVlanTagBytes = 4;                // TCI (2) + inner ethertype (2)
+
+constexpr std::size_t kIpv4MinHeaderBytes = 20;
+constexpr std::uint8_t kIpProtocolUdp = 17;
+constexpr std::uint16_t kIpMoreFragments = 0x2000;
+constexpr std::uint16_t kIpFragmentOffsetMask = 0x1FFF;
+constexpr std::size_t kUdpHeaderBytes = 8;
+
+constexpr std::int64_t kNsPerSecond = 1'000'000'000;
+
+std::uint16_t load_u16_be(const std::uint8_t* p) noexcept {
+  return static_cast<std::uint16_t>((p[0] << 8) | p[1]);
+}
+
+std::uint32_t load_u32_be(const std::uint8_t* p) noexcept {
+  return (static_cast<std::uint32_t>(p[0]) << 24) | (static_cast<std::uint32_t>(p[1]) << 16) |
+         (static_cast<std::uint32_t>(p[2]) << 8) | static_cast<std::uint32_t>(p[3]);
+}
+
+// Where a link layer puts the network-layer protocol and the network-layer packet.
+struct LinkLayer {
+  std::size_t header_bytes = 0;
+  std::size_t protocol_offset = 0;  // big-endian ethertype at this offset
+  bool raw_ip = false;              // no link header: the record starts with the IP header
+};
+
+// DLT_RAW is 12 on Linux and 14 on BSD/OS. libpcap maps a file's LINKTYPE_RAW (101) and 12 to the
+// platform's DLT_RAW, but passes 14 (written by old BSD/OS tools) through unnamed.
+constexpr int kDltRawBsdOs = 14;
+
+// DLT values as pcap_datalink() reports them (libpcap maps a file's LINKTYPE_ to its DLT_).
+std::optional<LinkLayer> link_layer(int dlt) noexcept {
+  if (dlt == DLT_RAW || dlt == kDltRawBsdOs || dlt == DLT_IPV4) return LinkLayer{0, 0, true};
+  switch (dlt) {
+    case DLT_EN10MB:
+      return LinkLayer{14, 12, false};  // dst MAC, src MAC, ethertype
+    case DLT_LINUX_SLL:
+      return LinkLayer{16, 14, false};  // packet type, ARPHRD, address length, address, protocol
+    case DLT_LINUX_SLL2:
+      return LinkLayer{20, 0, false};  // protocol first, then interface index, ARPHRD, ...
+    default:
+      return std::nullopt;
+  }
+}
+
+enum class FrameKind { kUdp, kNonIpv4, kNonUdp, kFragment, kMalformed };
+
+// Parses one record's captured bytes down to the UDP payload. Reads only inside `frame`; every
+// length in the headers is untrusted and checked against what was captured before it is used.
+FrameKind parse_frame(const LinkLayer& link, std::span<const std::uint8_t> frame,
+                      CaptureRecord& out) noexcept {
+  std::size_t ip_offset = link.header_bytes;
+  if (frame.size() < ip_offset) return FrameKind::kMalformed;
+  if (link.raw_ip) {
+    // DLT_RAW carries IPv6 as well; the version nibble tells them apart.
+    if (frame.empty()) return FrameKind::kMalformed;
+    if ((frame[0] >> 4) == 6) return FrameKind::kNonIpv4;
+  } else {
+    std::uint16_t protocol = load_u16_be(frame.data() + link.protocol_offset);
+    // Any number of VLAN tags, each 4 bytes: TCI, then the ethertype of what follows.
+    while (protocol == kEthertypeVlan || protocol == kEthertypeQinQ ||
+           protocol == kEthertypeQinQLegacy) {
+      if (frame.size() - ip_offset < kVlanTagBytes) return FrameKind::kMalformed;
+      protocol = load_u16_be(frame.data() + ip_offset + 2);
+      ip_offset += kVlanTagBytes;
+    }
+    if (protocol != kEthertypeIpv4) return FrameKind::kNonIpv4;
+  }
+
+  const std::span<const std::uint8_t> ip = frame.subspan(ip_offset);
+  if (ip.size() < kIpv4MinHeaderBytes) return FrameKind::kMalformed;
+  if ((ip[0] >> 4) != 4) return FrameKind::kMalformed;
+  const std::size_t ip_header_bytes = std::size_t{ip[0] & 0x0Fu} * 4;
+  const std::size_t total_length = load_u16_be(ip.data() + 2);
+  if (ip_header_bytes < kIpv4MinHeaderBytes || ip_header_bytes > ip.size() ||
+      total_length < ip_header_bytes) {
+    return FrameKind::kMalformed;
+  }
+  const std::uint16_t fragment = load_u16_be(ip.data() + 6);
+  if ((fragment & kIpMoreFragments) != 0 || (fragment & kIpFragmentOffsetMask) != 0) {
+    return FrameKind::kFragment;
+  }
+  if (ip[9] != kIpProtocolUdp) return FrameKind::kNonUdp;
+
+  // The UDP header must lie inside the datagram and inside the captured bytes.
+  if (total_length - ip_header_bytes < kUdpHeaderBytes ||
+      ip.size() - ip_header_bytes < kUdpHeaderBytes) {
+    return FrameKind::kMalformed;
+  }
+  const std::uint8_t* udp = ip.data() + ip_header_bytes;
+  const std::size_t udp_length = load_u16_be(udp + 4);
+  // As the Linux stack does: a UDP length shorter than the IP payload is honoured (trailing bytes
+  // ignored), a longer one is malformed.
+  if (udp_length < kUdpHeaderBytes || udp_length > total_length - ip_header_bytes) {
+    return FrameKind::kMalformed;
+  }
+
+  const std::size_t declared = udp_length - kUdpHeaderBytes;
+  // More bytes than declared: link-layer padding (Ethernet's 60-byte minimum) or a trailer.
+  // Fewer: the record was cut by the capture's snap length.
+  const std::size_t captured = ip.size() - ip_header_bytes - kUdpHeaderBytes;
+  out.payload = std::span<const std::uint8_t>(udp + kUdpHeaderBytes, std::min(declared, captured));
+  out.udp_payload_length = static_cast<std::uint32_t>(declared);
+  out.snapped = captured < declared;
+  out.source = {load_u32_be(ip.data() + 12), load_u16_be(udp)};
+  out.destination = {load_u32_be(ip.data() + 16), load_u16_be(udp + 2)};
+  return FrameKind::kUdp;
+}
+
+// Record time in ns. pcapng timestamps are 64-bit, so a corrupt one can exceed what int64 ns can
+// hold (year 2262): saturate rather than overflow.
+std::int64_t timestamp_ns(const timeval& ts, bool nanosecond) noexcept {
+  const std::int64_t seconds = ts.tv_sec;
+  const std::int64_t fraction = nanosecond ? ts.tv_usec : std::int64_t{ts.tv_usec} * 1000;
+  std::int64_t ns = 0;
+  if (__builtin_mul_overflow(seconds, kNsPerSecond, &ns) ||
+      __builtin_add_overflow(ns, fraction, &ns)) {
+    return seconds < 0 ? std::numeric_limits<std::int64_t>::min()
+                       : std::numeric_limits<std::int64_t>::max();
+  }
+  return ns;
+}
+
+}  // namespace
+
+std::string to_string(const Endpoint& endpoint) {
+  return std::to_string(endpoint.ip >> 24) + '.' + std::to_string((endpoint.ip >> 16) & 0xFF) +
+         '.' + std::to_string((endpoint.ip >> 8) & 0xFF) + '.' +
+         std::to_string(endpoint.ip & 0xFF) + ':' + std::to_string(endpoint.port);
+}
+
+CaptureReader::CaptureReader(const std::string& path, Options options)
+    : path_(path), options_(options) {
+  char errbuf[PCAP_ERRBUF_SIZE] = {};
+  // Nanosecond precision: libpcap scales microsecond files up, and keeps pcapng's finer units.
+  handle_ =
+      pcap_open_offline_with_tstamp_precision(path.c_str(), PCAP_TSTAMP_PRECISION_NANO, errbuf);
+  if (handle_ == nullptr) {
+    throw CaptureError("cannot open capture '" + path + "': " + errbuf);
+  }
+  // Always nano with libpcap >= 1.5 (the open fails otherwise); checked so that a microsecond
+  // handle could never be read as nanoseconds.
+  nanosecond_ = pcap_get_tstamp_precision(handle_) == PCAP_TSTAMP_PRECISION_NANO;
+  link_type_ = pcap_datalink(handle_);
+  if (!link_layer(link_type_)) {
+    pcap_close(handle_);
+    const char* name = pcap_datalink_val_to_name(link_type_);
+    throw CaptureError("capture '" + path + "' has unsupported link type " +
+                       (name != nullptr ? name : "unknown") + " (" + std::to_string(link_type_) +
+                       "); supported: EN10MB, LINUX_SLL, LINUX_SLL2, RAW, IPV4");
+  }
+}
+
+CaptureReader::~CaptureReader() {
+  pcap_close(handle_);
+}
+
+CaptureStatus CaptureReader::next(CaptureRecord& out) {
+  if (final_status_) return *final_status_;
+  const LinkLayer link = *link_layer(link_type_);
+  for (;;) {
+    pcap_pkthdr* header = nullptr;
+    const u_char* data = nullptr;
+    const int rc = pcap_next_ex(handle_, &header, &data);
+    if (rc != 1) return finish(rc);
+    ++stats_.records;
+    CaptureRecord record;
+    switch (parse_frame(link, {data, header->caplen}, record)) {
+      case FrameKind::kNonIpv4:
+        ++stats_.non_ipv4;
+        continue;
+      case FrameKind::kNonUdp:
+        ++stats_.non_udp;
+        continue;
+      case FrameKind::kFragment:
+        ++stats_.ip_fragments;
+        continue;
+      case FrameKind::kMalformed:
+        ++stats_.malformed;
+        continue;
+      case FrameKind::kUdp:
+        break;
+    }
+    if (options_.destination_port && record.destination.port != *options_.destination_port) {
+      ++stats_.port_filtered;
+      continue;
+    }
+    record.timestamp_ns = timestamp_ns(header->ts, nanosecond_);
+    ++stats_.udp_datagrams;
+    if (record.snapped) ++stats_.snapped;
+    out = record;
+    return CaptureStatus::kRecord;
+  }
+}
+
+// libpcap reports every read failure as PCAP_ERROR, so the kind is told by its message. Rule:
+// "truncated" in the message -> kTruncated, anything else -> kError. What libpcap 1.10.3 says:
+//   pcap cut in a record header   "truncated dump file; tried to read 16 header bytes, only got 5"
+//   pcap cut in a record's data   "truncated dump file; tried to read 1304 captured bytes, only
+//                                  got 1204"
+//   pcapng cut in a block header  "truncated pcapng dump file; tried to read 8 bytes, only got 6"
+//   pcapng cut in a block body    "truncated pcapng dump file; tried to read 72 bytes, only got 62"
+//   corrupt record / block        "invalid packet capture length 4294967040, bigger than snaplen
+//                                  of 262144", "pcapng block size 4294967040 > maximum 16777216",
+//                                  "block total length in header and trailer don't match"
+// A corrupt caplen that is plausible (below the file's snaplen) but runs past the end of the file
+// is indistinguishable from a cut-off recording and reads as kTruncated.
+CaptureStatus CaptureReader::finish(int pcap_status) {
+  if (pcap_status == PCAP_ERROR_BREAK) {
+    final_status_ = CaptureStatus::kEnd;
+  } else {
+    const std::string message = pcap_status == PCAP_ERROR
+                                    ? pcap_geterr(handle_)
+                                    : "pcap_next_ex returned " + std::to_string(pcap_status);
+    error_ = path_ + ": " + message;
+    final_status_ = message.find("truncated") != std::string::npos ? CaptureStatus::kTruncated
+                                                                   : CaptureStatus::kError;
+  }
+  return *final_status_;
+}
+
+}  // namespace pandarcap

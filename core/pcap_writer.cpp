@@ -1,0 +1,180 @@
+#include "pcap_writer.hpp"
+
+#include <array>
+#include <cerrno>
+#include <cstring>
+#include <stdexcept>
+#include <system_error>
+#include <utility>
+
+namespace pandarcap {
+namespace {
+
+constexpr std::uint32_t kPcapMagicMicroseconds = 0xA1B2C3D4;  // native order: readers detect it
+constexpr std::uint16_t kPcapVersionMajor = 2;
+constexpr std::uint16_t kPcapVersionMinor = 4;
+// Not 65535: the largest record (a 65507-byte payload) is a 65549-byte frame, and readers cut
+// records to the file's snaplen. 262144 is libpcap's maximum and tcpdump's default.
+constexpr std::uint32_t kSnaplen = 262144;
+constexpr std::uint32_t kLinktypeEthernet = 1;
+constexpr std::size_t kGlobalHeaderBytes = 24;
+constexpr std::size_t kRecordHeaderBytes = 16;
+
+constexpr std::size_t kEthernetBytes = 14;
+constexpr std::size_t kIpv4Bytes = 20;
+constexpr std::size_t kUdpBytes = 8;
+constexpr std::size_t kHeadersBytes = kEthernetBytes + kIpv4Bytes + kUdpBytes;  // 42
+constexpr std::size_t kMaxUdpPayloadBytes = 65535 - kIpv4Bytes - kUdpBytes;     // 65507
+
+constexpr std::int64_t kNsPerSecond = 1'000'000'000;
+constexpr std::int64_t kNsPerMicrosecond = 1'000;
+
+// Appends integers to a fixed buffer, in native order (pcap headers) or big-endian (wire headers).
+template <std::size_t N>
+class ByteWriter {
+ public:
+  void native_u16(std::uint16_t v) { bytes(&v, sizeof v); }
+  void native_u32(std::uint32_t v) { bytes(&v, sizeof v); }
+  void be_u16(std::uint16_t v) {
+    buffer_[size_++] = static_cast<std::uint8_t>(v >> 8);
+    buffer_[size_++] = static_cast<std::uint8_t>(v);
+  }
+  void be_u32(std::uint32_t v) {
+    be_u16(static_cast<std::uint16_t>(v >> 16));
+    be_u16(static_cast<std::uint16_t>(v));
+  }
+  void bytes(const void* data, std::size_t n) {
+    std::memcpy(buffer_.data() + size_, data, n);
+    size_ += n;
+  }
+  std::uint8_t* at(std::size_t offset) { return buffer_.data() + offset; }
+  std::span<const std::uint8_t> written() const { return {buffer_.data(), size_}; }
+
+ private:
+  std::array<std::uint8_t, N> buffer_{};
+  std::size_t size_ = 0;
+};
+
+// RFC 791 header checksum: one's complement of the one's-complement sum of the 16-bit words.
+std::uint16_t ipv4_checksum(std::span<const std::uint8_t> header) {
+  std::uint32_t sum = 0;
+  for (std::size_t i = 0; i + 1 < header.size(); i += 2) {
+    sum += static_cast<std::uint32_t>((header[i] << 8) | header[i + 1]);
+  }
+  while ((sum >> 16) != 0) {
+    sum = (sum & 0xFFFF) + (sum >> 16);  // end-around carry
+  }
+  return static_cast<std::uint16_t>(~sum);
+}
+
+[[noreturn]] void throw_write_error(const std::string& path, int error) {
+  // The C library is not obliged to set errno on every stdio failure.
+  throw std::system_error(error != 0 ? error : EIO, std::generic_category(),
+                          "cannot write '" + path + "'");
+}
+
+// The one place bytes reach the file; `file` is null after close().
+void write_all(std::FILE* file, std::span<const std::uint8_t> data, const std::string& path) {
+  if (file == nullptr) throw_write_error(path, EBADF);
+  if (data.empty()) return;  // an empty span may have a null data(), which fwrite must not get
+  errno = 0;
+  if (std::fwrite(data.data(), 1, data.size(), file) != data.size()) {
+    throw_write_error(path, errno);
+  }
+}
+
+}  // namespace
+
+PcapWriter::PcapWriter(const std::string& path) : path_(path) {
+  errno = 0;
+  file_ = std::fopen(path.c_str(), "wb");
+  if (file_ == nullptr) throw_write_error(path, errno);
+  ByteWriter<kGlobalHeaderBytes> header;
+  header.native_u32(kPcapMagicMicroseconds);
+  header.native_u16(kPcapVersionMajor);
+  header.native_u16(kPcapVersionMinor);
+  header.native_u32(0);  // thiszone: timestamps are UTC
+  header.native_u32(0);  // sigfigs
+  header.native_u32(kSnaplen);
+  header.native_u32(kLinktypeEthernet);
+  try {
+    write_all(file_, header.written(), path_);
+    bytes_ = kGlobalHeaderBytes;
+  } catch (...) {
+    std::fclose(file_);  // the destructor does not run for a throwing constructor
+    throw;
+  }
+}
+
+PcapWriter::~PcapWriter() {
+  // A destructor cannot report a failure; callers that need to know call close() first.
+  if (file_ != nullptr) std::fclose(file_);
+}
+
+void PcapWriter::write(std::span<const std::uint8_t> udp_payload, std::int64_t timestamp_ns,
+                       Endpoint source, Endpoint destination) {
+  if (udp_payload.size() > kMaxUdpPayloadBytes) {
+    throw std::invalid_argument("UDP payload of " + std::to_string(udp_payload.size()) +
+                                " bytes exceeds the maximum of " +
+                                std::to_string(kMaxUdpPayloadBytes));
+  }
+  const std::int64_t seconds = timestamp_ns / kNsPerSecond;
+  if (timestamp_ns < 0 || seconds > std::int64_t{UINT32_MAX}) {
+    throw std::invalid_argument("timestamp " + std::to_string(timestamp_ns) +
+                                " ns is outside the pcap range (1970 to 2106)");
+  }
+  const std::int64_t microseconds = timestamp_ns % kNsPerSecond / kNsPerMicrosecond;
+  const auto udp_length = static_cast<std::uint16_t>(kUdpBytes + udp_payload.size());
+  const auto ip_length = static_cast<std::uint16_t>(kIpv4Bytes + udp_length);
+  const auto frame_bytes = static_cast<std::uint32_t>(kHeadersBytes + udp_payload.size());
+
+  ByteWriter<kRecordHeaderBytes + kHeadersBytes> out;
+  out.native_u32(static_cast<std::uint32_t>(seconds));
+  out.native_u32(static_cast<std::uint32_t>(microseconds));
+  out.native_u32(frame_bytes);  // captured length
+  out.native_u32(frame_bytes);  // original length
+
+  constexpr std::array<std::uint8_t, 6> kDestinationMac{0x02, 0, 0, 0, 0, 0x02};
+  constexpr std::array<std::uint8_t, 6> kSourceMac{0x02, 0, 0, 0, 0, 0x01};
+  out.bytes(kDestinationMac.data(), kDestinationMac.size());
+  out.bytes(kSourceMac.data(), kSourceMac.size());
+  out.be_u16(0x0800);  // ethertype IPv4
+
+  const std::size_t ip_offset = kRecordHeaderBytes + kEthernetBytes;
+  out.be_u16(0x4500);  // version 4, IHL 5 (no options), DSCP/ECN 0
+  out.be_u16(ip_length);
+  out.be_u16(ip_id_++);
+  out.be_u16(0x4000);  // flags: DF; fragment offset 0
+  out.be_u16(0x4011);  // TTL 64, protocol UDP (17)
+  out.be_u16(0);       // header checksum, filled in below
+  out.be_u32(source.ip);
+  out.be_u32(destination.ip);
+  const std::uint16_t checksum = ipv4_checksum({out.at(ip_offset), kIpv4Bytes});
+  out.at(ip_offset + 10)[0] = static_cast<std::uint8_t>(checksum >> 8);
+  out.at(ip_offset + 10)[1] = static_cast<std::uint8_t>(checksum);
+
+  out.be_u16(source.port);
+  out.be_u16(destination.port);
+  out.be_u16(udp_length);
+  out.be_u16(0);  // checksum 0: "not computed", legal for UDP over IPv4
+
+  write_all(file_, out.written(), path_);
+  write_all(file_, udp_payload, path_);
+  bytes_ += out.written().size() + udp_payload.size();
+  ++records_;
+}
+
+void PcapWriter::flush() {
+  if (file_ == nullptr) throw_write_error(path_, EBADF);
+  errno = 0;
+  if (std::fflush(file_) != 0) throw_write_error(path_, errno);
+}
+
+void PcapWriter::close() {
+  if (file_ == nullptr) return;
+  errno = 0;
+  // fclose releases the stream even when its final flush fails, so the handle is dropped first.
+  if (std::fclose(std::exchange(file_, nullptr)) != 0) throw_write_error(path_, errno);
+}
+
+}  // namespace pandarcap

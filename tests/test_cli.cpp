@@ -1,0 +1,127 @@
+// The binaries, run as a user runs them: pandarcap-inspect --json on real and generated
+// captures, pandarcapd --simulate, and their errors for bad input.
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "test_support.hpp"
+
+using namespace pandarcap;
+using nlohmann::json;
+
+namespace {
+
+std::string quoted(const std::filesystem::path& p) { return "'" + p.string() + "'"; }
+
+json inspect_json(const std::string& arguments) {
+  const auto result =
+      test::run_command(quoted(test::binary("pandarcap-inspect")) + " --json " + arguments);
+  REQUIRE(result.exit_code == 0);
+  return json::parse(result.out);
+}
+
+}  // namespace
+
+TEST_CASE("inspect --json on the real dual capture", "[cli][real]") {
+  const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
+  const auto calibration = test::real_capture("nebula_Pandar40P_calibration.csv");
+  if (!capture || !calibration) return;
+  const json j = inspect_json("--calibration " + quoted(*calibration) + " --port 2368 " +
+                              quoted(*capture));
+  const json& s = j.at("summary");
+  CHECK(s.at("packets") == 1439);
+  CHECK(s.at("accepted") == 1439);
+  CHECK(s.at("rejected") == 0);
+  CHECK(s.at("rejects").at("bad_length") == 0);
+  CHECK(s.at("rpm_min").get<int>() >= 598);
+  CHECK(s.at("rpm_max").get<int>() <= 602);
+  CHECK(s.at("return_mode") == "dual");
+  CHECK(s.at("sequence_present") == false);
+  CHECK(s.at("sequence_gaps") == 0);
+  CHECK(s.at("frames_complete").get<int>() >= 2);
+  CHECK(s.at("frames_partial").get<int>() >= 1);
+  CHECK(s.at("points_per_complete_frame").size() == s.at("frames_complete").get<std::size_t>());
+  CHECK(s.at("capture_status") == "end");
+  REQUIRE(j.at("packets").size() == 1439);
+  const json& first = j.at("packets").at(0);
+  CHECK(first.at("size") == 1262);
+  CHECK(first.at("status") == "ok");
+  CHECK(first.at("factory") == 0x42);
+  CHECK(first.at("utc").get<std::string>().rfind("2017-09-06T", 0) == 0);
+  CHECK(first.at("sequence").is_null());
+
+  // The destination-port filter: nothing in this capture goes to 2369.
+  const json other = inspect_json("--port 2369 " + quoted(*capture));
+  CHECK(other.at("summary").at("packets") == 0);
+  CHECK(other.at("summary").at("capture").at("port_filtered") == 1439);
+}
+
+TEST_CASE("inspect --json on the real single 1266-byte packet", "[cli][real]") {
+  const auto capture = test::real_capture("velocityreport_pandar40p_single_packet_1266B.pcapng");
+  if (!capture) return;
+  const json s = inspect_json(quoted(*capture)).at("summary");
+  CHECK(s.at("packets") == 1);
+  CHECK(s.at("return_mode") == "last");
+  CHECK(s.at("sequence_present") == true);
+  CHECK(s.at("rpm_min") == 599);
+}
+
+TEST_CASE("pandarcapd --simulate records a capture that inspect decodes", "[cli][simulate]") {
+  test::ScratchDir dir("simulate");
+  const auto result = test::run_command(quoted(test::binary("pandarcapd")) +
+                                        " --simulate --duration 1 --rpm 1200 --return-mode last "
+                                        "--udp-sequence --quiet --output-dir " +
+                                        quoted(dir.path()) + " 2>&1");
+  INFO(result.out);
+  REQUIRE(result.exit_code == 0);
+  const auto capture = dir / "raw/simulated.pcap";
+  REQUIRE(std::filesystem::exists(capture));
+  const json s = inspect_json("--summary " + quoted(capture)).at("summary");
+  CHECK(s.at("packets") == 1800);  // 1800 packets/s in single return, whatever the RPM
+  CHECK(s.at("rejected") == 0);
+  CHECK(s.at("return_mode") == "last");
+  CHECK(s.at("sequence_present") == true);
+  CHECK(s.at("sequence_gaps") == 0);
+  CHECK(s.at("rpm_min").get<int>() >= 1198);
+  CHECK(s.at("rpm_max").get<int>() <= 1202);
+  // 1 s at 20 Hz from azimuth 0: 20 revolutions. The first is partial (channels with a positive
+  // azimuth offset crossed the cut before the stream began), and so is the last (channels with
+  // a negative offset have not reached the cut when the stream ends).
+  CHECK(s.at("frames_complete").get<int>() >= 18);
+  CHECK(s.at("frames_complete").get<int>() <= 20);
+  for (const json& points : s.at("points_per_complete_frame")) {
+    // 900 firing rounds per revolution at 1200 RPM, 40 channels, minus the doorway's no-returns.
+    CHECK(points.get<int>() > 30000);
+    CHECK(points.get<int>() <= 36000);
+  }
+}
+
+TEST_CASE("bad command lines and bad files give clear errors and exit codes", "[cli]") {
+  const std::string inspect = quoted(test::binary("pandarcap-inspect"));
+  const std::string daemon = quoted(test::binary("pandarcapd"));
+  CHECK(test::run_command(inspect + " 2>/dev/null").exit_code == 64);
+  CHECK(test::run_command(inspect + " --port 0 x.pcap 2>/dev/null").exit_code == 64);
+  CHECK(test::run_command(inspect + " --bogus x.pcap 2>/dev/null").exit_code == 64);
+  CHECK(test::run_command(daemon + " 2>/dev/null").exit_code == 64);
+  CHECK(test::run_command(daemon + " --simulate --rpm 700 2>/dev/null").exit_code == 64);
+  const auto help = test::run_command(inspect + " --help");
+  CHECK(help.exit_code == 0);
+  CHECK(help.out.find("--calibration") != std::string::npos);
+
+  const auto missing = test::run_command(inspect + " /nonexistent/file.pcap 2>&1");
+  CHECK(missing.exit_code == 2);
+  CHECK(missing.out.find("/nonexistent/file.pcap") != std::string::npos);
+
+  test::ScratchDir dir("badcal");
+  {
+    std::ofstream bad(dir / "bad.csv");
+    bad << "Laser id,Elevation,Azimuth\n1,15,-1.042\n2,eleven,-1.042\n";
+  }
+  const auto calibration = test::run_command(daemon + " --simulate --duration 0.01 --output-dir " +
+                                             quoted(dir.path()) + " --calibration " +
+                                             quoted(dir / "bad.csv") + " 2>&1");
+  CHECK(calibration.exit_code == 2);
+  CHECK(calibration.out.find("bad.csv:3:3: elevation is not a number") != std::string::npos);
+}
