@@ -459,6 +459,18 @@ TEST_CASE("PcapWriter reports failing writes as system_error with errno and path
       CHECK_THAT(e.what(), Catch::Contains("/dev/full"));
     }
   }
+  SECTION("a full disk surfaces at close") {
+    if (!fs::exists("/dev/full")) return;
+    PcapWriter writer("/dev/full");
+    writer.write(pattern(1262, 0), 0, kLidar, kHost);
+    try {
+      writer.close();
+      FAIL("close of /dev/full did not throw");
+    } catch (const std::system_error& e) {
+      CHECK(e.code() == std::error_code(ENOSPC, std::generic_category()));
+    }
+    writer.close();  // the stream was released all the same
+  }
   SECTION("writing after close") {
     PcapWriter writer((dir / "closed.pcap").string());
     writer.close();
@@ -836,12 +848,17 @@ TEST_CASE("pcapng: Ethernet packets, nanosecond timestamps, truncation and corru
     CHECK(result.records[1].timestamp_ns == static_cast<std::int64_t>(t0 + 1));
   }
   SECTION("a timestamp past what int64 nanoseconds hold saturates") {
-    Bytes late = pcapng_header();
-    append(late, pcapng_packet(ethernet(ipv4(first)), UINT64_MAX));  // year 2554
-    write_bytes(path, late);
-    const ReadResult result = read_all(path);
-    REQUIRE(result.records.size() == 1);
-    CHECK(result.records[0].timestamp_ns == std::numeric_limits<std::int64_t>::max());
+    // 2^64 - 1 ns overflows seconds * 10^9; 9223372036.999999999 s overflows only on adding the
+    // nanoseconds (INT64_MAX is 9223372036.854775807 s).
+    for (std::uint64_t late_ns :
+         {std::numeric_limits<std::uint64_t>::max(), std::uint64_t{9'223'372'036'999'999'999u}}) {
+      Bytes late = pcapng_header();
+      append(late, pcapng_packet(ethernet(ipv4(first)), late_ns));
+      write_bytes(path, late);
+      const ReadResult result = read_all(path);
+      REQUIRE(result.records.size() == 1);
+      CHECK(result.records[0].timestamp_ns == std::numeric_limits<std::int64_t>::max());
+    }
   }
   SECTION("cut in the middle of a block body") {
     write_bytes(path, file, second_block + 100);
