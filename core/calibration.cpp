@@ -1,5 +1,7 @@
 #include "calibration.hpp"
 
+#include <fmt/format.h>
+
 #include <bitset>
 #include <charconv>
 #include <cmath>
@@ -7,18 +9,16 @@
 #include <sstream>
 #include <vector>
 
-#include <fmt/format.h>
-
 namespace pandarcap {
 
 Calibration Calibration::nominal() {
   // Design elevations (MAN40 Appendix I, Hesai General SDK default). The General SDK has -1.66
   // for channel 17; every neighbouring step is 1/3 degree, so the design value -1.67 is used.
   static constexpr std::array<double, kChannels> kElevation = {
-      15.0,  11.0,  8.0,   5.0,   3.0,   2.0,   1.67,  1.33,  1.0,   0.67,
-      0.33,  0.0,   -0.33, -0.67, -1.0,  -1.33, -1.67, -2.0,  -2.33, -2.67,
-      -3.0,  -3.33, -3.67, -4.0,  -4.33, -4.67, -5.0,  -5.33, -5.67, -6.0,
-      -7.0,  -8.0,  -9.0,  -10.0, -11.0, -12.0, -13.0, -14.0, -19.0, -25.0};
+      15.0, 11.0,  8.0,   5.0,   3.0,   2.0,   1.67,  1.33,  1.0,   0.67,
+      0.33, 0.0,   -0.33, -0.67, -1.0,  -1.33, -1.67, -2.0,  -2.33, -2.67,
+      -3.0, -3.33, -3.67, -4.0,  -4.33, -4.67, -5.0,  -5.33, -5.67, -6.0,
+      -7.0, -8.0,  -9.0,  -10.0, -11.0, -12.0, -13.0, -14.0, -19.0, -25.0};
   Calibration calibration;
   calibration.elevation_deg = kElevation;
   for (int c = 0; c < kChannels; ++c) {
@@ -43,9 +43,11 @@ struct Field {
 
 std::string_view trim(std::string_view s, std::size_t* leading = nullptr) {
   std::size_t begin = 0;
-  while (begin < s.size() && (s[begin] == ' ' || s[begin] == '\t')) ++begin;
+  while (begin < s.size() && (s[begin] == ' ' || s[begin] == '\t'))
+    ++begin;
   std::size_t end = s.size();
-  while (end > begin && (s[end - 1] == ' ' || s[end - 1] == '\t' || s[end - 1] == '\r')) --end;
+  while (end > begin && (s[end - 1] == ' ' || s[end - 1] == '\t' || s[end - 1] == '\r'))
+    --end;
   if (leading != nullptr) *leading = begin;
   return s.substr(begin, end - begin);
 }
@@ -55,8 +57,8 @@ std::vector<Field> split_fields(std::string_view line) {
   std::size_t start = 0;
   while (true) {
     const std::size_t comma = line.find(',', start);
-    const std::string_view raw = line.substr(start, comma == std::string_view::npos ? line.npos
-                                                                                    : comma - start);
+    const std::string_view raw =
+        line.substr(start, comma == std::string_view::npos ? line.npos : comma - start);
     std::size_t leading = 0;
     const std::string_view text = trim(raw, &leading);
     fields.push_back({text, start + leading + 1});
@@ -124,8 +126,9 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
     }
     const int channel = static_cast<int>(values[0]) - 1;
     if (seen[channel]) {
-      fail(source_name, line_number, fields[0].column,
-           fmt::format("channel {} already defined on line {}", channel + 1, seen_on_line[channel]));
+      fail(
+          source_name, line_number, fields[0].column,
+          fmt::format("channel {} already defined on line {}", channel + 1, seen_on_line[channel]));
     }
     if (values[1] < -90.0 || values[1] > 90.0) {
       fail(source_name, line_number, fields[1].column,
@@ -146,8 +149,9 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
     for (int c = 0; c < kChannels; ++c) {
       if (!seen[c]) missing += fmt::format("{}{}", missing.empty() ? "" : ",", c + 1);
     }
-    fail(source_name, last_line + 1, 1,
-         fmt::format("{} of {} channels missing: {}", kChannels - seen.count(), kChannels, missing));
+    fail(
+        source_name, last_line + 1, 1,
+        fmt::format("{} of {} channels missing: {}", kChannels - seen.count(), kChannels, missing));
   }
   return calibration;
 }

@@ -52,14 +52,14 @@ struct CaptureRecord {
 enum class CaptureStatus { kRecord, kEnd, kTruncated, kError };
 
 struct CaptureStats {
-  std::uint64_t records = 0;          // every record read from the file
-  std::uint64_t udp_datagrams = 0;    // records yielded (after the port filter)
-  std::uint64_t port_filtered = 0;    // UDP datagrams to another destination port
-  std::uint64_t non_ipv4 = 0;         // ARP, IPv6, unknown ethertypes / link protocols
-  std::uint64_t non_udp = 0;          // IPv4 but not UDP
-  std::uint64_t ip_fragments = 0;     // IPv4 fragments (not reassembled)
-  std::uint64_t malformed = 0;        // headers cut short or inconsistent
-  std::uint64_t snapped = 0;          // yielded datagrams with snapped == true
+  std::uint64_t records = 0;        // every record read from the file
+  std::uint64_t udp_datagrams = 0;  // records yielded (after the port filter)
+  std::uint64_t port_filtered = 0;  // UDP datagrams to another destination port
+  std::uint64_t non_ipv4 = 0;       // ARP, IPv6, unknown ethertypes / link protocols
+  std::uint64_t non_udp = 0;        // IPv4 but not UDP
+  std::uint64_t ip_fragments = 0;   // IPv4 fragments (not reassembled)
+  std::uint64_t malformed = 0;      // headers cut short or inconsistent
+  std::uint64_t snapped = 0;        // yielded datagrams with snapped == true
 };
 
 class CaptureReader {

@@ -39,12 +39,14 @@ std::string_view to_string(FilterReason reason) noexcept {
 
 std::uint64_t FilterCounts::total() const noexcept {
   std::uint64_t sum = 0;
-  for (std::uint64_t n : by_reason) sum += n;
+  for (std::uint64_t n : by_reason)
+    sum += n;
   return sum;
 }
 
 FilterCounts& FilterCounts::operator+=(const FilterCounts& other) noexcept {
-  for (std::size_t i = 0; i < kFilterReasonCount; ++i) by_reason[i] += other.by_reason[i];
+  for (std::size_t i = 0; i < kFilterReasonCount; ++i)
+    by_reason[i] += other.by_reason[i];
   return *this;
 }
 
@@ -119,8 +121,8 @@ Point ScalarDecoder::make_point(const PacketView& packet, int block, int channel
   p.y = static_cast<float>(r * ch.cos_elevation * std::cos(azimuth));
   p.z = static_cast<float>(r * ch.sin_elevation);
   p.distance_m = static_cast<float>(r);
-  p.timestamp_ns = t0_ns + block_offset_ns(block, packet.return_mode()) -
-                   kChannelFiringOffsetNs[channel];
+  p.timestamp_ns =
+      t0_ns + block_offset_ns(block, packet.return_mode()) - kChannelFiringOffsetNs[channel];
   p.azimuth_cdeg = static_cast<std::uint16_t>(std::lround(azimuth_deg * 100.0) % 36000);
   p.intensity = packet.reflectivity(block, channel);
   p.channel = static_cast<std::uint8_t>(channel);
@@ -156,8 +158,8 @@ DecodedPacket ScalarDecoder::decode(const PacketView& packet, std::int64_t t0_ns
         keep_strongest[c] = in_range(d_strongest, filtered);
         strongest_type[c] = ReturnType::kStrongest;
         if (keep_last[c] && keep_strongest[c]) {
-          const bool identical = d_last == d_strongest &&
-                                 packet.reflectivity(b, c) == packet.reflectivity(b + 1, c);
+          const bool identical =
+              d_last == d_strongest && packet.reflectivity(b, c) == packet.reflectivity(b + 1, c);
           const auto diff = static_cast<std::uint32_t>(std::abs(d_last - d_strongest));
           if (identical || diff < threshold_raw) {
             filtered.add(identical ? FilterReason::kDualDuplicate : FilterReason::kDualTooClose);

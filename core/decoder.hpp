@@ -37,7 +37,7 @@ struct DecoderConfig {
 };
 
 enum class FilterReason : std::uint8_t {
-  kNoReturn,       // raw distance 0
+  kNoReturn,  // raw distance 0
   kBelowMinRange,
   kAboveMaxRange,
   kDualDuplicate,  // dual: identical to the strongest echo

@@ -15,15 +15,15 @@ namespace pandarcap {
 inline constexpr std::size_t kDefaultFrameCapacityPoints = 1800 * 40 * 2 * 5 / 4;
 
 struct FrameInfo {
-  std::uint64_t sequence = 0;      // 0, 1, 2, ... in revolution order; a gap = a dropped frame
-  std::int64_t start_ns = 0;       // earliest point time
-  std::int64_t end_ns = 0;         // latest point time
+  std::uint64_t sequence = 0;  // 0, 1, 2, ... in revolution order; a gap = a dropped frame
+  std::int64_t start_ns = 0;   // earliest point time
+  std::int64_t end_ns = 0;     // latest point time
   std::uint32_t points = 0;
-  std::uint32_t packets = 0;       // packets that contributed at least one point
-  double rpm = 0;                  // mean of the tail motor speed over those packets
+  std::uint32_t packets = 0;                   // packets that contributed at least one point
+  double rpm = 0;                              // mean of the tail motor speed over those packets
   ReturnMode return_mode = ReturnMode::kDual;  // of the last packet that contributed
-  bool partial = false;            // did not see its whole revolution (first frame, loss, end)
-  bool time_valid = true;          // every contributing packet had a valid absolute time
+  bool partial = false;              // did not see its whole revolution (first frame, loss, end)
+  bool time_valid = true;            // every contributing packet had a valid absolute time
   std::uint32_t points_dropped = 0;  // points that did not fit (capacity)
 };
 

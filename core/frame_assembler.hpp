@@ -51,7 +51,7 @@ struct PacketMeta {
 struct AssemblerStats {
   std::uint64_t frames_complete = 0;
   std::uint64_t frames_partial = 0;
-  std::uint64_t frames_dropped = 0;       // no free frame in the sink
+  std::uint64_t frames_dropped = 0;  // no free frame in the sink
   std::uint64_t points_dropped_no_frame = 0;
   std::uint64_t points_dropped_full = 0;  // frame capacity exceeded
   std::uint64_t points_late = 0;          // fell into an already closed frame
@@ -76,7 +76,7 @@ class FrameAssembler {
   struct Slot {
     std::int64_t index = 0;  // frame number relative to the stream start
     Frame* frame = nullptr;
-    bool dropped = false;    // no frame could be had: its points are counted, not stored
+    bool dropped = false;  // no frame could be had: its points are counted, not stored
     bool in_use = false;
     std::uint64_t last_packet = ~0ULL;
     double rpm_sum = 0;

@@ -28,14 +28,14 @@ namespace pandarcap {
 inline constexpr int kChannels = 40;
 inline constexpr int kBlocks = 10;
 inline constexpr std::size_t kBlockBytes = 4 + 3 * kChannels;         // 124
-inline constexpr std::size_t kBodyBytes = kBlocks * kBlockBytes;       // 1240
-inline constexpr std::size_t kTailBytes = 22;                          // "Additional Information"
-inline constexpr std::size_t kPacketBytes = kBodyBytes + kTailBytes;   // 1262
-inline constexpr std::size_t kSequenceBytes = 4;                       // optional UDP sequence
+inline constexpr std::size_t kBodyBytes = kBlocks * kBlockBytes;      // 1240
+inline constexpr std::size_t kTailBytes = 22;                         // "Additional Information"
+inline constexpr std::size_t kPacketBytes = kBodyBytes + kTailBytes;  // 1262
+inline constexpr std::size_t kSequenceBytes = 4;                      // optional UDP sequence
 inline constexpr std::size_t kPacketWithSequenceBytes = kPacketBytes + kSequenceBytes;  // 1266
 inline constexpr std::size_t kMaxPacketBytes = kPacketWithSequenceBytes;
-inline constexpr std::uint8_t kMarker0 = 0xFF;  // first marker byte on the wire
-inline constexpr std::uint8_t kMarker1 = 0xEE;  // second marker byte on the wire
+inline constexpr std::uint8_t kMarker0 = 0xFF;             // first marker byte on the wire
+inline constexpr std::uint8_t kMarker1 = 0xEE;             // second marker byte on the wire
 inline constexpr std::uint16_t kAzimuthLimitCdeg = 36000;  // azimuths are 0..35999
 inline constexpr double kDistanceUnitM = 0.004;
 

@@ -10,7 +10,8 @@ void store_u16_le(std::uint8_t* p, std::uint16_t v) {
 }
 
 void store_u32_le(std::uint8_t* p, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
+  for (int i = 0; i < 4; ++i)
+    p[i] = static_cast<std::uint8_t>(v >> (8 * i));
 }
 
 }  // namespace

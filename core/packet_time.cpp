@@ -9,17 +9,17 @@ std::int64_t days_from_civil(int year, unsigned month, unsigned day) noexcept {
   // 400-year eras (146097 days each) and the days inside the era.
   const int y = year - (month <= 2 ? 1 : 0);
   const int era = (y >= 0 ? y : y - 399) / 400;
-  const unsigned year_of_era = static_cast<unsigned>(y - era * 400);                    // 0..399
-  const unsigned month_from_march = month > 2 ? month - 3 : month + 9;                 // 0..11
-  const unsigned day_of_year = (153 * month_from_march + 2) / 5 + day - 1;             // 0..365
+  const unsigned year_of_era = static_cast<unsigned>(y - era * 400);        // 0..399
+  const unsigned month_from_march = month > 2 ? month - 3 : month + 9;      // 0..11
+  const unsigned day_of_year = (153 * month_from_march + 2) / 5 + day - 1;  // 0..365
   const unsigned day_of_era =
-      year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;           // 0..146096
+      year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;  // 0..146096
   return static_cast<std::int64_t>(era) * 146097 + static_cast<std::int64_t>(day_of_era) - 719468;
 }
 
 TailDateTime tail_datetime_from_unix(std::int64_t unix_seconds) noexcept {
-  constexpr std::int64_t kFirst = 946684800;        // 2000-01-01T00:00:00Z
-  constexpr std::int64_t kLast = 9025257599;        // 2255-12-31T23:59:59Z
+  constexpr std::int64_t kFirst = 946684800;  // 2000-01-01T00:00:00Z
+  constexpr std::int64_t kLast = 9025257599;  // 2255-12-31T23:59:59Z
   unix_seconds = std::clamp(unix_seconds, kFirst, kLast);
   const std::int64_t days = unix_seconds / 86400;
   const std::int64_t second_of_day = unix_seconds % 86400;
@@ -29,11 +29,13 @@ TailDateTime tail_datetime_from_unix(std::int64_t unix_seconds) noexcept {
   const auto day_of_era = static_cast<unsigned>(z - era * 146097);
   const unsigned year_of_era =
       (day_of_era - day_of_era / 1460 + day_of_era / 36524 - day_of_era / 146096) / 365;
-  const unsigned day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
+  const unsigned day_of_year =
+      day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
   const unsigned month_from_march = (5 * day_of_year + 2) / 153;
   const unsigned day = day_of_year - (153 * month_from_march + 2) / 5 + 1;
   const unsigned month = month_from_march < 10 ? month_from_march + 3 : month_from_march - 9;
-  const std::int64_t year = static_cast<std::int64_t>(year_of_era) + era * 400 + (month <= 2 ? 1 : 0);
+  const std::int64_t year =
+      static_cast<std::int64_t>(year_of_era) + era * 400 + (month <= 2 ? 1 : 0);
   TailDateTime utc;
   utc.year_since_2000 = static_cast<std::uint8_t>(year - 2000);
   utc.month = static_cast<std::uint8_t>(month);
@@ -46,7 +48,9 @@ TailDateTime tail_datetime_from_unix(std::int64_t unix_seconds) noexcept {
 
 namespace {
 
-bool is_leap(int year) noexcept { return (year % 4 == 0 && year % 100 != 0) || year % 400 == 0; }
+bool is_leap(int year) noexcept {
+  return (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
+}
 
 unsigned days_in_month(int year, unsigned month) noexcept {
   static constexpr unsigned kDays[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};

@@ -30,8 +30,8 @@ class PcapWriter {
   // Appends one record. `timestamp_ns` is truncated to microseconds. Payloads longer than a UDP
   // datagram can carry (65507 bytes), and times outside 1970..2106 (classic pcap stores seconds
   // as an unsigned 32-bit number), throw std::invalid_argument.
-  void write(std::span<const std::uint8_t> udp_payload, std::int64_t timestamp_ns,
-             Endpoint source, Endpoint destination);
+  void write(std::span<const std::uint8_t> udp_payload, std::int64_t timestamp_ns, Endpoint source,
+             Endpoint destination);
   void flush();
   void close();
 

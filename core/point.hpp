@@ -17,12 +17,12 @@ std::string_view to_string(ReturnType type) noexcept;
 
 // 32 bytes, no padding surprises: stored as-is in frame arenas.
 struct Point {
-  float x = 0, y = 0, z = 0;        // metres, sensor frame: z up, y at azimuth 0, x at 90°
-  float distance_m = 0;             // range along the beam
-  std::int64_t timestamp_ns = 0;    // firing time, ns since the Unix epoch (see PacketTime)
-  std::uint16_t azimuth_cdeg = 0;   // corrected azimuth, 0.01°, 0..35999
-  std::uint8_t intensity = 0;       // reflectivity byte
-  std::uint8_t channel = 0;         // 0..39 (manual channel number - 1)
+  float x = 0, y = 0, z = 0;       // metres, sensor frame: z up, y at azimuth 0, x at 90°
+  float distance_m = 0;            // range along the beam
+  std::int64_t timestamp_ns = 0;   // firing time, ns since the Unix epoch (see PacketTime)
+  std::uint16_t azimuth_cdeg = 0;  // corrected azimuth, 0.01°, 0..35999
+  std::uint8_t intensity = 0;      // reflectivity byte
+  std::uint8_t channel = 0;        // 0..39 (manual channel number - 1)
   ReturnType return_type = ReturnType::kSingle;
   std::uint8_t reserved_[3]{};
 };

@@ -6,7 +6,8 @@ namespace pandarcap {
 
 std::uint64_t StreamStats::rejected() const noexcept {
   std::uint64_t sum = 0;
-  for (std::size_t i = 1; i < kRejectReasonCount; ++i) sum += rejects[i];
+  for (std::size_t i = 1; i < kRejectReasonCount; ++i)
+    sum += rejects[i];
   return sum;
 }
 
@@ -54,7 +55,8 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   stats_.points += decoded.point_count;
 
   PacketMeta meta;
-  for (int b = 0; b < kBlocks; ++b) meta.block_azimuth_cdeg[b] = packet.azimuth_cdeg(b);
+  for (int b = 0; b < kBlocks; ++b)
+    meta.block_azimuth_cdeg[b] = packet.azimuth_cdeg(b);
   meta.t0_ns = time.t0_ns;
   meta.time_valid = time.valid();
   meta.motor_rpm = rpm;

@@ -31,13 +31,13 @@ struct StreamStats {
   std::uint64_t packets = 0;
   std::uint64_t accepted = 0;
   std::array<std::uint64_t, kRejectReasonCount> rejects{};  // indexed by RejectReason
-  std::uint64_t bad_date = 0;            // accepted, absolute time invalid (date out of range)
-  std::uint64_t bad_microseconds = 0;    // accepted, µs field > 1'000'000
-  std::uint64_t static_timestamps = 0;   // packet time did not advance from the previous packet
-  std::uint64_t high_temperature = 0;    // packets with the shutdown flag set
+  std::uint64_t bad_date = 0;           // accepted, absolute time invalid (date out of range)
+  std::uint64_t bad_microseconds = 0;   // accepted, µs field > 1'000'000
+  std::uint64_t static_timestamps = 0;  // packet time did not advance from the previous packet
+  std::uint64_t high_temperature = 0;   // packets with the shutdown flag set
   std::uint64_t return_mode_changes = 0;
-  std::uint64_t sequence_packets = 0;    // accepted packets that carried a UDP sequence
-  std::optional<ReturnMode> return_mode;  // of the last accepted packet
+  std::uint64_t sequence_packets = 0;      // accepted packets that carried a UDP sequence
+  std::optional<ReturnMode> return_mode;   // of the last accepted packet
   std::uint16_t rpm_min = 0, rpm_max = 0;  // over accepted packets (0 before the first)
   std::uint64_t points = 0;
   FilterCounts filtered;
@@ -50,8 +50,7 @@ struct StreamStats {
 
 class StreamDecoder {
  public:
-  StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
-                FrameSink& sink);
+  StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config, FrameSink& sink);
 
   // Processes one UDP payload; returns why it was rejected, or kNone.
   RejectReason process(std::span<const std::uint8_t> payload);

@@ -96,7 +96,8 @@ SyntheticSensor::Echoes SyntheticSensor::trace(double elevation_deg, double azim
   if (dx > 0) {
     const double tf = kFenceX / dx;
     const double y = tf * dy, z = tf * dz;
-    if (tf < t && y > kFenceYMin && y < kFenceYMax && z < kFenceTopZ) echoes.strongest = {to_raw(tf), 120};
+    if (tf < t && y > kFenceYMin && y < kFenceYMax && z < kFenceTopZ)
+      echoes.strongest = {to_raw(tf), 120};
   }
   return echoes;
 }
@@ -112,7 +113,8 @@ PacketContents SyntheticSensor::next_contents() {
   PacketContents p;
   for (int r = 0; r < rounds; ++r) {
     const std::uint64_t round = k * static_cast<std::uint64_t>(rounds) + r;
-    const double azimuth_cdeg = std::fmod(start_cdeg + static_cast<double>(round) * step_cdeg, 36000.0);
+    const double azimuth_cdeg =
+        std::fmod(start_cdeg + static_cast<double>(round) * step_cdeg, 36000.0);
     const auto azimuth = static_cast<std::uint16_t>(std::lround(azimuth_cdeg) % 36000);
     for (int echo = 0; echo < returns_per_firing(mode); ++echo) {
       const int b = r * returns_per_firing(mode) + echo;
@@ -121,7 +123,8 @@ PacketContents SyntheticSensor::next_contents() {
         const double alpha = azimuth / 100.0 + calibration_.azimuth_offset_deg[c];
         const Echoes echoes = trace(calibration_.elevation_deg[c], alpha);
         // Dual: even block = last echo, odd = strongest. Single: the mode's echo.
-        const bool want_last = mode == ReturnMode::kLast || (mode == ReturnMode::kDual && echo == 0);
+        const bool want_last =
+            mode == ReturnMode::kLast || (mode == ReturnMode::kDual && echo == 0);
         Echo e = want_last ? echoes.last : echoes.strongest;
         if (e.distance_raw != 0) {
           // ±2 raw units (±8 mm) of noise, the same for both echoes of a firing.
@@ -148,7 +151,8 @@ PacketContents SyntheticSensor::next_contents() {
   tail.reserved_opaque[0] = 0x72;
   tail.reserved_opaque[1] = 0x71;
   const double since_start_us = static_cast<double>(t0 - config_.start_unix_ns) / 1000.0;
-  tail.status_id = static_cast<std::uint8_t>(static_cast<std::int64_t>(since_start_us / kStatusPeriodUs) % 23);
+  tail.status_id =
+      static_cast<std::uint8_t>(static_cast<std::int64_t>(since_start_us / kStatusPeriodUs) % 23);
   tail.status_value = status_value(tail.status_id);
   if (config_.udp_sequence) {
     tail.sequence = config_.first_sequence + static_cast<std::uint32_t>(k);

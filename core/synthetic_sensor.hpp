@@ -29,13 +29,13 @@
 namespace pandarcap {
 
 struct SyntheticSensorConfig {
-  int rpm = 600;                                 // 600 (10 Hz) or 1200 (20 Hz); 60..1500 accepted
+  int rpm = 600;  // 600 (10 Hz) or 1200 (20 Hz); 60..1500 accepted
   ReturnMode return_mode = ReturnMode::kDual;
-  bool udp_sequence = false;                     // 1266-byte packets with a sequence number
+  bool udp_sequence = false;  // 1266-byte packets with a sequence number
   std::uint32_t first_sequence = 0;
   std::int64_t start_unix_ns = 1'795'348'800'000'000'000;  // 2026-11-22T12:00:00Z
   double start_azimuth_deg = 0.0;
-  std::uint64_t seed = 1;                        // varies the distance noise
+  std::uint64_t seed = 1;  // varies the distance noise
 };
 
 class SyntheticSensor {

@@ -16,12 +16,13 @@
 
 namespace pandarcap {
 
-inline constexpr std::int64_t kRoundPeriodNs = 55'560;    // one firing round
-inline constexpr std::int64_t kLastRoundEndNs = 28'580;   // last round ends this long before t0
+inline constexpr std::int64_t kRoundPeriodNs = 55'560;   // one firing round
+inline constexpr std::int64_t kLastRoundEndNs = 28'580;  // last round ends this long before t0
 
 // Block end relative to t0 (negative: earlier). b is 0-based.
 constexpr std::int64_t block_offset_ns(int b, ReturnMode mode) noexcept {
-  const int rounds_after = mode == ReturnMode::kDual ? (kBlocks / 2 - 1) - b / 2 : (kBlocks - 1) - b;
+  const int rounds_after =
+      mode == ReturnMode::kDual ? (kBlocks / 2 - 1) - b / 2 : (kBlocks - 1) - b;
   return -kLastRoundEndNs - kRoundPeriodNs * rounds_after;
 }
 

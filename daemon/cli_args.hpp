@@ -3,14 +3,14 @@
 // usage text and exit 0.
 #pragma once
 
+#include <fmt/format.h>
+
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <string_view>
-
-#include <fmt/format.h>
 
 namespace pandarcap {
 
@@ -45,8 +45,8 @@ class CliArgs {
     long long result = 0;
     const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), result);
     if (ec != std::errc() || ptr != text.data() + text.size() || result < min || result > max) {
-      usage_error(fmt::format("{} takes a whole number from {} to {}, got '{}'", option, min, max,
-                              text));
+      usage_error(
+          fmt::format("{} takes a whole number from {} to {}, got '{}'", option, min, max, text));
     }
     return result;
   }

@@ -3,16 +3,16 @@
 // Exit status: 0 the capture was read to its end (cleanly or truncated: see "capture_status"),
 // 1 the capture is corrupt part-way (what was read is still summarised), 2 the capture or the
 // calibration file cannot be used, 64 bad command line.
+#include <fmt/format.h>
+
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
-
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
 
 #include "core/calibration.hpp"
 #include "core/capture_reader.hpp"
@@ -137,21 +137,25 @@ std::string packet_line(const json& p) {
   const std::string sequence = p["sequence"].is_null()
                                    ? std::string("-")
                                    : std::to_string(p["sequence"].get<std::uint32_t>());
-  return fmt::format("{:>6} {:>5} {:>7.2f} {:>7.2f} {:>5} {:>8} {:>9} 0x{:02x} {} {:>10} {:>3} {:>5}{}",
-                     p["index"].get<std::uint64_t>(), p["size"].get<std::size_t>(),
-                     p["azimuth_first_cdeg"].get<int>() / 100.0,
-                     p["azimuth_last_cdeg"].get<int>() / 100.0, p["rpm"].get<int>(),
-                     p["timestamp_us"].get<std::uint32_t>(), p["return_mode"].get<std::string>(),
-                     p["factory"].get<int>(), p["utc"].get<std::string>(), sequence,
-                     p["status_id"].get<int>(), p["status_value"].get<int>(),
-                     p["high_temperature"].get<bool>() ? " HIGH-TEMP" : "");
+  return fmt::format(
+      "{:>6} {:>5} {:>7.2f} {:>7.2f} {:>5} {:>8} {:>9} 0x{:02x} {} {:>10} {:>3} {:>5}{}",
+      p["index"].get<std::uint64_t>(), p["size"].get<std::size_t>(),
+      p["azimuth_first_cdeg"].get<int>() / 100.0, p["azimuth_last_cdeg"].get<int>() / 100.0,
+      p["rpm"].get<int>(), p["timestamp_us"].get<std::uint32_t>(),
+      p["return_mode"].get<std::string>(), p["factory"].get<int>(), p["utc"].get<std::string>(),
+      sequence, p["status_id"].get<int>(), p["status_value"].get<int>(),
+      p["high_temperature"].get<bool>() ? " HIGH-TEMP" : "");
 }
 
 json frame_json(const FrameInfo& info) {
-  return {{"sequence", info.sequence},     {"points", info.points},
-          {"packets", info.packets},       {"rpm", info.rpm},
-          {"start_ns", info.start_ns},     {"end_ns", info.end_ns},
-          {"partial", info.partial},       {"time_valid", info.time_valid},
+  return {{"sequence", info.sequence},
+          {"points", info.points},
+          {"packets", info.packets},
+          {"rpm", info.rpm},
+          {"start_ns", info.start_ns},
+          {"end_ns", info.end_ns},
+          {"partial", info.partial},
+          {"time_valid", info.time_valid},
           {"return_mode", to_string(info.return_mode)}};
 }
 

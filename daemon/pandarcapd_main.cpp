@@ -5,6 +5,10 @@
 // printing one line per frame and a summary. Live UDP capture is not implemented yet.
 //
 // Start-up order: options -> logging -> calibration -> source -> decode -> summary.
+#include <fmt/format.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -13,10 +17,6 @@
 #include <string>
 #include <string_view>
 #include <system_error>
-
-#include <fmt/format.h>
-#include <spdlog/sinks/stdout_color_sinks.h>
-#include <spdlog/spdlog.h>
 
 #include "core/calibration.hpp"
 #include "core/capture_reader.hpp"
@@ -103,7 +103,8 @@ Options parse_options(int argc, char** argv) {
       const std::string_view mode = args.value(arg);
       const auto parsed = return_mode_from_string(mode);
       if (!parsed) {
-        args.usage_error(fmt::format("--return-mode takes dual, strongest or last, got '{}'", mode));
+        args.usage_error(
+            fmt::format("--return-mode takes dual, strongest or last, got '{}'", mode));
       }
       o.sensor.return_mode = *parsed;
     } else if (arg == "--udp-sequence") {
@@ -157,8 +158,8 @@ std::filesystem::path record_simulation(const Options& o, const Calibration& cal
   PcapWriter writer(path.string());
   const Endpoint source{0xC0A801C9, 2368};       // 192.168.1.201, the sensor's factory address
   const Endpoint destination{0xC0A8010A, 2368};  // 192.168.1.10
-  const auto packets =
-      static_cast<std::uint64_t>(std::llround(o.duration_s * 1e9 / static_cast<double>(sensor.packet_period_ns())));
+  const auto packets = static_cast<std::uint64_t>(
+      std::llround(o.duration_s * 1e9 / static_cast<double>(sensor.packet_period_ns())));
   std::array<std::uint8_t, kMaxPacketBytes> buffer{};
   for (std::uint64_t i = 0; i < packets; ++i) {
     const std::size_t size = sensor.next(buffer);
@@ -186,8 +187,9 @@ int run(const Options& o) {
     calibration = Calibration::load(*o.calibration);
     spdlog::info("calibration: {}", calibration.source);
   } else {
-    spdlog::warn("calibration: nominal Pandar40P table in use (no --calibration given); per-unit "
-                 "elevations differ by up to ~0.45 degrees");
+    spdlog::warn(
+        "calibration: nominal Pandar40P table in use (no --calibration given); per-unit "
+        "elevations differ by up to ~0.45 degrees");
   }
 
   const std::filesystem::path input =
@@ -197,16 +199,18 @@ int run(const Options& o) {
   FrameCollector collector(3, kDefaultFrameCapacityPoints, [&](const Frame& frame) {
     const FrameInfo& f = frame.info;
     if (o.quiet) return;
-    fmt::print("frame {:>4}  {:>6} points  {:>4} packets  {:>6.1f} rpm  {:<9}  {:<8}  {}  {:.1f} ms\n",
-               f.sequence, f.points, f.packets, f.rpm, to_string(f.return_mode),
-               f.partial ? "partial" : "complete", format_time(f.start_ns, f.time_valid),
-               static_cast<double>(f.end_ns - f.start_ns) / 1e6);
+    fmt::print(
+        "frame {:>4}  {:>6} points  {:>4} packets  {:>6.1f} rpm  {:<9}  {:<8}  {}  {:.1f} ms\n",
+        f.sequence, f.points, f.packets, f.rpm, to_string(f.return_mode),
+        f.partial ? "partial" : "complete", format_time(f.start_ns, f.time_valid),
+        static_cast<double>(f.end_ns - f.start_ns) / 1e6);
   });
   StreamDecoder decoder(calibration, o.decode, collector);
 
   CaptureRecord record;
   CaptureStatus status;
-  while ((status = reader.next(record)) == CaptureStatus::kRecord) decoder.process(record.payload);
+  while ((status = reader.next(record)) == CaptureStatus::kRecord)
+    decoder.process(record.payload);
   decoder.flush();
 
   const StreamStats& s = decoder.stats();

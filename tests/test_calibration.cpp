@@ -1,7 +1,6 @@
 // Calibration CSV loader: good files in every accepted dialect, and each kind of bad file with
 // the file:line:col it must point at.
 #include <catch2/catch.hpp>
-
 #include <fstream>
 #include <string>
 
@@ -16,15 +15,14 @@ namespace {
 std::string table(const std::string& header, const std::string& eol, bool trailing_newline) {
   std::string text = header.empty() ? "" : header + eol;
   for (int id = 1; id <= kChannels; ++id) {
-    text += std::to_string(id) + "," + std::to_string(id / 10.0) + "," +
-            std::to_string(-id / 100.0);
+    text +=
+        std::to_string(id) + "," + std::to_string(id / 10.0) + "," + std::to_string(-id / 100.0);
     if (id < kChannels || trailing_newline) text += eol;
   }
   return text;
 }
 
-void require_error(const std::string& text, const std::string& location,
-                   const std::string& words) {
+void require_error(const std::string& text, const std::string& location, const std::string& words) {
   try {
     (void)Calibration::parse(text, "cal.csv");
     FAIL("no error for a bad file; expected " << location);
@@ -39,7 +37,8 @@ void require_error(const std::string& text, const std::string& location,
 // Replaces line `line` (1-based) of `text`.
 std::string with_line(std::string text, int line, const std::string& replacement) {
   std::size_t begin = 0;
-  for (int i = 1; i < line; ++i) begin = text.find('\n', begin) + 1;
+  for (int i = 1; i < line; ++i)
+    begin = text.find('\n', begin) + 1;
   const std::size_t end = text.find('\n', begin);
   return text.replace(begin, end - begin, replacement);
 }
@@ -49,9 +48,8 @@ std::string with_line(std::string text, int line, const std::string& replacement
 TEST_CASE("calibration parses LF, CRLF, with and without trailing newline", "[calibration]") {
   for (const std::string& eol : {std::string("\n"), std::string("\r\n")}) {
     for (bool trailing : {true, false}) {
-      for (const std::string& header :
-           {std::string("Laser id,Elevation,Azimuth"), std::string("Channel,Elevation,Azimuth"),
-            std::string()}) {
+      for (const std::string& header : {std::string("Laser id,Elevation,Azimuth"),
+                                        std::string("Channel,Elevation,Azimuth"), std::string()}) {
         const Calibration c = Calibration::parse(table(header, eol, trailing), "t.csv");
         for (int ch = 0; ch < kChannels; ++ch) {
           CHECK(c.elevation_deg[ch] == Approx((ch + 1) / 10.0));
@@ -92,7 +90,8 @@ TEST_CASE("each kind of bad calibration file names its line and column", "[calib
   require_error(with_line(good, 9, "8,nan,1.0"), "9:3", "not a number");
   // Missing channels are reported after the last line, with the list of ids.
   std::string short_table = "Laser id,Elevation,Azimuth\n";
-  for (int id = 1; id <= 38; ++id) short_table += std::to_string(id) + ",0,0\n";
+  for (int id = 1; id <= 38; ++id)
+    short_table += std::to_string(id) + ",0,0\n";
   require_error(short_table, "40:1", "2 of 40 channels missing: 39,40");
   require_error("", "1:1", "40 of 40 channels missing");
 }
@@ -115,7 +114,8 @@ TEST_CASE("the nominal table is the Pandar40P design table", "[calibration]") {
   CHECK(c.elevation_deg[38] == -19.0);
   CHECK(c.elevation_deg[39] == -25.0);
   // Elevations strictly decrease from channel 1 to channel 40.
-  for (int ch = 1; ch < kChannels; ++ch) CHECK(c.elevation_deg[ch] < c.elevation_deg[ch - 1]);
+  for (int ch = 1; ch < kChannels; ++ch)
+    CHECK(c.elevation_deg[ch] < c.elevation_deg[ch - 1]);
   // Offsets: channels 1-6 and 31-40 at -1.042; 7, 10, ..., 28 at +3.125; 8, 11, ..., 29 at -5.208.
   for (int id = 1; id <= kChannels; ++id) {
     double expected = -1.042;

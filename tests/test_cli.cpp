@@ -1,7 +1,6 @@
 // The binaries, run as a user runs them: pandarcap-inspect --json on real and generated
 // captures, pandarcapd --simulate, and their errors for bad input.
 #include <catch2/catch.hpp>
-
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -13,7 +12,9 @@ using nlohmann::json;
 
 namespace {
 
-std::string quoted(const std::filesystem::path& p) { return "'" + p.string() + "'"; }
+std::string quoted(const std::filesystem::path& p) {
+  return "'" + p.string() + "'";
+}
 
 json inspect_json(const std::string& arguments) {
   const auto result =
@@ -28,8 +29,8 @@ TEST_CASE("inspect --json on the real dual capture", "[cli][real]") {
   const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
   const auto calibration = test::real_capture("nebula_Pandar40P_calibration.csv");
   if (!capture || !calibration) return;
-  const json j = inspect_json("--calibration " + quoted(*calibration) + " --port 2368 " +
-                              quoted(*capture));
+  const json j =
+      inspect_json("--calibration " + quoted(*calibration) + " --port 2368 " + quoted(*capture));
   const json& s = j.at("summary");
   CHECK(s.at("packets") == 1439);
   CHECK(s.at("accepted") == 1439);
@@ -119,9 +120,9 @@ TEST_CASE("bad command lines and bad files give clear errors and exit codes", "[
     std::ofstream bad(dir / "bad.csv");
     bad << "Laser id,Elevation,Azimuth\n1,15,-1.042\n2,eleven,-1.042\n";
   }
-  const auto calibration = test::run_command(daemon + " --simulate --duration 0.01 --output-dir " +
-                                             quoted(dir.path()) + " --calibration " +
-                                             quoted(dir / "bad.csv") + " 2>&1");
+  const auto calibration =
+      test::run_command(daemon + " --simulate --duration 0.01 --output-dir " + quoted(dir.path()) +
+                        " --calibration " + quoted(dir / "bad.csv") + " 2>&1");
   CHECK(calibration.exit_code == 2);
   CHECK(calibration.out.find("bad.csv:3:3: elevation is not a number") != std::string::npos);
 }

@@ -1,7 +1,6 @@
 // Scalar decoder: geometry, per-point time, range filters and dual-return rules, on crafted
 // packets whose expected output is worked out by hand.
 #include <catch2/catch.hpp>
-
 #include <cmath>
 
 #include "core/decoder.hpp"
@@ -121,8 +120,8 @@ TEST_CASE("firing-time correction rotates each channel back by RPM·6e-6·Δt de
   CHECK(off.points[1].azimuth_cdeg == 9000);
   CHECK(on.points[1].azimuth_cdeg == 8961);
   CHECK(on.points[0].azimuth_cdeg == 8970);  // channel 1: 42.22 µs -> 0.304°
-  CHECK(on.points[1].y == Approx(10 * std::cos(1.33 * M_PI / 180) * std::cos(89.6064 * M_PI / 180))
-                              .margin(0.001));
+  CHECK(on.points[1].y ==
+        Approx(10 * std::cos(1.33 * M_PI / 180) * std::cos(89.6064 * M_PI / 180)).margin(0.001));
 }
 
 TEST_CASE("every point carries t0 + block offset - channel firing offset", "[decoder]") {
@@ -145,8 +144,8 @@ TEST_CASE("every point carries t0 + block offset - channel firing offset", "[dec
       }
     }
     // Spot check against the spec's numbers: block 0, channel 8 fires first in the packet.
-    const std::int64_t first = mode == ReturnMode::kDual ? t0 - 250'820 - 54'670
-                                                         : t0 - 528'620 - 54'670;
+    const std::int64_t first =
+        mode == ReturnMode::kDual ? t0 - 250'820 - 54'670 : t0 - 528'620 - 54'670;
     CHECK(d.points[7].channel == 7);
     CHECK(d.points[7].timestamp_ns == first);
   }
@@ -192,9 +191,9 @@ TEST_CASE("dual return: even block is last, odd is strongest; duplicates merge",
   p.distance_raw[1][2] = 1500;
   p.distance_raw[0][3] = 1525;  // ch 3: 0.100 m apart -> both kept
   p.distance_raw[1][3] = 1500;
-  p.distance_raw[0][4] = 0;     // ch 4: only the strongest echo
+  p.distance_raw[0][4] = 0;  // ch 4: only the strongest echo
   p.distance_raw[1][4] = 800;
-  p.distance_raw[0][5] = 900;   // ch 5: only the last echo
+  p.distance_raw[0][5] = 900;  // ch 5: only the last echo
   p.distance_raw[1][5] = 0;
   p.distance_raw[0][6] = 1500;  // ch 6: same distance, other reflectivity -> merged (too close)
   p.reflectivity[0][6] = 1;
@@ -260,7 +259,8 @@ TEST_CASE("block layout groups points by block in block order", "[decoder]") {
   PacketContents p = empty_packet(ReturnMode::kStrongest);
   for (int b = 0; b < kBlocks; ++b) {
     p.azimuth_cdeg[b] = static_cast<std::uint16_t>(1000 + 20 * b);
-    for (int c = 0; c <= b; ++c) p.distance_raw[b][c] = 1000;  // block b has b + 1 points
+    for (int c = 0; c <= b; ++c)
+      p.distance_raw[b][c] = 1000;  // block b has b + 1 points
   }
   const Decoded d = decode(p, Calibration::nominal());
   CHECK(d.layout.point_count == 55);

@@ -1,6 +1,5 @@
 // Packet validation (one crafted packet per reject reason) and tail decoding.
 #include <catch2/catch.hpp>
-
 #include <vector>
 
 #include "core/capture_reader.hpp"
@@ -53,7 +52,8 @@ TEST_CASE("a bad marker in any block is rejected", "[packet]") {
   }
   // Newer Hesai models write EE FF; the 40P writes FF EE. The swapped order must not pass.
   std::vector<std::uint8_t> swapped = valid_packet();
-  for (int b = 0; b < kBlocks; ++b) std::swap(swapped[kBlockBytes * b], swapped[kBlockBytes * b + 1]);
+  for (int b = 0; b < kBlocks; ++b)
+    std::swap(swapped[kBlockBytes * b], swapped[kBlockBytes * b + 1]);
   CHECK(validate(swapped) == RejectReason::kBadMarker);
 }
 

@@ -1,9 +1,8 @@
 // The real dual-return capture (tier4/nebula test data, 600 RPM, 1262-byte packets) decoded end
 // to end with its own calibration file. The checks are physical: they fail if the geometry,
 // timing, dual-return labelling or frame cutting is wrong, without hard-coding decoder output.
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <map>
 #include <vector>
@@ -44,7 +43,8 @@ double misalignment(const std::vector<std::vector<std::uint8_t>>& payloads,
   FilterCounts filtered;
   std::vector<double> range_a(1800, -1), range_b(1800, -1);
   for (std::size_t k = 0; k < std::min<std::size_t>(360, payloads.size()); ++k) {
-    const DecodedPacket d = decoder.decode(PacketView::assume_valid(payloads[k]), 0, points, filtered);
+    const DecodedPacket d =
+        decoder.decode(PacketView::assume_valid(payloads[k]), 0, points, filtered);
     for (std::size_t i = 0; i < d.point_count; ++i) {
       const Point& p = points[i];
       if (p.return_type == ReturnType::kLast) continue;
@@ -80,14 +80,16 @@ TEST_CASE("real dual capture: packets, RPM, return mode and frames", "[real][e2e
     points_in_frames += frame.size;
     CHECK(frame.size == frame.info.points);
     if (frame.info.partial) return;
-    for (const Point& p : frame.used()) azimuths[frame.info.sequence][p.channel].push_back(p.azimuth_cdeg);
+    for (const Point& p : frame.used())
+      azimuths[frame.info.sequence][p.channel].push_back(p.azimuth_cdeg);
     // Frame time span: one revolution (100 ms at 600 RPM) plus the spread of channel offsets.
     const double span_ms = static_cast<double>(frame.info.end_ns - frame.info.start_ns) / 1e6;
     CHECK(span_ms > 98.0);
     CHECK(span_ms < 104.0);
   });
   StreamDecoder decoder(calibration, {}, collector);
-  for (const auto& payload : read_payloads(capture->string())) decoder.process(payload);
+  for (const auto& payload : read_payloads(capture->string()))
+    decoder.process(payload);
   decoder.flush();
 
   const StreamStats& s = decoder.stats();
@@ -125,7 +127,8 @@ TEST_CASE("real dual capture: packets, RPM, return mode and frames", "[real][e2e
   CHECK(complete >= 2);
   CHECK(frames.front().partial);
   CHECK(frames.back().partial);
-  for (std::size_t i = 1; i < frames.size(); ++i) CHECK(frames[i].sequence == frames[i - 1].sequence + 1);
+  for (std::size_t i = 1; i < frames.size(); ++i)
+    CHECK(frames[i].sequence == frames[i - 1].sequence + 1);
 
   // Per-channel cut: in a complete frame every channel sweeps once from the cut (0°) round to
   // just before it, so its azimuths, in arrival order, never wrap. Channels that see something
@@ -142,14 +145,16 @@ TEST_CASE("real dual capture: packets, RPM, return mode and frames", "[real][e2e
   }
 }
 
-TEST_CASE("real dual capture: the calibration's offsets align adjacent channels", "[real][geometry]") {
+TEST_CASE("real dual capture: the calibration's offsets align adjacent channels",
+          "[real][geometry]") {
   const auto capture = test::real_capture(kDualCapture);
   const auto calibration_path = test::real_capture(kCalibration);
   if (!capture || !calibration_path) return;
   const auto payloads = read_payloads(capture->string());
   const Calibration right = Calibration::load(calibration_path->string());
   Calibration negated = right;  // offsets subtracted instead of added
-  for (double& offset : negated.azimuth_offset_deg) offset = -offset;
+  for (double& offset : negated.azimuth_offset_deg)
+    offset = -offset;
 
   // Channels 7-30 carry the three different offsets (+3.125, -5.208, -1.042).
   for (int c = 6; c < 29; ++c) {

@@ -3,7 +3,6 @@
 // turns ranges back into xyz; points landing on the scene's surfaces check elevation, azimuth
 // offsets and the axis convention from the other direction.
 #include <catch2/catch.hpp>
-
 #include <cmath>
 #include <set>
 
@@ -53,7 +52,8 @@ TEST_CASE("synthetic packets are valid with realistic tails and timing", "[synth
             CHECK(std::abs(d - step) <= 1);
           }
           if (mode == ReturnMode::kDual) {
-            for (int b = 0; b < kBlocks; b += 2) CHECK(view->azimuth_cdeg(b) == view->azimuth_cdeg(b + 1));
+            for (int b = 0; b < kBlocks; b += 2)
+              CHECK(view->azimuth_cdeg(b) == view->azimuth_cdeg(b + 1));
           }
         }
         CHECK(status_ids.size() == 23);

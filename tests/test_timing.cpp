@@ -41,7 +41,8 @@ TEST_CASE("channel firing offsets match the manual's firing-sequence table", "[t
     CHECK(kChannelFiringOffsetNs[entry.channel - 1] == std::llround(entry.dt_us * 1000));
     ++seen[entry.channel - 1];
   }
-  for (int count : seen) CHECK(count == 1);
+  for (int count : seen)
+    CHECK(count == 1);
 }
 
 TEST_CASE("packet periods follow the 55.56 µs firing round", "[timing]") {
