@@ -120,17 +120,19 @@ void FrameAssembler::add_point(Slot& slot, const Point& point, const PacketMeta&
   }
   Frame& frame = *slot.frame;
   FrameInfo& info = frame.info;
+  // Capacity first: a packet whose points were all dropped must not count towards the frame's
+  // packets, RPM or time validity.
+  if (frame.size == frame.points.size()) {
+    ++stats_.points_dropped_full;
+    ++info.points_dropped;
+    return;
+  }
   if (slot.last_packet != packet_counter_) {
     slot.last_packet = packet_counter_;
     slot.rpm_sum += meta.motor_rpm;
     ++info.packets;
     info.return_mode = meta.return_mode;
     info.time_valid = info.time_valid && meta.time_valid;
-  }
-  if (frame.size == frame.points.size()) {
-    ++stats_.points_dropped_full;
-    ++info.points_dropped;
-    return;
   }
   frame.points[frame.size++] = point;
   if (info.points == 0 || point.timestamp_ns < info.start_ns) info.start_ns = point.timestamp_ns;

@@ -2,8 +2,14 @@
 // duplicates, late (reordered) packets and resets (a sensor reboot restarts its counter: that is
 // not 4 billion lost packets). Arithmetic is modulo 2^32, so the wrap from 0xFFFFFFFF to 0 is
 // in order.
+//
+// The tracker remembers which of the last kReorderWindow numbers have arrived (a 256-byte
+// bitmap), so a late packet is told apart from a repeat: only a number that was really missing
+// is "reordered" and forgiven from `lost`; a number that already arrived is a duplicate, however
+// far back it is inside the window.
 #pragma once
 
+#include <array>
 #include <cstdint>
 
 namespace pandarcap {
@@ -12,8 +18,8 @@ struct SequenceStats {
   std::uint64_t in_order = 0;
   std::uint64_t gaps = 0;        // events: the sequence skipped ahead
   std::uint64_t lost = 0;        // packets missing in those gaps (late arrivals subtracted)
-  std::uint64_t duplicates = 0;  // the same number as the previous packet
-  std::uint64_t reordered = 0;   // arrived after a higher number (counted missing, now found)
+  std::uint64_t duplicates = 0;  // a number that had already arrived
+  std::uint64_t reordered = 0;   // a missing number arriving after a higher one (no longer lost)
   std::uint64_t resets = 0;      // jumps too large to be loss or reordering
 };
 
@@ -29,8 +35,18 @@ class SequenceTracker {
   const SequenceStats& stats() const noexcept { return stats_; }
 
  private:
+  // One bit per number in [last_ - kReorderWindow, last_] (kReorderWindow + 1 numbers), indexed by
+  // the number modulo kBits; kBits is the next power of two that holds them all.
+  static constexpr std::uint32_t kBits = 2 * kReorderWindow;
+  static_assert((kBits & (kBits - 1)) == 0, "bitmap index is a mask");
+
+  bool arrived(std::uint32_t sequence) const noexcept;
+  void mark(std::uint32_t sequence, bool arrived) noexcept;
+  void advance_to(std::uint32_t sequence) noexcept;  // numbers skipped become missing
+
   bool started_ = false;
   std::uint32_t last_ = 0;  // highest sequence seen (the next expected is last_ + 1)
+  std::array<std::uint64_t, kBits / 64> arrived_{};
   SequenceStats stats_;
 };
 
