@@ -1,0 +1,44 @@
+// PacketSlot and PacketRing: what the receive thread hands the decoder.
+//
+// A slot holds one UDP datagram exactly as recvmmsg wrote it, with what the kernel said about it.
+// The payload buffer is sized for the largest datagram the decoder accepts (1266 bytes: a
+// Pandar40P packet with its 4-byte UDP sequence) plus slack to a whole number of cache lines; a
+// larger datagram is cut by the kernel and marked `truncated` (MSG_TRUNC), and the decoder rejects
+// it by length and counts it. Slots are 64-byte aligned so one slot's header never shares a cache
+// line with the previous slot's payload.
+#pragma once
+
+#include <netinet/in.h>
+
+#include <cstddef>
+#include <cstdint>
+
+#include "ringbuf/slot_ring.hpp"
+
+namespace pandarcap::ringbuf {
+
+// Largest datagram the decoder accepts (spec §1: 1262 bytes, or 1266 with the UDP sequence).
+inline constexpr std::size_t kMaxAcceptedDatagram = 1266;
+
+struct alignas(kCacheLine) PacketSlot {
+  // Room for the largest accepted datagram, rounded up so the slot is whole cache lines.
+  static constexpr std::size_t kPayloadCapacity = 1280;
+  static_assert(kPayloadCapacity >= kMaxAcceptedDatagram);
+
+  std::uint8_t payload[kPayloadCapacity];
+  // The datagram's length on the wire; if it exceeds kPayloadCapacity, only kPayloadCapacity
+  // bytes were kept and `truncated` is set.
+  std::uint32_t length;
+  bool truncated;
+  // Kernel receive time (SO_TIMESTAMPNS, CLOCK_REALTIME ns), or the time recvmmsg returned when
+  // the kernel gave none; 0 for replayed packets that had no capture time.
+  std::int64_t receive_time_ns;
+  // Sender, as recvmmsg wrote it (the daemon binds an IPv4 socket; the sensor speaks IPv4).
+  sockaddr_in source;
+};
+
+static_assert(sizeof(PacketSlot) % kCacheLine == 0);
+
+using PacketRing = SlotRing<PacketSlot>;
+
+}  // namespace pandarcap::ringbuf
