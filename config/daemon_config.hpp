@@ -1,0 +1,70 @@
+// Everything pandarcapd can be configured with, and its defaults. The TOML file
+// (config/pandarcap.toml documents every key) maps onto this one-to-one: table [sensor] holds
+// the established LiDAR-driver parameter names, then [ring], [arenas], [output] and [health].
+// The defaults are what `pandarcapd --replay FILE` runs with when no config file is given.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace pandarcap {
+
+struct SensorSection {
+  std::string sensor_ip;               // accept datagrams only from this IPv4; "" = any source
+  std::string host_ip = "0.0.0.0";     // local address the UDP socket binds to
+  std::string multicast_ip;            // group to join; "" = unicast/broadcast
+  std::string multicast_interface_ip;  // local interface address for the join; "" = any
+  std::uint16_t data_port = 2368;      // 1..65535
+  std::uint64_t udp_socket_receive_buffer_size_bytes = 8u << 20;  // requested SO_RCVBUF
+  std::string return_mode = "any";  // expected: "any", "last", "strongest", "dual"
+  int rotation_speed = 600;         // expected motor speed, RPM: 600 or 1200
+  double cut_angle = 0.0;           // degrees, [0, 360)
+  double min_range = 0.3;           // metres, >= 0
+  double max_range = 200.0;         // metres, > min_range
+  double dual_return_distance_threshold = 0.1;  // metres, >= 0
+  std::string calibration_file;                 // CSV; "" = the nominal table
+  bool firing_time_correction = false;
+};
+
+struct RingSection {
+  std::uint32_t slots = 4096;         // packet slots between receive and decode; power of two
+  std::uint32_t receive_batch = 64;   // datagrams per recvmmsg; 1..1024 and <= slots
+};
+
+struct ArenaSection {
+  std::uint32_t count = 4;                   // frame arenas in the pool; 2..64
+  std::uint32_t points_per_frame = 180'000;  // 1800 firings x 40 channels x 2 returns + 25 %
+  std::uint32_t packets_per_frame = 512;     // raw packets kept per frame for the pcap
+};
+
+struct OutputSection {
+  std::string directory = "pandarcap-output";  // frames/, raw/ and health/ go under it
+  bool frames = true;                          // write frames as PCD
+  std::uint32_t frame_decimation = 1;          // write every Nth frame; >= 1
+  std::uint64_t frames_max_files = 0;          // retention; 0 = unlimited
+  std::uint64_t frames_max_bytes = 0;          // retention; 0 = unlimited
+  bool pcap = true;                            // record raw packets as pcap
+  std::uint64_t pcap_rotate_bytes = 1u << 30;  // start a new file after this many; 0 = never
+  std::uint32_t pcap_rotate_seconds = 0;       // start a new file after this long; 0 = never
+  std::uint64_t pcap_max_files = 0;            // retention; 0 = unlimited
+  std::uint64_t pcap_max_bytes = 0;            // retention; 0 = unlimited
+};
+
+struct HealthSection {
+  std::string sensor_name = "pandar40p";       // the `sensor` label on every metric
+  double no_data_timeout_seconds = 2.0;        // silence longer than this: state no_data
+  bool prometheus = true;                      // health/pandarcap.prom
+  bool jsonl = true;                           // health/health.jsonl
+  std::uint64_t jsonl_rotate_bytes = 64u << 20;  // rotate health.jsonl; 0 = never
+};
+
+struct DaemonConfig {
+  std::string log_level = "info";  // trace, debug, info, warn, error, critical, off
+  SensorSection sensor;
+  RingSection ring;
+  ArenaSection arenas;
+  OutputSection output;
+  HealthSection health;
+};
+
+}  // namespace pandarcap
