@@ -1,0 +1,40 @@
+// Reading, checking and printing pandarcapd's TOML configuration (toml++).
+//
+// Every problem is a ConfigError whose message starts with its location, `file:line:col: `,
+// the way compilers report errors, so an operator can jump straight to the key at fault:
+//   /etc/pandarcap/pandarcap.toml:12:15: sensor.data_port: 70000 is out of range (1..65535)
+// Unknown tables and keys are errors too (a misspelt key must not silently keep its default).
+#pragma once
+
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+
+#include "daemon_config.hpp"
+
+namespace pandarcap {
+
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Parses TOML text. `source_name` is the file name used in messages. Keys that are absent keep
+// their defaults. Throws ConfigError for syntax errors, unknown keys, wrong types and values out
+// of range (the latter via validate_config).
+DaemonConfig parse_config(std::string_view toml_text, const std::string& source_name);
+
+// Reads and parses a file; a missing or unreadable file is a ConfigError naming it.
+DaemonConfig load_config_file(const std::filesystem::path& path);
+
+// Checks the values against their ranges and each other (e.g. max_range > min_range, ring slots
+// a power of two). Used after command-line overrides, where there is no line to point at: then
+// the message starts with `source_name: `.
+void validate_config(const DaemonConfig& config, const std::string& source_name);
+
+// The configuration as a complete TOML document that parse_config reads back to the same values
+// (`pandarcapd --print-config`).
+std::string to_toml(const DaemonConfig& config);
+
+}  // namespace pandarcap
