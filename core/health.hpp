@@ -35,7 +35,7 @@ struct HealthCounters {
   std::uint64_t ring_overruns = 0;        // ring full: datagram dropped by the receive thread
   // Decode side.
   std::uint64_t packets_accepted = 0;
-  std::uint64_t packets_rejected = 0;  // = sum(rejects)
+  std::uint64_t packets_rejected = 0;                       // = sum(rejects)
   std::array<std::uint64_t, kRejectReasonCount> rejects{};  // indexed by RejectReason
   std::uint64_t sequence_gaps = 0;
   std::uint64_t sequence_lost = 0;
@@ -53,12 +53,13 @@ struct HealthCounters {
   // Frames.
   std::uint64_t frames_complete = 0;
   std::uint64_t frames_partial = 0;
-  std::uint64_t frames_dropped_no_arena = 0;    // no free arena when the frame began
+  std::uint64_t frames_dropped_no_arena = 0;     // no free arena when the frame began
   std::uint64_t frames_dropped_writer_busy = 0;  // writer queue full (slow disk): not written
-  std::uint64_t frames_decimated = 0;           // skipped on purpose (frame_decimation)
-  std::uint64_t frames_written = 0;             // PCD files completed
+  std::uint64_t frames_decimated = 0;            // skipped on purpose (frame_decimation)
+  std::uint64_t frames_written = 0;              // PCD files completed
   // Writer.
   std::uint64_t pcap_packets_written = 0;
+  std::uint64_t pcap_packets_not_recorded = 0;  // no free raw batch (writer behind): not in pcap
   std::uint64_t pcap_bytes_written = 0;
   std::uint64_t pcd_bytes_written = 0;
   std::uint64_t write_errors = 0;

@@ -1,0 +1,216 @@
+// The health renderings: Prometheus text (node_exporter textfile conventions, checked with
+// promtool when it is installed) and the JSON line (every counter present under its field name).
+#include <catch2/catch.hpp>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <sstream>
+
+#include "core/health_format.hpp"
+#include "test_support.hpp"
+
+using namespace pandarcap;
+
+namespace {
+
+// A snapshot where every counter has a distinct value, so a field rendered from the wrong
+// member shows up as a wrong number.
+HealthSnapshot distinct_snapshot() {
+  HealthSnapshot h;
+  h.unix_time_ns = 1'700'000'000'123'456'789;
+  h.sensor = "front \"left\"\\lidar";
+  h.version = "1.2.3";
+  HealthCounters& c = h.counters;
+  std::uint64_t v = 1000;
+  for (std::uint64_t* field : {&c.datagrams_received,
+                               &c.bytes_received,
+                               &c.foreign_datagrams,
+                               &c.truncated_datagrams,
+                               &c.kernel_drops,
+                               &c.ring_overruns,
+                               &c.packets_accepted,
+                               &c.sequence_gaps,
+                               &c.sequence_lost,
+                               &c.sequence_duplicates,
+                               &c.sequence_reordered,
+                               &c.sequence_resets,
+                               &c.azimuth_gaps,
+                               &c.static_timestamp_packets,
+                               &c.invalid_time_packets,
+                               &c.high_temperature_packets,
+                               &c.return_mode_changes,
+                               &c.points,
+                               &c.points_dropped_frame_full,
+                               &c.frames_complete,
+                               &c.frames_partial,
+                               &c.frames_dropped_no_arena,
+                               &c.frames_dropped_writer_busy,
+                               &c.frames_decimated,
+                               &c.frames_written,
+                               &c.pcap_packets_written,
+                               &c.pcap_packets_not_recorded,
+                               &c.pcap_bytes_written,
+                               &c.pcd_bytes_written,
+                               &c.write_errors,
+                               &c.bytes_not_written}) {
+    *field = v++;
+  }
+  for (std::size_t i = 0; i < kRejectReasonCount; ++i)
+    c.rejects[i] = 10 + i;
+  c.packets_rejected = 11 + 12 + 13 + 14;
+  for (std::size_t i = 0; i < kFilterReasonCount; ++i)
+    c.filtered_points[i] = 20 + i;
+  h.gauges.rpm_tail = 600;
+  h.gauges.rpm_measured = 599.5;
+  h.gauges.frame_rate_hz = 10;
+  h.gauges.return_mode = "dual";
+  h.gauges.high_temperature = true;
+  h.gauges.seconds_since_last_packet = 0.25;
+  h.gauges.uptime_seconds = 12.5;
+  h.gauges.state = HealthState::kDegraded;
+  h.gauges.reason = "3 kernel drops";
+  return h;
+}
+
+// "name{labels} value" lines, keyed by "name{labels}".
+std::map<std::string, std::string> samples(const std::string& text) {
+  std::map<std::string, std::string> out;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    const auto space = line.rfind(' ');
+    REQUIRE(space != std::string::npos);
+    out[line.substr(0, space)] = line.substr(space + 1);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("health states have stable names", "[health]") {
+  CHECK(to_string(HealthState::kOk) == "ok");
+  CHECK(to_string(HealthState::kNoData) == "no_data");
+  CHECK(to_string(HealthState::kDegraded) == "degraded");
+  CHECK(to_string(HealthState::kError) == "error");
+}
+
+TEST_CASE("Prometheus label values are escaped", "[health]") {
+  CHECK(escape_label_value("plain") == "plain");
+  CHECK(escape_label_value("a\"b\\c\nd") == "a\\\"b\\\\c\\nd");
+}
+
+TEST_CASE("Prometheus text follows the textfile-collector conventions", "[health]") {
+  const HealthSnapshot h = distinct_snapshot();
+  const std::string text = to_prometheus(h);
+  REQUIRE(text.back() == '\n');
+  const std::string sensor = R"(sensor="front \"left\"\\lidar")";
+  const auto s = samples(text);
+
+  CHECK(s.at("pandarcap_build_info{" + sensor + ",version=\"1.2.3\"}") == "1");
+  CHECK(s.at("pandarcap_datagrams_received_total{" + sensor + "}") ==
+        std::to_string(h.counters.datagrams_received));
+  CHECK(s.at("pandarcap_received_bytes_total{" + sensor + "}") ==
+        std::to_string(h.counters.bytes_received));
+  CHECK(s.at("pandarcap_kernel_drops_total{" + sensor + "}") ==
+        std::to_string(h.counters.kernel_drops));
+  CHECK(s.at("pandarcap_pcap_packets_not_recorded_total{" + sensor + "}") ==
+        std::to_string(h.counters.pcap_packets_not_recorded));
+  CHECK(s.at("pandarcap_not_written_bytes_total{" + sensor + "}") ==
+        std::to_string(h.counters.bytes_not_written));
+  CHECK(s.at("pandarcap_packets_rejected_total{" + sensor + ",reason=\"bad_marker\"}") ==
+        std::to_string(h.counters.rejects[static_cast<std::size_t>(RejectReason::kBadMarker)]));
+  CHECK(s.count("pandarcap_packets_rejected_total{" + sensor + ",reason=\"none\"}") == 0);
+  CHECK(s.at("pandarcap_points_filtered_total{" + sensor + ",reason=\"above_max_range\"}") == "22");
+  CHECK(s.at("pandarcap_motor_speed_measured_rpm{" + sensor + "}") == "599.5");
+  CHECK(s.at("pandarcap_high_temperature{" + sensor + "}") == "1");
+  CHECK(s.at("pandarcap_return_mode{" + sensor + ",mode=\"dual\"}") == "1");
+  CHECK(s.at("pandarcap_return_mode{" + sensor + ",mode=\"last\"}") == "0");
+  CHECK(s.at("pandarcap_state{" + sensor + ",state=\"degraded\"}") == "1");
+  CHECK(s.at("pandarcap_state{" + sensor + ",state=\"ok\"}") == "0");
+
+  // Every sample: a pandarcap_ name with the sensor label, a number, no timestamp; every
+  // counter family ends in _total; each family has HELP and TYPE once.
+  const std::regex sample(
+      R"(^pandarcap_[a-z_]+\{sensor="(?:[^"\\]|\\.)*"(,[a-z_]+="[a-z_0-9.]*")*\} -?[0-9.]+$)");
+  std::istringstream in(text);
+  std::string line;
+  std::map<std::string, int> types;
+  while (std::getline(in, line)) {
+    if (line.rfind("# TYPE ", 0) == 0) {
+      std::istringstream fields(line.substr(7));
+      std::string name, type;
+      fields >> name >> type;
+      CHECK(++types[name] == 1);
+      if (type == "counter") CHECK(name.ends_with("_total"));
+      if (type == "gauge") CHECK_FALSE(name.ends_with("_total"));
+    } else if (line[0] != '#') {
+      INFO(line);
+      CHECK(std::regex_match(line, sample));
+    }
+  }
+  CHECK(types.size() > 35);
+}
+
+TEST_CASE("promtool accepts the Prometheus file", "[health]") {
+  if (test::run_command("command -v promtool >/dev/null").exit_code != 0) {
+    if (std::getenv("CI") != nullptr) FAIL("promtool (package prometheus) is not installed");
+    WARN("promtool not installed: skipped");
+    return;
+  }
+  test::ScratchDir dir("prom");
+  const auto path = dir / "pandarcap.prom";
+  std::ofstream(path) << to_prometheus(distinct_snapshot());
+  const auto result = test::run_command("promtool check metrics < '" + path.string() + "' 2>&1");
+  INFO(result.out);
+  CHECK(result.exit_code == 0);
+}
+
+TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]") {
+  const HealthSnapshot h = distinct_snapshot();
+  const std::string line = to_json_line(h);
+  REQUIRE(line.back() == '\n');
+  CHECK(line.find('\n') == line.size() - 1);  // one line
+  const auto j = nlohmann::json::parse(line);
+  CHECK(j.at("time") == "2023-11-14T22:13:20.123Z");
+  CHECK(j.at("unix_time_ns") == h.unix_time_ns);
+  CHECK(j.at("sensor") == h.sensor);
+  CHECK(j.at("version") == "1.2.3");
+  CHECK(j.at("state") == "degraded");
+  CHECK(j.at("reason") == "3 kernel drops");
+  const auto& c = j.at("counters");
+  CHECK(c.at("datagrams_received") == h.counters.datagrams_received);
+  CHECK(c.at("bytes_received") == h.counters.bytes_received);
+  CHECK(c.at("packets_accepted") == h.counters.packets_accepted);
+  CHECK(c.at("packets_rejected") == h.counters.packets_rejected);
+  CHECK(c.at("foreign_datagrams") == h.counters.foreign_datagrams);
+  CHECK(c.at("ring_overruns") == h.counters.ring_overruns);
+  CHECK(c.at("kernel_drops") == h.counters.kernel_drops);
+  CHECK(c.at("frames_complete") == h.counters.frames_complete);
+  CHECK(c.at("frames_partial") == h.counters.frames_partial);
+  CHECK(c.at("frames_dropped_no_arena") == h.counters.frames_dropped_no_arena);
+  CHECK(c.at("frames_written") == h.counters.frames_written);
+  CHECK(c.at("pcap_packets_written") == h.counters.pcap_packets_written);
+  CHECK(c.at("pcap_packets_not_recorded") == h.counters.pcap_packets_not_recorded);
+  CHECK(c.at("bytes_not_written") == h.counters.bytes_not_written);
+  CHECK(c.at("rejects").at("bad_return_mode") == 14);
+  CHECK(c.at("rejects").size() == kRejectReasonCount - 1);
+  CHECK(c.at("filtered_points").at("dual_too_close") == 24);
+  // 31 scalar counters in the table + packets_rejected + the two reason maps.
+  CHECK(c.size() == 34);
+  const auto& g = j.at("gauges");
+  CHECK(g.at("rpm_tail") == 600.0);
+  CHECK(g.at("rpm_measured") == 599.5);
+  CHECK(g.at("return_mode") == "dual");
+  CHECK(g.at("high_temperature") == true);
+  CHECK(g.at("seconds_since_last_packet") == 0.25);
+}
+
+TEST_CASE("JSON line survives a reason that is not UTF-8", "[health]") {
+  HealthSnapshot h;
+  h.gauges.reason = "write failed: \xff\xfe";
+  const auto j = nlohmann::json::parse(to_json_line(h));
+  CHECK(j.at("state") == "no_data");
+  CHECK(j.at("reason").get<std::string>().rfind("write failed: ", 0) == 0);
+}
