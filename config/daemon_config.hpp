@@ -16,19 +16,19 @@ struct SensorSection {
   std::string multicast_interface_ip;  // local interface address for the join; "" = any
   std::uint16_t data_port = 2368;      // 1..65535
   std::uint64_t udp_socket_receive_buffer_size_bytes = 8u << 20;  // requested SO_RCVBUF
-  std::string return_mode = "any";  // expected: "any", "last", "strongest", "dual"
-  int rotation_speed = 600;         // expected motor speed, RPM: 600 or 1200
-  double cut_angle = 0.0;           // degrees, [0, 360)
-  double min_range = 0.3;           // metres, >= 0
-  double max_range = 200.0;         // metres, > min_range
+  std::string return_mode = "any";              // expected: "any", "last", "strongest", "dual"
+  int rotation_speed = 600;                     // expected motor speed, RPM: 600 or 1200
+  double cut_angle = 0.0;                       // degrees, [0, 360)
+  double min_range = 0.3;                       // metres, >= 0
+  double max_range = 200.0;                     // metres, > min_range
   double dual_return_distance_threshold = 0.1;  // metres, >= 0
   std::string calibration_file;                 // CSV; "" = the nominal table
   bool firing_time_correction = false;
 };
 
 struct RingSection {
-  std::uint32_t slots = 4096;         // packet slots between receive and decode; power of two
-  std::uint32_t receive_batch = 64;   // datagrams per recvmmsg; 1..1024 and <= slots
+  std::uint32_t slots = 4096;        // packet slots between receive and decode; power of two
+  std::uint32_t receive_batch = 64;  // datagrams per recvmmsg; 1..1024 and <= slots
 };
 
 struct ArenaSection {
@@ -51,10 +51,10 @@ struct OutputSection {
 };
 
 struct HealthSection {
-  std::string sensor_name = "pandar40p";       // the `sensor` label on every metric
-  double no_data_timeout_seconds = 2.0;        // silence longer than this: state no_data
-  bool prometheus = true;                      // health/pandarcap.prom
-  bool jsonl = true;                           // health/health.jsonl
+  std::string sensor_name = "pandar40p";         // the `sensor` label on every metric
+  double no_data_timeout_seconds = 2.0;          // silence longer than this: state no_data
+  bool prometheus = true;                        // health/pandarcap.prom
+  bool jsonl = true;                             // health/health.jsonl
   std::uint64_t jsonl_rotate_bytes = 64u << 20;  // rotate health.jsonl; 0 = never
 };
 

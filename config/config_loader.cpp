@@ -1,0 +1,459 @@
+// The TOML configuration, read with toml++.
+//
+// One list of keys (for_each_key) drives everything: reading the file, the range checks, the
+// unknown-key check and printing. Adding a key means adding one line there, so the file format,
+// the checks and `--print-config` cannot drift apart.
+#include "config/config_loader.hpp"
+
+#include <arpa/inet.h>
+#include <fmt/format.h>
+#include <toml++/toml.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <variant>
+
+namespace pandarcap {
+namespace {
+
+// Allowed integer values, inclusive.
+struct IntRange {
+  std::int64_t lo;
+  std::int64_t hi;
+};
+
+// Allowed real values; either end may be open. Non-finite values are never allowed.
+struct RealRange {
+  double lo;
+  bool lo_open;
+  double hi;  // +infinity: no upper bound
+  bool hi_open;
+};
+
+// A check on a string value: the problem, or nothing when the value is fine.
+using StringCheck = std::optional<std::string> (*)(const std::string&);
+
+constexpr double kNoUpperBound = std::numeric_limits<double>::infinity();
+
+std::optional<std::string> any_string(const std::string&) {
+  return std::nullopt;
+}
+
+std::optional<std::string> non_empty(const std::string& s) {
+  if (s.empty()) return "must not be empty";
+  return std::nullopt;
+}
+
+std::optional<in_addr> parse_ipv4(const std::string& s) {
+  in_addr a{};
+  if (inet_pton(AF_INET, s.c_str(), &a) != 1) return std::nullopt;
+  return a;
+}
+
+std::optional<std::string> ipv4(const std::string& s) {
+  if (!parse_ipv4(s)) return fmt::format("\"{}\" is not an IPv4 address (a.b.c.d)", s);
+  return std::nullopt;
+}
+
+std::optional<std::string> ipv4_or_empty(const std::string& s) {
+  if (s.empty()) return std::nullopt;
+  return ipv4(s);
+}
+
+std::optional<std::string> multicast_or_empty(const std::string& s) {
+  if (s.empty()) return std::nullopt;
+  const auto a = parse_ipv4(s);
+  if (!a) return ipv4(s);
+  if ((ntohl(a->s_addr) >> 28) != 0xE) {
+    return fmt::format("\"{}\" is not a multicast address (224.0.0.0/4)", s);
+  }
+  return std::nullopt;
+}
+
+std::optional<std::string> one_of(const std::string& s, std::initializer_list<const char*> names) {
+  std::string list;
+  for (const char* n : names) {
+    if (s == n) return std::nullopt;
+    list += list.empty() ? "" : ", ";
+    list += n;
+  }
+  return fmt::format("\"{}\" is not one of {}", s, list);
+}
+
+std::optional<std::string> return_mode(const std::string& s) {
+  return one_of(s, {"any", "last", "strongest", "dual"});
+}
+
+std::optional<std::string> log_level(const std::string& s) {
+  return one_of(s, {"trace", "debug", "info", "warn", "error", "critical", "off"});
+}
+
+// The sensor name becomes a Prometheus label value and a JSON string; refuse the characters that
+// would need escaping there so the name reads the same in every output.
+std::optional<std::string> label(const std::string& s) {
+  if (s.empty()) return "must not be empty";
+  for (const char c : s) {
+    if (c == '"' || c == '\\' || static_cast<unsigned char>(c) < 0x20) {
+      return "must not contain quotes, backslashes or control characters";
+    }
+  }
+  return std::nullopt;
+}
+
+std::string describe(const RealRange& r) {
+  if (std::isinf(r.hi)) return fmt::format("{} {}", r.lo_open ? ">" : ">=", r.lo);
+  return fmt::format("{}{}, {}{}", r.lo_open ? '(' : '[', r.lo, r.hi, r.hi_open ? ')' : ']');
+}
+
+bool in_range(double v, const RealRange& r) {
+  if (!std::isfinite(v)) return false;
+  if (r.lo_open ? v <= r.lo : v < r.lo) return false;
+  if (r.hi_open ? v >= r.hi : v > r.hi) return false;
+  return true;
+}
+
+// Calls `v` once per configuration key, in the order of config/pandarcap.toml:
+//   v(table, key, member, check)
+// where `check` is an IntRange, a RealRange, a StringCheck, or nothing for booleans.
+// Table "" is the document's top level.
+template <typename Config, typename Visitor>
+void for_each_key(Config& c, Visitor&& v) {
+  constexpr std::int64_t kU32 = std::numeric_limits<std::uint32_t>::max();
+  constexpr std::int64_t kI64 = std::numeric_limits<std::int64_t>::max();
+  v("", "log_level", c.log_level, &log_level);
+
+  auto& s = c.sensor;
+  v("sensor", "sensor_ip", s.sensor_ip, &ipv4_or_empty);
+  v("sensor", "host_ip", s.host_ip, &ipv4);
+  v("sensor", "multicast_ip", s.multicast_ip, &multicast_or_empty);
+  v("sensor", "multicast_interface_ip", s.multicast_interface_ip, &ipv4_or_empty);
+  v("sensor", "data_port", s.data_port, IntRange{1, 65535});
+  v("sensor", "udp_socket_receive_buffer_size_bytes", s.udp_socket_receive_buffer_size_bytes,
+    IntRange{0, std::numeric_limits<std::int32_t>::max()});
+  v("sensor", "return_mode", s.return_mode, &return_mode);
+  v("sensor", "rotation_speed", s.rotation_speed, IntRange{600, 1200});
+  v("sensor", "cut_angle", s.cut_angle, RealRange{0.0, false, 360.0, true});
+  v("sensor", "min_range", s.min_range, RealRange{0.0, false, kNoUpperBound, false});
+  v("sensor", "max_range", s.max_range, RealRange{0.0, true, kNoUpperBound, false});
+  v("sensor", "dual_return_distance_threshold", s.dual_return_distance_threshold,
+    RealRange{0.0, false, kNoUpperBound, false});
+  v("sensor", "calibration_file", s.calibration_file, &any_string);
+  v("sensor", "firing_time_correction", s.firing_time_correction, std::monostate{});
+
+  v("ring", "slots", c.ring.slots, IntRange{64, 1 << 20});
+  v("ring", "receive_batch", c.ring.receive_batch, IntRange{1, 1024});
+
+  v("arenas", "count", c.arenas.count, IntRange{2, 64});
+  v("arenas", "points_per_frame", c.arenas.points_per_frame, IntRange{1000, 10'000'000});
+  v("arenas", "packets_per_frame", c.arenas.packets_per_frame, IntRange{1, 65536});
+
+  auto& o = c.output;
+  v("output", "directory", o.directory, &non_empty);
+  v("output", "frames", o.frames, std::monostate{});
+  v("output", "frame_decimation", o.frame_decimation, IntRange{1, kU32});
+  v("output", "frames_max_files", o.frames_max_files, IntRange{0, kI64});
+  v("output", "frames_max_bytes", o.frames_max_bytes, IntRange{0, kI64});
+  v("output", "pcap", o.pcap, std::monostate{});
+  v("output", "pcap_rotate_bytes", o.pcap_rotate_bytes, IntRange{0, kI64});
+  v("output", "pcap_rotate_seconds", o.pcap_rotate_seconds, IntRange{0, kU32});
+  v("output", "pcap_max_files", o.pcap_max_files, IntRange{0, kI64});
+  v("output", "pcap_max_bytes", o.pcap_max_bytes, IntRange{0, kI64});
+
+  auto& h = c.health;
+  v("health", "sensor_name", h.sensor_name, &label);
+  v("health", "no_data_timeout_seconds", h.no_data_timeout_seconds,
+    RealRange{0.0, true, 86400.0, false});
+  v("health", "prometheus", h.prometheus, std::monostate{});
+  v("health", "jsonl", h.jsonl, std::monostate{});
+  v("health", "jsonl_rotate_bytes", h.jsonl_rotate_bytes, IntRange{0, kI64});
+}
+
+std::string dotted(std::string_view table, std::string_view key) {
+  return table.empty() ? std::string(key) : fmt::format("{}.{}", table, key);
+}
+
+// Where each key was found, so value checks can point at the line.
+using Positions = std::map<std::string, toml::source_position, std::less<>>;
+
+// Builds "where: key: message" with `where` the key's position if known, else the source name.
+class Reporter {
+ public:
+  Reporter(const std::string& source_name, const Positions* positions)
+      : source_(source_name), positions_(positions) {}
+
+  [[noreturn]] void fail(std::string_view key, const std::string& message) const {
+    if (positions_ != nullptr) {
+      if (auto it = positions_->find(key); it != positions_->end()) {
+        fail_at(it->second, key, message);
+      }
+    }
+    throw ConfigError(fmt::format("{}: {}: {}", source_, key, message));
+  }
+
+  [[noreturn]] void fail_at(const toml::source_position& at, std::string_view key,
+                            const std::string& message) const {
+    throw ConfigError(fmt::format("{}:{}:{}: {}: {}", source_, at.line, at.column, key, message));
+  }
+
+ private:
+  const std::string& source_;
+  const Positions* positions_;
+};
+
+// Range checks of single values (the file reader has already checked the types).
+struct ValueChecker {
+  const Reporter& report;
+
+  void operator()(std::string_view table, std::string_view key, const std::string& value,
+                  StringCheck check) const {
+    if (auto problem = check(value)) report.fail(dotted(table, key), *problem);
+  }
+  void operator()(std::string_view, std::string_view, bool, std::monostate) const {}
+  template <typename Int>
+  void operator()(std::string_view table, std::string_view key, Int value, IntRange r) const {
+    const auto v = static_cast<long double>(value);
+    if (v < static_cast<long double>(r.lo) || v > static_cast<long double>(r.hi)) {
+      report.fail(dotted(table, key),
+                  fmt::format("{} is out of range ({}..{})", value, r.lo, r.hi));
+    }
+  }
+  void operator()(std::string_view table, std::string_view key, double value,
+                  const RealRange& r) const {
+    if (!in_range(value, r)) {
+      report.fail(dotted(table, key), fmt::format("{} is out of range ({}{})", value, describe(r),
+                                                  std::isfinite(value) ? "" : ", finite"));
+    }
+  }
+};
+
+void check_values(const DaemonConfig& c, const Reporter& report) {
+  for_each_key(c, ValueChecker{report});
+  const auto& s = c.sensor;
+  if (s.rotation_speed != 600 && s.rotation_speed != 1200) {
+    report.fail("sensor.rotation_speed", fmt::format("{} RPM is not a Pandar40P motor speed "
+                                                     "(600 or 1200)",
+                                                     s.rotation_speed));
+  }
+  if (!(s.max_range > s.min_range)) {
+    report.fail("sensor.max_range", fmt::format("{} must be greater than sensor.min_range ({})",
+                                                s.max_range, s.min_range));
+  }
+  const auto slots = c.ring.slots;
+  if ((slots & (slots - 1)) != 0) {
+    report.fail("ring.slots", fmt::format("{} is not a power of two", slots));
+  }
+  if (c.ring.receive_batch > slots) {
+    report.fail("ring.receive_batch",
+                fmt::format("{} is more than ring.slots ({})", c.ring.receive_batch, slots));
+  }
+}
+
+// Reads each known key from the document into the configuration, checking its type and that
+// an integer fits its field, and records where it was.
+struct FileReader {
+  const toml::table& root;
+  const Reporter& report;
+  Positions& positions;
+
+  const toml::node* find(std::string_view table, std::string_view key) const {
+    const toml::node* holder = table.empty() ? &root : root.get(table);
+    if (holder == nullptr || !holder->is_table()) return nullptr;
+    const toml::node* node = holder->as_table()->get(key);
+    if (node != nullptr) positions[dotted(table, key)] = node->source().begin;
+    return node;
+  }
+
+  [[noreturn]] void wrong_type(const toml::node& n, std::string_view table, std::string_view key,
+                               std::string_view expected) const {
+    report.fail_at(n.source().begin, dotted(table, key),
+                   fmt::format("expected {}, found {}", expected, type_name(n.type())));
+  }
+
+  static std::string_view type_name(toml::node_type t) {
+    switch (t) {
+      case toml::node_type::string:
+        return "a string";
+      case toml::node_type::integer:
+        return "an integer";
+      case toml::node_type::floating_point:
+        return "a floating-point number";
+      case toml::node_type::boolean:
+        return "a boolean";
+      case toml::node_type::table:
+        return "a table";
+      case toml::node_type::array:
+        return "an array";
+      default:
+        return "a date or time";
+    }
+  }
+
+  void operator()(std::string_view table, std::string_view key, std::string& out,
+                  StringCheck) const {
+    if (const auto* n = find(table, key)) {
+      if (!n->is_string()) wrong_type(*n, table, key, "a string");
+      out = n->as_string()->get();
+    }
+  }
+  void operator()(std::string_view table, std::string_view key, bool& out, std::monostate) const {
+    if (const auto* n = find(table, key)) {
+      if (!n->is_boolean()) wrong_type(*n, table, key, "true or false");
+      out = n->as_boolean()->get();
+    }
+  }
+  template <typename Int>
+  void operator()(std::string_view table, std::string_view key, Int& out, IntRange r) const {
+    if (const auto* n = find(table, key)) {
+      if (!n->is_integer()) wrong_type(*n, table, key, "an integer");
+      const std::int64_t v = n->as_integer()->get();
+      // Checked here, before narrowing, so 65537 cannot wrap to a valid port.
+      if (v < r.lo || v > r.hi) {
+        report.fail_at(n->source().begin, dotted(table, key),
+                       fmt::format("{} is out of range ({}..{})", v, r.lo, r.hi));
+      }
+      out = static_cast<Int>(v);
+    }
+  }
+  void operator()(std::string_view table, std::string_view key, double& out, RealRange) const {
+    if (const auto* n = find(table, key)) {
+      if (n->is_floating_point()) {
+        out = n->as_floating_point()->get();
+      } else if (n->is_integer()) {  // `max_range = 200` means 200.0
+        out = static_cast<double>(n->as_integer()->get());
+      } else {
+        wrong_type(*n, table, key, "a number");
+      }
+    }
+  }
+};
+
+// Every table and key in the document must be one the configuration has. Of several unknown
+// keys the first in the file is reported (the document's tables are sorted by name, not line).
+void reject_unknown(const toml::table& root, const Reporter& report) {
+  std::map<std::string, std::set<std::string>, std::less<>> known;
+  DaemonConfig probe;
+  for_each_key(probe, [&](std::string_view table, std::string_view key, auto&, auto) {
+    known[std::string(table)].insert(std::string(key));
+  });
+  struct Problem {
+    toml::source_position at;
+    std::string key;
+    std::string message;
+  };
+  std::optional<Problem> first;
+  auto note = [&](const toml::source_position& at, std::string key, std::string message) {
+    if (!first || at < first->at) first = Problem{at, std::move(key), std::move(message)};
+  };
+  const auto& top = known[""];
+  for (const auto& [key, node] : root) {
+    const std::string name(key.str());
+    const auto table = known.find(name);
+    if (table == known.end() || name.empty()) {
+      if (top.count(name) == 0) note(key.source().begin, name, "unknown key or table");
+      continue;
+    }
+    if (!node.is_table()) {
+      note(node.source().begin, name,
+           fmt::format("expected a table, found {}", FileReader::type_name(node.type())));
+      continue;
+    }
+    for (const auto& [inner, inner_node] : *node.as_table()) {
+      if (table->second.count(std::string(inner.str())) == 0) {
+        note(inner.source().begin, dotted(name, inner.str()), "unknown key");
+      }
+    }
+  }
+  if (first) report.fail_at(first->at, first->key, first->message);
+}
+
+std::string toml_string(const std::string& s) {
+  std::string out = "\"";
+  for (const char c : s) {
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (u < 0x20 || u == 0x7F) {
+      out += fmt::format("\\u{:04X}", u);
+    } else {
+      out += c;
+    }
+  }
+  return out + '"';
+}
+
+// Shortest text that reads back to the same double, always with a '.' or exponent so TOML
+// reads it as a float.
+std::string toml_real(double v) {
+  std::string text = fmt::format("{}", v);
+  if (text.find_first_of(".eEn") == std::string::npos) text += ".0";
+  return text;
+}
+
+}  // namespace
+
+DaemonConfig parse_config(std::string_view toml_text, const std::string& source_name) {
+  toml::table root;
+  try {
+    root = toml::parse(toml_text, source_name);
+  } catch (const toml::parse_error& e) {
+    const auto& at = e.source().begin;
+    throw ConfigError(
+        fmt::format("{}:{}:{}: {}", source_name, at.line, at.column, e.description()));
+  }
+  Positions positions;
+  const Reporter report(source_name, &positions);
+  reject_unknown(root, report);
+  DaemonConfig config;
+  for_each_key(config, FileReader{root, report, positions});
+  check_values(config, report);
+  return config;
+}
+
+DaemonConfig load_config_file(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    throw ConfigError(fmt::format("{}: cannot read: {}", path.string(), std::strerror(errno)));
+  }
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) {
+    throw ConfigError(fmt::format("{}: cannot read: {}", path.string(), std::strerror(errno)));
+  }
+  return parse_config(text.str(), path.string());
+}
+
+void validate_config(const DaemonConfig& config, const std::string& source_name) {
+  check_values(config, Reporter(source_name, nullptr));
+}
+
+std::string to_toml(const DaemonConfig& config) {
+  std::string out = "# pandarcapd configuration (pandarcapd --print-config)\n";
+  std::string_view current_table;
+  for_each_key(config, [&](std::string_view table, std::string_view key, const auto& value, auto) {
+    if (table != current_table) {
+      out += fmt::format("\n[{}]\n", table);
+      current_table = table;
+    }
+    using T = std::decay_t<decltype(value)>;
+    if constexpr (std::is_same_v<T, std::string>) {
+      out += fmt::format("{} = {}\n", key, toml_string(value));
+    } else if constexpr (std::is_same_v<T, bool>) {
+      out += fmt::format("{} = {}\n", key, value ? "true" : "false");
+    } else if constexpr (std::is_same_v<T, double>) {
+      out += fmt::format("{} = {}\n", key, toml_real(value));
+    } else {
+      out += fmt::format("{} = {}\n", key, value);
+    }
+  });
+  return out;
+}
+
+}  // namespace pandarcap
