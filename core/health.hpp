@@ -69,7 +69,7 @@ struct HealthCounters {
 struct HealthGauges {
   double rpm_tail = 0;            // mean motor speed reported in the tails over the last second
   double rpm_measured = 0;        // from azimuth progression over packet time, last second
-  double frame_rate_hz = 0;       // frames finished in the last second
+  double frame_rate_hz = 0;       // complete frames cut in the last second
   std::string return_mode;        // "last", "strongest", "dual", or "" before the first packet
   bool high_temperature = false;  // the last packet's flag
   double seconds_since_last_packet = -1;  // -1 before the first packet

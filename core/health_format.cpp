@@ -109,7 +109,7 @@ constexpr GaugeField kGauges[] = {
     {"rpm_measured", "motor_speed_measured_rpm", &HealthGauges::rpm_measured,
      "Motor speed measured from azimuth progression over packet time, last second"},
     {"frame_rate_hz", "frame_rate_hertz", &HealthGauges::frame_rate_hz,
-     "Frames finished per second, last second"},
+     "Complete frames (full revolutions) cut per second, last second"},
     {"seconds_since_last_packet", "seconds_since_last_packet",
      &HealthGauges::seconds_since_last_packet,
      "Seconds since the last accepted packet; -1 before the first"},

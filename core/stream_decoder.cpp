@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "timing.hpp"
+
 namespace pandarcap {
 
 std::uint64_t StreamStats::rejected() const noexcept {
@@ -19,6 +21,24 @@ FrameAssemblerConfig assembler_config(const ScalarDecoder& decoder, double cut_a
 }
 
 }  // namespace
+
+void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, std::uint16_t rpm,
+                                  ReturnMode mode, bool sequence_present) {
+  const std::optional<std::uint16_t> previous = previous_azimuth_cdeg_;
+  previous_azimuth_cdeg_ = azimuth_cdeg;
+  if (!previous || !previous_t0_ns_) return;
+  const int step = (azimuth_cdeg - *previous + 36000) % 36000;  // forward, 0..35999
+  const std::int64_t dt = t0_ns - *previous_t0_ns_;
+  // The step one packet should make at the reported speed (600 RPM dual: 100 cdeg).
+  const double expected = rpm / 60.0 * 36000.0 * static_cast<double>(packet_period_ns(mode)) * 1e-9;
+  const bool gap = step > 1.5 * expected + 5;
+  if (gap && !sequence_present && step < 18000) ++stats_.azimuth_gaps;
+  // A time gap over 100 ms or a big step is an outage or restart, not spin: leave it out.
+  if (!gap && step > 0 && dt > 0 && dt < 100'000'000) {
+    stats_.measured_azimuth_cdeg += static_cast<std::uint64_t>(step);
+    stats_.measured_time_ns += static_cast<std::uint64_t>(dt);
+  }
+}
 
 StreamDecoder::StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
                              FrameSink& sink)
@@ -39,7 +59,9 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   stats_.rpm_max = stats_.accepted == 1 ? rpm : std::max(stats_.rpm_max, rpm);
   if (stats_.return_mode && *stats_.return_mode != mode) ++stats_.return_mode_changes;
   stats_.return_mode = mode;
-  if (packet.tail_bytes()[5] != 0) ++stats_.high_temperature;
+  const bool high_temperature = packet.tail_bytes()[5] != 0;
+  if (high_temperature) ++stats_.high_temperature;
+  const bool sequence_present = packet.sequence().has_value();
   if (const auto sequence = packet.sequence()) {
     ++stats_.sequence_packets;
     sequence_.observe(*sequence);
@@ -49,7 +71,11 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   if (time.status == PacketTimeStatus::kBadDate) ++stats_.bad_date;
   if (time.status == PacketTimeStatus::kBadMicroseconds) ++stats_.bad_microseconds;
   if (previous_t0_ns_ && *previous_t0_ns_ == time.t0_ns) ++stats_.static_timestamps;
+  track_azimuth(packet.azimuth_cdeg(0), time.t0_ns, rpm, mode, sequence_present);
   previous_t0_ns_ = time.t0_ns;
+  stats_.last_t0_ns = time.t0_ns;
+  stats_.last_rpm = rpm;
+  stats_.last_high_temperature = high_temperature;
 
   const DecodedPacket decoded = decoder_.decode(packet, time.t0_ns, points_, stats_.filtered);
   stats_.points += decoded.point_count;

@@ -41,6 +41,18 @@ struct StreamStats {
   std::uint16_t rpm_min = 0, rpm_max = 0;  // over accepted packets (0 before the first)
   std::uint64_t points = 0;
   FilterCounts filtered;
+  // Without a UDP sequence, loss shows as an azimuth step between consecutive packets larger
+  // than the tail RPM allows (more than 1.5 packets' worth plus 0.05°).
+  std::uint64_t azimuth_gaps = 0;
+  // Measured spin: forward azimuth steps between consecutive packets (0.01°) and the packet time
+  // they took (ns), summed over steps that are neither gaps nor discontinuities. RPM over any
+  // interval = (delta azimuth / 36000) / (delta time in minutes).
+  std::uint64_t measured_azimuth_cdeg = 0;
+  std::uint64_t measured_time_ns = 0;
+  // The last accepted packet.
+  std::int64_t last_t0_ns = 0;
+  std::uint16_t last_rpm = 0;
+  bool last_high_temperature = false;
 
   std::uint64_t rejected() const noexcept;
   std::uint64_t rejects_for(RejectReason r) const noexcept {
@@ -63,12 +75,16 @@ class StreamDecoder {
   const ScalarDecoder& decoder() const noexcept { return decoder_; }
 
  private:
+  void track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, std::uint16_t rpm,
+                     ReturnMode mode, bool sequence_present);
+
   ScalarDecoder decoder_;
   FrameAssembler assembler_;
   PacketClock clock_;
   SequenceTracker sequence_;
   StreamStats stats_;
   std::optional<std::int64_t> previous_t0_ns_;
+  std::optional<std::uint16_t> previous_azimuth_cdeg_;  // first block of the previous packet
   std::array<Point, kMaxPointsPerPacket> points_{};
 };
 
