@@ -1,138 +1,200 @@
 // pandarcapd: the Pandar40P capture daemon.
 //
-// This version runs the decode path offline: it replays a capture file (--replay) or first
-// records the built-in simulated sensor into a capture file and then replays that (--simulate),
-// printing one line per frame and a summary. Live UDP capture is not implemented yet.
+//   receive thread (recvmmsg) or replay --ring--> decode worker --queue--> writer thread
+//   main thread: signals, sd_notify READY/STATUS/WATCHDOG/STOPPING, --duration, shutdown order
 //
-// Start-up order: options -> logging -> calibration -> source -> decode -> summary.
+// Start-up, in dependency order (shutdown is the reverse):
+//   1. options and configuration (bad config: the file:line:col message and exit 78)
+//   2. logging, calibration
+//   3. memory: ring, frame arenas, raw batches, queues — all of it, once
+//   4. outputs prepared (directories writable) and the source opened (socket bound / file open)
+//   5. threads started, READY=1
+// Exit status: 0 done, 1 runtime failure, 64 usage, 66 capture unreadable, 73 outputs cannot be
+// created, 78 configuration (or calibration file) invalid.
 #include <fmt/format.h>
+#include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
+#include <time.h>
 
-#include <cmath>
+#include <atomic>
+#include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <filesystem>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <thread>
+#include <vector>
 
+#include "config/config_loader.hpp"
+#include "config/daemon_config.hpp"
 #include "core/calibration.hpp"
 #include "core/capture_reader.hpp"
-#include "core/frame_collector.hpp"
-#include "core/packet_time.hpp"
-#include "core/pcap_writer.hpp"
-#include "core/stream_decoder.hpp"
+#include "core/packet.hpp"
 #include "core/synthetic_sensor.hpp"
 #include "daemon/cli_args.hpp"
+#include "daemon/decode_worker.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "daemon/replay_source.hpp"
+#include "daemon/sd_notify.hpp"
+#include "daemon/simulated_sender.hpp"
+#include "daemon/udp_receiver.hpp"
+#include "daemon/writer.hpp"
+#include "ringbuf/packet_slot.hpp"
+#include "ringbuf/spsc_queue.hpp"
 
 namespace {
 
 using namespace pandarcap;
 
-constexpr std::string_view kVersion = "0.1.0";
+constexpr std::string_view kVersion = PANDARCAP_VERSION;
 
-constexpr std::string_view kUsage = R"(Usage: pandarcapd --simulate [options]
-       pandarcapd --replay FILE [options]
+constexpr std::string_view kUsage =
+    R"(Usage: pandarcapd [options]                  live capture from the sensor
+       pandarcapd --simulate [options]       live path fed by a built-in simulated sensor
+       pandarcapd --replay FILE [options]    process a pcap/pcapng recording
 
-Decodes a Hesai Pandar40P packet stream into frames and prints one line per frame and a summary.
-This version works offline; live UDP capture is not implemented yet.
+Captures a Hesai Pandar40P: receives its UDP packets, decodes them into frames, and writes
+OUTPUT-DIR/frames/*.pcd, OUTPUT-DIR/raw/*.pcap (+ calibration.csv) and, every second,
+OUTPUT-DIR/health/pandarcap.prom and health.jsonl. SIGTERM/SIGINT stop it cleanly, SIGHUP
+starts new recording files.
 
-Sources (one is required):
-  --simulate             record the built-in simulated Pandar40P (a room with walls, floor,
-                         a pillar and a fence) into OUTPUT-DIR/raw/simulated.pcap, then decode it
-  --replay FILE          decode a pcap or pcapng capture
+Configuration:
+  -c, --config FILE      TOML configuration (see config/pandarcap.toml); without it the
+                         defaults apply, and the options below override either
+  --check-config         validate the configuration, print the result and exit (0 or 78)
+  --print-config         print the effective configuration as TOML and exit
 
-Simulation:
-  --duration S           seconds of sensor data to generate (default 2, at most 3600)
-  --rpm N                600 or 1200 (default 600)
-  --return-mode MODE     dual, strongest or last (default dual)
-  --udp-sequence         send 1266-byte packets with a UDP sequence number
+Sources:
+  --simulate             start a simulated sensor that sends over loopback to the daemon's own
+                         socket (127.0.0.1, a free port unless --port is given)
+  --replay FILE          read packets from a capture file instead of the network; exits when
+                         the file is done
+  --top-speed            replay as fast as the decoder goes (the default)
+  --rate X               replay at X times the recorded pace (1 = real time)
+  --duration S           stop after S seconds (live and simulated runs)
 
-Decoding:
-  --calibration FILE     angle-correction CSV (default: the nominal Pandar40P table)
-  --port N               replay only datagrams to destination port N (default: any)
-  --cut-angle DEG        frame cut angle (default 0)
-  --min-range M          default 0.3
-  --max-range M          default 200
+Overrides (same names as the configuration keys):
+  --output-dir DIR       output.directory (default pandarcap-output)
+  --calibration FILE     sensor.calibration_file (default: the nominal Pandar40P table)
+  --host-ip IP           sensor.host_ip (default 0.0.0.0)
+  --port N               sensor.data_port (default 2368); with --replay: only datagrams to N
+  --sensor-ip IP         sensor.sensor_ip: drop (and count) datagrams from other sources
+  --cut-angle DEG        sensor.cut_angle (default 0)
+  --min-range M          sensor.min_range (default 0.3)
+  --max-range M          sensor.max_range (default 200)
   --dual-return-distance-threshold M
-                         default 0.1
+                         sensor.dual_return_distance_threshold (default 0.1)
   --firing-time-correction
-                         correct each channel's azimuth for its firing time (default off)
-
-General:
-  --output-dir DIR       where recordings go (default ./pandarcap-output)
-  --quiet                no per-frame lines, only the summary
-  --log-level LEVEL      trace, debug, info, warn, error (default info)
-  --version              print the version
+                         sensor.firing_time_correction = true
+  --rpm N                simulated (and expected) motor speed, 600 or 1200
+  --return-mode MODE     simulated (and expected) return mode: dual, strongest or last
+  --udp-sequence         the simulated sensor appends a UDP sequence number
+  --log-level LEVEL      trace, debug, info, warn, error, critical, off
+  --version              print the version and exit
   -h, --help             this text
 
-Exit status: 0 done, 1 the capture ended in a corrupt record, 2 an input or output file could not
-be used, 64 bad command line.
+Exit status: 0 done, 1 runtime failure, 64 usage error, 66 capture file unreadable,
+73 output directory not writable, 78 invalid configuration or calibration file.
 )";
 
+constexpr int kExitUsage = 64;
+constexpr int kExitNoInput = 66;
+constexpr int kExitCantCreate = 73;
+constexpr int kExitConfig = 78;
+
 struct Options {
+  std::optional<std::string> config_path;
+  bool check_config = false;
+  bool print_config = false;
   bool simulate = false;
   std::optional<std::string> replay;
-  double duration_s = 2.0;
-  SyntheticSensorConfig sensor;
-  std::optional<std::string> calibration;
-  std::optional<std::uint16_t> port;
-  StreamDecoderConfig decode;
-  std::filesystem::path output_dir = "pandarcap-output";
-  bool quiet = false;
-  spdlog::level::level_enum log_level = spdlog::level::info;
+  std::optional<double> rate;
+  std::optional<double> duration_s;
+  bool port_given = false;
+  bool udp_sequence = false;
+  ReturnMode simulated_mode = ReturnMode::kDual;
+  int simulated_rpm = 600;
+  // Overrides, applied to the configuration in the order given.
+  std::vector<std::function<void(DaemonConfig&)>> overrides;
 };
 
 Options parse_options(int argc, char** argv) {
-  Options o;
   CliArgs args(argc, argv, kUsage);
+  Options o;
+  const auto set = [&](auto apply) { o.overrides.emplace_back(apply); };
   while (args.more()) {
     const std::string_view arg = args.next();
-    if (arg == "--simulate") {
+    if (arg == "-c" || arg == "--config") {
+      o.config_path = std::string(args.value(arg));
+    } else if (arg == "--check-config") {
+      o.check_config = true;
+    } else if (arg == "--print-config") {
+      o.print_config = true;
+    } else if (arg == "--simulate") {
       o.simulate = true;
     } else if (arg == "--replay") {
       o.replay = std::string(args.value(arg));
+    } else if (arg == "--top-speed") {
+      o.rate.reset();
+    } else if (arg == "--rate") {
+      o.rate = args.number(arg, 0.001, 1000);
     } else if (arg == "--duration") {
-      o.duration_s = args.number(arg, 0.001, 3600);
-    } else if (arg == "--rpm") {
-      o.sensor.rpm = static_cast<int>(args.integer(arg, 600, 1200));
-      if (o.sensor.rpm != 600 && o.sensor.rpm != 1200) args.usage_error("--rpm takes 600 or 1200");
-    } else if (arg == "--return-mode") {
-      const std::string_view mode = args.value(arg);
-      const auto parsed = return_mode_from_string(mode);
-      if (!parsed) {
-        args.usage_error(
-            fmt::format("--return-mode takes dual, strongest or last, got '{}'", mode));
-      }
-      o.sensor.return_mode = *parsed;
-    } else if (arg == "--udp-sequence") {
-      o.sensor.udp_sequence = true;
-    } else if (arg == "--calibration") {
-      o.calibration = std::string(args.value(arg));
-    } else if (arg == "--port") {
-      o.port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
-    } else if (arg == "--cut-angle") {
-      o.decode.cut_angle_deg = args.number(arg, 0.0, 360.0);
-    } else if (arg == "--min-range") {
-      o.decode.decoder.min_range_m = args.number(arg, 0.0, 262.14);
-    } else if (arg == "--max-range") {
-      o.decode.decoder.max_range_m = args.number(arg, 0.0, 262.14);
-    } else if (arg == "--dual-return-distance-threshold") {
-      o.decode.decoder.dual_return_distance_threshold_m = args.number(arg, 0.0, 262.14);
-    } else if (arg == "--firing-time-correction") {
-      o.decode.decoder.firing_time_correction = true;
+      o.duration_s = args.number(arg, 0.1, 1e7);
     } else if (arg == "--output-dir") {
-      o.output_dir = std::string(args.value(arg));
-    } else if (arg == "--quiet") {
-      o.quiet = true;
+      const std::string dir(args.value(arg));
+      set([dir](DaemonConfig& c) { c.output.directory = dir; });
+    } else if (arg == "--calibration") {
+      const std::string file(args.value(arg));
+      set([file](DaemonConfig& c) { c.sensor.calibration_file = file; });
+    } else if (arg == "--host-ip") {
+      const std::string ip(args.value(arg));
+      set([ip](DaemonConfig& c) { c.sensor.host_ip = ip; });
+    } else if (arg == "--port") {
+      const auto port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
+      o.port_given = true;
+      set([port](DaemonConfig& c) { c.sensor.data_port = port; });
+    } else if (arg == "--sensor-ip") {
+      const std::string ip(args.value(arg));
+      set([ip](DaemonConfig& c) { c.sensor.sensor_ip = ip; });
+    } else if (arg == "--cut-angle") {
+      const double v = args.number(arg, 0, 359.99);
+      set([v](DaemonConfig& c) { c.sensor.cut_angle = v; });
+    } else if (arg == "--min-range") {
+      const double v = args.number(arg, 0, 1000);
+      set([v](DaemonConfig& c) { c.sensor.min_range = v; });
+    } else if (arg == "--max-range") {
+      const double v = args.number(arg, 0, 1000);
+      set([v](DaemonConfig& c) { c.sensor.max_range = v; });
+    } else if (arg == "--dual-return-distance-threshold") {
+      const double v = args.number(arg, 0, 10);
+      set([v](DaemonConfig& c) { c.sensor.dual_return_distance_threshold = v; });
+    } else if (arg == "--firing-time-correction") {
+      set([](DaemonConfig& c) { c.sensor.firing_time_correction = true; });
+    } else if (arg == "--rpm") {
+      const auto rpm = static_cast<int>(args.integer(arg, 600, 1200));
+      if (rpm != 600 && rpm != 1200) args.usage_error("--rpm takes 600 or 1200");
+      o.simulated_rpm = rpm;
+      set([rpm](DaemonConfig& c) { c.sensor.rotation_speed = rpm; });
+    } else if (arg == "--return-mode") {
+      const std::string_view name = args.value(arg);
+      const auto mode = return_mode_from_string(name);
+      if (!mode) args.usage_error("--return-mode takes dual, strongest or last");
+      o.simulated_mode = *mode;
+      const std::string text(name);
+      set([text](DaemonConfig& c) { c.sensor.return_mode = text; });
+    } else if (arg == "--udp-sequence") {
+      o.udp_sequence = true;
     } else if (arg == "--log-level") {
       const std::string level(args.value(arg));
-      o.log_level = spdlog::level::from_str(level);
-      if (o.log_level == spdlog::level::off && level != "off") {
-        args.usage_error(fmt::format("unknown log level '{}'", level));
-      }
+      set([level](DaemonConfig& c) { c.log_level = level; });
     } else if (arg == "--version") {
       fmt::print("pandarcapd {}\n", kVersion);
       std::exit(0);
@@ -140,102 +202,342 @@ Options parse_options(int argc, char** argv) {
       args.usage_error(fmt::format("unknown option '{}'", arg));
     }
   }
-  if (o.simulate == o.replay.has_value()) {
-    args.usage_error("give exactly one source: --simulate or --replay FILE");
-  }
-  if (o.decode.decoder.min_range_m > o.decode.decoder.max_range_m) {
-    args.usage_error("--min-range is larger than --max-range");
-  }
+  if (o.simulate && o.replay) args.usage_error("--simulate and --replay exclude each other");
+  if (o.rate && !o.replay) args.usage_error("--rate applies to --replay only");
   return o;
 }
 
-// Records `duration_s` of the simulated sensor into a classic pcap; returns its path.
-std::filesystem::path record_simulation(const Options& o, const Calibration& calibration) {
-  const std::filesystem::path raw_dir = o.output_dir / "raw";
-  std::filesystem::create_directories(raw_dir);
-  const std::filesystem::path path = raw_dir / "simulated.pcap";
-  SyntheticSensor sensor(o.sensor, calibration);
-  PcapWriter writer(path.string());
-  const Endpoint source{0xC0A801C9, 2368};       // 192.168.1.201, the sensor's factory address
-  const Endpoint destination{0xC0A8010A, 2368};  // 192.168.1.10
-  const auto packets = static_cast<std::uint64_t>(
-      std::llround(o.duration_s * 1e9 / static_cast<double>(sensor.packet_period_ns())));
-  std::array<std::uint8_t, kMaxPacketBytes> buffer{};
-  for (std::uint64_t i = 0; i < packets; ++i) {
-    const std::size_t size = sensor.next(buffer);
-    writer.write(std::span(buffer).first(size), sensor.last_packet_time_ns(), source, destination);
-  }
-  writer.close();
-  spdlog::info("simulated sensor: {} packets ({} s, {} RPM, {} return{}) recorded to {}", packets,
-               o.duration_s, o.sensor.rpm, to_string(o.sensor.return_mode),
-               o.sensor.udp_sequence ? ", UDP sequence" : "", path.string());
-  return path;
-}
-
-std::string format_time(std::int64_t ns, bool valid) {
-  if (!valid) return fmt::format("(no valid date) +{:.6f} s", static_cast<double>(ns) / 1e9);
-  const std::int64_t seconds = ns >= 0 ? ns / 1'000'000'000 : (ns + 1) / 1'000'000'000 - 1;
-  const TailDateTime utc = tail_datetime_from_unix(seconds);
-  return fmt::format("{:04}-{:02}-{:02}T{:02}:{:02}:{:02}.{:03}Z", 2000 + utc.year_since_2000,
-                     utc.month, utc.day, utc.hour, utc.minute, utc.second,
-                     (ns - seconds * 1'000'000'000) / 1'000'000);
-}
-
-int run(const Options& o) {
-  Calibration calibration = Calibration::nominal();
-  if (o.calibration) {
-    calibration = Calibration::load(*o.calibration);
-    spdlog::info("calibration: {}", calibration.source);
+void setup_logging(const std::string& level) {
+  auto logger = spdlog::stderr_color_mt("pandarcapd");
+  // Under systemd, journald timestamps every line itself.
+  if (std::getenv("JOURNAL_STREAM") != nullptr) {
+    logger->set_pattern("[%l] %v");
   } else {
-    spdlog::warn(
-        "calibration: nominal Pandar40P table in use (no --calibration given); per-unit "
-        "elevations differ by up to ~0.45 degrees");
+    logger->set_pattern("%Y-%m-%dT%H:%M:%S.%e [%l] %v");
+  }
+  logger->set_level(spdlog::level::from_str(level));
+  spdlog::set_default_logger(logger);
+}
+
+std::int64_t realtime_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+}
+
+// The fixed memory of the pipeline, allocated before any thread starts.
+struct Pipeline {
+  explicit Pipeline(const DaemonConfig& c)
+      : ring(c.ring.slots),
+        free_arenas(round_up(c.arenas.count)),
+        free_raw(round_up(raw_batches(c))),
+        to_writer(round_up(c.arenas.count + raw_batches(c) + 16)),
+        status(4) {
+    for (std::uint32_t i = 0; i < c.arenas.count; ++i) {
+      arenas.push_back(std::make_unique<FrameArena>(c.arenas.points_per_frame));
+      free_arenas.try_push(arenas.back().get());
+    }
+    for (std::uint32_t i = 0; i < raw_batches(c); ++i) {
+      raw.push_back(std::make_unique<RawBatch>(c.arenas.packets_per_frame));
+      free_raw.try_push(raw.back().get());
+    }
+  }
+  // As many raw batches as arenas: the recording may fall behind as far as the frames can.
+  static std::uint32_t raw_batches(const DaemonConfig& c) { return c.arenas.count; }
+  static std::size_t round_up(std::size_t n) {
+    std::size_t p = 1;
+    while (p < n)
+      p <<= 1;
+    return p;
   }
 
-  const std::filesystem::path input =
-      o.simulate ? record_simulation(o, calibration) : std::filesystem::path(*o.replay);
-  CaptureReader reader(input.string(), CaptureReader::Options{o.port});
+  ringbuf::PacketRing ring;
+  std::vector<std::unique_ptr<FrameArena>> arenas;
+  std::vector<std::unique_ptr<RawBatch>> raw;
+  DecodeWorker::ArenaQueue free_arenas;
+  DecodeWorker::RawQueue free_raw;
+  DecodeWorker::WriterQueue to_writer;
+  ringbuf::SpscQueue<StatusLine> status;
+  ReceiveCounters receive;
+  Heartbeats heartbeats;
+  std::atomic<bool> stop_source{false};
+  std::atomic<bool> source_done{false};
+  std::atomic<std::uint32_t> rotate_generation{0};
+};
 
-  FrameCollector collector(3, kDefaultFrameCapacityPoints, [&](const Frame& frame) {
-    const FrameInfo& f = frame.info;
-    if (o.quiet) return;
+void print_summary(const std::filesystem::path& dir) {
+  const std::filesystem::path jsonl = dir / "health" / "health.jsonl";
+  std::ifstream in(jsonl);
+  std::string line, last;
+  while (std::getline(in, line)) {
+    if (!line.empty()) last = line;
+  }
+  fmt::print("outputs in {}:\n  frames  {}\n  raw     {}\n  health  {} and {}\n", dir.string(),
+             (dir / "frames").string(), (dir / "raw").string(),
+             (dir / "health" / "pandarcap.prom").string(), jsonl.string());
+  if (last.empty()) return;
+  try {
+    const auto h = nlohmann::json::parse(last);
+    const auto& c = h.at("counters");
     fmt::print(
-        "frame {:>4}  {:>6} points  {:>4} packets  {:>6.1f} rpm  {:<9}  {:<8}  {}  {:.1f} ms\n",
-        f.sequence, f.points, f.packets, f.rpm, to_string(f.return_mode),
-        f.partial ? "partial" : "complete", format_time(f.start_ns, f.time_valid),
-        static_cast<double>(f.end_ns - f.start_ns) / 1e6);
+        "final health ({}): state {}{}; {} datagrams received, {} accepted, {} rejected, {} "
+        "foreign, {} ring overruns, {} kernel drops; frames {} complete, {} partial, {} dropped, "
+        "{} written; {} packets recorded\n",
+        jsonl.filename().string(), h.value("state", "?"),
+        h.value("reason", "").empty() ? "" : " (" + h.value("reason", "") + ")",
+        c.value("datagrams_received", 0), c.value("packets_accepted", 0),
+        c.value("packets_rejected", 0), c.value("foreign_datagrams", 0),
+        c.value("ring_overruns", 0), c.value("kernel_drops", 0), c.value("frames_complete", 0),
+        c.value("frames_partial", 0), c.value("frames_dropped_no_arena", 0),
+        c.value("frames_written", 0), c.value("pcap_packets_written", 0));
+  } catch (const std::exception& error) {
+    spdlog::warn("cannot summarise {}: {}", jsonl.string(), error.what());
+  }
+}
+
+int run(int argc, char** argv) {
+  // 1. Options and configuration.
+  Options options = parse_options(argc, argv);
+  DaemonConfig config;
+  const std::string source_name = options.config_path.value_or("command line");
+  try {
+    if (options.config_path) config = load_config_file(*options.config_path);
+    for (const auto& apply : options.overrides)
+      apply(config);
+    validate_config(config, source_name);
+  } catch (const ConfigError& error) {
+    std::fprintf(stderr, "pandarcapd: %s\n", error.what());
+    return kExitConfig;
+  }
+  if (options.check_config) {
+    fmt::print("{}: configuration OK\n", source_name);
+    return 0;
+  }
+  if (options.print_config) {
+    fmt::print("{}", to_toml(config));
+    return 0;
+  }
+
+  // 2. Logging and calibration.
+  setup_logging(config.log_level);
+  spdlog::info("pandarcapd {} starting ({})", kVersion,
+               options.simulate ? "simulated sensor"
+               : options.replay ? "replay of " + *options.replay
+                                : "live capture");
+  Calibration calibration;
+  try {
+    calibration = config.sensor.calibration_file.empty()
+                      ? Calibration::nominal()
+                      : Calibration::load(config.sensor.calibration_file);
+  } catch (const std::exception& error) {
+    spdlog::critical("{}", error.what());
+    return kExitConfig;
+  }
+  if (calibration.is_nominal()) {
+    spdlog::warn(
+        "calibration: nominal Pandar40P table in use (no calibration_file); per-unit "
+        "elevations differ by up to ~0.45 degrees");
+  } else {
+    spdlog::info("calibration: {}", calibration.source);
+  }
+
+  // 3. Memory, all of it now.
+  Pipeline pipe(config);
+  spdlog::info(
+      "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
+      "packets",
+      config.ring.slots, sizeof(ringbuf::PacketSlot), config.arenas.count,
+      config.arenas.points_per_frame, Pipeline::raw_batches(config),
+      config.arenas.packets_per_frame);
+
+  // 4. Source and outputs.
+  std::unique_ptr<UdpReceiver> receiver;
+  std::unique_ptr<ReplaySource> replay;
+  std::unique_ptr<SimulatedSender> simulator;
+  try {
+    if (options.replay) {
+      ReplayOptions ro;
+      ro.path = *options.replay;
+      ro.rate = options.rate;
+      if (options.port_given) ro.destination_port = config.sensor.data_port;
+      ro.sensor_ip = config.sensor.sensor_ip;
+      replay = std::make_unique<ReplaySource>(ro);
+    } else {
+      UdpReceiverOptions ro;
+      ro.host_ip = options.simulate ? "127.0.0.1" : config.sensor.host_ip;
+      ro.port = options.simulate && !options.port_given ? 0 : config.sensor.data_port;
+      ro.multicast_ip = options.simulate ? "" : config.sensor.multicast_ip;
+      ro.multicast_interface_ip = config.sensor.multicast_interface_ip;
+      ro.receive_buffer_bytes = config.sensor.udp_socket_receive_buffer_size_bytes;
+      ro.sensor_ip = config.sensor.sensor_ip;
+      ro.batch = config.ring.receive_batch;
+      receiver = std::make_unique<UdpReceiver>(ro);
+      if (options.simulate) {
+        SyntheticSensorConfig sc;
+        sc.rpm = options.simulated_rpm;
+        sc.return_mode = options.simulated_mode;
+        sc.udp_sequence = options.udp_sequence;
+        sc.start_unix_ns = realtime_ns();
+        simulator =
+            std::make_unique<SimulatedSender>(sc, "127.0.0.1", "127.0.0.1", receiver->bound_port());
+        spdlog::info("simulated sensor: {} RPM, {} return{}, sending to 127.0.0.1:{}", sc.rpm,
+                     to_string(sc.return_mode), sc.udp_sequence ? ", UDP sequence" : "",
+                     receiver->bound_port());
+      }
+    }
+  } catch (const CaptureError& error) {
+    spdlog::critical("{}", error.what());
+    return kExitNoInput;
+  } catch (const std::exception& error) {
+    spdlog::critical("{}", error.what());
+    return 1;
+  }
+
+  const std::filesystem::path output_dir = config.output.directory;
+  WriterOptions wo;
+  wo.output_dir = output_dir;
+  wo.frames = config.output.frames;
+  wo.frames_max_files = config.output.frames_max_files;
+  wo.frames_max_bytes = config.output.frames_max_bytes;
+  wo.pcap = config.output.pcap;
+  wo.pcap_rotate_bytes = config.output.pcap_rotate_bytes;
+  wo.pcap_rotate_seconds = config.output.pcap_rotate_seconds;
+  wo.pcap_max_files = config.output.pcap_max_files;
+  wo.pcap_max_bytes = config.output.pcap_max_bytes;
+  wo.prometheus = config.health.prometheus;
+  wo.jsonl = config.health.jsonl;
+  wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;
+  wo.sensor_name = config.health.sensor_name;
+  wo.version = std::string(kVersion);
+  wo.no_data_timeout_seconds = config.health.no_data_timeout_seconds;
+  wo.expected_return_mode = config.sensor.return_mode;
+  wo.expected_rpm = config.sensor.rotation_speed;
+  wo.calibration_csv = calibration.to_csv();
+  wo.pcap_destination = Endpoint{0, receiver ? receiver->bound_port() : config.sensor.data_port};
+  Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive);
+  try {
+    writer.prepare();
+  } catch (const std::exception& error) {
+    spdlog::critical("outputs: {}", error.what());
+    return kExitCantCreate;
+  }
+
+  // 5. Threads. Signals are blocked first so every thread inherits the mask and only the main
+  // thread takes them, synchronously, with sigtimedwait.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGHUP);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  DecodeWorkerOptions dopt;
+  dopt.decoder.decoder.min_range_m = config.sensor.min_range;
+  dopt.decoder.decoder.max_range_m = config.sensor.max_range;
+  dopt.decoder.decoder.dual_return_distance_threshold_m =
+      config.sensor.dual_return_distance_threshold;
+  dopt.decoder.decoder.firing_time_correction = config.sensor.firing_time_correction;
+  dopt.decoder.cut_angle_deg = config.sensor.cut_angle;
+  dopt.frame_decimation = config.output.frame_decimation;
+  dopt.write_frames = config.output.frames;
+  dopt.record_raw = config.output.pcap;
+  DecodeWorker worker(calibration, dopt, pipe.ring, pipe.to_writer, pipe.free_arenas,
+                      pipe.free_raw);
+
+  ReplayResult replay_result;
+  std::thread writer_thread(
+      [&] { writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status); });
+  std::thread decode_thread([&] { worker.run(pipe.source_done, pipe.heartbeats.decode); });
+  std::thread source_thread([&] {
+    if (replay) {
+      replay_result =
+          replay->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive);
+    } else {
+      receiver->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive);
+    }
+    // release: everything the source published happens before the decoder sees "done".
+    pipe.source_done.store(true, std::memory_order_release);
   });
-  StreamDecoder decoder(calibration, o.decode, collector);
+  std::atomic<bool> stop_simulator{false};
+  std::thread simulator_thread;
+  if (simulator) simulator_thread = std::thread([&] { simulator->run(stop_simulator); });
 
-  CaptureRecord record;
-  CaptureStatus status;
-  while ((status = reader.next(record)) == CaptureStatus::kRecord)
-    decoder.process(record.payload);
-  decoder.flush();
+  systemd::ready();
+  spdlog::info("ready: writing to {}", output_dir.string());
 
-  const StreamStats& s = decoder.stats();
-  const AssemblerStats& fs = decoder.frames();
-  fmt::print(
-      "\n{}: {} packets, {} accepted, {} rejected; {} frames complete, {} partial, {} dropped; "
-      "{} points ({} filtered); rpm {}..{}; return mode {}\n",
-      input.string(), s.packets, s.accepted, s.rejected(), fs.frames_complete, fs.frames_partial,
-      fs.frames_dropped, s.points, s.filtered.total(), s.rpm_min, s.rpm_max,
-      s.return_mode ? to_string(*s.return_mode) : "none");
-  if (status != CaptureStatus::kEnd) spdlog::warn("{}", reader.error());
-  return status == CaptureStatus::kError ? 1 : 0;
+  // Supervision: signals, --duration, end of replay, STATUS and WATCHDOG.
+  const auto start = std::chrono::steady_clock::now();
+  const auto watchdog = systemd::watchdog_interval();
+  const auto tick = std::chrono::milliseconds(100);
+  auto next_watchdog = start;
+  std::uint64_t seen[3] = {~0ull, ~0ull, ~0ull};
+  for (;;) {
+    const timespec timeout{0, std::chrono::nanoseconds(tick).count()};
+    const int signal = sigtimedwait(&signals, nullptr, &timeout);
+    if (signal == SIGTERM || signal == SIGINT) {
+      spdlog::info("{}: stopping", signal == SIGTERM ? "SIGTERM" : "SIGINT");
+      break;
+    }
+    if (signal == SIGHUP) pipe.rotate_generation.fetch_add(1, std::memory_order_relaxed);
+    if (options.duration_s && std::chrono::steady_clock::now() - start >=
+                                  std::chrono::duration<double>(*options.duration_s)) {
+      spdlog::info("{} s elapsed: stopping", *options.duration_s);
+      break;
+    }
+    if (pipe.source_done.load(std::memory_order_acquire)) break;  // replay finished
+    StatusLine status;
+    while (pipe.status.try_pop(status))
+      systemd::status(status.text);
+    const auto now = std::chrono::steady_clock::now();
+    if (watchdog && now >= next_watchdog) {
+      // Only while all three loops are making progress (each bumps its counter even when idle).
+      const std::uint64_t beats[3] = {pipe.heartbeats.receive.load(), pipe.heartbeats.decode.load(),
+                                      pipe.heartbeats.writer.load()};
+      if (beats[0] != seen[0] && beats[1] != seen[1] && beats[2] != seen[2]) {
+        systemd::watchdog();
+        std::copy(std::begin(beats), std::end(beats), std::begin(seen));
+      }
+      next_watchdog = now + *watchdog / 2;
+    }
+  }
+
+  // Shutdown, in reverse: the simulator, the source, then the decoder drains the ring and the
+  // writer finishes (partial frame renamed, pcap closed, final health).
+  systemd::stopping();
+  stop_simulator.store(true, std::memory_order_relaxed);
+  if (simulator_thread.joinable()) simulator_thread.join();
+  pipe.stop_source.store(true, std::memory_order_relaxed);
+  source_thread.join();
+  decode_thread.join();
+  writer_thread.join();
+
+  int status = 0;
+  if (replay) {
+    const auto& capture = replay_result.capture;
+    spdlog::info(
+        "replay: {} records, {} UDP datagrams ({} other ports, {} non-IPv4, {} non-UDP, "
+        "{} fragments, {} malformed)",
+        capture.records, capture.udp_datagrams, capture.port_filtered, capture.non_ipv4,
+        capture.non_udp, capture.ip_fragments, capture.malformed);
+    if (replay_result.status == CaptureStatus::kTruncated) {
+      spdlog::warn("{}: the file ends in the middle of a record (cut off while recording)",
+                   *options.replay);
+    } else if (replay_result.status == CaptureStatus::kError) {
+      spdlog::error("{}: {}", *options.replay, replay_result.error);
+      status = 1;
+    }
+  }
+  print_summary(output_dir);
+  return status;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  const Options options = parse_options(argc, argv);
-  // Logs go to stderr; stdout carries the frame lines and the summary.
-  spdlog::set_default_logger(spdlog::stderr_color_mt("pandarcapd"));
-  spdlog::set_level(options.log_level);
   try {
-    return run(options);
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 2;
+    return run(argc, argv);
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "pandarcapd: %s\n", error.what());
+    return 1;
   }
 }

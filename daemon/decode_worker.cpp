@@ -1,0 +1,169 @@
+#include "daemon/decode_worker.hpp"
+
+#include <time.h>
+
+#include <chrono>
+#include <cstring>
+#include <thread>
+
+namespace pandarcap {
+namespace {
+
+std::int64_t coarse_monotonic_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC_COARSE, &ts);
+  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+}
+
+constexpr std::size_t kDecodeBatch = 64;
+
+}  // namespace
+
+DecodeWorker::DecodeWorker(const Calibration& calibration, const DecodeWorkerOptions& options,
+                           ringbuf::PacketRing& ring, WriterQueue& to_writer,
+                           ArenaQueue& free_arenas, RawQueue& free_raw)
+    : options_(options),
+      ring_(ring),
+      to_writer_(to_writer),
+      free_arenas_(free_arenas),
+      free_raw_(free_raw),
+      decoder_(calibration, options.decoder, *this) {}
+
+Frame* DecodeWorker::acquire_frame() {
+  FrameArena* arena = nullptr;
+  if (!free_arenas_.try_pop(arena)) return nullptr;  // the assembler counts the dropped frame
+  for (FrameArena*& open : open_) {
+    if (open == nullptr) {
+      open = arena;
+      return &arena->frame;
+    }
+  }
+  // Cannot happen (the assembler keeps at most two frames open); give the arena back.
+  free_arenas_.try_push(arena);
+  return nullptr;
+}
+
+void DecodeWorker::frame_done(Frame& frame) {
+  FrameArena* arena = nullptr;
+  for (FrameArena*& open : open_) {
+    if (open != nullptr && &open->frame == &frame) {
+      arena = open;
+      open = nullptr;
+      break;
+    }
+  }
+  if (arena == nullptr) return;
+  const bool write = options_.write_frames && frames_finished_ % options_.frame_decimation == 0;
+  ++frames_finished_;
+  if (write) {
+    WriterMessage message;
+    message.kind = WriterMessage::Kind::kFrame;
+    message.arena = arena;
+    // The queue holds every arena and batch at once, so this cannot fail; if it ever did, the
+    // arena goes back to the pool and the frame counts as decimated rather than vanishing.
+    if (to_writer_.try_push(message)) {
+      to_writer_.notify();
+      return;
+    }
+  }
+  ++frames_decimated_;
+  free_arenas_.try_push(arena);
+}
+
+void DecodeWorker::record_raw(const ringbuf::PacketSlot& slot) {
+  if (raw_ == nullptr && !free_raw_.try_pop(raw_)) {
+    ++raw_dropped_;
+    return;
+  }
+  RawPacket& packet = raw_->packets[raw_->size++];
+  packet.receive_time_ns = slot.receive_time_ns;
+  packet.source = slot.source;
+  packet.length =
+      static_cast<std::uint16_t>(std::min<std::size_t>(slot.length, sizeof packet.payload));
+  std::memcpy(packet.payload, slot.payload, packet.length);
+  if (raw_->size == raw_->capacity) flush_raw();
+}
+
+void DecodeWorker::flush_raw() {
+  if (raw_ == nullptr || raw_->size == 0) return;
+  WriterMessage message;
+  message.kind = WriterMessage::Kind::kRaw;
+  message.raw = raw_;
+  if (to_writer_.try_push(message)) {
+    to_writer_.notify();
+  } else {
+    raw_dropped_ += raw_->size;  // cannot happen (see frame_done); counted if it does
+    raw_->size = 0;
+    free_raw_.try_push(raw_);
+  }
+  raw_ = nullptr;
+}
+
+void DecodeWorker::process(const ringbuf::PacketSlot& slot) {
+  if (options_.record_raw) record_raw(slot);
+  decoder_.process(std::span<const std::uint8_t>(slot.payload, slot.length));
+}
+
+DecodeSnapshot DecodeWorker::snapshot() const {
+  DecodeSnapshot s;
+  s.stream = decoder_.stats();
+  s.sequence = decoder_.sequence();
+  s.frames = decoder_.frames();
+  s.frames_decimated = frames_decimated_;
+  s.raw_packets_dropped = raw_dropped_;
+  s.monotonic_ns = coarse_monotonic_ns();
+  s.last_packet_monotonic_ns = last_packet_monotonic_ns_;
+  return s;
+}
+
+void DecodeWorker::send_snapshot(WriterMessage::Kind kind) {
+  WriterMessage message;
+  message.kind = kind;
+  message.snapshot = snapshot();
+  if (kind == WriterMessage::Kind::kEnd) {
+    // The end must arrive: wait for the writer to make room (shutdown only).
+    while (!to_writer_.try_push(message)) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  } else {
+    to_writer_.try_push(message);  // a full queue skips one second's snapshot; the next follows
+  }
+  to_writer_.notify();
+}
+
+void DecodeWorker::run(const std::atomic<bool>& producer_done,
+                       std::atomic<std::uint64_t>& heartbeat) {
+  std::int64_t next_snapshot_ns = coarse_monotonic_ns();
+  std::int64_t next_raw_flush_ns = next_snapshot_ns;
+  for (;;) {
+    ReceiveCounters::add(heartbeat, 1);
+    // Read the flag before looking at the ring: if the producer was done then, an empty ring now
+    // means everything has been taken.
+    const bool done = producer_done.load(std::memory_order_acquire);
+    std::span<ringbuf::PacketSlot> batch = ring_.peek(kDecodeBatch);
+    if (batch.empty()) {
+      if (done) break;
+      ring_.wait_for_data(std::chrono::milliseconds(100));
+    } else {
+      for (const ringbuf::PacketSlot& slot : batch)
+        process(slot);
+      ring_.release(batch.size());
+      last_packet_monotonic_ns_ = coarse_monotonic_ns();
+    }
+    const std::int64_t now = coarse_monotonic_ns();
+    if (now >= next_raw_flush_ns) {
+      // Keep the pcap no more than ~100 ms behind, even at low packet rates.
+      flush_raw();
+      next_raw_flush_ns = now + 100'000'000;
+    }
+    if (now >= next_snapshot_ns) {
+      send_snapshot(WriterMessage::Kind::kSnapshot);
+      next_snapshot_ns = now + 1'000'000'000;
+    }
+  }
+  decoder_.flush();
+  flush_raw();
+  send_snapshot(WriterMessage::Kind::kEnd);
+}
+
+}  // namespace pandarcap

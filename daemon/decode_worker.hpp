@@ -1,0 +1,72 @@
+// The decode worker: takes batches of datagrams from the PacketRing, runs each through the core
+// StreamDecoder (validate, time, decode, cut frames) into frame arenas from a fixed pool, copies
+// each datagram into a RawBatch for the pcap recording, and hands finished arenas and batches to
+// the writer. Once a second (and at the end) it sends the writer a snapshot of its counters.
+//
+// It never allocates and never waits for the writer: with no empty arena the frame is dropped
+// (the assembler counts it), with no empty raw batch the datagram is not recorded (counted).
+// Every `frame_decimation`-th frame goes to the writer; the others go straight back to the pool,
+// counted as decimated.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <vector>
+
+#include "core/calibration.hpp"
+#include "core/stream_decoder.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "ringbuf/packet_slot.hpp"
+#include "ringbuf/spsc_queue.hpp"
+
+namespace pandarcap {
+
+struct DecodeWorkerOptions {
+  StreamDecoderConfig decoder;
+  std::uint32_t frame_decimation = 1;  // 1 = every frame
+  bool write_frames = true;            // false: every frame is returned at once (not written)
+  bool record_raw = true;
+};
+
+class DecodeWorker final : public FrameSink {
+ public:
+  using ArenaQueue = ringbuf::SpscQueue<FrameArena*>;
+  using RawQueue = ringbuf::SpscQueue<RawBatch*>;
+  using WriterQueue = ringbuf::SpscQueue<WriterMessage>;
+
+  DecodeWorker(const Calibration& calibration, const DecodeWorkerOptions& options,
+               ringbuf::PacketRing& ring, WriterQueue& to_writer, ArenaQueue& free_arenas,
+               RawQueue& free_raw);
+
+  // Runs until `producer_done` is set and the ring is empty; then finishes open frames as
+  // partial, flushes the raw batch and sends the writer a final snapshot and kEnd.
+  void run(const std::atomic<bool>& producer_done, std::atomic<std::uint64_t>& heartbeat);
+
+  // FrameSink (called by the assembler on this thread).
+  Frame* acquire_frame() override;
+  void frame_done(Frame& frame) override;
+
+ private:
+  void process(const ringbuf::PacketSlot& slot);
+  void record_raw(const ringbuf::PacketSlot& slot);
+  void flush_raw();
+  DecodeSnapshot snapshot() const;
+  void send_snapshot(WriterMessage::Kind kind);
+
+  DecodeWorkerOptions options_;
+  ringbuf::PacketRing& ring_;
+  WriterQueue& to_writer_;
+  ArenaQueue& free_arenas_;
+  RawQueue& free_raw_;
+  StreamDecoder decoder_;
+  // Arenas currently being filled by the assembler (at most two frames are open at once), so a
+  // Frame& from the assembler can be mapped back to its arena without searching the pool.
+  std::array<FrameArena*, 4> open_{};
+  RawBatch* raw_ = nullptr;
+  std::uint64_t frames_finished_ = 0;
+  std::uint64_t frames_decimated_ = 0;
+  std::uint64_t raw_dropped_ = 0;
+  std::int64_t last_packet_monotonic_ns_ = 0;
+};
+
+}  // namespace pandarcap

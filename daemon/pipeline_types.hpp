@@ -1,0 +1,98 @@
+// What the daemon's threads hand each other, all allocated once at start-up:
+//
+//   receive/replay --PacketRing--> decode worker --SpscQueue<WriterMessage>--> writer
+//                                        ^                                       |
+//                                        +---- SpscQueue<FrameArena*> ----------+  (empty arenas)
+//                                        +---- SpscQueue<RawBatch*>   ----------+  (empty batches)
+//
+// A FrameArena is one frame's fixed point storage. A RawBatch is a run of raw datagrams, copied
+// out of the ring, on their way to the pcap recording. When no empty arena (or batch) is there,
+// the decode worker drops the frame (or the datagram's recording) and counts it: it never
+// allocates and never waits for the writer.
+#pragma once
+
+#include <netinet/in.h>
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include "core/frame.hpp"
+#include "core/packet.hpp"
+#include "core/point.hpp"
+#include "core/stream_decoder.hpp"
+#include "ringbuf/packet_slot.hpp"
+
+namespace pandarcap {
+
+struct FrameArena {
+  explicit FrameArena(std::size_t capacity_points)
+      : storage(new Point[capacity_points]()), capacity(capacity_points) {
+    frame.points = std::span<Point>(storage.get(), capacity);
+  }
+  std::unique_ptr<Point[]> storage;
+  std::size_t capacity;
+  Frame frame;
+};
+
+struct RawPacket {
+  std::int64_t receive_time_ns = 0;
+  sockaddr_in source{};
+  std::uint16_t length = 0;  // bytes in payload (a truncated datagram keeps what fit)
+  std::uint8_t payload[ringbuf::PacketSlot::kPayloadCapacity];
+};
+
+struct RawBatch {
+  explicit RawBatch(std::size_t capacity_packets)
+      : packets(new RawPacket[capacity_packets]), capacity(capacity_packets) {}
+  std::unique_ptr<RawPacket[]> packets;
+  std::size_t capacity;
+  std::size_t size = 0;
+};
+
+// The decode worker's counters, copied to the writer once a second (and at the end) as one
+// message, so the writer reads a consistent set without any shared mutable state.
+struct DecodeSnapshot {
+  StreamStats stream;
+  SequenceStats sequence;
+  AssemblerStats frames;
+  std::uint64_t frames_decimated = 0;
+  std::uint64_t raw_packets_dropped = 0;      // no empty RawBatch: not recorded to pcap
+  std::int64_t monotonic_ns = 0;              // when it was taken
+  std::int64_t last_packet_monotonic_ns = 0;  // 0 before the first packet
+};
+
+// Messages are copied into the queue's preallocated cells; a snapshot travels by value.
+struct WriterMessage {
+  enum class Kind : std::uint8_t { kFrame, kRaw, kSnapshot, kEnd } kind = Kind::kEnd;
+  FrameArena* arena = nullptr;  // kFrame
+  RawBatch* raw = nullptr;      // kRaw
+  DecodeSnapshot snapshot;      // kSnapshot and kEnd (the final counts)
+};
+
+// Per-loop progress counters for the systemd watchdog: each loop bumps its own every iteration,
+// including idle wake-ups, so "not advancing" means stuck, not "no packets".
+struct Heartbeats {
+  std::atomic<std::uint64_t> receive{0};
+  std::atomic<std::uint64_t> decode{0};
+  std::atomic<std::uint64_t> writer{0};
+};
+
+// Written only by the receive (or replay) thread, read by the writer for health.
+struct ReceiveCounters {
+  std::atomic<std::uint64_t> datagrams{0};
+  std::atomic<std::uint64_t> bytes{0};
+  std::atomic<std::uint64_t> foreign{0};
+  std::atomic<std::uint64_t> truncated{0};
+  std::atomic<std::uint64_t> kernel_drops{0};
+  std::atomic<std::uint64_t> ring_overruns{0};
+  std::atomic<std::uint64_t> receive_errors{0};
+
+  // Single writer: a relaxed load + store is enough (no read-modify-write needed).
+  static void add(std::atomic<std::uint64_t>& counter, std::uint64_t n) noexcept {
+    counter.store(counter.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);
+  }
+};
+
+}  // namespace pandarcap

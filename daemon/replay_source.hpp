@@ -1,0 +1,49 @@
+// The replay source: feeds a pcap/pcapng capture through the same PacketRing the live socket
+// fills, so a recording is processed exactly as live data would be.
+//
+// Pace: as fast as the decoder takes it (top speed, the default for files), or the recorded
+// pace scaled by `rate` (1 = real time, 2 = twice as fast). Unlike the live receiver, replay
+// waits for ring space instead of dropping: a file does not overflow, so nothing is lost.
+// The record's capture time becomes the packet's receive time.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "core/capture_reader.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "ringbuf/packet_slot.hpp"
+
+namespace pandarcap {
+
+struct ReplayOptions {
+  std::string path;
+  std::optional<double> rate;  // empty = top speed
+  std::optional<std::uint16_t> destination_port;
+  std::string sensor_ip;  // "" = every source
+};
+
+struct ReplayResult {
+  CaptureStatus status = CaptureStatus::kEnd;  // kEnd, kTruncated or kError
+  std::string error;                           // for kError
+  CaptureStats capture;
+  bool stopped = false;  // stopped early by a signal
+};
+
+class ReplaySource {
+ public:
+  // Opens the file; throws CaptureError naming it when it cannot be read as a capture.
+  explicit ReplaySource(const ReplayOptions& options);
+
+  ReplayResult run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+                   ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
+
+ private:
+  ReplayOptions options_;
+  CaptureReader reader_;
+  std::optional<std::uint32_t> sensor_ip_;  // host order, as Endpoint
+};
+
+}  // namespace pandarcap

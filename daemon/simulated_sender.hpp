@@ -1,0 +1,36 @@
+// The simulated sensor of `pandarcapd --simulate`: a thread that sends the core generator's
+// packets over loopback UDP to the daemon's own socket at the sensor's real rate (1800 packets/s
+// single return, 3600 dual, at 600 RPM), so the whole live path runs with no hardware.
+// Packets due are sent together with sendmmsg every millisecond.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+
+#include "core/synthetic_sensor.hpp"
+
+namespace pandarcap {
+
+class SimulatedSender {
+ public:
+  // Throws std::system_error when the socket cannot be created or bound to `source_ip`.
+  SimulatedSender(const SyntheticSensorConfig& config, const std::string& source_ip,
+                  const std::string& destination_ip, std::uint16_t destination_port);
+  ~SimulatedSender();
+  SimulatedSender(const SimulatedSender&) = delete;
+  SimulatedSender& operator=(const SimulatedSender&) = delete;
+
+  // Sends until `stop` is set.
+  void run(const std::atomic<bool>& stop);
+  std::uint64_t packets_sent() const noexcept { return sent_.load(std::memory_order_relaxed); }
+  std::uint64_t send_errors() const noexcept { return errors_.load(std::memory_order_relaxed); }
+
+ private:
+  SyntheticSensor sensor_;
+  int fd_ = -1;
+  std::atomic<std::uint64_t> sent_{0};
+  std::atomic<std::uint64_t> errors_{0};
+};
+
+}  // namespace pandarcap

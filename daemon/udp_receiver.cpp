@@ -1,0 +1,252 @@
+#include "daemon/udp_receiver.hpp"
+
+#include <arpa/inet.h>
+#include <linux/sock_diag.h>
+#include <poll.h>
+#include <spdlog/spdlog.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <system_error>
+
+namespace pandarcap {
+namespace {
+
+constexpr std::size_t kMaxBatch = 1024;
+// Room for SO_TIMESTAMPNS (a timespec) and SO_RXQ_OVFL (a u32), with headers and alignment.
+constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(uint32_t));
+
+[[noreturn]] void fail(const std::string& what) {
+  throw std::system_error(errno, std::generic_category(), what);
+}
+
+in_addr parse_ipv4(const std::string& text, const char* what) {
+  in_addr address{};
+  if (inet_pton(AF_INET, text.c_str(), &address) != 1) {
+    throw std::system_error(EINVAL, std::generic_category(),
+                            std::string(what) + " '" + text + "' is not an IPv4 address");
+  }
+  return address;
+}
+
+std::int64_t realtime_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+}
+
+std::int64_t coarse_monotonic_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC_COARSE, &ts);
+  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+}
+
+std::uint64_t read_rmem_max() {
+  std::ifstream in("/proc/sys/net/core/rmem_max");
+  std::uint64_t value = 0;
+  in >> value;
+  return value;
+}
+
+}  // namespace
+
+// recvmmsg's headers, allocated with the receiver so nothing is allocated per call; plus the
+// scratch slots that overrun datagrams are received into and dropped from.
+struct UdpReceiver::Batch {
+  std::array<mmsghdr, kMaxBatch> headers{};
+  std::array<iovec, kMaxBatch> iov{};
+  std::array<std::array<std::uint8_t, kControlBytes>, kMaxBatch> control{};
+  std::array<ringbuf::PacketSlot, 16> scratch{};
+};
+
+UdpReceiver::UdpReceiver(const UdpReceiverOptions& options)
+    : batch_(std::clamp<std::size_t>(options.batch, 1, kMaxBatch)), buffers_(new Batch) {
+  fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd_ < 0) fail("cannot create the UDP socket");
+  try {
+    configure(options);
+  } catch (...) {
+    ::close(fd_);
+    throw;
+  }
+}
+
+void UdpReceiver::configure(const UdpReceiverOptions& options) {
+  const int on = 1;
+  // Several listeners may share a multicast port; harmless for unicast.
+  if (!options.multicast_ip.empty()) {
+    if (::setsockopt(fd_, SOL_SOCKET, SO_REUSEADDR, &on, sizeof on) != 0) fail("SO_REUSEADDR");
+  }
+
+  // Receive buffer: try the privileged variant that ignores rmem_max, then the normal one.
+  const int requested =
+      static_cast<int>(std::min<std::uint64_t>(options.receive_buffer_bytes, 0x7fffffff));
+  if (::setsockopt(fd_, SOL_SOCKET, SO_RCVBUFFORCE, &requested, sizeof requested) != 0 &&
+      ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &requested, sizeof requested) != 0) {
+    fail("cannot set SO_RCVBUF");
+  }
+  int granted = 0;
+  socklen_t length = sizeof granted;
+  if (::getsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &granted, &length) != 0) fail("SO_RCVBUF");
+  // The kernel doubles the request for its bookkeeping and reports the doubled size.
+  granted_rcvbuf_ = static_cast<std::uint64_t>(granted) / 2;
+  if (granted_rcvbuf_ < static_cast<std::uint64_t>(requested)) {
+    spdlog::warn(
+        "socket receive buffer: {} bytes requested, {} granted: net.core.rmem_max ({}) caps it; "
+        "raise it with 'sysctl -w net.core.rmem_max={}' (or run with CAP_NET_ADMIN)",
+        requested, granted_rcvbuf_, read_rmem_max(), requested);
+  } else {
+    spdlog::info("socket receive buffer: {} bytes", granted_rcvbuf_);
+  }
+
+  if (::setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) != 0) fail("SO_TIMESTAMPNS");
+  if (::setsockopt(fd_, SOL_SOCKET, SO_RXQ_OVFL, &on, sizeof on) != 0) fail("SO_RXQ_OVFL");
+  const timeval timeout{0, 100'000};
+  if (::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout) != 0) {
+    fail("SO_RCVTIMEO");
+  }
+
+  sockaddr_in local{};
+  local.sin_family = AF_INET;
+  local.sin_port = htons(options.port);
+  local.sin_addr = parse_ipv4(options.host_ip, "host_ip");
+  if (::bind(fd_, reinterpret_cast<const sockaddr*>(&local), sizeof local) != 0) {
+    fail("cannot bind UDP " + options.host_ip + ":" + std::to_string(options.port));
+  }
+  sockaddr_in bound{};
+  socklen_t bound_length = sizeof bound;
+  if (::getsockname(fd_, reinterpret_cast<sockaddr*>(&bound), &bound_length) != 0) {
+    fail("getsockname");
+  }
+  bound_port_ = ntohs(bound.sin_port);
+
+  if (!options.multicast_ip.empty()) {
+    ip_mreq membership{};
+    membership.imr_multiaddr = parse_ipv4(options.multicast_ip, "multicast_ip");
+    membership.imr_interface.s_addr = htonl(INADDR_ANY);
+    if (!options.multicast_interface_ip.empty()) {
+      membership.imr_interface =
+          parse_ipv4(options.multicast_interface_ip, "multicast_interface_ip");
+    }
+    if (::setsockopt(fd_, IPPROTO_IP, IP_ADD_MEMBERSHIP, &membership, sizeof membership) != 0) {
+      fail("cannot join multicast group " + options.multicast_ip);
+    }
+    spdlog::info("joined multicast group {}", options.multicast_ip);
+  }
+  if (!options.sensor_ip.empty()) sensor_ip_ = parse_ipv4(options.sensor_ip, "sensor_ip").s_addr;
+  spdlog::info(
+      "receiving UDP on {}:{}{}", options.host_ip, bound_port_,
+      options.sensor_ip.empty() ? std::string(" from any source") : " from " + options.sensor_ip);
+}
+
+UdpReceiver::~UdpReceiver() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void UdpReceiver::read_kernel_drops(ReceiveCounters& counters) {
+  // SO_MEMINFO's drop count is cumulative for the socket's life; the cmsg variant only appears
+  // with the next packet after a drop, so this is read on a timer instead.
+  std::array<std::uint32_t, SK_MEMINFO_VARS> info{};
+  socklen_t length = sizeof info;
+  if (::getsockopt(fd_, SOL_SOCKET, SO_MEMINFO, info.data(), &length) == 0 &&
+      length >= sizeof(std::uint32_t) * (SK_MEMINFO_DROPS + 1)) {
+    counters.kernel_drops.store(info[SK_MEMINFO_DROPS], std::memory_order_relaxed);
+  }
+}
+
+void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+                      ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
+  Batch& batch = *buffers_;
+  std::int64_t next_meminfo_ns = 0;
+
+  while (!stop.load(std::memory_order_relaxed)) {
+    ReceiveCounters::add(heartbeat, 1);
+    const std::int64_t now = coarse_monotonic_ns();
+    if (now >= next_meminfo_ns) {
+      read_kernel_drops(counters);
+      next_meminfo_ns = now + 1'000'000'000;
+    }
+
+    std::span<ringbuf::PacketSlot> slots = ring.reserve(batch_);
+    const bool overrun = slots.empty();
+    if (overrun) {
+      // Ring full. Wait (briefly) for a datagram, then drop what is waiting and count it.
+      pollfd pfd{fd_, POLLIN, 0};
+      if (::poll(&pfd, 1, 1) <= 0) continue;
+      slots = batch.scratch;
+    }
+
+    const std::size_t n = slots.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      ringbuf::PacketSlot& slot = slots[i];
+      batch.iov[i] = {slot.payload, sizeof slot.payload};
+      msghdr& header = batch.headers[i].msg_hdr;
+      header.msg_name = &slot.source;
+      header.msg_namelen = sizeof slot.source;
+      header.msg_iov = &batch.iov[i];
+      header.msg_iovlen = 1;
+      header.msg_control = batch.control[i].data();
+      header.msg_controllen = batch.control[i].size();
+      header.msg_flags = 0;
+    }
+    const int received = ::recvmmsg(fd_, batch.headers.data(), static_cast<unsigned>(n),
+                                    MSG_WAITFORONE | (overrun ? MSG_DONTWAIT : 0), nullptr);
+    if (received <= 0) {
+      if (received < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
+        ReceiveCounters::add(counters.receive_errors, 1);
+      }
+      continue;  // timeout: check the stop flag
+    }
+
+    std::uint64_t bytes = 0;
+    std::uint64_t truncated = 0;
+    std::uint64_t foreign = 0;
+    std::size_t kept = 0;
+    const std::int64_t fallback_time = realtime_ns();
+    for (int i = 0; i < received; ++i) {
+      ringbuf::PacketSlot& slot = slots[i];
+      const mmsghdr& message = batch.headers[i];
+      bytes += message.msg_len;
+      if (overrun) continue;
+      slot.length = message.msg_len;
+      slot.truncated = (message.msg_hdr.msg_flags & MSG_TRUNC) != 0;
+      truncated += slot.truncated;
+      slot.receive_time_ns = fallback_time;
+      for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;
+           c = CMSG_NXTHDR(const_cast<msghdr*>(&message.msg_hdr), c)) {
+        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS) {
+          timespec ts{};
+          std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
+          slot.receive_time_ns = ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+        }
+      }
+      if (sensor_ip_ && slot.source.sin_addr.s_addr != *sensor_ip_) {
+        ++foreign;
+        continue;
+      }
+      // Keep accepted datagrams contiguous; a copy happens only after a foreign one.
+      if (kept != static_cast<std::size_t>(i)) slots[kept] = slot;
+      ++kept;
+    }
+    ReceiveCounters::add(counters.datagrams, static_cast<std::uint64_t>(received));
+    ReceiveCounters::add(counters.bytes, bytes);
+    if (overrun) {
+      ReceiveCounters::add(counters.ring_overruns, static_cast<std::uint64_t>(received));
+      continue;
+    }
+    ReceiveCounters::add(counters.truncated, truncated);
+    ReceiveCounters::add(counters.foreign, foreign);
+    if (kept > 0) {
+      ring.publish(kept);
+      ring.notify();
+    }
+  }
+}
+
+}  // namespace pandarcap

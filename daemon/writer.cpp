@@ -1,0 +1,398 @@
+#include "daemon/writer.hpp"
+
+#include <arpa/inet.h>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <system_error>
+
+#include "core/health_format.hpp"
+#include "core/pcd.hpp"
+#include "daemon/file_output.hpp"
+
+namespace pandarcap {
+namespace {
+
+constexpr std::int64_t kSecondNs = 1'000'000'000;
+constexpr std::size_t kPcdChunkPoints = 4096;
+
+std::int64_t monotonic_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec * kSecondNs + ts.tv_nsec;
+}
+
+std::int64_t realtime_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return ts.tv_sec * kSecondNs + ts.tv_nsec;
+}
+
+std::string_view return_mode_name(const std::optional<ReturnMode>& mode) {
+  if (!mode) return "";
+  switch (*mode) {
+    case ReturnMode::kLast:
+      return "last";
+    case ReturnMode::kStrongest:
+      return "strongest";
+    case ReturnMode::kDual:
+      return "dual";
+  }
+  return "";
+}
+
+}  // namespace
+
+Writer::Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_decoder,
+               DecodeWorker::ArenaQueue& arenas_back, DecodeWorker::RawQueue& raw_back,
+               const ReceiveCounters& receive)
+    : options_(options),
+      from_decoder_(from_decoder),
+      arenas_back_(arenas_back),
+      raw_back_(raw_back),
+      receive_(receive),
+      frames_dir_(options.output_dir / "frames"),
+      raw_dir_(options.output_dir / "raw"),
+      health_dir_(options.output_dir / "health"),
+      pcd_buffer_(kPcdChunkPoints * kPcdPointBytes) {}
+
+Writer::~Writer() = default;
+
+void Writer::prepare() {
+  start_monotonic_ns_ = monotonic_ns();
+  last_tick_ns_ = start_monotonic_ns_;
+  decode_.monotonic_ns = decode_prev_.monotonic_ns = start_monotonic_ns_;
+  std::filesystem::create_directories(health_dir_);
+  if (options_.frames) std::filesystem::create_directories(frames_dir_);
+  if (options_.pcap) {
+    std::filesystem::create_directories(raw_dir_);
+    // The angles the recording was decoded with travel with it.
+    write_file_replacing(raw_dir_ / "calibration.csv", options_.calibration_csv);
+  }
+  // Proves the health directory is writable before the daemon reports ready.
+  health_ = build_health(start_monotonic_ns_);
+  if (options_.prometheus) {
+    write_file_replacing(health_dir_ / "pandarcap.prom", to_prometheus(health_));
+  }
+}
+
+void Writer::write_failed(const std::exception& error, std::uint64_t bytes) {
+  ++write_errors_;
+  bytes_not_written_ += bytes;
+  last_error_ = error.what();
+  const std::int64_t now = monotonic_ns();
+  if (last_error_log_ns_ < 0 || now - last_error_log_ns_ >= 10 * kSecondNs) {
+    spdlog::error("write failed: {} ({} write errors so far)", last_error_, write_errors_);
+    last_error_log_ns_ = now;
+  }
+}
+
+void Writer::enforce_retention(std::deque<std::pair<std::filesystem::path, std::uint64_t>>& files,
+                               std::uint64_t max_files, std::uint64_t max_bytes) {
+  if (max_files == 0 && max_bytes == 0) {
+    files.clear();  // nothing to enforce: do not keep a list that grows forever
+    return;
+  }
+  std::uint64_t total = 0;
+  for (const auto& file : files)
+    total += file.second;
+  while (!files.empty() &&
+         ((max_files != 0 && files.size() > max_files) || (max_bytes != 0 && total > max_bytes))) {
+    std::error_code ignored;
+    std::filesystem::remove(files.front().first, ignored);
+    total -= files.front().second;
+    files.pop_front();
+  }
+}
+
+void Writer::write_frame(FrameArena& arena) {
+  const Frame& frame = arena.frame;
+  const std::span<const Point> points = frame.used();
+  const std::string header = pcd_header(points.size());
+  const std::uint64_t expected = header.size() + points.size() * kPcdPointBytes;
+  const std::filesystem::path path =
+      frames_dir_ / fmt::format("frame_{:06}_{}{}.pcd", frame.info.sequence,
+                                utc_file_stamp(frame.info.start_ns, true),
+                                frame.info.partial ? "_partial" : "");
+  const std::filesystem::path temporary = temporary_name(path);
+  try {
+    OutputFile file(temporary, OutputFile::Mode::kCreate);
+    file.write(header);
+    for (std::size_t i = 0; i < points.size(); i += kPcdChunkPoints) {
+      const auto chunk = points.subspan(i, std::min(kPcdChunkPoints, points.size() - i));
+      const std::size_t n = encode_pcd_points(chunk, pcd_buffer_);
+      file.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
+    }
+    file.close();
+    std::filesystem::rename(temporary, path);
+    ++frames_written_;
+    pcd_bytes_ += expected;
+    frame_files_.emplace_back(path, expected);
+    enforce_retention(frame_files_, options_.frames_max_files, options_.frames_max_bytes);
+  } catch (const std::exception& error) {
+    std::error_code ignored;
+    std::filesystem::remove(temporary, ignored);
+    write_failed(error, expected);
+  }
+}
+
+void Writer::open_pcap(std::int64_t first_packet_ns) {
+  pcap_final_path_ = raw_dir_ / fmt::format("pandarcap_{}_{:04}.pcap",
+                                            utc_file_stamp(first_packet_ns, false), pcap_index_++);
+  const std::filesystem::path part = pcap_final_path_.string() + ".part";
+  pcap_ = std::make_unique<PcapWriter>(part.string());
+  pcap_opened_monotonic_ns_ = monotonic_ns();
+}
+
+void Writer::close_pcap() {
+  if (!pcap_) return;
+  const std::string part = pcap_->path();
+  try {
+    pcap_->close();
+    std::filesystem::rename(part, pcap_final_path_);
+    pcap_files_.emplace_back(pcap_final_path_, pcap_->bytes());
+    enforce_retention(pcap_files_, options_.pcap_max_files, options_.pcap_max_bytes);
+  } catch (const std::exception& error) {
+    write_failed(error, 0);
+  }
+  pcap_.reset();
+}
+
+void Writer::write_raw(RawBatch& batch) {
+  for (std::size_t i = 0; i < batch.size; ++i) {
+    const RawPacket& packet = batch.packets[i];
+    try {
+      if (pcap_ &&
+          ((options_.pcap_rotate_bytes != 0 && pcap_->bytes() >= options_.pcap_rotate_bytes) ||
+           (options_.pcap_rotate_seconds != 0 && monotonic_ns() - pcap_opened_monotonic_ns_ >=
+                                                     options_.pcap_rotate_seconds * kSecondNs))) {
+        close_pcap();
+      }
+      if (!pcap_) open_pcap(packet.receive_time_ns);
+      pcap_->write(std::span<const std::uint8_t>(packet.payload, packet.length),
+                   packet.receive_time_ns,
+                   Endpoint{ntohl(packet.source.sin_addr.s_addr), ntohs(packet.source.sin_port)},
+                   options_.pcap_destination);
+      ++pcap_packets_;
+    } catch (const std::exception& error) {
+      // A broken file is abandoned (renamed as it stands); the next packet starts a new one.
+      write_failed(error, packet.length);
+      if (pcap_) close_pcap();
+    }
+  }
+  if (pcap_) pcap_bytes_ = pcap_->bytes();
+}
+
+void Writer::rotate_outputs() {
+  spdlog::info("SIGHUP: closing {} and starting new recordings",
+               pcap_ ? pcap_final_path_.filename().string() : std::string("no open pcap"));
+  close_pcap();
+}
+
+HealthSnapshot Writer::build_health(std::int64_t now) {
+  HealthSnapshot h;
+  h.unix_time_ns = realtime_ns();
+  h.sensor = options_.sensor_name;
+  h.version = options_.version;
+  HealthCounters& c = h.counters;
+  c.datagrams_received = receive_.datagrams.load(std::memory_order_relaxed);
+  c.bytes_received = receive_.bytes.load(std::memory_order_relaxed);
+  c.foreign_datagrams = receive_.foreign.load(std::memory_order_relaxed);
+  c.truncated_datagrams = receive_.truncated.load(std::memory_order_relaxed);
+  c.kernel_drops = receive_.kernel_drops.load(std::memory_order_relaxed);
+  c.ring_overruns = receive_.ring_overruns.load(std::memory_order_relaxed);
+  const StreamStats& s = decode_.stream;
+  c.packets_accepted = s.accepted;
+  c.rejects = s.rejects;
+  c.packets_rejected = s.rejected();
+  c.sequence_gaps = decode_.sequence.gaps;
+  c.sequence_lost = decode_.sequence.lost;
+  c.sequence_duplicates = decode_.sequence.duplicates;
+  c.sequence_reordered = decode_.sequence.reordered;
+  c.sequence_resets = decode_.sequence.resets;
+  c.azimuth_gaps = s.azimuth_gaps;
+  c.static_timestamp_packets = s.static_timestamps;
+  c.invalid_time_packets = s.bad_date + s.bad_microseconds;
+  c.high_temperature_packets = s.high_temperature;
+  c.return_mode_changes = s.return_mode_changes;
+  c.points = s.points;
+  c.filtered_points = s.filtered.by_reason;
+  c.points_dropped_frame_full = decode_.frames.points_dropped_full;
+  c.frames_complete = decode_.frames.frames_complete;
+  c.frames_partial = decode_.frames.frames_partial;
+  c.frames_dropped_no_arena = decode_.frames.frames_dropped;
+  c.frames_decimated = decode_.frames_decimated;
+  c.frames_written = frames_written_;
+  c.pcap_packets_written = pcap_packets_;
+  c.pcap_packets_not_recorded = decode_.raw_packets_dropped;
+  c.pcap_bytes_written = pcap_bytes_;
+  c.pcd_bytes_written = pcd_bytes_;
+  c.write_errors = write_errors_;
+  c.bytes_not_written = bytes_not_written_;
+
+  HealthGauges& g = h.gauges;
+  g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;
+  g.return_mode = std::string(return_mode_name(s.return_mode));
+  g.high_temperature = s.last_high_temperature;
+  g.rpm_tail = s.last_rpm;
+  const double span_s = static_cast<double>(decode_.monotonic_ns - decode_prev_.monotonic_ns) / 1e9;
+  const auto d_az = s.measured_azimuth_cdeg - decode_prev_.stream.measured_azimuth_cdeg;
+  const auto d_t = s.measured_time_ns - decode_prev_.stream.measured_time_ns;
+  g.rpm_measured =
+      d_t > 0 ? (static_cast<double>(d_az) / 36000.0) / (static_cast<double>(d_t) / 60e9) : 0.0;
+  // Complete frames only: partial ones are cut by start, gaps and shutdown, not by rotation. The
+  // final tick at shutdown can be a fraction of a second long (and sees the flushed partials),
+  // so a window under half a second keeps the previous second's rate.
+  const auto complete = decode_.frames.frames_complete - decode_prev_.frames.frames_complete;
+  g.frame_rate_hz =
+      span_s >= 0.5 ? static_cast<double>(complete) / span_s : health_.gauges.frame_rate_hz;
+  g.seconds_since_last_packet =
+      decode_.last_packet_monotonic_ns == 0
+          ? -1.0
+          : static_cast<double>(now - decode_.last_packet_monotonic_ns) / 1e9;
+
+  // State: error > no_data > degraded > ok; the reason names what changed since the last tick.
+  const HealthCounters& p = previous_counters_;
+  std::vector<std::string> problems;
+  const auto grew = [&](std::uint64_t now_value, std::uint64_t before, const char* what) {
+    if (now_value > before) problems.push_back(fmt::format("{} {}", now_value - before, what));
+  };
+  grew(c.kernel_drops, p.kernel_drops, "kernel drops");
+  grew(c.ring_overruns, p.ring_overruns, "ring overruns");
+  grew(c.frames_dropped_no_arena, p.frames_dropped_no_arena, "frames dropped (no free arena)");
+  grew(c.pcap_packets_not_recorded, p.pcap_packets_not_recorded, "packets not recorded");
+  grew(c.sequence_lost, p.sequence_lost, "packets lost (sequence)");
+  grew(c.azimuth_gaps, p.azimuth_gaps, "azimuth gaps");
+  grew(c.packets_rejected, p.packets_rejected, "packets rejected");
+  grew(c.static_timestamp_packets, p.static_timestamp_packets, "static timestamps");
+  if (g.high_temperature) problems.emplace_back("sensor high-temperature flag set");
+  if (options_.expected_return_mode != "any" && !g.return_mode.empty() &&
+      g.return_mode != options_.expected_return_mode) {
+    problems.push_back(
+        fmt::format("return mode {} (expected {})", g.return_mode, options_.expected_return_mode));
+  }
+  if (g.seconds_since_last_packet >= 0 && g.rpm_tail > 0 &&
+      std::abs(g.rpm_tail - options_.expected_rpm) > 0.1 * options_.expected_rpm) {
+    problems.push_back(
+        fmt::format("motor at {:.0f} RPM (expected {})", g.rpm_tail, options_.expected_rpm));
+  }
+  if (write_errors_ > write_errors_at_last_tick_) {
+    g.state = HealthState::kError;
+    g.reason =
+        fmt::format("{} write errors: {}", write_errors_ - write_errors_at_last_tick_, last_error_);
+  } else if (g.seconds_since_last_packet < 0 ||
+             g.seconds_since_last_packet > options_.no_data_timeout_seconds) {
+    g.state = HealthState::kNoData;
+    g.reason = g.seconds_since_last_packet < 0
+                   ? std::string("no packet received yet")
+                   : fmt::format("no packet for {:.1f} s", g.seconds_since_last_packet);
+  } else if (!problems.empty()) {
+    g.state = HealthState::kDegraded;
+    for (const std::string& problem : problems) {
+      g.reason += (g.reason.empty() ? "" : "; ") + problem;
+    }
+  } else {
+    g.state = HealthState::kOk;
+  }
+  return h;
+}
+
+void Writer::write_health(bool final) {
+  const std::int64_t now = monotonic_ns();
+  if (pcap_) {
+    try {
+      pcap_->flush();  // the recording on disk is at most a second behind
+    } catch (const std::exception& error) {
+      write_failed(error, 0);
+    }
+  }
+  health_ = build_health(now);
+  previous_counters_ = health_.counters;
+  write_errors_at_last_tick_ = write_errors_;
+  decode_prev_ = decode_;
+  try {
+    if (options_.prometheus) {
+      write_file_replacing(health_dir_ / "pandarcap.prom", to_prometheus(health_));
+    }
+    if (options_.jsonl) {
+      const std::string line = to_json_line(health_);
+      const std::filesystem::path path = health_dir_ / "health.jsonl";
+      std::error_code ec;
+      const auto size = std::filesystem::file_size(path, ec);
+      if (!ec && options_.jsonl_rotate_bytes != 0 &&
+          size + line.size() > options_.jsonl_rotate_bytes) {
+        std::filesystem::rename(path, health_dir_ / "health.jsonl.1");
+      }
+      OutputFile file(path, OutputFile::Mode::kAppend);
+      file.write(line);
+      file.close();
+    }
+  } catch (const std::exception& error) {
+    write_failed(error, 0);
+  }
+  (void) final;
+}
+
+void Writer::run(std::atomic<std::uint64_t>& heartbeat,
+                 const std::atomic<std::uint32_t>& rotate_generation,
+                 ringbuf::SpscQueue<StatusLine>& status_out) {
+  std::int64_t next_tick = monotonic_ns() + kSecondNs;
+  std::uint32_t seen_generation = rotate_generation.load(std::memory_order_relaxed);
+  bool ended = false;
+  while (!ended) {
+    ReceiveCounters::add(heartbeat, 1);
+    if (WriterMessage* message = from_decoder_.front()) {
+      switch (message->kind) {
+        case WriterMessage::Kind::kFrame:
+          write_frame(*message->arena);
+          arenas_back_.try_push(message->arena);  // room for every arena: cannot fail
+          break;
+        case WriterMessage::Kind::kRaw:
+          if (options_.pcap) write_raw(*message->raw);
+          message->raw->size = 0;
+          raw_back_.try_push(message->raw);
+          break;
+        case WriterMessage::Kind::kSnapshot:
+          decode_ = message->snapshot;
+          break;
+        case WriterMessage::Kind::kEnd:
+          decode_ = message->snapshot;
+          ended = true;
+          break;
+      }
+      from_decoder_.pop();
+    } else {
+      const std::int64_t wait =
+          std::clamp<std::int64_t>(next_tick - monotonic_ns(), 0, 100'000'000);
+      from_decoder_.wait_for_data(std::chrono::nanoseconds(wait));
+    }
+    const std::uint32_t generation = rotate_generation.load(std::memory_order_relaxed);
+    if (generation != seen_generation) {
+      seen_generation = generation;
+      rotate_outputs();
+    }
+    const std::int64_t now = monotonic_ns();
+    if (now >= next_tick) {
+      write_health(false);
+      StatusLine status;
+      const HealthCounters& c = health_.counters;
+      fmt::format_to_n(status.text, sizeof status.text - 1,
+                       "{}: {} packets, {} frames written, {:.0f} RPM, {} dropped{}{}",
+                       to_string(health_.gauges.state), c.datagrams_received, c.frames_written,
+                       health_.gauges.rpm_tail,
+                       c.kernel_drops + c.ring_overruns + c.frames_dropped_no_arena,
+                       health_.gauges.reason.empty() ? "" : " - ", health_.gauges.reason);
+      status_out.try_push(status);
+      next_tick = std::max(next_tick + kSecondNs, now);
+    }
+  }
+  close_pcap();
+  write_health(true);
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,123 @@
+// The writer thread: the only thread that touches the disk.
+//
+// It takes finished frame arenas, raw-packet batches and the decoder's counter snapshots from the
+// decode worker's queue, and
+//   - writes each frame as a PCD v0.7 binary file in DIR/frames/ (temporary name, then renamed;
+//     partial frames carry "_partial" in the name), keeping at most frames_max_files /
+//     frames_max_bytes of this run's frames;
+//   - appends raw packets to a classic pcap in DIR/raw/ (".part" while open, renamed when closed),
+//     rotated by size and age and on SIGHUP, with retention, and the calibration CSV in use saved
+//     beside it as DIR/raw/calibration.csv;
+//   - every second writes DIR/health/pandarcap.prom (temporary file + rename) and appends one line
+//     to DIR/health/health.jsonl (rotated to health.jsonl.1 past jsonl_rotate_bytes).
+// Arenas and batches go back to the decoder as soon as they are written. A write error is
+// counted (write_errors, bytes_not_written), logged at most every 10 s, and makes the state
+// "error"; the thread carries on with the next file. A slow disk holds arenas longer, so the
+// decoder runs out and drops frames (counted) — the receive thread never waits for the disk.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <deque>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/capture_reader.hpp"
+#include "core/health.hpp"
+#include "core/pcap_writer.hpp"
+#include "daemon/decode_worker.hpp"
+#include "daemon/pipeline_types.hpp"
+
+namespace pandarcap {
+
+struct WriterOptions {
+  std::filesystem::path output_dir;
+  bool frames = true;
+  std::uint64_t frames_max_files = 0;
+  std::uint64_t frames_max_bytes = 0;
+  bool pcap = true;
+  std::uint64_t pcap_rotate_bytes = 0;
+  std::uint32_t pcap_rotate_seconds = 0;
+  std::uint64_t pcap_max_files = 0;
+  std::uint64_t pcap_max_bytes = 0;
+  bool prometheus = true;
+  bool jsonl = true;
+  std::uint64_t jsonl_rotate_bytes = 0;
+  std::string sensor_name;
+  std::string version;
+  double no_data_timeout_seconds = 2.0;
+  std::string expected_return_mode = "any";
+  int expected_rpm = 600;
+  Endpoint pcap_destination;  // the synthesised destination of recorded packets
+  std::string calibration_csv;
+};
+
+// One line for sd_notify STATUS=, handed to the main thread once a second.
+struct StatusLine {
+  char text[200] = {};
+};
+
+class Writer {
+ public:
+  Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_decoder,
+         DecodeWorker::ArenaQueue& arenas_back, DecodeWorker::RawQueue& raw_back,
+         const ReceiveCounters& receive);
+  ~Writer();
+
+  // Creates the output directories and proves they are writable (writes calibration.csv and a
+  // first health file). Throws std::system_error; called before READY=1.
+  void prepare();
+
+  // Runs until the decoder's kEnd; then closes the pcap, writes the final health and returns.
+  // `rotate_generation` changes on SIGHUP.
+  void run(std::atomic<std::uint64_t>& heartbeat,
+           const std::atomic<std::uint32_t>& rotate_generation,
+           ringbuf::SpscQueue<StatusLine>& status_out);
+
+  // Valid after run() returns.
+  const HealthSnapshot& final_health() const noexcept { return health_; }
+
+ private:
+  void write_frame(FrameArena& arena);
+  void write_raw(RawBatch& batch);
+  void open_pcap(std::int64_t first_packet_ns);
+  void close_pcap();
+  void rotate_outputs();
+  void write_health(bool final);
+  HealthSnapshot build_health(std::int64_t now_monotonic_ns);
+  void write_failed(const std::exception& error, std::uint64_t bytes);
+  void enforce_retention(std::deque<std::pair<std::filesystem::path, std::uint64_t>>& files,
+                         std::uint64_t max_files, std::uint64_t max_bytes);
+
+  WriterOptions options_;
+  DecodeWorker::WriterQueue& from_decoder_;
+  DecodeWorker::ArenaQueue& arenas_back_;
+  DecodeWorker::RawQueue& raw_back_;
+  const ReceiveCounters& receive_;
+  std::filesystem::path frames_dir_, raw_dir_, health_dir_;
+
+  std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
+  std::unique_ptr<PcapWriter> pcap_;
+  std::filesystem::path pcap_final_path_;
+  std::int64_t pcap_opened_monotonic_ns_ = 0;
+  std::uint32_t pcap_index_ = 0;
+  std::deque<std::pair<std::filesystem::path, std::uint64_t>> frame_files_, pcap_files_;
+
+  DecodeSnapshot decode_;       // the latest counters from the decoder
+  DecodeSnapshot decode_prev_;  // the ones a second earlier, for rates
+  std::int64_t start_monotonic_ns_ = 0;
+  std::int64_t last_tick_ns_ = 0;
+  std::uint64_t frames_written_ = 0, frames_written_prev_ = 0;
+  std::uint64_t pcd_bytes_ = 0, pcap_packets_ = 0, pcap_bytes_ = 0;
+  std::uint64_t write_errors_ = 0, bytes_not_written_ = 0;
+  std::uint64_t write_errors_at_last_tick_ = 0;
+  std::int64_t last_error_log_ns_ = -1;
+  std::string last_error_;
+  HealthCounters previous_counters_{};
+  HealthSnapshot health_;
+};
+
+}  // namespace pandarcap

@@ -1,0 +1,49 @@
+// Runs pandarcapd (or any binary) in the background for integration tests: start with
+// arguments and extra environment, send signals, wait for exit with a deadline, read stderr.
+// Plus the waiting primitive the daemon tests use instead of sleeps: poll a condition until it
+// holds or a deadline passes.
+#pragma once
+
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace pandarcap::test {
+
+class DaemonProcess {
+ public:
+  // Starts `program args...` with `env` added to the environment; stdout and stderr go to
+  // `log_path`.
+  DaemonProcess(const std::filesystem::path& program, const std::vector<std::string>& args,
+                const std::filesystem::path& log_path, const std::vector<std::string>& env = {});
+  ~DaemonProcess();  // kills (SIGKILL) a process still running
+  DaemonProcess(const DaemonProcess&) = delete;
+  DaemonProcess& operator=(const DaemonProcess&) = delete;
+
+  int pid() const noexcept { return pid_; }
+  void signal(int signal_number) const;
+  // The exit status, or nullopt if it did not exit within `timeout` (or died from a signal: -sig).
+  std::optional<int> wait_exit(std::chrono::milliseconds timeout);
+  std::string log() const;
+
+ private:
+  int pid_ = -1;
+  bool reaped_ = false;
+  std::filesystem::path log_path_;
+};
+
+// Polls `condition` every few milliseconds until it returns true (-> true) or `timeout` passes
+// (-> false).
+bool wait_until(const std::function<bool()>& condition, std::chrono::milliseconds timeout);
+
+// A UDP port on 127.0.0.1 that was free a moment ago.
+std::uint16_t free_udp_port();
+
+// Sends `payloads` as UDP datagrams from `source_ip` (any port) to 127.0.0.1:`port`.
+void send_udp(const std::string& source_ip, std::uint16_t port,
+              const std::vector<std::vector<std::uint8_t>>& payloads);
+
+}  // namespace pandarcap::test
