@@ -12,6 +12,7 @@
 // Exit status: 0 done, 1 runtime failure, 64 usage, 66 capture unreadable, 73 outputs cannot be
 // created, 78 configuration (or calibration file) invalid.
 #include <fmt/format.h>
+#include <pthread.h>
 #include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -51,6 +52,11 @@
 #include "ringbuf/spsc_queue.hpp"
 
 namespace {
+
+// Linux thread names are at most 15 characters.
+void name_this_thread(const char* name) {
+  pthread_setname_np(pthread_self(), name);
+}
 
 using namespace pandarcap;
 
@@ -445,10 +451,17 @@ int run(int argc, char** argv) {
                       pipe.free_raw);
 
   ReplayResult replay_result;
-  std::thread writer_thread(
-      [&] { writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status); });
-  std::thread decode_thread([&] { worker.run(pipe.source_done, pipe.heartbeats.decode); });
+  // Named threads (`top -H`, /proc/PID/task/*/comm) so each stage's CPU can be measured.
+  std::thread writer_thread([&] {
+    name_this_thread("pc-writer");
+    writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status);
+  });
+  std::thread decode_thread([&] {
+    name_this_thread("pc-decode");
+    worker.run(pipe.source_done, pipe.heartbeats.decode);
+  });
   std::thread source_thread([&] {
+    name_this_thread(replay ? "pc-replay" : "pc-receive");
     if (replay) {
       replay_result =
           replay->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive);
@@ -460,7 +473,12 @@ int run(int argc, char** argv) {
   });
   std::atomic<bool> stop_simulator{false};
   std::thread simulator_thread;
-  if (simulator) simulator_thread = std::thread([&] { simulator->run(stop_simulator); });
+  if (simulator) {
+    simulator_thread = std::thread([&] {
+      name_this_thread("pc-simsensor");
+      simulator->run(stop_simulator);
+    });
+  }
 
   systemd::ready();
   spdlog::info("ready: writing to {}", output_dir.string());
