@@ -6,14 +6,10 @@
 #include <cstring>
 #include <thread>
 
+#include "daemon/monotonic_clock.hpp"
+
 namespace pandarcap {
 namespace {
-
-std::int64_t coarse_monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC_COARSE, &ts);
-  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
-}
 
 constexpr std::size_t kDecodeBatch = 64;
 

@@ -8,14 +8,10 @@
 #include <cstring>
 #include <thread>
 
+#include "daemon/monotonic_clock.hpp"
+
 namespace pandarcap {
 namespace {
-
-std::int64_t monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
-}
 
 void sleep_until_monotonic(std::int64_t deadline_ns) noexcept {
   const timespec ts{static_cast<time_t>(deadline_ns / 1'000'000'000),

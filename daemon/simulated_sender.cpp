@@ -11,6 +11,8 @@
 #include <cerrno>
 #include <system_error>
 
+#include "daemon/monotonic_clock.hpp"
+
 namespace pandarcap {
 namespace {
 
@@ -24,12 +26,6 @@ sockaddr_in ipv4(const std::string& ip, std::uint16_t port) {
     throw std::system_error(EINVAL, std::generic_category(), "not an IPv4 address: " + ip);
   }
   return address;
-}
-
-std::int64_t monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
 }
 
 }  // namespace

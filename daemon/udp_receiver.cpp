@@ -15,6 +15,8 @@
 #include <fstream>
 #include <system_error>
 
+#include "daemon/monotonic_clock.hpp"
+
 namespace pandarcap {
 namespace {
 
@@ -38,12 +40,6 @@ in_addr parse_ipv4(const std::string& text, const char* what) {
 std::int64_t realtime_ns() noexcept {
   timespec ts{};
   clock_gettime(CLOCK_REALTIME, &ts);
-  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
-}
-
-std::int64_t coarse_monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC_COARSE, &ts);
   return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
 }
 

@@ -14,6 +14,7 @@
 #include "core/health_format.hpp"
 #include "core/pcd.hpp"
 #include "daemon/file_output.hpp"
+#include "daemon/monotonic_clock.hpp"
 
 namespace pandarcap {
 namespace {
@@ -21,29 +22,10 @@ namespace {
 constexpr std::int64_t kSecondNs = 1'000'000'000;
 constexpr std::size_t kPcdChunkPoints = 4096;
 
-std::int64_t monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * kSecondNs + ts.tv_nsec;
-}
-
 std::int64_t realtime_ns() noexcept {
   timespec ts{};
   clock_gettime(CLOCK_REALTIME, &ts);
   return ts.tv_sec * kSecondNs + ts.tv_nsec;
-}
-
-std::string_view return_mode_name(const std::optional<ReturnMode>& mode) {
-  if (!mode) return "";
-  switch (*mode) {
-    case ReturnMode::kLast:
-      return "last";
-    case ReturnMode::kStrongest:
-      return "strongest";
-    case ReturnMode::kDual:
-      return "dual";
-  }
-  return "";
 }
 
 }  // namespace
@@ -237,7 +219,7 @@ HealthSnapshot Writer::build_health(std::int64_t now) {
 
   HealthGauges& g = h.gauges;
   g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;
-  g.return_mode = std::string(return_mode_name(s.return_mode));
+  g.return_mode = s.return_mode ? std::string(to_string(*s.return_mode)) : std::string();
   g.high_temperature = s.last_high_temperature;
   g.rpm_tail = s.last_rpm;
   const double span_s = static_cast<double>(decode_.monotonic_ns - decode_prev_.monotonic_ns) / 1e9;
