@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <string_view>
 
+#include "bench/decode_bench.hpp"
 #include "bench/ring_bench.hpp"
 #include "daemon/cli_args.hpp"
 
@@ -12,6 +13,9 @@ namespace {
 constexpr std::string_view kUsage = R"(Usage: pandarcap-bench SUBCOMMAND [OPTIONS]
 
 Subcommands:
+  decode    packet decoding per core: the scalar reference and every SIMD target this machine
+            runs (sse4, avx2, avx512, ...), on a capture or the simulated sensor looped in
+            memory: packets/s, points/s and the ratio to scalar.
   ring      SPSC packet ring (batches 1, 8, 32) and typed queue against a mutex + condition
             variable queue measured in the same run: items/s, round-trip latency, and the CPU
             an idle consumer uses at the sensor's packet rate.
@@ -36,6 +40,69 @@ mutex_queue_items_per_s, ratio_vs_mutex (packet ring at batch 32 / mutex),
 ratio_vs_mutex_per_batch, typed_queue_ratio_vs_mutex, round_trip_ns, idle, order_errors, goals.
 Exit status: 0, 1 if any item arrived out of order, 64 for a usage error.
 )";
+
+constexpr std::string_view kDecodeUsage = R"(Usage: pandarcap-bench decode [OPTIONS]
+
+Options:
+  --json               print one JSON object instead of a table
+  --capture FILE       pcap/pcapng of Pandar40P packets to loop (default: one second of the
+                       simulated sensor in dual return, 3600 packets)
+  --calibration FILE   calibration CSV (default: the nominal table)
+  --target NAME        measure only this target (repeatable): scalar, sse4, avx2, avx512, ...
+                       (default: every target this CPU supports)
+  --seconds S          CPU seconds per target per round (default 0.3)
+  --rounds N           interleaved rounds; figures are medians (default 5)
+  --passes N           no timing: decode the stream N times per target and report the work done
+                       (for instruction counts; see bench/callgrind-decode)
+  -h, --help           this text
+
+JSON keys: input, one object per target that ran ("scalar", "sse4", "avx2", "avx512", ...) with
+packets_per_s, points_per_s, ns_per_packet, channel_measurements_per_s, vs_scalar; targets_ran,
+best_target, best_vs_scalar, auto_target, goals, method.
+Exit status: 0, 2 if the capture cannot be used, 64 for a usage error (or a target this CPU
+cannot run).
+)";
+
+int run_decode(int argc, char** argv) {
+  pandarcap::CliArgs args(argc, argv, kDecodeUsage);
+  pandarcap::bench::DecodeBenchOptions options;
+  bool json = false;
+  while (args.more()) {
+    const std::string_view arg = args.next();
+    if (arg == "--json") {
+      json = true;
+    } else if (arg == "--capture") {
+      options.capture = std::string(args.value(arg));
+    } else if (arg == "--calibration") {
+      options.calibration = std::string(args.value(arg));
+    } else if (arg == "--target") {
+      const pandarcap::DecoderChoice choice = pandarcap::choose_decoder_target(args.value(arg));
+      if (!choice.target) args.usage_error(choice.error);
+      options.targets.push_back(*choice.target);
+    } else if (arg == "--seconds") {
+      options.seconds = args.number(arg, 0.001, 3600);
+    } else if (arg == "--rounds") {
+      options.rounds = static_cast<int>(args.integer(arg, 1, 1000));
+    } else if (arg == "--passes") {
+      options.passes = static_cast<int>(args.integer(arg, 1, 1'000'000));
+    } else {
+      args.usage_error(fmt::format("unknown option '{}'", arg));
+    }
+  }
+  nlohmann::ordered_json report;
+  try {
+    report = pandarcap::bench::run_decode_bench(options);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "pandarcap-bench decode: %s\n", e.what());
+    return 2;
+  }
+  if (json) {
+    std::puts(report.dump(2).c_str());
+  } else {
+    pandarcap::bench::print_decode_report(report);
+  }
+  return 0;
+}
 
 int run_ring(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kRingUsage);
@@ -78,10 +145,15 @@ int run_ring(int argc, char** argv) {
 
 int main(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kUsage);
-  if (!args.more()) args.usage_error("a subcommand is required (ring)");
+  if (!args.more()) args.usage_error("a subcommand is required (decode, ring)");
   const std::string_view subcommand = args.next();
   // The subcommand parses the rest, with "pandarcap-bench SUBCOMMAND" as its program name.
   static char ring_name[] = "pandarcap-bench ring";
+  static char decode_name[] = "pandarcap-bench decode";
+  if (subcommand == "decode") {
+    argv[1] = decode_name;
+    return run_decode(argc - 1, argv + 1);
+  }
   if (subcommand == "ring") {
     argv[1] = ring_name;
     return run_ring(argc - 1, argv + 1);

@@ -20,6 +20,8 @@
 #include <sstream>
 #include <variant>
 
+#include "core/decoder_target.hpp"
+
 namespace pandarcap {
 namespace {
 
@@ -97,6 +99,13 @@ std::optional<std::string> log_level(const std::string& s) {
 
 // The sensor name becomes a Prometheus label value and a JSON string; refuse the characters that
 // would need escaping there so the name reads the same in every output.
+// Only the name is checked here: whether this CPU runs the target is checked at start-up, so a
+// config is valid or not independently of the machine it is checked on.
+std::optional<std::string> decoder_name(const std::string& s) {
+  if (s == "auto" || decoder_target_from_string(s)) return std::nullopt;
+  return "must be auto, scalar, sse4, avx2, avx512, neon, sve or sve2";
+}
+
 std::optional<std::string> label(const std::string& s) {
   if (s.empty()) return "must not be empty";
   for (const char c : s) {
@@ -128,6 +137,7 @@ void for_each_key(Config& c, Visitor&& v) {
   constexpr std::int64_t kU32 = std::numeric_limits<std::uint32_t>::max();
   constexpr std::int64_t kI64 = std::numeric_limits<std::int64_t>::max();
   v("", "log_level", c.log_level, &log_level);
+  v("", "decoder", c.decoder, &decoder_name);
 
   auto& s = c.sensor;
   v("sensor", "sensor_ip", s.sensor_ip, &ipv4_or_empty);

@@ -60,6 +60,10 @@ struct HealthSection {
 
 struct DaemonConfig {
   std::string log_level = "info";  // trace, debug, info, warn, error, critical, off
+  // Packet decoder: "auto" (the fastest SIMD target this CPU runs), "scalar" (the reference),
+  // or a SIMD target: "sse4", "avx2", "avx512", "neon", "sve", "sve2". A target this CPU cannot
+  // run stops the daemon at start-up (exit 78); it never falls back silently.
+  std::string decoder = "auto";
   SensorSection sensor;
   RingSection ring;
   ArenaSection arenas;

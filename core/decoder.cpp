@@ -1,5 +1,6 @@
 #include "decoder.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -56,22 +57,49 @@ constexpr double kDegToRad = std::numbers::pi / 180.0;
 
 // Smallest raw distance (4 mm units) that is >= metres; a small epsilon keeps 0.3 m at raw 75
 // although 0.3 / 0.004 is not exact in binary floating point.
+// Results above any 16-bit distance saturate (config allows any max_range).
 std::uint32_t raw_at_least(double metres) {
-  if (metres <= 0) return 0;
-  return static_cast<std::uint32_t>(std::ceil(metres / kDistanceUnitM - 1e-9));
+  if (!(metres > 0)) return 0;
+  const double raw = std::ceil(metres / kDistanceUnitM - 1e-9);
+  return raw >= 1e6 ? 1'000'000u : static_cast<std::uint32_t>(raw);
 }
 
 }  // namespace
 
+RangeLimitsRaw range_limits_raw(const DecoderConfig& config) noexcept {
+  RangeLimitsRaw limits;
+  limits.min = raw_at_least(config.min_range_m);
+  // Largest raw value <= max_range: one below the smallest raw value above it.
+  limits.max = raw_at_least(config.max_range_m + kDistanceUnitM) - 1;
+  // Smallest raw difference that is NOT "too close" (0.1 m -> 25, i.e. 0.096 m is too close).
+  limits.dual_threshold = raw_at_least(config.dual_return_distance_threshold_m);
+  return limits;
+}
+
+ChannelAzimuthFixed channel_azimuth_fixed(double offset_deg, std::int32_t firing_offset_ns,
+                                          bool firing_time_correction) noexcept {
+  ChannelAzimuthFixed fixed;
+  double offset = std::fmod(offset_deg, 360.0);
+  if (offset < 0) offset += 360.0;
+  fixed.offset_q = static_cast<std::int32_t>(std::lround(offset * 100.0 * kAzimuthQ));
+  if (fixed.offset_q >= kFullCircleQ) fixed.offset_q -= kFullCircleQ;
+  if (firing_time_correction) {
+    // δ = RPM x 6e-6 °/(RPM µs) x Δt: per RPM, 6e-7 x Δt[ns] hundredths of a degree.
+    fixed.rpm_gain =
+        static_cast<std::int32_t>(std::lround(firing_offset_ns * 6e-7 * kAzimuthQ * 256));
+  }
+  return fixed;
+}
+
 ScalarDecoder::ScalarDecoder(const Calibration& calibration, const DecoderConfig& config)
-    : config_(config),
-      min_range_raw_(raw_at_least(config.min_range_m)),
-      // Largest raw value <= max_range: one below the smallest raw value above it.
-      max_range_raw_(raw_at_least(config.max_range_m + kDistanceUnitM) - 1) {
+    : config_(config), limits_(range_limits_raw(config)) {
   for (int c = 0; c < kChannels; ++c) {
     const double elevation = calibration.elevation_deg[c] * kDegToRad;
-    channels_[c] = {std::cos(elevation), std::sin(elevation), calibration.azimuth_offset_deg[c],
-                    kChannelFiringOffsetNs[c] / 1000.0};
+    channels_[c] = {
+        std::cos(elevation), std::sin(elevation), calibration.azimuth_offset_deg[c],
+        kChannelFiringOffsetNs[c] / 1000.0,
+        channel_azimuth_fixed(calibration.azimuth_offset_deg[c], kChannelFiringOffsetNs[c],
+                              config.firing_time_correction)};
   }
 }
 
@@ -92,11 +120,11 @@ bool ScalarDecoder::in_range(std::uint16_t raw, FilterCounts& filtered) const no
     filtered.add(FilterReason::kNoReturn);
     return false;
   }
-  if (raw < min_range_raw_) {
+  if (raw < limits_.min) {
     filtered.add(FilterReason::kBelowMinRange);
     return false;
   }
-  if (raw > max_range_raw_) {
+  if (raw > limits_.max) {
     filtered.add(FilterReason::kAboveMaxRange);
     return false;
   }
@@ -106,10 +134,11 @@ bool ScalarDecoder::in_range(std::uint16_t raw, FilterCounts& filtered) const no
 Point ScalarDecoder::make_point(const PacketView& packet, int block, int channel,
                                 std::int64_t t0_ns, ReturnType type) const noexcept {
   const Channel& ch = channels_[channel];
+  const int rpm = std::min<int>(packet.motor_rpm(), kMaxCorrectionRpm);
   double azimuth_deg = packet.azimuth_cdeg(block) / 100.0 + ch.azimuth_offset_deg;
   if (config_.firing_time_correction) {
     // The laser fired Δt before the block's reference angle was sampled: rotate it back.
-    azimuth_deg -= packet.motor_rpm() * 6e-6 * ch.firing_offset_us;
+    azimuth_deg -= rpm * 6e-6 * ch.firing_offset_us;
   }
   azimuth_deg = std::fmod(azimuth_deg, 360.0);
   if (azimuth_deg < 0) azimuth_deg += 360.0;
@@ -123,7 +152,7 @@ Point ScalarDecoder::make_point(const PacketView& packet, int block, int channel
   p.distance_m = static_cast<float>(r);
   p.timestamp_ns =
       t0_ns + block_offset_ns(block, packet.return_mode()) - kChannelFiringOffsetNs[channel];
-  p.azimuth_cdeg = static_cast<std::uint16_t>(std::lround(azimuth_deg * 100.0) % 36000);
+  p.azimuth_cdeg = corrected_azimuth_cdeg(packet.azimuth_cdeg(block), ch.label, rpm);
   p.intensity = packet.reflectivity(block, channel);
   p.channel = static_cast<std::uint8_t>(channel);
   p.return_type = type;
@@ -145,8 +174,7 @@ DecodedPacket ScalarDecoder::decode(const PacketView& packet, std::int64_t t0_ns
       }
     }
   } else {
-    // Smallest raw difference that is NOT "too close" (0.1 m -> 25, i.e. 0.096 m is too close).
-    const auto threshold_raw = raw_at_least(config_.dual_return_distance_threshold_m);
+    const std::uint32_t threshold_raw = limits_.dual_threshold;
     for (int b = 0; b < kBlocks; b += 2) {
       // Decide per channel first, so the even block's points are written before the odd's.
       std::array<ReturnType, kChannels> strongest_type{};

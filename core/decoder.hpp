@@ -29,6 +29,10 @@ namespace pandarcap {
 
 inline constexpr int kMaxPointsPerPacket = kBlocks * kChannels;  // 400
 
+// Firing-time correction uses the tail's RPM clamped to this (the sensor spins at 600 or 1200;
+// a corrupt RPM field must not turn a sub-degree correction into a large rotation).
+inline constexpr int kMaxCorrectionRpm = 2400;
+
 struct DecoderConfig {
   double min_range_m = 0.3;
   double max_range_m = 200.0;
@@ -45,6 +49,40 @@ enum class FilterReason : std::uint8_t {
 };
 inline constexpr std::size_t kFilterReasonCount = 5;
 std::string_view to_string(FilterReason reason) noexcept;  // "no_return", ...
+
+// The range filter and dual-return threshold in raw 4 mm units (inclusive limits).
+struct RangeLimitsRaw {
+  std::uint32_t min = 0, max = 0;
+  std::uint32_t dual_threshold = 0;  // raw differences below this are "too close"
+};
+RangeLimitsRaw range_limits_raw(const DecoderConfig& config) noexcept;
+
+// A point's azimuth label (Point::azimuth_cdeg, the angle frames are cut by) in fixed point:
+// 1/1024 of 0.01°. Both decoders compute it with this integer arithmetic, so they agree on it
+// exactly and therefore cut frames identically; the floating-point angle used for x and y is
+// not rounded.
+inline constexpr std::int32_t kAzimuthQ = 1024;
+inline constexpr std::int32_t kFullCircleQ = 36000 * kAzimuthQ;
+
+struct ChannelAzimuthFixed {
+  std::int32_t offset_q = 0;  // calibration azimuth offset, normalised into [0, kFullCircleQ)
+  std::int32_t rpm_gain = 0;  // firing-time correction per RPM, in 1/256 of a step; 0 when off
+};
+ChannelAzimuthFixed channel_azimuth_fixed(double offset_deg, std::int32_t firing_offset_ns,
+                                          bool firing_time_correction) noexcept;
+
+// block_cdeg in 0..35999, rpm in 0..kMaxCorrectionRpm; returns 0..35999.
+constexpr std::uint16_t corrected_azimuth_cdeg(std::uint16_t block_cdeg, ChannelAzimuthFixed ch,
+                                               std::int32_t rpm) noexcept {
+  std::int32_t q = block_cdeg * kAzimuthQ + ch.offset_q - ((rpm * ch.rpm_gain + 128) >> 8);
+  if (q < 0) {
+    q += kFullCircleQ;
+  } else if (q >= kFullCircleQ) {
+    q -= kFullCircleQ;
+  }
+  const std::int32_t cdeg = (q + kAzimuthQ / 2) / kAzimuthQ;
+  return static_cast<std::uint16_t>(cdeg == 36000 ? 0 : cdeg);
+}
 
 struct FilterCounts {
   std::array<std::uint64_t, kFilterReasonCount> by_reason{};
@@ -83,10 +121,11 @@ class ScalarDecoder {
   struct Channel {
     double cos_elevation, sin_elevation, azimuth_offset_deg;
     double firing_offset_us;
+    ChannelAzimuthFixed label;
   };
   std::array<Channel, kChannels> channels_{};
   DecoderConfig config_;
-  std::uint32_t min_range_raw_, max_range_raw_;  // inclusive limits in 4 mm units
+  RangeLimitsRaw limits_;
 
   bool in_range(std::uint16_t raw, FilterCounts& filtered) const noexcept;
   Point make_point(const PacketView& packet, int block, int channel, std::int64_t t0_ns,

@@ -82,6 +82,7 @@ struct HealthSnapshot {
   std::int64_t unix_time_ns = 0;  // when it was taken (CLOCK_REALTIME)
   std::string sensor;             // the `sensor` label (config: health.sensor_name)
   std::string version;            // pandarcap version, for the _build_info gauge
+  std::string decoder;            // decoder target in use ("avx512", "scalar", ...), likewise
   HealthCounters counters;
   HealthGauges gauges;
 };

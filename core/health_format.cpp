@@ -160,8 +160,9 @@ std::string to_prometheus(const HealthSnapshot& h) {
     fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
   };
 
-  family(out, "build_info", "gauge", "pandarcap version; always 1");
-  append("pandarcap_build_info{{{},version=\"{}\"}} 1\n", sensor, escape_label_value(h.version));
+  family(out, "build_info", "gauge", "pandarcap version and decoder target; always 1");
+  append("pandarcap_build_info{{{},version=\"{}\",decoder=\"{}\"}} 1\n", sensor,
+         escape_label_value(h.version), escape_label_value(h.decoder));
 
   for (const CounterField& f : kCounters) {
     family(out, std::string(f.prometheus) + "_total", "counter", f.help);
@@ -204,6 +205,7 @@ std::string to_json_line(const HealthSnapshot& h) {
   j["unix_time_ns"] = h.unix_time_ns;
   j["sensor"] = h.sensor;
   j["version"] = h.version;
+  j["decoder"] = h.decoder;
   j["state"] = to_string(h.gauges.state);
   j["reason"] = h.gauges.reason;
   nlohmann::ordered_json counters;

@@ -42,8 +42,8 @@ void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns
 
 StreamDecoder::StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
                              FrameSink& sink)
-    : decoder_(calibration, config.decoder),
-      assembler_(assembler_config(decoder_, config.cut_angle_deg), sink) {}
+    : decoder_(calibration, config.decoder, config.decoder_target),
+      assembler_(assembler_config(decoder_.scalar(), config.cut_angle_deg), sink) {}
 
 RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   ++stats_.packets;

@@ -15,15 +15,18 @@
 
 #include "calibration.hpp"
 #include "decoder.hpp"
+#include "decoder_target.hpp"
 #include "frame_assembler.hpp"
 #include "packet.hpp"
 #include "packet_time.hpp"
 #include "sequence_tracker.hpp"
+#include "simd_decoder.hpp"
 
 namespace pandarcap {
 
 struct StreamDecoderConfig {
   DecoderConfig decoder;
+  DecoderTarget decoder_target = DecoderTarget::kScalar;  // callers resolve "auto"
   double cut_angle_deg = 0.0;
 };
 
@@ -72,13 +75,14 @@ class StreamDecoder {
   const StreamStats& stats() const noexcept { return stats_; }
   const SequenceStats& sequence() const noexcept { return sequence_.stats(); }
   const AssemblerStats& frames() const noexcept { return assembler_.stats(); }
-  const ScalarDecoder& decoder() const noexcept { return decoder_; }
+  const ScalarDecoder& decoder() const noexcept { return decoder_.scalar(); }
+  DecoderTarget decoder_target() const noexcept { return decoder_.target(); }
 
  private:
   void track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, std::uint16_t rpm,
                      ReturnMode mode, bool sequence_present);
 
-  ScalarDecoder decoder_;
+  PacketDecoder decoder_;
   FrameAssembler assembler_;
   PacketClock clock_;
   SequenceTracker sequence_;

@@ -38,6 +38,7 @@
 #include "config/daemon_config.hpp"
 #include "core/calibration.hpp"
 #include "core/capture_reader.hpp"
+#include "core/decoder_target.hpp"
 #include "core/packet.hpp"
 #include "core/synthetic_sensor.hpp"
 #include "daemon/cli_args.hpp"
@@ -103,6 +104,7 @@ Overrides (same names as the configuration keys):
   --rpm N                simulated (and expected) motor speed, 600 or 1200
   --return-mode MODE     simulated (and expected) return mode: dual, strongest or last
   --udp-sequence         the simulated sensor appends a UDP sequence number
+  --decoder NAME         decoder: auto (default), scalar, sse4, avx2, avx512, neon, sve, sve2
   --log-level LEVEL      trace, debug, info, warn, error, critical, off
   --version              print the version and exit
   -h, --help             this text
@@ -198,6 +200,9 @@ Options parse_options(int argc, char** argv) {
       set([text](DaemonConfig& c) { c.sensor.return_mode = text; });
     } else if (arg == "--udp-sequence") {
       o.udp_sequence = true;
+    } else if (arg == "--decoder") {
+      const std::string name(args.value(arg));
+      set([name](DaemonConfig& c) { c.decoder = name; });
     } else if (arg == "--log-level") {
       const std::string level(args.value(arg));
       set([level](DaemonConfig& c) { c.log_level = level; });
@@ -347,6 +352,16 @@ int run(int argc, char** argv) {
     spdlog::info("calibration: {}", calibration.source);
   }
 
+  // The decoder is chosen once, here; a named target this CPU cannot run is a configuration
+  // error, not a reason to quietly run another.
+  const DecoderChoice decoder_choice = choose_decoder_target(config.decoder);
+  if (!decoder_choice.target) {
+    spdlog::critical("{}", decoder_choice.error);
+    return kExitConfig;
+  }
+  spdlog::info("decoder: {}{}", to_string(*decoder_choice.target),
+               config.decoder == "auto" ? " (auto)" : "");
+
   // 3. Memory, all of it now.
   Pipeline pipe(config);
   spdlog::info(
@@ -415,6 +430,7 @@ int run(int argc, char** argv) {
   wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;
   wo.sensor_name = config.health.sensor_name;
   wo.version = std::string(kVersion);
+  wo.decoder = std::string(to_string(*decoder_choice.target));
   wo.no_data_timeout_seconds = config.health.no_data_timeout_seconds;
   wo.expected_return_mode = config.sensor.return_mode;
   wo.expected_rpm = config.sensor.rotation_speed;
@@ -444,6 +460,7 @@ int run(int argc, char** argv) {
       config.sensor.dual_return_distance_threshold;
   dopt.decoder.decoder.firing_time_correction = config.sensor.firing_time_correction;
   dopt.decoder.cut_angle_deg = config.sensor.cut_angle;
+  dopt.decoder.decoder_target = *decoder_choice.target;
   dopt.frame_decimation = config.output.frame_decimation;
   dopt.write_frames = config.output.frames;
   dopt.record_raw = config.output.pcap;

@@ -181,6 +181,7 @@ HealthSnapshot Writer::build_health(std::int64_t now) {
   h.unix_time_ns = realtime_ns();
   h.sensor = options_.sensor_name;
   h.version = options_.version;
+  h.decoder = options_.decoder;
   HealthCounters& c = h.counters;
   c.datagrams_received = receive_.datagrams.load(std::memory_order_relaxed);
   c.bytes_received = receive_.bytes.load(std::memory_order_relaxed);

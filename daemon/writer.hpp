@@ -48,6 +48,7 @@ struct WriterOptions {
   std::uint64_t jsonl_rotate_bytes = 0;
   std::string sensor_name;
   std::string version;
+  std::string decoder;  // decoder target in use, reported in the health output
   double no_data_timeout_seconds = 2.0;
   std::string expected_return_mode = "any";
   int expected_rpm = 600;

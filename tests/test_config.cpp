@@ -179,6 +179,9 @@ TEST_CASE("Strings are checked: addresses, names from a fixed set, labels", "[co
             .find("trace, debug, info, warn, error, critical, off") != std::string::npos);
   CHECK(error_of("[health]\nsensor_name = \"a\\\"b\"\n").find("health.sensor_name: must not") !=
         std::string::npos);
+  CHECK(error_of("decoder = \"fastest\"\n") ==
+        "t.toml:1:11: decoder: must be auto, scalar, sse4, avx2, avx512, neon, sve or sve2");
+  CHECK(error_of("decoder = \"avx512\"\n") == "(accepted)");  // the CPU is checked at start-up
   CHECK(error_of("[output]\ndirectory = \"\"\n") ==
         "t.toml:2:13: output.directory: must not be empty");
   CHECK(error_of("[sensor]\nsensor_ip = \"\"\nmulticast_ip = \"239.255.0.1\"\n") == "(accepted)");

@@ -10,6 +10,7 @@
 #include <catch2/catch.hpp>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <set>
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "core/capture_reader.hpp"
+#include "core/decoder_target.hpp"
 #include "daemon_process.hpp"
 #include "test_support.hpp"
 
@@ -277,6 +279,61 @@ TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon]")
   CHECK(counter(h, "pcap_packets_written") == counter(h, "datagrams_received"));
   CHECK(health_lines(out).size() >= 2);  // one per second, plus the final one
   check_no_temporary_files(out);
+}
+
+TEST_CASE("pandarcapd --decoder: every target this CPU runs writes the scalar reference's frames",
+          "[daemon][simd]") {
+  const auto capture = test::real_capture(kDualCapture);
+  const auto calibration = test::real_capture(kCalibration);
+  if (!capture || !calibration) return;
+  test::ScratchDir dir("daemon-decoder");
+  // file name -> POINTS, per target
+  auto run = [&](const std::string& target) {
+    const fs::path out = dir / target;
+    const auto result =
+        test::run_command(pandarcapd() + " --replay '" + capture->string() +
+                          "' --top-speed --calibration '" + calibration->string() + "' --decoder " +
+                          target + " --output-dir '" + out.string() + "' 2>&1");
+    INFO(result.out);
+    REQUIRE(result.exit_code == 0);
+    // The log names the decoder that ran: what was asked for, or what auto resolved to.
+    const std::string ran =
+        target == "auto" ? std::string(to_string(best_decoder_target())) : target;
+    CHECK(result.out.find("decoder: " + ran) != std::string::npos);
+    std::map<std::string, std::size_t> frames;
+    for (const fs::path& pcd : files_with(out / "frames", ".pcd")) {
+      frames[pcd.filename().string()] = pcd_points(pcd);
+    }
+    return frames;
+  };
+  const auto reference = run("scalar");
+  REQUIRE(reference.size() == 6);
+  std::vector<std::string> targets{"auto"};
+  for (const DecoderTarget target : supported_decoder_targets()) {
+    if (target != DecoderTarget::kScalar) targets.emplace_back(to_string(target));
+  }
+  for (const std::string& target : targets) {
+    INFO("decoder " << target);
+    CHECK(run(target) == reference);
+  }
+}
+
+TEST_CASE("pandarcapd --decoder naming a target this machine cannot run exits 78, no fallback",
+          "[daemon][simd][config]") {
+  const std::vector<DecoderTarget> supported = supported_decoder_targets();
+  for (const char* name : {"sse4", "avx2", "avx512", "neon", "sve", "sve2"}) {
+    const DecoderTarget target = *decoder_target_from_string(name);
+    if (std::find(supported.begin(), supported.end(), target) != supported.end()) continue;
+    test::ScratchDir dir("daemon-decoder-missing");
+    const auto result =
+        test::run_command(pandarcapd() + " --simulate --duration 1 --decoder " + name +
+                          " --output-dir '" + (dir / "out").string() + "' 2>&1");
+    INFO(result.out);
+    CHECK(result.exit_code == 78);
+    CHECK(result.out.find(std::string("decoder '") + name + "'") != std::string::npos);
+    CHECK(result.out.find("supported: scalar") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir / "out" / "frames"));
+  }
 }
 
 TEST_CASE("a bad configuration exits 78 with file:line:col", "[daemon][config]") {

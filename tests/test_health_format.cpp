@@ -21,6 +21,7 @@ HealthSnapshot distinct_snapshot() {
   h.unix_time_ns = 1'700'000'000'123'456'789;
   h.sensor = "front \"left\"\\lidar";
   h.version = "1.2.3";
+  h.decoder = "avx2";
   HealthCounters& c = h.counters;
   std::uint64_t v = 1000;
   for (std::uint64_t* field : {&c.datagrams_received,
@@ -108,7 +109,7 @@ TEST_CASE("Prometheus text follows the textfile-collector conventions", "[health
   const std::string sensor = R"(sensor="front \"left\"\\lidar")";
   const auto s = samples(text);
 
-  CHECK(s.at("pandarcap_build_info{" + sensor + ",version=\"1.2.3\"}") == "1");
+  CHECK(s.at("pandarcap_build_info{" + sensor + ",version=\"1.2.3\",decoder=\"avx2\"}") == "1");
   CHECK(s.at("pandarcap_datagrams_received_total{" + sensor + "}") ==
         std::to_string(h.counters.datagrams_received));
   CHECK(s.at("pandarcap_received_bytes_total{" + sensor + "}") ==
@@ -177,6 +178,7 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(j.at("unix_time_ns") == h.unix_time_ns);
   CHECK(j.at("sensor") == h.sensor);
   CHECK(j.at("version") == "1.2.3");
+  CHECK(j.at("decoder") == "avx2");
   CHECK(j.at("state") == "degraded");
   CHECK(j.at("reason") == "3 kernel drops");
   const auto& c = j.at("counters");
