@@ -17,6 +17,9 @@
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 
+// Highway's one-lane HWY_SCALAR fallback (this build's baseline) is not a decoder target: the
+// scalar reference is core/decoder.cpp. Only real SIMD targets get a kernel.
+#if HWY_TARGET != HWY_SCALAR
 HWY_BEFORE_NAMESPACE();
 namespace pandarcap {
 namespace HWY_NAMESPACE {
@@ -26,64 +29,79 @@ namespace hn = hwy::HWY_NAMESPACE;
 
 constexpr int kLanes = SimdDecoderTables::kLanes;
 
-// At most 16 float lanes (3 vectors per block) and 64 byte lanes (the record split), so the
-// padded arrays are large enough on scalable targets (SVE) too.
+// At most 16 lanes (3 vectors per block), so the padded per-channel arrays are large enough on
+// scalable targets (SVE) too.
 using DF = hn::CappedTag<float, 16>;
 using DI = hn::RebindToSigned<DF>;
-using DU8 = hn::CappedTag<std::uint8_t, 64>;
+using DU = hn::RebindToUnsigned<DF>;
+using DU8 = hn::Repartition<std::uint8_t, DI>;  // the bytes of one DI vector
 
-// One block's 40 channel records split into planes; lanes 40..63 are zero.
-struct BlockPlanes {
-  alignas(64) std::uint8_t distance_low[64];
-  alignas(64) std::uint8_t distance_high[64];
-  alignas(64) std::uint8_t reflectivity[64];
-};
+// Unpacking 3-byte channel records with two shuffles: first whole 32-bit words, so that each
+// 128-bit block holds the 12 bytes of 4 channels, then bytes within each block, so that each
+// 32-bit lane holds one channel's distance (or reflectivity), zero-extended.
+alignas(64) constexpr std::int32_t kRecordWords[16] = {0, 1, 2, 0, 3, 4,  5,  0,
+                                                       6, 7, 8, 0, 9, 10, 11, 0};
+constexpr std::uint8_t Z = 0x80;  // TableLookupBytesOr0: zero
+alignas(64) constexpr std::uint8_t kDistanceBytes[64] = {
+    0, 1,  Z, Z, 3, 4, Z, Z,  6, 7, Z, Z, 9, 10, Z, Z, 0, 1,  Z, Z, 3, 4,
+    Z, Z,  6, 7, Z, Z, 9, 10, Z, Z, 0, 1, Z, Z,  3, 4, Z, Z,  6, 7, Z, Z,
+    9, 10, Z, Z, 0, 1, Z, Z,  3, 4, Z, Z, 6, 7,  Z, Z, 9, 10, Z, Z};
+alignas(64) constexpr std::uint8_t kReflectivityBytes[64] = {
+    2,  Z, Z, Z, 5, Z, Z,  Z, 8, Z, Z, Z, 11, Z, Z, Z, 2,  Z, Z, Z, 5, Z,
+    Z,  Z, 8, Z, Z, Z, 11, Z, Z, Z, 2, Z, Z,  Z, 5, Z, Z,  Z, 8, Z, Z, Z,
+    11, Z, Z, Z, 2, Z, Z,  Z, 5, Z, Z, Z, 8,  Z, Z, Z, 11, Z, Z, Z};
 
-// One block's points before compaction: every channel's fields, and which channels are kept.
+// Bytes one block's loads read from its first channel record: the last vector starts at channel
+// ((40 - 1) / N) * N and loads 4 N bytes.
+std::size_t record_span() {
+  const std::size_t n = hn::Lanes(DI());
+  return 3 * (((kChannels - 1) / n) * n) + 4 * n;
+}
+
+// One block's points before compaction: every channel's 32 bytes, and which channels are kept.
 struct BlockPoints {
-  alignas(64) float xyzd[kLanes * 4];          // x, y, z, distance per channel
-  alignas(64) std::uint32_t meta[kLanes * 2];  // Point bytes 24..31 per channel
+  alignas(64) float xyzd[kLanes * 4];          // Point bytes 0..15: x, y, z, distance
+  alignas(64) std::uint32_t tail[kLanes * 4];  // Point bytes 16..31: time, azimuth, ...
   std::uint64_t kept = 0;                      // bit c: channel c is kept
 };
 
-// The channel constants a packet uses: the calibration's, or rotated by the firing-time
+// The per-channel constants one packet uses: the calibration's, or rotated by the firing-time
 // correction at this packet's RPM.
 struct ChannelConstants {
   const float* a;
   const float* b;
-  const std::int32_t* offset_q;
+  const std::int32_t* label_offset;  // offset_q (- correction), wrapped into [0, full), + 1/2
 };
 
+// Filter counts as lane-wise vectors (one subtract per mask), summed once per packet.
 struct FilterTally {
-  std::size_t no_return = 0, below = 0, above = 0, duplicate = 0, too_close = 0;
+  hn::Vec<DI> no_return, below, above, duplicate, too_close;
+  FilterTally() {
+    const DI di;
+    no_return = below = above = duplicate = too_close = hn::Zero(di);
+  }
 };
 
-HWY_INLINE void split_block(const std::uint8_t* block, BlockPlanes& planes) {
-  alignas(64) std::uint8_t records[3 * 64] = {};
-  std::memcpy(records, block + 4, 3 * kChannels);
+HWY_INLINE void count(hn::Vec<DI>& counter, hn::Mask<DI> mask) {
+  counter = hn::Sub(counter, hn::VecFromMask(DI(), mask));  // true lanes are -1
+}
+
+HWY_INLINE std::uint64_t total(hn::Vec<DI> counter) {
+  return static_cast<std::uint64_t>(hn::GetLane(hn::SumOfLanes(DI(), counter)));
+}
+
+struct Records {
+  hn::Vec<DI> distance, reflectivity;
+};
+
+HWY_INLINE Records load_records(const std::uint8_t* records, std::size_t i) {
+  const DI di;
   const DU8 d8;
-  const std::size_t n = hn::Lanes(d8);
-  for (std::size_t i = 0; i < static_cast<std::size_t>(kChannels); i += n) {
-    hn::Vec<DU8> low, high, reflectivity;
-    hn::LoadInterleaved3(d8, records + 3 * i, low, high, reflectivity);
-    hn::Store(low, d8, planes.distance_low + i);
-    hn::Store(high, d8, planes.distance_high + i);
-    hn::Store(reflectivity, d8, planes.reflectivity + i);
-  }
-}
-
-HWY_INLINE hn::Vec<DI> load_distance(const BlockPlanes& planes, std::size_t i) {
-  const DI di;
-  const hn::Rebind<std::uint8_t, DI> d8;
-  const auto low = hn::PromoteTo(di, hn::Load(d8, planes.distance_low + i));
-  const auto high = hn::PromoteTo(di, hn::Load(d8, planes.distance_high + i));
-  return hn::Or(low, hn::ShiftLeft<8>(high));
-}
-
-HWY_INLINE hn::Vec<DI> load_reflectivity(const BlockPlanes& planes, std::size_t i) {
-  const DI di;
-  const hn::Rebind<std::uint8_t, DI> d8;
-  return hn::PromoteTo(di, hn::Load(d8, planes.reflectivity + i));
+  const auto words = hn::TableLookupLanes(hn::BitCast(di, hn::LoadU(d8, records + 3 * i)),
+                                          hn::SetTableIndices(di, kRecordWords));
+  const auto bytes = hn::BitCast(d8, words);
+  return {hn::BitCast(di, hn::TableLookupBytesOr0(bytes, hn::Load(d8, kDistanceBytes))),
+          hn::BitCast(di, hn::TableLookupBytesOr0(bytes, hn::Load(d8, kReflectivityBytes)))};
 }
 
 // Lanes of real channels (the last vector of a 16-lane target covers channels 32..47).
@@ -102,48 +120,62 @@ HWY_INLINE hn::Mask<DI> in_range(const SimdDecoderTables& t, hn::Vec<DI> distanc
       hn::And(hn::Lt(distance, hn::Set(di, static_cast<std::int32_t>(t.limits.min))), returned);
   const auto above =
       hn::And(hn::Gt(distance, hn::Set(di, static_cast<std::int32_t>(t.limits.max))), returned);
-  tally.no_return += hn::CountTrue(di, zero);
-  tally.below += hn::CountTrue(di, below);
-  tally.above += hn::CountTrue(di, above);
+  count(tally.no_return, zero);
+  count(tally.below, below);
+  count(tally.above, above);
   return hn::AndNot(hn::Or(below, above), returned);
 }
 
-// Computes one vector of points (channels i..i+N) of a block and appends the kept channels.
+// What one block needs besides its records.
+struct BlockContext {
+  float sin_azimuth, cos_azimuth;
+  std::int32_t azimuth_q;  // block azimuth x kAzimuthQ
+  std::int64_t time_ns;    // t0 + block offset; a point's time is this - firing offset
+};
+
+// Computes one vector of points (channels i..i+N) of a block into `out`.
 HWY_INLINE void emit(const SimdDecoderTables& t, const ChannelConstants& k, std::size_t i,
-                     std::uint16_t block_azimuth, float sin_azimuth, float cos_azimuth,
-                     hn::Vec<DI> distance, hn::Vec<DI> reflectivity, hn::Vec<DI> return_type,
+                     const BlockContext& block, Records records, hn::Vec<DI> return_type,
                      hn::Mask<DI> keep, BlockPoints& out) {
   const DF df;
   const DI di;
+  const DU du;
 
   const auto r =
-      hn::Mul(hn::ConvertTo(df, distance), hn::Set(df, static_cast<float>(kDistanceUnitM)));
+      hn::Mul(hn::ConvertTo(df, records.distance), hn::Set(df, static_cast<float>(kDistanceUnitM)));
   const auto a = hn::Load(df, k.a + i);
   const auto b = hn::Load(df, k.b + i);
-  const auto sin_a = hn::Set(df, sin_azimuth);
-  const auto cos_a = hn::Set(df, cos_azimuth);
+  const auto sin_a = hn::Set(df, block.sin_azimuth);
+  const auto cos_a = hn::Set(df, block.cos_azimuth);
   // sin(A + o) cos ω and cos(A + o) cos ω by angle addition.
-  const auto x_unit = hn::MulAdd(sin_a, a, hn::Mul(cos_a, b));
-  const auto y_unit = hn::NegMulAdd(sin_a, b, hn::Mul(cos_a, a));
-  const auto x = hn::Mul(r, x_unit);
-  const auto y = hn::Mul(r, y_unit);
+  const auto x = hn::Mul(r, hn::MulAdd(sin_a, a, hn::Mul(cos_a, b)));
+  const auto y = hn::Mul(r, hn::NegMulAdd(sin_a, b, hn::Mul(cos_a, a)));
   const auto z = hn::Mul(r, hn::Load(df, t.sin_elevation.data() + i));
   hn::StoreInterleaved4(x, y, z, r, df, out.xyzd + 4 * i);
 
-  // The azimuth label, exactly as corrected_azimuth_cdeg computes it.
-  const auto full = hn::Set(di, kFullCircleQ);
-  auto q = hn::Add(hn::Set(di, block_azimuth * kAzimuthQ), hn::Load(di, k.offset_q + i));
-  q = hn::IfThenElse(hn::Lt(q, hn::Zero(di)), hn::Add(q, full), q);
-  q = hn::IfThenElse(hn::Gt(q, hn::Set(di, kFullCircleQ - 1)), hn::Sub(q, full), q);
-  auto cdeg = hn::ShiftRight<10>(hn::Add(q, hn::Set(di, kAzimuthQ / 2)));
+  // The azimuth label: the same value as corrected_azimuth_cdeg, with the half step for
+  // rounding folded into the per-channel offset so one wrap suffices.
+  auto q = hn::Add(hn::Set(di, block.azimuth_q), hn::Load(di, k.label_offset + i));
+  q = hn::IfThenElse(hn::Gt(q, hn::Set(di, kFullCircleQ - 1)),
+                     hn::Sub(q, hn::Set(di, kFullCircleQ)), q);
   static_assert(kAzimuthQ == 1 << 10);
-  cdeg = hn::IfThenZeroElse(hn::Eq(cdeg, hn::Set(di, 36000)), cdeg);
+  const auto cdeg = hn::ShiftRight<10>(q);
 
-  // Bytes 24..31 of the Point: azimuth (u16), intensity, channel | return type, 3 reserved.
-  const auto meta = hn::Or(hn::Or(cdeg, hn::ShiftLeft<16>(reflectivity)),
+  // Point bytes 16..31: time (i64 as two u32 with borrow), then azimuth (u16), intensity,
+  // channel, return type and 3 reserved zero bytes.
+  const auto time_low = static_cast<std::uint32_t>(static_cast<std::uint64_t>(block.time_ns));
+  const auto time_high =
+      static_cast<std::uint32_t>(static_cast<std::uint64_t>(block.time_ns) >> 32);
+  const auto firing =
+      hn::Load(du, reinterpret_cast<const std::uint32_t*>(t.firing_offset_ns.data()) + i);
+  const auto low = hn::Sub(hn::Set(du, time_low), firing);
+  const auto borrow = hn::Lt(hn::Set(di, static_cast<std::int32_t>(time_low ^ 0x80000000u)),
+                             hn::Load(di, t.firing_offset_biased.data() + i));
+  const auto high = hn::Add(hn::Set(du, time_high), hn::BitCast(du, hn::VecFromMask(di, borrow)));
+  const auto meta = hn::Or(hn::Or(cdeg, hn::ShiftLeft<16>(records.reflectivity)),
                            hn::Load(di, t.channel_byte.data() + i));
-  const hn::RebindToUnsigned<DI> du;
-  hn::StoreInterleaved2(hn::BitCast(du, meta), hn::BitCast(du, return_type), du, out.meta + 2 * i);
+  hn::StoreInterleaved4(low, high, hn::BitCast(du, meta), hn::BitCast(du, return_type), du,
+                        out.tail + 4 * i);
 
   // A bit mask rather than CompressStore: Highway 1.0.3's AVX2 compress copies a 1 KB index
   // table per call, and write_points walks the kept channels anyway.
@@ -155,8 +187,7 @@ HWY_INLINE void emit(const SimdDecoderTables& t, const ChannelConstants& k, std:
 }
 
 // Writes the kept points of one block, in channel order, from out[n]; returns the new n.
-HWY_INLINE std::size_t write_points(const SimdDecoderTables& t, const BlockPoints& block,
-                                    std::int64_t block_time_ns, Point* out, std::size_t n) {
+HWY_INLINE std::size_t write_points(const BlockPoints& block, Point* out, std::size_t n) {
   static_assert(offsetof(Point, x) == 0 && offsetof(Point, distance_m) == 12);
   static_assert(offsetof(Point, timestamp_ns) == 16 && offsetof(Point, azimuth_cdeg) == 24);
   static_assert(offsetof(Point, intensity) == 26 && offsetof(Point, channel) == 27);
@@ -165,16 +196,14 @@ HWY_INLINE std::size_t write_points(const SimdDecoderTables& t, const BlockPoint
     const auto c = static_cast<std::size_t>(__builtin_ctzll(kept));
     auto* bytes = reinterpret_cast<unsigned char*>(out + n);
     std::memcpy(bytes, block.xyzd + 4 * c, 16);
-    const std::int64_t time = block_time_ns - t.firing_offset_ns[c];
-    std::memcpy(bytes + 16, &time, 8);
-    std::memcpy(bytes + 24, block.meta + 2 * c, 8);
+    std::memcpy(bytes + 16, block.tail + 4 * c, 16);
   }
   return n;
 }
 
 ChannelConstants channel_constants(const SimdDecoderTables& t, int rpm, float* a, float* b,
-                                   std::int32_t* offset_q) {
-  if (!t.firing_time_correction) return {t.a.data(), t.b.data(), t.offset_q.data()};
+                                   std::int32_t* label_offset) {
+  if (!t.firing_time_correction) return {t.a.data(), t.b.data(), t.label_offset.data()};
   const DF df;
   const DI di;
   const auto vrpm = hn::Set(df, static_cast<float>(rpm));
@@ -194,11 +223,15 @@ ChannelConstants channel_constants(const SimdDecoderTables& t, int rpm, float* a
     // cos(o − δ) = cos o cos δ + sin o sin δ;  sin(o − δ) = sin o cos δ − cos o sin δ
     hn::Store(hn::Mul(ce, hn::MulAdd(co, cos_d, hn::Mul(so, sin_d))), df, a + i);
     hn::Store(hn::Mul(ce, hn::NegMulAdd(co, sin_d, hn::Mul(so, cos_d))), df, b + i);
+    // offset_q - correction, wrapped into [0, full), + the half step (see emit).
     const auto gain = hn::Load(di, t.rpm_gain.data() + i);
     const auto correction = hn::ShiftRight<8>(hn::Add(hn::Mul(vrpm_i, gain), hn::Set(di, 128)));
-    hn::Store(hn::Sub(hn::Load(di, t.offset_q.data() + i), correction), di, offset_q + i);
+    auto offset = hn::Sub(hn::Load(di, t.offset_q.data() + i), correction);
+    offset = hn::IfThenElse(hn::Lt(offset, hn::Zero(di)),
+                            hn::Add(offset, hn::Set(di, kFullCircleQ)), offset);
+    hn::Store(hn::Add(offset, hn::Set(di, kAzimuthQ / 2)), di, label_offset + i);
   }
-  return {a, b, offset_q};
+  return {a, b, label_offset};
 }
 
 }  // namespace
@@ -212,39 +245,48 @@ DecodedPacket DecodeKernel(const SimdDecoderTables& t, const PacketView& packet,
 
   alignas(64) float rotated_a[kLanes];
   alignas(64) float rotated_b[kLanes];
-  alignas(64) std::int32_t rotated_offset_q[kLanes];
-  const ChannelConstants k = channel_constants(t, rpm, rotated_a, rotated_b, rotated_offset_q);
+  alignas(64) std::int32_t rotated_offset[kLanes];
+  const ChannelConstants k = channel_constants(t, rpm, rotated_a, rotated_b, rotated_offset);
+
+  // Loads read whole vectors; where that would run past the packet (the last block, on wide
+  // targets), they read a zero-padded copy instead.
+  alignas(64) std::uint8_t padded[192] = {};
+  const std::uint8_t* records[kBlocks];
+  for (int b = 0; b < kBlocks; ++b)
+    records[b] = packet.block(b) + 4;
+  if (kBlockBytes * (kBlocks - 1) + 4 + record_span() > packet.bytes().size()) {
+    std::memcpy(padded, records[kBlocks - 1], 3 * kChannels);
+    records[kBlocks - 1] = padded;
+  }
 
   // sin and cos of each block azimuth: coarse and fine table entries combined in double.
-  float sin_azimuth[kBlocks], cos_azimuth[kBlocks];
+  BlockContext blocks[kBlocks];
   for (int b = 0; b < kBlocks; ++b) {
     const unsigned azimuth = packet.azimuth_cdeg(b);  // < 36000: validate() checked it
     const auto& coarse = t.coarse_sin_cos[azimuth / SimdDecoderTables::kAngleFineSteps];
     const auto& fine = t.fine_sin_cos[azimuth % SimdDecoderTables::kAngleFineSteps];
-    sin_azimuth[b] = static_cast<float>(coarse[0] * fine[1] + coarse[1] * fine[0]);
-    cos_azimuth[b] = static_cast<float>(coarse[1] * fine[1] - coarse[0] * fine[0]);
+    blocks[b].sin_azimuth = static_cast<float>(coarse[0] * fine[1] + coarse[1] * fine[0]);
+    blocks[b].cos_azimuth = static_cast<float>(coarse[1] * fine[1] - coarse[0] * fine[0]);
+    blocks[b].azimuth_q = static_cast<std::int32_t>(azimuth) * kAzimuthQ;
+    blocks[b].time_ns = t0_ns + block_offset_ns(b, mode);
   }
 
   DecodedPacket result;
   FilterTally tally;
   std::size_t n = 0;
-  BlockPlanes planes[2];
   BlockPoints points[2];
 
   if (mode != ReturnMode::kDual) {
     const auto single = hn::Set(di, static_cast<std::int32_t>(ReturnType::kSingle));
     for (int b = 0; b < kBlocks; ++b) {
-      split_block(packet.block(b), planes[0]);
       points[0].kept = 0;
-      const auto azimuth = packet.azimuth_cdeg(b);
       for (std::size_t i = 0; i < static_cast<std::size_t>(kChannels); i += lanes) {
-        const auto distance = load_distance(planes[0], i);
-        const auto keep = in_range(t, distance, real_channels(i), tally);
-        emit(t, k, i, azimuth, sin_azimuth[b], cos_azimuth[b], distance,
-             load_reflectivity(planes[0], i), single, keep, points[0]);
+        const Records r = load_records(records[b], i);
+        const auto keep = in_range(t, r.distance, real_channels(i), tally);
+        emit(t, k, i, blocks[b], r, single, keep, points[0]);
       }
       result.block_begin[b] = static_cast<std::uint16_t>(n);
-      n = write_points(t, points[0], t0_ns + block_offset_ns(b, mode), out, n);
+      n = write_points(points[0], out, n);
     }
   } else {
     const auto last = hn::Set(di, static_cast<std::int32_t>(ReturnType::kLast));
@@ -252,53 +294,49 @@ DecodedPacket DecodeKernel(const SimdDecoderTables& t, const PacketView& packet,
     const auto merged_type = hn::Set(di, static_cast<std::int32_t>(ReturnType::kLastStrongest));
     const auto threshold = hn::Set(di, static_cast<std::int32_t>(t.limits.dual_threshold));
     for (int b = 0; b < kBlocks; b += 2) {
-      split_block(packet.block(b), planes[0]);
-      split_block(packet.block(b + 1), planes[1]);
       points[0].kept = points[1].kept = 0;
       for (std::size_t i = 0; i < static_cast<std::size_t>(kChannels); i += lanes) {
         const auto real = real_channels(i);
-        const auto d_last = load_distance(planes[0], i);
-        const auto d_strongest = load_distance(planes[1], i);
-        const auto r_last = load_reflectivity(planes[0], i);
-        const auto r_strongest = load_reflectivity(planes[1], i);
-        auto keep_last = in_range(t, d_last, real, tally);
-        const auto keep_strongest = in_range(t, d_strongest, real, tally);
+        const Records r_last = load_records(records[b], i);
+        const Records r_strongest = load_records(records[b + 1], i);
+        auto keep_last = in_range(t, r_last.distance, real, tally);
+        const auto keep_strongest = in_range(t, r_strongest.distance, real, tally);
         // Both echoes kept: identical, or closer than the threshold, keeps only the odd block's.
         const auto both = hn::And(keep_last, keep_strongest);
         const auto identical =
-            hn::And(both, hn::And(hn::Eq(d_last, d_strongest), hn::Eq(r_last, r_strongest)));
-        const auto close = hn::And(hn::AndNot(identical, both),
-                                   hn::Lt(hn::Abs(hn::Sub(d_last, d_strongest)), threshold));
+            hn::And(both, hn::And(hn::Eq(r_last.distance, r_strongest.distance),
+                                  hn::Eq(r_last.reflectivity, r_strongest.reflectivity)));
+        const auto close =
+            hn::And(hn::AndNot(identical, both),
+                    hn::Lt(hn::Abs(hn::Sub(r_last.distance, r_strongest.distance)), threshold));
         const auto merged = hn::Or(identical, close);
-        tally.duplicate += hn::CountTrue(di, identical);
-        tally.too_close += hn::CountTrue(di, close);
+        count(tally.duplicate, identical);
+        count(tally.too_close, close);
         keep_last = hn::AndNot(merged, keep_last);
-        emit(t, k, i, packet.azimuth_cdeg(b), sin_azimuth[b], cos_azimuth[b], d_last, r_last, last,
-             keep_last, points[0]);
-        emit(t, k, i, packet.azimuth_cdeg(b + 1), sin_azimuth[b + 1], cos_azimuth[b + 1],
-             d_strongest, r_strongest, hn::IfThenElse(merged, merged_type, strongest),
+        emit(t, k, i, blocks[b], r_last, last, keep_last, points[0]);
+        emit(t, k, i, blocks[b + 1], r_strongest, hn::IfThenElse(merged, merged_type, strongest),
              keep_strongest, points[1]);
       }
-      const std::int64_t time = t0_ns + block_offset_ns(b, mode);  // one firing for both
       result.block_begin[b] = static_cast<std::uint16_t>(n);
-      n = write_points(t, points[0], time, out, n);
+      n = write_points(points[0], out, n);
       result.block_begin[b + 1] = static_cast<std::uint16_t>(n);
-      n = write_points(t, points[1], time, out, n);
+      n = write_points(points[1], out, n);
     }
   }
   result.block_begin[kBlocks] = static_cast<std::uint16_t>(n);
   result.point_count = static_cast<std::uint16_t>(n);
-  filtered.add(FilterReason::kNoReturn, tally.no_return);
-  filtered.add(FilterReason::kBelowMinRange, tally.below);
-  filtered.add(FilterReason::kAboveMaxRange, tally.above);
-  filtered.add(FilterReason::kDualDuplicate, tally.duplicate);
-  filtered.add(FilterReason::kDualTooClose, tally.too_close);
+  filtered.add(FilterReason::kNoReturn, total(tally.no_return));
+  filtered.add(FilterReason::kBelowMinRange, total(tally.below));
+  filtered.add(FilterReason::kAboveMaxRange, total(tally.above));
+  filtered.add(FilterReason::kDualDuplicate, total(tally.duplicate));
+  filtered.add(FilterReason::kDualTooClose, total(tally.too_close));
   return result;
 }
 
 }  // namespace HWY_NAMESPACE
 }  // namespace pandarcap
 HWY_AFTER_NAMESPACE();
+#endif  // HWY_TARGET != HWY_SCALAR
 
 #if HWY_ONCE
 namespace pandarcap {
@@ -364,9 +402,12 @@ SimdDecoderTables::SimdDecoderTables(const Calibration& calibration, const Decod
         channel_azimuth_fixed(calibration.azimuth_offset_deg[c], kChannelFiringOffsetNs[c],
                               config.firing_time_correction);
     offset_q[c] = fixed.offset_q;
+    label_offset[c] = fixed.offset_q + kAzimuthQ / 2;
     rpm_gain[c] = fixed.rpm_gain;
     channel_byte[c] = c << 24;
     firing_offset_ns[c] = kChannelFiringOffsetNs[c];
+    firing_offset_biased[c] = static_cast<std::int32_t>(
+        static_cast<std::uint32_t>(kChannelFiringOffsetNs[c]) ^ 0x80000000u);
   }
   for (int i = 0; i < kAngleCoarseSteps; ++i) {
     const double angle = i * kAngleFineSteps * kCdegToRad;

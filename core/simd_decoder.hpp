@@ -53,9 +53,12 @@ struct alignas(64) SimdDecoderTables {
   alignas(64) std::array<float, kLanes> sin_offset{};
   alignas(64) std::array<float, kLanes> correction_rad_per_rpm{};  // δ / RPM
   alignas(64) std::array<std::int32_t, kLanes> offset_q{};         // see ChannelAzimuthFixed
+  alignas(64) std::array<std::int32_t, kLanes> label_offset{};     // offset_q + half a step
   alignas(64) std::array<std::int32_t, kLanes> rpm_gain{};
   alignas(64) std::array<std::int32_t, kLanes> channel_byte{};  // c << 24, the Point's channel
-  std::array<std::int32_t, kChannels> firing_offset_ns{};
+  alignas(64) std::array<std::int32_t, kLanes> firing_offset_ns{};
+  // firing_offset_ns with the sign bit flipped: an unsigned compare done with signed lanes.
+  alignas(64) std::array<std::int32_t, kLanes> firing_offset_biased{};
   // sin and cos of (coarse * 64) and of (fine) hundredths of a degree.
   std::array<std::array<double, 2>, kAngleCoarseSteps> coarse_sin_cos{};
   std::array<std::array<double, 2>, kAngleFineSteps> fine_sin_cos{};

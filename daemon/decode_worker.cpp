@@ -27,7 +27,10 @@ DecodeWorker::DecodeWorker(const Calibration& calibration, const DecodeWorkerOpt
 
 Frame* DecodeWorker::acquire_frame() {
   FrameArena* arena = nullptr;
-  if (!free_arenas_.try_pop(arena)) return nullptr;  // the assembler counts the dropped frame
+  while (!free_arenas_.try_pop(arena)) {
+    if (!options_.lossless) return nullptr;  // the assembler counts the dropped frame
+    free_arenas_.wait_for_data(std::chrono::milliseconds(100));
+  }
   for (FrameArena*& open : open_) {
     if (open == nullptr) {
       open = arena;
@@ -67,9 +70,12 @@ void DecodeWorker::frame_done(Frame& frame) {
 }
 
 void DecodeWorker::record_raw(const ringbuf::PacketSlot& slot) {
-  if (raw_ == nullptr && !free_raw_.try_pop(raw_)) {
-    ++raw_dropped_;
-    return;
+  while (raw_ == nullptr && !free_raw_.try_pop(raw_)) {
+    if (!options_.lossless) {
+      ++raw_dropped_;
+      return;
+    }
+    free_raw_.wait_for_data(std::chrono::milliseconds(100));
   }
   RawPacket& packet = raw_->packets[raw_->size++];
   packet.receive_time_ns = slot.receive_time_ns;

@@ -26,6 +26,9 @@ struct DecodeWorkerOptions {
   std::uint32_t frame_decimation = 1;  // 1 = every frame
   bool write_frames = true;            // false: every frame is returned at once (not written)
   bool record_raw = true;
+  // Replay: wait for the writer to return a free arena or raw batch instead of dropping the
+  // frame. A file can wait; a socket cannot, so live capture drops (and counts) instead.
+  bool lossless = false;
 };
 
 class DecodeWorker final : public FrameSink {

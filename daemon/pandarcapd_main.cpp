@@ -464,6 +464,7 @@ int run(int argc, char** argv) {
   dopt.frame_decimation = config.output.frame_decimation;
   dopt.write_frames = config.output.frames;
   dopt.record_raw = config.output.pcap;
+  dopt.lossless = options.replay.has_value();
   DecodeWorker worker(calibration, dopt, pipe.ring, pipe.to_writer, pipe.free_arenas,
                       pipe.free_raw);
 

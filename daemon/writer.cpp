@@ -334,11 +334,13 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
         case WriterMessage::Kind::kFrame:
           write_frame(*message->arena);
           arenas_back_.try_push(message->arena);  // room for every arena: cannot fail
+          arenas_back_.notify();                  // a replaying decoder may be waiting for it
           break;
         case WriterMessage::Kind::kRaw:
           if (options_.pcap) write_raw(*message->raw);
           message->raw->size = 0;
           raw_back_.try_push(message->raw);
+          raw_back_.notify();
           break;
         case WriterMessage::Kind::kSnapshot:
           decode_ = message->snapshot;

@@ -318,6 +318,27 @@ TEST_CASE("pandarcapd --decoder: every target this CPU runs writes the scalar re
   }
 }
 
+TEST_CASE("replay waits for free arenas: two arenas at top speed still write every frame",
+          "[daemon]") {
+  const auto capture = test::real_capture(kDualCapture);
+  if (!capture) return;
+  test::ScratchDir dir("daemon-replay-arenas");
+  const fs::path config = dir / "two-arenas.toml";
+  std::ofstream(config) << "[arenas]\ncount = 2\npackets_per_frame = 64\n";
+  const fs::path out = dir / "out";
+  const auto result = test::run_command(pandarcapd() + " -c '" + config.string() + "' --replay '" +
+                                        capture->string() + "' --top-speed --output-dir '" +
+                                        out.string() + "' 2>&1");
+  INFO(result.out);
+  REQUIRE(result.exit_code == 0);
+  const json h = last_health(out);
+  CHECK(counter(h, "frames_dropped_no_arena") == 0);
+  CHECK(counter(h, "pcap_packets_not_recorded") == 0);
+  CHECK(counter(h, "frames_written") == 6);
+  CHECK(files_with(out / "frames", ".pcd").size() == 6);
+  CHECK(recorded(out / "raw").size() == 1439);
+}
+
 TEST_CASE("pandarcapd --decoder naming a target this machine cannot run exits 78, no fallback",
           "[daemon][simd][config]") {
   const std::vector<DecoderTarget> supported = supported_decoder_targets();
