@@ -12,6 +12,7 @@
 #include <string>
 
 #include "decoder.hpp"
+#include "latency_histogram.hpp"
 #include "packet.hpp"
 
 namespace pandarcap {
@@ -85,6 +86,8 @@ struct HealthSnapshot {
   std::string decoder;            // decoder target in use ("avx512", "scalar", ...), likewise
   HealthCounters counters;
   HealthGauges gauges;
+  // Kernel receive timestamp -> decoded, since start-up; empty when replaying a file.
+  LatencyHistogram latency;
 };
 
 }  // namespace pandarcap

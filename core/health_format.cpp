@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <cmath>
 #include <ctime>
 #include <nlohmann/json.hpp>
 
@@ -196,6 +197,20 @@ std::string to_prometheus(const HealthSnapshot& h) {
     append("pandarcap_state{{{},state=\"{}\"}} {}\n", sensor, to_string(state),
            h.gauges.state == state ? 1 : 0);
   }
+
+  // Buckets at powers of two (exact edges of the histogram), 8.2 µs .. 1.07 s.
+  family(out, "receive_to_decoded_latency_seconds", "histogram",
+         "Kernel receive timestamp to decoded, per packet (live capture only)");
+  for (int p = 13; p <= 30; ++p) {
+    append("pandarcap_receive_to_decoded_latency_seconds_bucket{{{},le=\"{}\"}} {}\n", sensor,
+           std::ldexp(1e-9, p), h.latency.count_below_pow2(p));
+  }
+  append("pandarcap_receive_to_decoded_latency_seconds_bucket{{{},le=\"+Inf\"}} {}\n", sensor,
+         h.latency.count());
+  append("pandarcap_receive_to_decoded_latency_seconds_sum{{{}}} {}\n", sensor,
+         static_cast<double>(h.latency.sum_ns()) / 1e9);
+  append("pandarcap_receive_to_decoded_latency_seconds_count{{{}}} {}\n", sensor,
+         h.latency.count());
   return out;
 }
 
@@ -227,6 +242,13 @@ std::string to_json_line(const HealthSnapshot& h) {
   gauges["return_mode"] = h.gauges.return_mode;
   gauges["high_temperature"] = h.gauges.high_temperature;
   j["gauges"] = std::move(gauges);
+  // Percentiles are bucket upper edges (at most 12.5 % high); max is exact.
+  const auto us = [&](double q) { return static_cast<double>(h.latency.quantile_ns(q)) / 1e3; };
+  j["latency"] = {{"count", h.latency.count()},
+                  {"p50_us", us(0.5)},
+                  {"p99_us", us(0.99)},
+                  {"p999_us", us(0.999)},
+                  {"max_us", static_cast<double>(h.latency.max_ns()) / 1e3}};
   // A reason may hold bytes from an error message that are not UTF-8: replace, never throw.
   return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <thread>
 
-#include "daemon/monotonic_clock.hpp"
+#include "daemon/clocks.hpp"
 
 namespace pandarcap {
 namespace {
@@ -115,6 +115,7 @@ DecodeSnapshot DecodeWorker::snapshot() const {
   s.raw_packets_dropped = raw_dropped_;
   s.monotonic_ns = coarse_monotonic_ns();
   s.last_packet_monotonic_ns = last_packet_monotonic_ns_;
+  s.latency = latency_;
   return s;
 }
 
@@ -149,6 +150,13 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
     } else {
       for (const ringbuf::PacketSlot& slot : batch)
         process(slot);
+      if (options_.measure_latency) {
+        // One clock read per batch: "decoded" is when the batch is done.
+        const std::int64_t decoded_ns = realtime_ns();
+        for (const ringbuf::PacketSlot& slot : batch) {
+          if (slot.receive_time_ns > 0) latency_.record(decoded_ns - slot.receive_time_ns);
+        }
+      }
       ring_.release(batch.size());
       last_packet_monotonic_ns_ = coarse_monotonic_ns();
     }

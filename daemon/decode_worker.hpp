@@ -29,6 +29,9 @@ struct DecodeWorkerOptions {
   // Replay: wait for the writer to return a free arena or raw batch instead of dropping the
   // frame. A file can wait; a socket cannot, so live capture drops (and counts) instead.
   bool lossless = false;
+  // Live sources: record each packet's kernel receive timestamp -> decoded latency. (A replayed
+  // packet's timestamp is its capture time, so the figure would mean nothing.)
+  bool measure_latency = false;
 };
 
 class DecodeWorker final : public FrameSink {
@@ -70,6 +73,7 @@ class DecodeWorker final : public FrameSink {
   std::uint64_t frames_decimated_ = 0;
   std::uint64_t raw_dropped_ = 0;
   std::int64_t last_packet_monotonic_ns_ = 0;
+  LatencyHistogram latency_;
 };
 
 }  // namespace pandarcap

@@ -42,6 +42,7 @@
 #include "core/packet.hpp"
 #include "core/synthetic_sensor.hpp"
 #include "daemon/cli_args.hpp"
+#include "daemon/clocks.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/replay_source.hpp"
@@ -228,12 +229,6 @@ void setup_logging(const std::string& level) {
   }
   logger->set_level(spdlog::level::from_str(level));
   spdlog::set_default_logger(logger);
-}
-
-std::int64_t realtime_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
 }
 
 // The fixed memory of the pipeline, allocated before any thread starts.
@@ -465,6 +460,7 @@ int run(int argc, char** argv) {
   dopt.write_frames = config.output.frames;
   dopt.record_raw = config.output.pcap;
   dopt.lossless = options.replay.has_value();
+  dopt.measure_latency = !options.replay.has_value();
   DecodeWorker worker(calibration, dopt, pipe.ring, pipe.to_writer, pipe.free_arenas,
                       pipe.free_raw);
 

@@ -19,6 +19,7 @@
 #include <span>
 
 #include "core/frame.hpp"
+#include "core/latency_histogram.hpp"
 #include "core/packet.hpp"
 #include "core/point.hpp"
 #include "core/stream_decoder.hpp"
@@ -61,6 +62,7 @@ struct DecodeSnapshot {
   std::uint64_t raw_packets_dropped = 0;      // no empty RawBatch: not recorded to pcap
   std::int64_t monotonic_ns = 0;              // when it was taken
   std::int64_t last_packet_monotonic_ns = 0;  // 0 before the first packet
+  LatencyHistogram latency;  // kernel receive timestamp -> decoded (live sources only)
 };
 
 // Messages are copied into the queue's preallocated cells; a snapshot travels by value.

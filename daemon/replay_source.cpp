@@ -8,7 +8,7 @@
 #include <cstring>
 #include <thread>
 
-#include "daemon/monotonic_clock.hpp"
+#include "daemon/clocks.hpp"
 
 namespace pandarcap {
 namespace {

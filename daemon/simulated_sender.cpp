@@ -11,7 +11,7 @@
 #include <cerrno>
 #include <system_error>
 
-#include "daemon/monotonic_clock.hpp"
+#include "daemon/clocks.hpp"
 
 namespace pandarcap {
 namespace {

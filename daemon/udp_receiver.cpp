@@ -15,7 +15,7 @@
 #include <fstream>
 #include <system_error>
 
-#include "daemon/monotonic_clock.hpp"
+#include "daemon/clocks.hpp"
 
 namespace pandarcap {
 namespace {
@@ -35,12 +35,6 @@ in_addr parse_ipv4(const std::string& text, const char* what) {
                             std::string(what) + " '" + text + "' is not an IPv4 address");
   }
   return address;
-}
-
-std::int64_t realtime_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
 }
 
 std::uint64_t read_rmem_max() {

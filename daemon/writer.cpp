@@ -13,20 +13,14 @@
 
 #include "core/health_format.hpp"
 #include "core/pcd.hpp"
+#include "daemon/clocks.hpp"
 #include "daemon/file_output.hpp"
-#include "daemon/monotonic_clock.hpp"
 
 namespace pandarcap {
 namespace {
 
 constexpr std::int64_t kSecondNs = 1'000'000'000;
 constexpr std::size_t kPcdChunkPoints = 4096;
-
-std::int64_t realtime_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return ts.tv_sec * kSecondNs + ts.tv_nsec;
-}
 
 }  // namespace
 
@@ -183,6 +177,7 @@ HealthSnapshot Writer::build_health(std::int64_t now) {
   h.version = options_.version;
   h.decoder = options_.decoder;
   HealthCounters& c = h.counters;
+  h.latency = decode_.latency;
   c.datagrams_received = receive_.datagrams.load(std::memory_order_relaxed);
   c.bytes_received = receive_.bytes.load(std::memory_order_relaxed);
   c.foreign_datagrams = receive_.foreign.load(std::memory_order_relaxed);

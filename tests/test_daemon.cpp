@@ -167,6 +167,8 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
       test::run_command("tcpdump -nr '" + pcaps[0].string() + "' 2>/dev/null | wc -l");
   CHECK(std::stoul(tcpdump.out) == 1439);
   check_no_temporary_files(out);
+  // A replayed packet's timestamp is its capture time: no latency is recorded.
+  CHECK(h.at("latency").at("count") == 0);
 }
 
 TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all accounted",
@@ -278,6 +280,14 @@ TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon]")
   CHECK(counter(h, "frames_complete") >= 10);
   CHECK(counter(h, "pcap_packets_written") == counter(h, "datagrams_received"));
   CHECK(health_lines(out).size() >= 2);  // one per second, plus the final one
+  // Every packet that reached the decoder has a receive-to-decoded latency; at the sensor's
+  // rate it is well under a second, and the percentiles are ordered.
+  const json& latency = h.at("latency");
+  CHECK(latency.at("count") == counter(h, "packets_accepted") + counter(h, "packets_rejected"));
+  CHECK(latency.at("p50_us").get<double>() > 0);
+  CHECK(latency.at("p50_us").get<double>() <= latency.at("p99_us").get<double>());
+  CHECK(latency.at("p99_us").get<double>() <= latency.at("max_us").get<double>());
+  CHECK(latency.at("max_us").get<double>() < 1e6);
   check_no_temporary_files(out);
 }
 

@@ -22,6 +22,9 @@ HealthSnapshot distinct_snapshot() {
   h.sensor = "front \"left\"\\lidar";
   h.version = "1.2.3";
   h.decoder = "avx2";
+  for (int i = 0; i < 100; ++i)
+    h.latency.record(100'000 + i * 1000);  // 100 .. 199 µs
+  h.latency.record(3'000'000);             // one 3 ms outlier
   HealthCounters& c = h.counters;
   std::uint64_t v = 1000;
   for (std::uint64_t* field : {&c.datagrams_received,
@@ -134,7 +137,7 @@ TEST_CASE("Prometheus text follows the textfile-collector conventions", "[health
   // Every sample: a pandarcap_ name with the sensor label, a number, no timestamp; every
   // counter family ends in _total; each family has HELP and TYPE once.
   const std::regex sample(
-      R"(^pandarcap_[a-z_]+\{sensor="(?:[^"\\]|\\.)*"(,[a-z_]+="[a-z_0-9.]*")*\} -?[0-9.]+$)");
+      R"(^pandarcap_[a-z_]+\{sensor="(?:[^"\\]|\\.)*"(,[a-z_]+="[a-zA-Z_0-9.+-]*")*\} -?[0-9.]+(e[+-][0-9]+)?$)");
   std::istringstream in(text);
   std::string line;
   std::map<std::string, int> types;
@@ -152,6 +155,33 @@ TEST_CASE("Prometheus text follows the textfile-collector conventions", "[health
     }
   }
   CHECK(types.size() > 35);
+}
+
+TEST_CASE("Latency is a Prometheus histogram and percentiles in the JSON line", "[health]") {
+  const HealthSnapshot h = distinct_snapshot();
+  const auto s = samples(to_prometheus(h));
+  const std::string sensor = R"(sensor="front \"left\"\\lidar")";
+  const std::string name = "pandarcap_receive_to_decoded_latency_seconds";
+  // Cumulative buckets: nothing below 65.5 µs, all 100 regular values below 262 µs, the outlier
+  // only in the 4.19 ms bucket and above.
+  CHECK(s.at(name + "_bucket{" + sensor + ",le=\"6.5536e-05\"}") == "0");
+  CHECK(s.at(name + "_bucket{" + sensor + ",le=\"0.000262144\"}") == "100");
+  CHECK(s.at(name + "_bucket{" + sensor + ",le=\"0.002097152\"}") == "100");
+  CHECK(s.at(name + "_bucket{" + sensor + ",le=\"0.004194304\"}") == "101");
+  CHECK(s.at(name + "_bucket{" + sensor + ",le=\"+Inf\"}") == "101");
+  CHECK(s.at(name + "_count{" + sensor + "}") == "101");
+  CHECK(std::stod(s.at(name + "_sum{" + sensor + "}")) == Approx((14'950'000 + 3'000'000) / 1e9));
+
+  const auto j = nlohmann::json::parse(to_json_line(h));
+  const auto& latency = j.at("latency");
+  CHECK(latency.at("count") == 101);
+  CHECK(latency.at("max_us").get<double>() == 3000.0);
+  // p50 = the 51st value (150 µs), reported as its bucket's edge: within 12.5 % above.
+  CHECK(latency.at("p50_us").get<double>() >= 150.0);
+  CHECK(latency.at("p50_us").get<double>() <= 150.0 * 1.125);
+  CHECK(latency.at("p99_us").get<double>() >= 199.0);
+  CHECK(latency.at("p99_us").get<double>() <= 199.0 * 1.125);
+  CHECK(latency.at("p999_us").get<double>() == 3000.0);  // the outlier, capped at the max
 }
 
 TEST_CASE("promtool accepts the Prometheus file", "[health]") {

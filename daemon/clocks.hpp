@@ -1,6 +1,9 @@
-// CLOCK_MONOTONIC in nanoseconds, for every deadline, pace and rate in the daemon: it does not
-// jump when the host's wall clock is set (NTP, GPS time), so rotation, pacing and the
-// per-second health tick are undisturbed by it. Both calls go through the vDSO (no syscall).
+// The daemon's clocks, in nanoseconds, all read through the vDSO (no syscall).
+//
+// CLOCK_MONOTONIC for every deadline, pace and rate: it does not jump when the host's wall clock
+// is set (NTP, GPS time), so rotation, pacing and the per-second health tick are undisturbed by
+// it. CLOCK_REALTIME only where a time is compared with a kernel receive timestamp
+// (SO_TIMESTAMPNS is wall-clock time) or written into a file.
 #pragma once
 
 #include <time.h>
@@ -20,6 +23,12 @@ inline std::int64_t monotonic_ns() noexcept {
 inline std::int64_t coarse_monotonic_ns() noexcept {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC_COARSE, &ts);
+  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+}
+
+inline std::int64_t realtime_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
   return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
 }
 
