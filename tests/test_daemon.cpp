@@ -18,9 +18,9 @@
 #include <string>
 #include <vector>
 
+#include "bench/child_process.hpp"
 #include "core/capture_reader.hpp"
 #include "core/decoder_target.hpp"
-#include "daemon_process.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;
@@ -127,10 +127,10 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
   if (!capture || !calibration) return;
   test::ScratchDir dir("daemon-replay");
   const fs::path out = dir / "out";
-  test::DaemonProcess daemon(pandarcapd(),
-                             {"--replay", capture->string(), "--top-speed", "--calibration",
-                              calibration->string(), "--output-dir", out.string()},
-                             dir / "log.txt");
+  harness::ChildProcess daemon(pandarcapd(),
+                               {"--replay", capture->string(), "--top-speed", "--calibration",
+                                calibration->string(), "--output-dir", out.string()},
+                               dir / "log.txt");
   const auto status = daemon.wait_exit(60s);
   INFO(daemon.log());
   REQUIRE(status == 0);
@@ -178,21 +178,22 @@ TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all ac
   const auto payloads = payloads_of(*capture);
   test::ScratchDir dir("daemon-live");
   const fs::path out = dir / "out";
-  const std::uint16_t port = test::free_udp_port();
-  test::DaemonProcess daemon(pandarcapd(),
-                             {"--host-ip", "127.0.0.1", "--port", std::to_string(port),
-                              "--sensor-ip", "127.0.0.1", "--output-dir", out.string()},
-                             dir / "log.txt");
+  const std::uint16_t port = harness::free_udp_port();
+  harness::ChildProcess daemon(pandarcapd(),
+                               {"--host-ip", "127.0.0.1", "--port", std::to_string(port),
+                                "--sensor-ip", "127.0.0.1", "--output-dir", out.string()},
+                               dir / "log.txt");
   // Ready once the first health file is there (written before the threads start).
-  REQUIRE(test::wait_until([&] { return fs::exists(out / "health" / "pandarcap.prom"); }, 10s));
-  REQUIRE(test::wait_until([&] { return daemon.log().find("ready") != std::string::npos; }, 10s));
+  REQUIRE(harness::wait_until([&] { return fs::exists(out / "health" / "pandarcap.prom"); }, 10s));
+  REQUIRE(
+      harness::wait_until([&] { return daemon.log().find("ready") != std::string::npos; }, 10s));
 
   const std::vector<std::vector<std::uint8_t>> foreign(25, payloads.front());
-  test::send_udp("127.0.0.1", port, payloads);
-  test::send_udp("127.0.0.2", port, foreign);
+  harness::send_udp("127.0.0.1", port, payloads);
+  harness::send_udp("127.0.0.2", port, foreign);
   const std::uint64_t sent = payloads.size() + foreign.size();
   // Wait until the daemon has seen everything (or the kernel reports having dropped the rest).
-  const bool all_seen = test::wait_until(
+  const bool all_seen = harness::wait_until(
       [&] {
         const json h = last_health(out);
         return counter(h, "datagrams_received") + counter(h, "kernel_drops") >= sent;
@@ -233,25 +234,27 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
   const std::vector<std::vector<std::uint8_t>> second(payloads.begin() + 700, payloads.end());
   test::ScratchDir dir("daemon-hup");
   const fs::path out = dir / "out";
-  const std::uint16_t port = test::free_udp_port();
-  test::DaemonProcess daemon(
+  const std::uint16_t port = harness::free_udp_port();
+  harness::ChildProcess daemon(
       pandarcapd(),
       {"--host-ip", "127.0.0.1", "--port", std::to_string(port), "--output-dir", out.string()},
       dir / "log.txt");
-  REQUIRE(test::wait_until([&] { return daemon.log().find("ready") != std::string::npos; }, 10s));
+  REQUIRE(
+      harness::wait_until([&] { return daemon.log().find("ready") != std::string::npos; }, 10s));
   const auto seen = [&](std::uint64_t n) {
-    return test::wait_until(
+    return harness::wait_until(
         [&] {
           const json h = last_health(out);
           return counter(h, "pcap_packets_written") + counter(h, "kernel_drops") >= n;
         },
         20s);
   };
-  test::send_udp("127.0.0.1", port, first);
+  harness::send_udp("127.0.0.1", port, first);
   REQUIRE(seen(first.size()));
   daemon.signal(SIGHUP);
-  REQUIRE(test::wait_until([&] { return daemon.log().find("SIGHUP") != std::string::npos; }, 10s));
-  test::send_udp("127.0.0.1", port, second);
+  REQUIRE(
+      harness::wait_until([&] { return daemon.log().find("SIGHUP") != std::string::npos; }, 10s));
+  harness::send_udp("127.0.0.1", port, second);
   REQUIRE(seen(payloads.size()));
   daemon.signal(SIGTERM);
   REQUIRE(daemon.wait_exit(10s) == 0);
@@ -265,9 +268,9 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
 TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon]") {
   test::ScratchDir dir("daemon-simulate");
   const fs::path out = dir / "out";
-  test::DaemonProcess daemon(pandarcapd(),
-                             {"--simulate", "--duration", "2", "--output-dir", out.string()},
-                             dir / "log.txt");
+  harness::ChildProcess daemon(pandarcapd(),
+                               {"--simulate", "--duration", "2", "--output-dir", out.string()},
+                               dir / "log.txt");
   const auto status = daemon.wait_exit(30s);
   INFO(daemon.log());
   REQUIRE(status == 0);
@@ -402,16 +405,16 @@ TEST_CASE("sd_notify: READY, STATUS, WATCHDOG, STOPPING over NOTIFY_SOCKET", "[d
   const timeval timeout{0, 100'000};
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
 
-  test::DaemonProcess daemon(pandarcapd(), {"--simulate", "--output-dir", (dir / "out").string()},
-                             dir / "log.txt",
-                             {"NOTIFY_SOCKET=" + socket_path.string(), "WATCHDOG_USEC=500000"});
+  harness::ChildProcess daemon(pandarcapd(), {"--simulate", "--output-dir", (dir / "out").string()},
+                               dir / "log.txt",
+                               {"NOTIFY_SOCKET=" + socket_path.string(), "WATCHDOG_USEC=500000"});
   std::string messages;
   const auto receive = [&] {
     char buffer[512];
     const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
     if (n > 0) messages.append(buffer, static_cast<std::size_t>(n)).append("\n");
   };
-  const bool running = test::wait_until(
+  const bool running = harness::wait_until(
       [&] {
         receive();
         return messages.find("READY=1") != std::string::npos &&
@@ -423,7 +426,7 @@ TEST_CASE("sd_notify: READY, STATUS, WATCHDOG, STOPPING over NOTIFY_SOCKET", "[d
   INFO(daemon.log());
   CHECK(running);
   daemon.signal(SIGTERM);
-  CHECK(test::wait_until(
+  CHECK(harness::wait_until(
       [&] {
         receive();
         return messages.find("STOPPING=1") != std::string::npos;

@@ -1,27 +1,28 @@
-// Runs pandarcapd (or any binary) in the background for integration tests: start with
-// arguments and extra environment, send signals, wait for exit with a deadline, read stderr.
-// Plus the waiting primitive the daemon tests use instead of sleeps: poll a condition until it
-// holds or a deadline passes.
+// Runs pandarcapd (or any binary) in the background, for the integration tests and the
+// benchmark harness: start with arguments and extra environment, send signals, wait for exit with
+// a deadline, read its log. Plus the waiting primitive used instead of sleeps (poll a condition
+// until it holds or a deadline passes) and small loopback UDP helpers.
 #pragma once
 
 #include <chrono>
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <optional>
 #include <string>
 #include <vector>
 
-namespace pandarcap::test {
+namespace pandarcap::harness {
 
-class DaemonProcess {
+class ChildProcess {
  public:
   // Starts `program args...` with `env` added to the environment; stdout and stderr go to
   // `log_path`.
-  DaemonProcess(const std::filesystem::path& program, const std::vector<std::string>& args,
-                const std::filesystem::path& log_path, const std::vector<std::string>& env = {});
-  ~DaemonProcess();  // kills (SIGKILL) a process still running
-  DaemonProcess(const DaemonProcess&) = delete;
-  DaemonProcess& operator=(const DaemonProcess&) = delete;
+  ChildProcess(const std::filesystem::path& program, const std::vector<std::string>& args,
+               const std::filesystem::path& log_path, const std::vector<std::string>& env = {});
+  ~ChildProcess();  // kills (SIGKILL) a process still running
+  ChildProcess(const ChildProcess&) = delete;
+  ChildProcess& operator=(const ChildProcess&) = delete;
 
   int pid() const noexcept { return pid_; }
   void signal(int signal_number) const;
@@ -46,4 +47,4 @@ std::uint16_t free_udp_port();
 void send_udp(const std::string& source_ip, std::uint16_t port,
               const std::vector<std::vector<std::uint8_t>>& payloads);
 
-}  // namespace pandarcap::test
+}  // namespace pandarcap::harness

@@ -1,4 +1,4 @@
-#include "daemon_process.hpp"
+#include "bench/child_process.hpp"
 
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -16,12 +16,12 @@
 
 extern char** environ;
 
-namespace pandarcap::test {
+namespace pandarcap::harness {
 
-DaemonProcess::DaemonProcess(const std::filesystem::path& program,
-                             const std::vector<std::string>& args,
-                             const std::filesystem::path& log_path,
-                             const std::vector<std::string>& env)
+ChildProcess::ChildProcess(const std::filesystem::path& program,
+                           const std::vector<std::string>& args,
+                           const std::filesystem::path& log_path,
+                           const std::vector<std::string>& env)
     : log_path_(log_path) {
   std::vector<std::string> argv_strings{program.string()};
   argv_strings.insert(argv_strings.end(), args.begin(), args.end());
@@ -55,18 +55,18 @@ DaemonProcess::DaemonProcess(const std::filesystem::path& program,
   }
 }
 
-DaemonProcess::~DaemonProcess() {
+ChildProcess::~ChildProcess() {
   if (pid_ > 0 && !reaped_) {
     ::kill(pid_, SIGKILL);
     ::waitpid(pid_, nullptr, 0);
   }
 }
 
-void DaemonProcess::signal(int signal_number) const {
+void ChildProcess::signal(int signal_number) const {
   ::kill(pid_, signal_number);
 }
 
-std::optional<int> DaemonProcess::wait_exit(std::chrono::milliseconds timeout) {
+std::optional<int> ChildProcess::wait_exit(std::chrono::milliseconds timeout) {
   if (reaped_) return std::nullopt;
   std::optional<int> result;
   wait_until(
@@ -82,7 +82,7 @@ std::optional<int> DaemonProcess::wait_exit(std::chrono::milliseconds timeout) {
   return result;
 }
 
-std::string DaemonProcess::log() const {
+std::string ChildProcess::log() const {
   std::ifstream in(log_path_);
   std::stringstream s;
   s << in.rdbuf();
@@ -133,4 +133,4 @@ void send_udp(const std::string& source_ip, std::uint16_t port,
   ::close(fd);
 }
 
-}  // namespace pandarcap::test
+}  // namespace pandarcap::harness
