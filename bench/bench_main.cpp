@@ -2,10 +2,13 @@
 // table, or one JSON object with --json. Performance figures in the README come from here, never
 // from timed unit tests.
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <string_view>
 
 #include "bench/decode_bench.hpp"
 #include "bench/ring_bench.hpp"
+#include "bench/zero_loss.hpp"
 #include "daemon/cli_args.hpp"
 
 namespace {
@@ -16,6 +19,10 @@ Subcommands:
   decode    packet decoding per core: the scalar reference and every SIMD target this machine
             runs (sse4, avx2, avx512, ...), on a capture or the simulated sensor looped in
             memory: packets/s, points/s and the ratio to scalar.
+  zero-loss the highest packet rate the real pandarcapd takes with zero loss (RFC 2544 style
+            search), against a bare recvmmsg receiver and a recvfrom receiver searched the same
+            way in the same run; the daemon's CPU, latency, RSS and allocations at one sensor's
+            rate; a JSON report, a Markdown summary and an SVG plot.
   ring      SPSC packet ring (batches 1, 8, 32) and typed queue against a mutex + condition
             variable queue measured in the same run: items/s, round-trip latency, and the CPU
             an idle consumer uses at the sensor's packet rate.
@@ -62,6 +69,95 @@ best_target, best_vs_scalar, auto_target, goals, method.
 Exit status: 0, 2 if the capture cannot be used, 64 for a usage error (or a target this CPU
 cannot run).
 )";
+
+constexpr std::string_view kZeroLossUsage = R"(Usage: pandarcap-bench zero-loss [OPTIONS]
+
+Sends Pandar40P packets over loopback (127.0.0.1) with sendmmsg at paced rates and searches for
+the highest rate each receiver takes with zero loss: the real pandarcapd (started per trial with
+all outputs on), a bare recvmmsg loop and a recvfrom loop. Loss is counted per stage from the
+daemon's own health record and cross-checked against the packets sent.
+
+Options:
+  --json                 print the report as one JSON object (default: the Markdown summary)
+  --report-dir DIR       write report.json, summary.md and plot.svg into DIR
+  --trial-seconds S      length of each trial (default 10; RFC 2544 uses 60)
+  --min-rate PPS         lowest rate tried (default 1000)
+  --max-rate PPS         highest rate tried (default 1000000)
+  --steps N              bisections between them (default 7)
+  --sensor-rate PPS      rate of the CPU/latency/RSS trial (default 3600: one dual-return sensor)
+  --daemon FILE          pandarcapd to run (default: the one beside pandarcap-bench)
+  --config FILE          daemon configuration (the harness sets address, port and output dir)
+  --capture FILE         send this capture's packets (default: the simulated sensor)
+  --work-dir DIR         keep daemon logs there (default: a temporary directory, removed)
+  --daemon-only          skip the reference receivers
+  -h, --help             this text
+
+JSON keys: daemon_zero_loss_pps, daemon_loss_at_most_0_5_percent_pps,
+bare_recvmmsg_zero_loss_pps, recvfrom_zero_loss_pps, daemon_vs_bare, daemon_vs_recvfrom,
+at_sensor_rate {cpu_fraction_of_one_core, cpu_by_thread, latency_p50_us, latency_p99_us,
+latency_p999_us, latency_max_us, hot_path_allocations, peak_rss_bytes}, goals, environment,
+settings, trials.
+Exit status: 0, 1 if the daemon could not be run, 64 for a usage error.
+)";
+
+int run_zero_loss(int argc, char** argv) {
+  pandarcap::CliArgs args(argc, argv, kZeroLossUsage);
+  pandarcap::bench::ZeroLossOptions options;
+  bool json = false;
+  std::string report_dir;
+  while (args.more()) {
+    const std::string_view arg = args.next();
+    if (arg == "--json") {
+      json = true;
+    } else if (arg == "--report-dir") {
+      report_dir = std::string(args.value(arg));
+    } else if (arg == "--trial-seconds") {
+      options.trial_seconds = args.number(arg, 0.2, 3600);
+    } else if (arg == "--min-rate") {
+      options.min_rate = args.number(arg, 1, 1e8);
+    } else if (arg == "--max-rate") {
+      options.max_rate = args.number(arg, 1, 1e8);
+    } else if (arg == "--steps") {
+      options.steps = static_cast<int>(args.integer(arg, 0, 30));
+    } else if (arg == "--sensor-rate") {
+      options.sensor_rate = args.number(arg, 1, 1e8);
+    } else if (arg == "--daemon") {
+      options.daemon = std::string(args.value(arg));
+    } else if (arg == "--config") {
+      options.daemon_config = std::string(args.value(arg));
+    } else if (arg == "--capture") {
+      options.capture = std::string(args.value(arg));
+    } else if (arg == "--work-dir") {
+      options.work_dir = std::string(args.value(arg));
+    } else if (arg == "--daemon-only") {
+      options.skip_references = true;
+    } else {
+      args.usage_error(fmt::format("unknown option '{}'", arg));
+    }
+  }
+  if (options.max_rate < options.min_rate) args.usage_error("--max-rate is below --min-rate");
+  nlohmann::ordered_json report;
+  try {
+    report = pandarcap::bench::run_zero_loss(options);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "pandarcap-bench zero-loss: %s\n", e.what());
+    return 1;
+  }
+  if (!report_dir.empty()) {
+    std::filesystem::create_directories(report_dir);
+    std::ofstream(std::filesystem::path(report_dir) / "report.json") << report.dump(2) << "\n";
+    std::ofstream(std::filesystem::path(report_dir) / "summary.md")
+        << pandarcap::bench::zero_loss_markdown(report);
+    std::ofstream(std::filesystem::path(report_dir) / "plot.svg")
+        << pandarcap::bench::zero_loss_svg(report);
+  }
+  if (json) {
+    std::puts(report.dump(2).c_str());
+  } else {
+    std::fputs(pandarcap::bench::zero_loss_markdown(report).c_str(), stdout);
+  }
+  return 0;
+}
 
 int run_decode(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kDecodeUsage);
@@ -145,11 +241,16 @@ int run_ring(int argc, char** argv) {
 
 int main(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kUsage);
-  if (!args.more()) args.usage_error("a subcommand is required (decode, ring)");
+  if (!args.more()) args.usage_error("a subcommand is required (decode, ring, zero-loss)");
   const std::string_view subcommand = args.next();
   // The subcommand parses the rest, with "pandarcap-bench SUBCOMMAND" as its program name.
   static char ring_name[] = "pandarcap-bench ring";
   static char decode_name[] = "pandarcap-bench decode";
+  static char zero_loss_name[] = "pandarcap-bench zero-loss";
+  if (subcommand == "zero-loss") {
+    argv[1] = zero_loss_name;
+    return run_zero_loss(argc - 1, argv + 1);
+  }
   if (subcommand == "decode") {
     argv[1] = decode_name;
     return run_decode(argc - 1, argv + 1);

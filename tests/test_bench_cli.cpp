@@ -3,7 +3,9 @@
 // figures themselves are performance claims and belong to the README, not to a test.
 #include <algorithm>
 #include <catch2/catch.hpp>
+#include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 
 #include "core/decoder_target.hpp"
@@ -102,4 +104,52 @@ TEST_CASE("pandarcap-bench decode --json: every supported target, ratios from on
     CHECK(bad.exit_code == 64);
     CHECK(bad.out.find("decoder 'neon'") != std::string::npos);
   }
+}
+
+TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "[bench][cli]") {
+  test::ScratchDir dir("zero-loss");
+  const auto report_dir = dir / "report";
+  const auto result = test::run_command(
+      bench() + " zero-loss --json --trial-seconds 0.5 --min-rate 1000 --max-rate 3000 --steps 1" +
+      " --sensor-rate 1800 --report-dir '" + report_dir.string() + "' 2>&1");
+  INFO(result.out);
+  REQUIRE(result.exit_code == 0);
+  const json report = json::parse(result.out);
+  for (const char* key : {"daemon_zero_loss_pps", "bare_recvmmsg_zero_loss_pps",
+                          "recvfrom_zero_loss_pps", "daemon_vs_bare"}) {
+    INFO(key);
+    REQUIRE(report.contains(key));
+  }
+  // At 1000 packets/s every receiver takes everything, the daemon with all its outputs on.
+  CHECK(report["daemon_zero_loss_pps"].get<double>() >= 900);
+  CHECK(report["bare_recvmmsg_zero_loss_pps"].get<double>() >= 900);
+  CHECK(report["recvfrom_zero_loss_pps"].get<double>() >= 900);
+  CHECK(report["daemon_vs_bare"].get<double>() ==
+        Approx(report["daemon_zero_loss_pps"].get<double>() /
+               report["bare_recvmmsg_zero_loss_pps"].get<double>()));
+  const json& first = report["trials"]["daemon"][0];
+  CHECK(first["sent"].get<std::uint64_t>() == first["accepted"].get<std::uint64_t>());
+  // The generator keeps its pace (within 10 %) at a low rate.
+  CHECK(first["achieved_pps"].get<double>() == Approx(1000).epsilon(0.1));
+
+  const json& s = report["at_sensor_rate"];
+  for (const char* key :
+       {"cpu_fraction_of_one_core", "latency_p99_us", "hot_path_allocations", "peak_rss_bytes"}) {
+    INFO(key);
+    REQUIRE(s.contains(key));
+  }
+  CHECK(s["lost"] == 0);
+  CHECK(s["cpu_fraction_of_one_core"].get<double>() > 0);
+  CHECK(s["latency_p99_us"].get<double>() > 0);
+  CHECK(s["peak_rss_bytes"].get<std::uint64_t>() > (1u << 20));
+  CHECK(report["environment"]["cores"].get<int>() >= 1);
+
+  // The report directory: the same JSON, a Markdown summary and an SVG plot.
+  CHECK(json::parse(std::ifstream(report_dir / "report.json")) == report);
+  std::stringstream md, svg;
+  md << std::ifstream(report_dir / "summary.md").rdbuf();
+  svg << std::ifstream(report_dir / "plot.svg").rdbuf();
+  CHECK_THAT(md.str(), Catch::Contains("zero-loss rate"));
+  CHECK(svg.str().rfind("<svg ", 0) == 0);
+  CHECK_THAT(svg.str(), Catch::Contains("</svg>") && Catch::Contains("<polyline"));
 }

@@ -1,0 +1,250 @@
+#include "bench/udp_traffic.hpp"
+
+#include <arpa/inet.h>
+#include <linux/sock_diag.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <stdexcept>
+
+#include "core/capture_reader.hpp"
+#include "core/synthetic_sensor.hpp"
+
+namespace pandarcap::bench {
+
+namespace {
+
+std::int64_t now_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+}
+
+double thread_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) / 1e9;
+}
+
+sockaddr_in ipv4(const std::string& ip, std::uint16_t port) {
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(port);
+  if (inet_pton(AF_INET, ip.c_str(), &a.sin_addr) != 1) {
+    throw std::runtime_error("not an IPv4 address: " + ip);
+  }
+  return a;
+}
+
+int udp_socket() {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) throw std::runtime_error(std::string("socket: ") + std::strerror(errno));
+  return fd;
+}
+
+// Valid packets due by `elapsed_s`: the base rate, plus the extra of every burst window so far.
+double due_packets(const GeneratorOptions& o, double elapsed_s) {
+  double due = o.rate_pps * elapsed_s;
+  if (o.burst_ms > 0 && o.burst_factor > 1 && o.burst_every_s > 0) {
+    const double window = o.burst_ms / 1000.0;
+    const double whole = std::floor(elapsed_s / o.burst_every_s);
+    const double into = std::min(window, elapsed_s - whole * o.burst_every_s);
+    due += o.rate_pps * (o.burst_factor - 1) * (whole * window + into);
+  }
+  return due;
+}
+
+}  // namespace
+
+TrafficSource TrafficSource::synthetic(ReturnMode mode, std::size_t count) {
+  TrafficSource source;
+  SyntheticSensorConfig config;
+  config.return_mode = mode;
+  SyntheticSensor sensor(config);
+  std::array<std::uint8_t, kMaxPacketBytes> buffer{};
+  for (std::size_t i = 0; i < count; ++i) {
+    const std::size_t size = sensor.next(buffer);
+    source.bodies.emplace_back(buffer.begin(), buffer.begin() + static_cast<long>(size));
+  }
+  source.description =
+      std::string("simulated Pandar40P, ") + std::string(to_string(mode)) + " return, 600 RPM";
+  return source;
+}
+
+TrafficSource TrafficSource::from_capture(const std::string& path) {
+  TrafficSource source;
+  CaptureReader reader(path);
+  CaptureRecord record;
+  while (reader.next(record) == CaptureStatus::kRecord) {
+    if (validate(record.payload) != RejectReason::kNone) continue;
+    source.bodies.emplace_back(record.payload.begin(), record.payload.begin() + kPacketBytes);
+  }
+  if (source.bodies.empty()) throw std::runtime_error(path + ": no valid Pandar40P packets");
+  source.description = path;
+  return source;
+}
+
+GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& o) {
+  const int fd = udp_socket();
+  const sockaddr_in destination = ipv4(o.destination_ip, o.port);
+  int foreign_fd = -1;
+  if (o.foreign_fraction > 0) {
+    foreign_fd = udp_socket();
+    const sockaddr_in from = ipv4("127.0.0.2", 0);
+    if (::bind(foreign_fd, reinterpret_cast<const sockaddr*>(&from), sizeof from) != 0) {
+      ::close(foreign_fd);
+      ::close(fd);
+      throw std::runtime_error("cannot bind the foreign sender to 127.0.0.2");
+    }
+  }
+  const int batch = std::max(1, o.batch);
+  std::vector<mmsghdr> messages(static_cast<std::size_t>(batch));
+  std::vector<std::array<iovec, 2>> iovecs(static_cast<std::size_t>(batch));
+  std::vector<std::uint32_t> sequences(static_cast<std::size_t>(batch));
+  std::mt19937 rng(1);
+  std::array<std::uint8_t, 2048> junk{};
+
+  GeneratorResult result;
+  double foreign_credit = 0, malformed_credit = 0;
+  const std::int64_t start = now_ns();
+  const auto end = start + static_cast<std::int64_t>(o.seconds * 1e9);
+  for (;;) {
+    const std::int64_t now = now_ns();
+    if (now >= end) break;
+    const double elapsed = static_cast<double>(now - start) / 1e9;
+    const auto due = static_cast<std::uint64_t>(due_packets(o, elapsed));
+    if (due <= result.sent) {
+      // Ahead of schedule: sleep until the next packet is due (spin the last 50 µs).
+      const double wait_s = 1.0 / (o.rate_pps * std::max(1.0, o.burst_factor));
+      if (wait_s > 60e-6) {
+        const timespec pause{0, static_cast<long>((wait_s - 50e-6) * 1e9)};
+        nanosleep(&pause, nullptr);
+      }
+      continue;
+    }
+    const auto n = static_cast<unsigned>(std::min<std::uint64_t>(due - result.sent, batch));
+    for (unsigned i = 0; i < n; ++i) {
+      const std::uint64_t k = result.sent + i;
+      const auto& body = source.bodies[k % source.bodies.size()];
+      sequences[i] = static_cast<std::uint32_t>(k);  // little-endian on the wire, as the sensor
+      iovecs[i][0] = {const_cast<std::uint8_t*>(body.data()), kPacketBytes};
+      iovecs[i][1] = {&sequences[i], sizeof(std::uint32_t)};
+      messages[i] = {};
+      messages[i].msg_hdr.msg_name = const_cast<sockaddr_in*>(&destination);
+      messages[i].msg_hdr.msg_namelen = sizeof destination;
+      messages[i].msg_hdr.msg_iov = iovecs[i].data();
+      messages[i].msg_hdr.msg_iovlen = 2;
+    }
+    const int sent = ::sendmmsg(fd, messages.data(), n, 0);
+    if (sent < 0) {
+      if (errno != ENOBUFS && errno != EAGAIN && errno != EINTR) ++result.send_errors;
+      continue;
+    }
+    result.sent += static_cast<std::uint64_t>(sent);
+    // The extra traffic, sent one datagram at a time beside the valid stream.
+    foreign_credit += o.foreign_fraction * sent;
+    malformed_credit += o.malformed_fraction * sent;
+    for (; foreign_credit >= 1; foreign_credit -= 1) {
+      const auto& body = source.bodies[result.foreign_sent % source.bodies.size()];
+      if (::sendto(foreign_fd, body.data(), body.size(), 0,
+                   reinterpret_cast<const sockaddr*>(&destination), sizeof destination) > 0) {
+        ++result.foreign_sent;
+      }
+    }
+    for (; malformed_credit >= 1; malformed_credit -= 1) {
+      const std::size_t length = rng() % junk.size();
+      for (std::size_t i = 0; i < length; ++i)
+        junk[i] = static_cast<std::uint8_t>(rng());
+      if (::sendto(fd, junk.data(), length, 0, reinterpret_cast<const sockaddr*>(&destination),
+                   sizeof destination) >= 0) {
+        ++result.malformed_sent;
+      }
+    }
+  }
+  result.seconds = static_cast<double>(now_ns() - start) / 1e9;
+  result.achieved_pps = static_cast<double>(result.sent) / result.seconds;
+  if (foreign_fd >= 0) ::close(foreign_fd);
+  ::close(fd);
+  return result;
+}
+
+ReferenceReceiver::ReferenceReceiver(Kind kind, std::uint64_t receive_buffer_bytes)
+    : kind_(kind), fd_(udp_socket()) {
+  const int requested = static_cast<int>(std::min<std::uint64_t>(receive_buffer_bytes, 1u << 30));
+  // As the daemon does: force past rmem_max when privileged, else take what the kernel allows.
+  if (::setsockopt(fd_, SOL_SOCKET, SO_RCVBUFFORCE, &requested, sizeof requested) != 0) {
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &requested, sizeof requested);
+  }
+  socklen_t length = sizeof granted_;
+  ::getsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &granted_, &length);
+  const timeval timeout{0, 100'000};  // wake up to see the stop flag
+  ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+  sockaddr_in address = ipv4("127.0.0.1", 0);
+  if (::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+    ::close(fd_);
+    throw std::runtime_error(std::string("bind: ") + std::strerror(errno));
+  }
+  length = sizeof address;
+  ::getsockname(fd_, reinterpret_cast<sockaddr*>(&address), &length);
+  port_ = ntohs(address.sin_port);
+  thread_ = std::thread([this] { run(); });
+}
+
+ReferenceReceiver::~ReferenceReceiver() {
+  stop_.store(true);
+  if (thread_.joinable()) thread_.join();
+  ::close(fd_);
+}
+
+void ReferenceReceiver::run() {
+  constexpr int kBatch = 64;
+  std::vector<std::array<std::uint8_t, 2048>> buffers(kBatch);
+  std::array<iovec, kBatch> iov{};
+  std::array<mmsghdr, kBatch> messages{};
+  for (int i = 0; i < kBatch; ++i) {
+    iov[i] = {buffers[i].data(), buffers[i].size()};
+    messages[i].msg_hdr.msg_iov = &iov[i];
+    messages[i].msg_hdr.msg_iovlen = 1;
+  }
+  const double cpu_start = thread_cpu_seconds();
+  while (!stop_.load(std::memory_order_relaxed)) {
+    if (kind_ == Kind::kRecvmmsg) {
+      const int n = ::recvmmsg(fd_, messages.data(), kBatch, MSG_WAITFORONE, nullptr);
+      if (n > 0) received_.fetch_add(static_cast<std::uint64_t>(n), std::memory_order_relaxed);
+    } else {
+      if (::recvfrom(fd_, buffers[0].data(), buffers[0].size(), 0, nullptr, nullptr) >= 0) {
+        received_.fetch_add(1, std::memory_order_relaxed);
+      }
+    }
+  }
+  cpu_seconds_ = thread_cpu_seconds() - cpu_start;
+}
+
+void ReferenceReceiver::drain_and_stop(int quiet_ms) {
+  std::uint64_t last = received();
+  for (;;) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(quiet_ms));  // a quiet period, polled
+    const std::uint64_t now = received();
+    if (now == last) break;
+    last = now;
+  }
+  stop_.store(true);
+  if (thread_.joinable()) thread_.join();
+}
+
+std::uint64_t ReferenceReceiver::kernel_drops() const {
+  std::array<std::uint32_t, SK_MEMINFO_VARS> info{};
+  socklen_t length = sizeof info;
+  if (::getsockopt(fd_, SOL_SOCKET, SO_MEMINFO, info.data(), &length) != 0) return 0;
+  return info[SK_MEMINFO_DROPS];
+}
+
+}  // namespace pandarcap::bench

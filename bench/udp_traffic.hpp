@@ -1,0 +1,89 @@
+// Loopback traffic for the benchmark harness: a paced Pandar40P packet generator (sendmmsg) and the
+// two reference receivers the daemon is compared with (recvmmsg into a buffer, and recvfrom one
+// packet per call, the vendor SDKs' way).
+//
+// Every generated packet is a 1266-byte Pandar40P packet whose 4-byte UDP sequence the generator
+// writes itself (0, 1, 2, ...), so a receiver's loss is exact: sent - received.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/packet.hpp"
+
+namespace pandarcap::bench {
+
+// Packet bodies to send (the 1262 bytes before the sequence), cycled in order.
+struct TrafficSource {
+  std::vector<std::vector<std::uint8_t>> bodies;
+  std::string description;
+
+  // `count` packets of the simulated sensor (600 RPM) in `mode`.
+  static TrafficSource synthetic(ReturnMode mode, std::size_t count);
+  // Every valid Pandar40P packet of a pcap/pcapng file (its own sequence, if any, is replaced).
+  // Throws std::runtime_error when the file has none.
+  static TrafficSource from_capture(const std::string& path);
+};
+
+struct GeneratorOptions {
+  std::string destination_ip = "127.0.0.1";  // never anything the user did not give
+  std::uint16_t port = 2368;
+  double rate_pps = 3600;
+  double seconds = 10;
+  int batch = 32;  // datagrams per sendmmsg
+  // Bursts: every `burst_every_s`, `burst_ms` at `burst_factor` x the rate.
+  double burst_factor = 1;
+  double burst_ms = 0;
+  double burst_every_s = 1;
+  // Extra traffic mixed in, as fractions of the valid packets: datagrams from 127.0.0.2 (foreign)
+  // and random-length random bytes (malformed).
+  double foreign_fraction = 0;
+  double malformed_fraction = 0;
+};
+
+struct GeneratorResult {
+  std::uint64_t sent = 0;  // valid packets, sequences 0 .. sent-1
+  std::uint64_t foreign_sent = 0;
+  std::uint64_t malformed_sent = 0;
+  std::uint64_t send_errors = 0;  // sendmmsg failures other than a full socket buffer
+  double seconds = 0;
+  double achieved_pps = 0;  // valid packets per second actually sent
+};
+
+// Sends for `options.seconds`, paced in batches against CLOCK_MONOTONIC. Throws
+// std::runtime_error when the socket cannot be set up.
+GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& options);
+
+// A reference receiver on 127.0.0.1: a thread that receives and counts, nothing else.
+class ReferenceReceiver {
+ public:
+  enum class Kind { kRecvmmsg, kRecvfrom };
+  ReferenceReceiver(Kind kind, std::uint64_t receive_buffer_bytes);
+  ~ReferenceReceiver();
+  ReferenceReceiver(const ReferenceReceiver&) = delete;
+  ReferenceReceiver& operator=(const ReferenceReceiver&) = delete;
+
+  std::uint16_t port() const noexcept { return port_; }
+  int receive_buffer_granted() const noexcept { return granted_; }
+  // Waits until nothing arrived for `quiet_ms`, then stops the thread.
+  void drain_and_stop(int quiet_ms);
+  std::uint64_t received() const noexcept { return received_.load(std::memory_order_relaxed); }
+  std::uint64_t kernel_drops() const;  // SO_MEMINFO
+  double cpu_seconds() const noexcept { return cpu_seconds_; }
+
+ private:
+  void run();
+  Kind kind_;
+  int fd_ = -1;
+  std::uint16_t port_ = 0;
+  int granted_ = 0;
+  std::atomic<bool> stop_{false};
+  std::atomic<std::uint64_t> received_{0};
+  double cpu_seconds_ = 0;
+  std::thread thread_;
+};
+
+}  // namespace pandarcap::bench

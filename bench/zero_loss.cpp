@@ -1,0 +1,425 @@
+#include "bench/zero_loss.hpp"
+
+#include <fmt/format.h>
+#include <signal.h>
+#include <sys/utsname.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+#include "bench/child_process.hpp"
+#include "bench/udp_traffic.hpp"
+
+namespace pandarcap::bench {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::ordered_json;
+using namespace std::chrono_literals;
+
+std::string read_file(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// a / b, 0 when b is 0.
+double ratio(double a, std::uint64_t b) {
+  return b == 0 ? 0.0 : a / static_cast<double>(b);
+}
+
+std::string trim(std::string s) {
+  while (!s.empty() && (s.back() == '\n' || s.back() == ' '))
+    s.pop_back();
+  return s;
+}
+
+// CPU ticks (utime + stime) per thread name, from /proc/PID/task/*/stat.
+std::map<std::string, std::uint64_t> thread_ticks(int pid) {
+  std::map<std::string, std::uint64_t> ticks;
+  std::error_code ec;
+  for (const auto& task : fs::directory_iterator(fmt::format("/proc/{}/task", pid), ec)) {
+    const std::string stat = read_file(task.path() / "stat");
+    const auto close = stat.rfind(')');  // the name may hold spaces; fields follow the last ')'
+    if (close == std::string::npos) continue;
+    std::istringstream fields(stat.substr(close + 2));
+    std::string field;
+    std::uint64_t utime = 0, stime = 0;
+    for (int i = 3; i <= 15 && fields >> field; ++i) {
+      if (i == 14) utime = std::stoull(field);
+      if (i == 15) stime = std::stoull(field);
+    }
+    ticks[trim(read_file(task.path() / "comm"))] += utime + stime;
+  }
+  return ticks;
+}
+
+std::uint64_t peak_rss_bytes(int pid) {
+  std::istringstream status(read_file(fmt::format("/proc/{}/status", pid)));
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) return std::stoull(line.substr(6)) * 1024;  // kB
+  }
+  return 0;
+}
+
+std::optional<ordered_json> last_health(const fs::path& out) {
+  std::ifstream in(out / "health" / "health.jsonl");
+  std::string line, last;
+  while (std::getline(in, line)) {
+    if (!line.empty()) last = line;
+  }
+  if (last.empty()) return std::nullopt;
+  try {
+    return ordered_json::parse(last);
+  } catch (const std::exception&) {
+    return std::nullopt;  // a line being appended right now
+  }
+}
+
+std::uint64_t counter(const ordered_json& health, const char* name) {
+  return health["counters"].value(name, std::uint64_t{0});
+}
+
+fs::path default_daemon() {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? fs::path("pandarcapd") : self.parent_path() / "pandarcapd";
+}
+
+std::string command_output(const std::string& command) {
+  std::string out;
+  if (FILE* p = ::popen(command.c_str(), "r")) {
+    char buffer[256];
+    while (std::fgets(buffer, sizeof buffer, p) != nullptr)
+      out += buffer;
+    ::pclose(p);
+  }
+  return trim(out);
+}
+
+ordered_json environment(const ZeroLossOptions& o, const fs::path& daemon) {
+  ordered_json env;
+  std::string model, flags;
+  std::istringstream cpuinfo(read_file("/proc/cpuinfo"));
+  std::string line;
+  while (std::getline(cpuinfo, line)) {
+    if (model.empty() && line.rfind("model name", 0) == 0)
+      model = trim(line.substr(line.find(':') + 2));
+    if (flags.empty() && line.rfind("flags", 0) == 0) flags = line.substr(line.find(':') + 2);
+  }
+  ordered_json simd = ordered_json::array();
+  for (const char* f :
+       {"sse4_2", "avx2", "fma", "avx512f", "avx512bw", "avx512vl", "asimd", "sve"}) {
+    if ((" " + flags + " ").find(std::string(" ") + f + " ") != std::string::npos)
+      simd.push_back(f);
+  }
+  utsname u{};
+  ::uname(&u);
+  env["cpu_model"] = model;
+  env["cpu_flags"] = simd;
+  env["cores"] = std::thread::hardware_concurrency();
+  env["kernel"] = std::string(u.sysname) + " " + u.release;
+  env["rmem_max"] = std::stoull("0" + trim(read_file("/proc/sys/net/core/rmem_max")));
+  env["pinning"] = "none (threads float; generator, daemon and receivers share the machine)";
+  env["build_type"] = PANDARCAP_BUILD_TYPE;
+  env["git_commit"] = command_output(std::string("git -C '") + PANDARCAP_SOURCE_DIR +
+                                     "' rev-parse --short HEAD 2>/dev/null");
+  env["daemon"] = daemon.string();
+  env["daemon_config"] = o.daemon_config.empty() ? "defaults (all outputs on)" : o.daemon_config;
+  return env;
+}
+
+class Harness {
+ public:
+  Harness(const ZeroLossOptions& options, const TrafficSource& source, fs::path work)
+      : o_(options),
+        source_(source),
+        work_(std::move(work)),
+        daemon_(options.daemon.empty() ? default_daemon() : fs::path(options.daemon)) {}
+
+  const fs::path& daemon() const { return daemon_; }
+  std::string daemon_socket_buffer;
+
+  // One trial of the real daemon at `rate`; its outputs are removed afterwards (a fast trial
+  // writes gigabytes of pcap).
+  ordered_json daemon_trial(double rate, double seconds, bool keep_cpu_detail) {
+    const fs::path dir = work_ / fmt::format("daemon_{:03d}", trials_++);
+    fs::create_directories(dir);
+    const fs::path out = dir / "out";
+    const std::uint16_t port = harness::free_udp_port();
+    std::vector<std::string> args;
+    if (!o_.daemon_config.empty()) args = {"-c", o_.daemon_config};
+    for (const std::string& a :
+         {std::string("--host-ip"), std::string("127.0.0.1"), std::string("--port"),
+          std::to_string(port), std::string("--output-dir"), out.string()}) {
+      args.push_back(a);
+    }
+    harness::ChildProcess process(daemon_, args, dir / "daemon.log");
+    if (!harness::wait_until([&] { return process.log().find("ready:") != std::string::npos; },
+                             15s)) {
+      throw std::runtime_error("pandarcapd did not become ready:\n" + process.log());
+    }
+    if (daemon_socket_buffer.empty()) {
+      const std::string log = process.log();
+      const auto at = log.find("socket receive buffer: ");
+      if (at != std::string::npos) {
+        daemon_socket_buffer = log.substr(at + 23, log.find('\n', at) - at - 23);
+      }
+    }
+    const auto cpu_before = thread_ticks(process.pid());
+    GeneratorOptions g;
+    g.port = port;
+    g.rate_pps = rate;
+    g.seconds = seconds;
+    const GeneratorResult sent = run_generator(source_, g);
+    const auto cpu_after = thread_ticks(process.pid());
+    const std::uint64_t rss = peak_rss_bytes(process.pid());
+    // Let the daemon count everything (it reads kernel drops once a second), then stop it.
+    harness::wait_until(
+        [&] {
+          const auto h = last_health(out);
+          return h && counter(*h, "datagrams_received") + counter(*h, "kernel_drops") >= sent.sent;
+        },
+        3s);
+    process.signal(SIGTERM);
+    const std::optional<int> status = process.wait_exit(30s);
+    const auto health = last_health(out);
+    if (!status || *status != 0 || !health) {
+      throw std::runtime_error(fmt::format("pandarcapd trial at {:.0f} packets/s ended badly:\n{}",
+                                           rate, process.log()));
+    }
+    const ordered_json& h = *health;
+    const std::uint64_t received = counter(h, "datagrams_received");
+    const std::uint64_t accepted = counter(h, "packets_accepted");
+    ordered_json stages = {{"kernel_drops", counter(h, "kernel_drops")},
+                           {"ring_overruns", counter(h, "ring_overruns")},
+                           {"rejected", counter(h, "packets_rejected")},
+                           {"frames_dropped", counter(h, "frames_dropped_no_arena") +
+                                                  counter(h, "frames_dropped_writer_busy")},
+                           {"pcap_packets_not_recorded", counter(h, "pcap_packets_not_recorded")},
+                           {"write_errors", counter(h, "write_errors")},
+                           {"unaccounted", sent.sent > received + counter(h, "kernel_drops")
+                                               ? sent.sent - received - counter(h, "kernel_drops")
+                                               : 0}};
+    const std::uint64_t lost = sent.sent > accepted ? sent.sent - accepted : 0;
+    // Packets the daemon failed to do its whole job on: not decoded, or not recorded to pcap.
+    const std::uint64_t failed =
+        std::min(sent.sent, lost + counter(h, "pcap_packets_not_recorded"));
+    bool clean = lost == 0;
+    for (const auto& [stage, n] : stages.items())
+      clean = clean && n.get<std::uint64_t>() == 0;
+    ordered_json t = {
+        {"offered_pps", rate},
+        {"achieved_pps", sent.achieved_pps},
+        {"sent", sent.sent},
+        {"received", received},
+        {"accepted", accepted},
+        {"delivered_pps", static_cast<double>(accepted) / sent.seconds},
+        {"lost", lost},
+        {"loss_fraction", ratio(static_cast<double>(failed), sent.sent)},
+        {"zero_loss", clean},
+        {"loss_by_stage", stages},
+        {"sequence_lost", counter(h, "sequence_lost")},
+        {"latency", h["latency"]},
+        {"peak_rss_bytes", rss},
+        {"hot_path_allocations", h["counters"].contains("hot_path_allocations")
+                                     ? ordered_json(counter(h, "hot_path_allocations"))
+                                     : ordered_json(nullptr)}};
+    if (keep_cpu_detail) {
+      const double tick = static_cast<double>(::sysconf(_SC_CLK_TCK));
+      double total = 0;
+      ordered_json per_thread;
+      for (const auto& [name, after] : cpu_after) {
+        const auto before = cpu_before.count(name) ? cpu_before.at(name) : 0;
+        const double cpu_s = static_cast<double>(after - before) / tick;
+        total += cpu_s;
+        per_thread[name] = {{"cpu_fraction_of_one_core", cpu_s / sent.seconds},
+                            {"cpu_us_per_packet", ratio(cpu_s * 1e6, sent.sent)}};
+      }
+      t["cpu_fraction_of_one_core"] = total / sent.seconds;
+      t["cpu_by_thread"] = per_thread;
+      t["cpu_resolution_s"] = 1.0 / tick;
+    }
+    std::error_code ec;
+    fs::remove_all(out, ec);
+    return t;
+  }
+
+  ordered_json reference_trial(ReferenceReceiver::Kind kind, double rate, double seconds) {
+    ReferenceReceiver receiver(kind, o_.receive_buffer_bytes);
+    GeneratorOptions g;
+    g.port = receiver.port();
+    g.rate_pps = rate;
+    g.seconds = seconds;
+    const GeneratorResult sent = run_generator(source_, g);
+    receiver.drain_and_stop(200);
+    const std::uint64_t received = std::min(receiver.received(), sent.sent);
+    const std::uint64_t lost = sent.sent - received;
+    return {{"offered_pps", rate},
+            {"achieved_pps", sent.achieved_pps},
+            {"sent", sent.sent},
+            {"received", received},
+            {"delivered_pps", static_cast<double>(received) / sent.seconds},
+            {"lost", lost},
+            {"loss_fraction", ratio(static_cast<double>(lost), sent.sent)},
+            {"zero_loss", lost == 0},
+            {"kernel_drops", receiver.kernel_drops()},
+            {"receive_buffer_granted", receiver.receive_buffer_granted()},
+            {"cpu_us_per_packet", ratio(receiver.cpu_seconds() * 1e6, received)}};
+  }
+
+ private:
+  const ZeroLossOptions& o_;
+  const TrafficSource& source_;
+  fs::path work_;
+  fs::path daemon_;
+  int trials_ = 0;
+};
+
+struct SearchResult {
+  double pps = 0;  // the rate actually sent in the best passing trial (0: even the lowest failed)
+  bool generator_limited = false;  // that trial could not send its offered rate
+};
+
+// Highest rate in [lo, hi] whose trial passes: both ends first, then geometric bisection on the
+// offered rate. The result is the achieved rate of the best passing trial: on a 2-core machine
+// the generator itself may fall short of the offered rate, and then the result is a lower bound
+// (generator_limited). Every trial is appended to `trials`.
+SearchResult search(const std::function<ordered_json(double)>& trial,
+                    const std::function<bool(const ordered_json&)>& passes, double lo, double hi,
+                    int steps, ordered_json& trials) {
+  SearchResult best;
+  auto run = [&](double rate) {
+    ordered_json t = trial(rate);
+    const bool ok = passes(t);
+    t["passed"] = ok;
+    const double achieved = t["achieved_pps"].get<double>();
+    if (ok && achieved > best.pps) {
+      best.pps = achieved;
+      best.generator_limited = achieved < 0.97 * rate;
+    }
+    trials.push_back(t);
+    return ok;
+  };
+  if (!run(lo) || hi <= lo || run(hi)) return best;
+  for (int i = 0; i < steps; ++i) {
+    const double mid = std::round(std::sqrt(lo * hi));
+    if (mid <= lo || mid >= hi) break;
+    (run(mid) ? lo : hi) = mid;
+  }
+  return best;
+}
+
+}  // namespace
+
+ordered_json run_zero_loss(const ZeroLossOptions& o) {
+  const TrafficSource source = o.capture.empty() ? TrafficSource::synthetic(ReturnMode::kDual, 3600)
+                                                 : TrafficSource::from_capture(o.capture);
+  const bool temporary = o.work_dir.empty();
+  const fs::path work =
+      temporary ? fs::temp_directory_path() / fmt::format("pandarcap-bench-{}", ::getpid())
+                : fs::path(o.work_dir);
+  fs::create_directories(work);
+  Harness harness(o, source, work);
+
+  ordered_json report;
+  ordered_json trials = {{"daemon", ordered_json::array()},
+                         {"bare_recvmmsg", ordered_json::array()},
+                         {"recvfrom", ordered_json::array()}};
+  const auto zero = [](const ordered_json& t) { return t["zero_loss"].get<bool>(); };
+  const auto within = [&](const ordered_json& t) {
+    return t["loss_fraction"].get<double>() <= o.loss_threshold;
+  };
+  const auto daemon = [&](double rate) {
+    return harness.daemon_trial(rate, o.trial_seconds, false);
+  };
+
+  // At the sensor's rate first: the daemon's cost when it is doing its real job.
+  ordered_json at_sensor =
+      harness.daemon_trial(o.sensor_rate, std::max(o.trial_seconds, 3.0), true);
+
+  const SearchResult daemon_zero =
+      search(daemon, zero, o.min_rate, o.max_rate, o.steps, trials["daemon"]);
+  const SearchResult daemon_within = search(daemon, within, std::max(daemon_zero.pps, o.min_rate),
+                                            o.max_rate, o.steps, trials["daemon"]);
+  SearchResult bare, recvfrom;
+  if (!o.skip_references) {
+    bare = search(
+        [&](double r) {
+          return harness.reference_trial(ReferenceReceiver::Kind::kRecvmmsg, r, o.trial_seconds);
+        },
+        zero, o.min_rate, o.max_rate, o.steps, trials["bare_recvmmsg"]);
+    recvfrom = search(
+        [&](double r) {
+          return harness.reference_trial(ReferenceReceiver::Kind::kRecvfrom, r, o.trial_seconds);
+        },
+        zero, o.min_rate, o.max_rate, o.steps, trials["recvfrom"]);
+  }
+
+  report["daemon_zero_loss_pps"] = daemon_zero.pps;
+  report["daemon_loss_at_most_0_5_percent_pps"] = daemon_within.pps;
+  report["bare_recvmmsg_zero_loss_pps"] = bare.pps;
+  report["recvfrom_zero_loss_pps"] = recvfrom.pps;
+  report["daemon_vs_bare"] = bare.pps > 0 ? daemon_zero.pps / bare.pps : 0.0;
+  report["daemon_vs_recvfrom"] = recvfrom.pps > 0 ? daemon_zero.pps / recvfrom.pps : 0.0;
+  // A result the generator could not push past is a lower bound, not the receiver's limit.
+  report["generator_limited"] = {{"daemon", daemon_zero.generator_limited},
+                                 {"bare_recvmmsg", bare.generator_limited},
+                                 {"recvfrom", recvfrom.generator_limited}};
+  const ordered_json& latency = at_sensor["latency"];
+  report["at_sensor_rate"] = {{"offered_pps", o.sensor_rate},
+                              {"achieved_pps", at_sensor["achieved_pps"]},
+                              {"lost", at_sensor["lost"]},
+                              {"cpu_fraction_of_one_core", at_sensor["cpu_fraction_of_one_core"]},
+                              {"cpu_by_thread", at_sensor["cpu_by_thread"]},
+                              {"latency_p50_us", latency.value("p50_us", 0.0)},
+                              {"latency_p99_us", latency.value("p99_us", 0.0)},
+                              {"latency_p999_us", latency.value("p999_us", 0.0)},
+                              {"latency_max_us", latency.value("max_us", 0.0)},
+                              {"hot_path_allocations", at_sensor["hot_path_allocations"]},
+                              {"peak_rss_bytes", at_sensor["peak_rss_bytes"]}};
+  const auto& s = report["at_sensor_rate"];
+  report["goals"] = {
+      {"daemon_vs_bare_at_least_0_9", bare.pps > 0 && daemon_zero.pps >= 0.9 * bare.pps},
+      {"daemon_above_recvfrom", recvfrom.pps > 0 && daemon_zero.pps > recvfrom.pps},
+      {"cpu_at_sensor_rate_at_most_2_percent", s["cpu_fraction_of_one_core"].get<double>() <= 0.02},
+      {"latency_p99_at_most_1_ms", s["latency_p99_us"].get<double>() <= 1000.0},
+      {"peak_rss_at_most_64_mib", s["peak_rss_bytes"].get<std::uint64_t>() <= (64u << 20)},
+      {"zero_hot_path_allocations", s["hot_path_allocations"].is_number() &&
+                                        s["hot_path_allocations"].get<std::uint64_t>() == 0}};
+  ordered_json env = environment(o, harness.daemon());
+  env["daemon_socket_buffer_granted"] = harness.daemon_socket_buffer;
+  if (!trials["bare_recvmmsg"].empty()) {
+    env["reference_socket_buffer_granted"] = trials["bare_recvmmsg"][0]["receive_buffer_granted"];
+  }
+  report["environment"] = env;
+  report["settings"] = {{"traffic", source.description},
+                        {"trial_seconds", o.trial_seconds},
+                        {"min_rate", o.min_rate},
+                        {"max_rate", o.max_rate},
+                        {"steps", o.steps},
+                        {"loss_threshold", o.loss_threshold},
+                        {"search",
+                         "both ends, then geometric bisection; a trial passes with zero "
+                         "loss at every stage"}};
+  report["trials"] = trials;
+  if (temporary) {
+    std::error_code ec;
+    fs::remove_all(work, ec);
+  }
+  return report;
+}
+
+}  // namespace pandarcap::bench

@@ -1,0 +1,47 @@
+// `pandarcap-bench zero-loss`: the highest packet rate the real pandarcapd takes with zero loss
+// (RFC 2544 style binary search over trials of fixed length), next to two reference receivers
+// searched the same way in the same run: a bare recvmmsg loop (the kernel path's ceiling on this
+// machine) and a recvfrom loop (one packet per call, as the vendor SDKs receive). Plus one trial
+// at a dual-return sensor's rate (3600 packets/s) measuring the daemon's CPU per thread, its
+// receive-to-decoded latency, peak RSS and hot-path allocations.
+//
+// Loss in a daemon trial is taken from the daemon's own final health record, per stage (kernel
+// socket drops, ring overruns, rejects, frames dropped for want of an arena or by a busy writer,
+// packets not recorded to pcap), and cross-checked against the generator's count: packets sent
+// that the daemon never counted at all are reported as `unaccounted`.
+#pragma once
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+namespace pandarcap::bench {
+
+struct ZeroLossOptions {
+  std::string daemon;         // pandarcapd to start; "" = the one beside pandarcap-bench
+  std::string daemon_config;  // passed as -c; the harness overrides address, port and output
+  std::string capture;        // packets to send; "" = the simulated sensor (dual return)
+  std::string work_dir;       // daemon outputs and logs; "" = a temporary directory, removed
+  double trial_seconds = 10;  // RFC 2544 uses 60
+  double min_rate = 1000;     // packets/s; the search starts by checking this rate
+  double max_rate = 1'000'000;
+  int steps = 7;                  // bisections after the two end points (geometric)
+  double sensor_rate = 3600;      // one dual-return Pandar40P at 600 RPM
+  double loss_threshold = 0.005;  // the second search: highest rate at <= 0.5 % loss
+  std::uint64_t receive_buffer_bytes = 8u << 20;  // reference receivers, as the daemon's default
+  bool skip_references = false;                   // only the daemon (quick checks)
+};
+
+// Runs the whole measurement and returns the report. Throws std::runtime_error when the daemon
+// cannot be started.
+nlohmann::ordered_json run_zero_loss(const ZeroLossOptions& options);
+
+// The Markdown summary of a report.
+std::string zero_loss_markdown(const nlohmann::ordered_json& report);
+
+// An SVG plot: offered vs delivered rate for the daemon and both reference receivers, and the
+// daemon's loss per stage.
+std::string zero_loss_svg(const nlohmann::ordered_json& report);
+
+}  // namespace pandarcap::bench

@@ -1,0 +1,240 @@
+// The zero-loss report as a person reads it: a Markdown summary and an SVG plot.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "bench/zero_loss.hpp"
+
+namespace pandarcap::bench {
+
+namespace {
+
+using nlohmann::ordered_json;
+
+std::string rate(double pps) {
+  if (pps >= 1e6) return fmt::format("{:.2f} M", pps / 1e6);
+  if (pps >= 1e3) return fmt::format("{:.1f} k", pps / 1e3);
+  return fmt::format("{:.0f}", pps);
+}
+
+std::string yes_no(const ordered_json& v) {
+  return v.get<bool>() ? "met" : "**not met**";
+}
+
+// One plotted series: (offered, value) points in offered order.
+struct Series {
+  std::string name, colour;
+  std::vector<std::pair<double, double>> points;
+};
+
+Series series(const ordered_json& trials, const std::string& name, const std::string& colour,
+              const std::string& y_key) {
+  Series s{name, colour, {}};
+  for (const auto& t : trials) {
+    if (t.contains(y_key))
+      s.points.emplace_back(t["achieved_pps"].get<double>(), t[y_key].get<double>());
+  }
+  std::sort(s.points.begin(), s.points.end());
+  return s;
+}
+
+class Panel {
+ public:
+  Panel(double x0, double y0, double w, double h, double xmin, double xmax, double ymin,
+        double ymax, bool log_y)
+      : x0_(x0),
+        y0_(y0),
+        w_(w),
+        h_(h),
+        lx0_(std::log10(xmin)),
+        lx1_(std::log10(xmax)),
+        ymin_(ymin),
+        ymax_(ymax),
+        log_y_(log_y) {}
+  double x(double v) const { return x0_ + (std::log10(v) - lx0_) / (lx1_ - lx0_) * w_; }
+  double y(double v) const {
+    const double f = log_y_ ? (std::log10(std::max(v, ymin_)) - std::log10(ymin_)) /
+                                  (std::log10(ymax_) - std::log10(ymin_))
+                            : (v - ymin_) / (ymax_ - ymin_);
+    return y0_ + h_ - std::clamp(f, 0.0, 1.0) * h_;
+  }
+  void frame(std::string& svg, const std::string& title, const std::string& ylabel) const {
+    svg += fmt::format(R"(<rect x="{}" y="{}" width="{}" height="{}" fill="none" stroke="#444"/>)"
+                       "\n",
+                       x0_, y0_, w_, h_);
+    svg += fmt::format(R"(<text x="{}" y="{}" font-size="14" text-anchor="middle">{}</text>)"
+                       "\n",
+                       x0_ + w_ / 2, y0_ - 8, title);
+    svg += fmt::format(
+        R"(<text x="{}" y="{}" font-size="12" text-anchor="middle">offered packets/s</text>)"
+        "\n",
+        x0_ + w_ / 2, y0_ + h_ + 32);
+    svg += fmt::format(
+        R"svg(<text x="{}" y="{}" font-size="12" text-anchor="middle" transform="rotate(-90 {} {})">{}</text>)svg"
+        "\n",
+        x0_ - 48, y0_ + h_ / 2, x0_ - 48, y0_ + h_ / 2, ylabel);
+    for (double d = std::ceil(lx0_); d <= lx1_; d += 1) {
+      const double v = std::pow(10, d);
+      svg += fmt::format(R"(<line x1="{0}" y1="{1}" x2="{0}" y2="{2}" stroke="#ddd"/>)"
+                         R"(<text x="{0}" y="{3}" font-size="11" text-anchor="middle">{4}</text>)"
+                         "\n",
+                         x(v), y0_, y0_ + h_, y0_ + h_ + 14, rate(v));
+    }
+  }
+  void plot(std::string& svg, const Series& s) const {
+    if (s.points.empty()) return;
+    std::string path;
+    for (const auto& [px, py] : s.points)
+      path += fmt::format("{:.1f},{:.1f} ", x(px), y(py));
+    svg += fmt::format(R"(<polyline points="{}" fill="none" stroke="{}" stroke-width="2"/>)"
+                       "\n",
+                       path, s.colour);
+    for (const auto& [px, py] : s.points) {
+      svg += fmt::format(R"(<circle cx="{:.1f}" cy="{:.1f}" r="3" fill="{}"/>)"
+                         "\n",
+                         x(px), y(py), s.colour);
+    }
+  }
+
+ private:
+  double x0_, y0_, w_, h_, lx0_, lx1_, ymin_, ymax_;
+  bool log_y_;
+};
+
+}  // namespace
+
+std::string zero_loss_markdown(const ordered_json& r) {
+  const auto& s = r["at_sensor_rate"];
+  const auto& g = r["goals"];
+  const auto& env = r["environment"];
+  std::string md = "# pandarcap zero-loss benchmark\n\n";
+  md += fmt::format("Machine: {} ({} cores), {}, rmem_max {}; commit {}, {} build.\n\n",
+                    env["cpu_model"].get<std::string>(), env["cores"].get<int>(),
+                    env["kernel"].get<std::string>(), env["rmem_max"].get<std::uint64_t>(),
+                    env["git_commit"].get<std::string>(), env["build_type"].get<std::string>());
+  md += fmt::format(
+      "Traffic: {}; trials of {} s; search {}..{} packets/s.\n\n",
+      r["settings"]["traffic"].get<std::string>(), r["settings"]["trial_seconds"].get<double>(),
+      rate(r["settings"]["min_rate"].get<double>()), rate(r["settings"]["max_rate"].get<double>()));
+  md += "| receiver | zero-loss rate (packets/s) |\n|---|---:|\n";
+  md += fmt::format("| pandarcapd (frames, pcap and health on) | {} |\n",
+                    rate(r["daemon_zero_loss_pps"].get<double>()));
+  md += fmt::format("| pandarcapd at <= 0.5 % loss | {} |\n",
+                    rate(r["daemon_loss_at_most_0_5_percent_pps"].get<double>()));
+  md += fmt::format("| bare recvmmsg loop | {} |\n",
+                    rate(r["bare_recvmmsg_zero_loss_pps"].get<double>()));
+  md += fmt::format("| recvfrom, one packet per call | {} |\n\n",
+                    rate(r["recvfrom_zero_loss_pps"].get<double>()));
+  std::string limited;
+  for (const auto& [who, flag] : r["generator_limited"].items()) {
+    if (flag.get<bool>()) limited += (limited.empty() ? "" : ", ") + who;
+  }
+  if (!limited.empty()) {
+    md += "The generator could not send faster than the best passing trial for: " + limited +
+          ". Those figures are lower bounds (the sender and the receivers share this machine's "
+          "cores).\n\n";
+  }
+  md +=
+      fmt::format("Daemon vs bare recvmmsg: **{:.2f}** (goal >= 0.90: {}); above recvfrom: {}.\n\n",
+                  r["daemon_vs_bare"].get<double>(), yes_no(g["daemon_vs_bare_at_least_0_9"]),
+                  yes_no(g["daemon_above_recvfrom"]));
+  md += fmt::format("At a dual-return sensor's rate ({} packets/s):\n\n",
+                    s["offered_pps"].get<double>());
+  md += fmt::format("- CPU: **{:.2f} %** of one core in total (goal <= 2 %: {})",
+                    100 * s["cpu_fraction_of_one_core"].get<double>(),
+                    yes_no(g["cpu_at_sensor_rate_at_most_2_percent"]));
+  std::string threads;
+  for (const auto& [name, t] : s["cpu_by_thread"].items()) {
+    threads += fmt::format("{}{} {:.2f} % ({:.1f} µs/packet)", threads.empty() ? "" : ", ", name,
+                           100 * t["cpu_fraction_of_one_core"].get<double>(),
+                           t["cpu_us_per_packet"].get<double>());
+  }
+  md += ": " + threads + ".\n";
+  md += fmt::format(
+      "- Receive-to-decoded latency: p50 {:.0f} µs, **p99 {:.0f} µs** (goal <= 1 ms: {}), p99.9 "
+      "{:.0f} µs, max {:.0f} µs.\n",
+      s["latency_p50_us"].get<double>(), s["latency_p99_us"].get<double>(),
+      yes_no(g["latency_p99_at_most_1_ms"]), s["latency_p999_us"].get<double>(),
+      s["latency_max_us"].get<double>());
+  md += fmt::format("- Peak RSS: **{:.1f} MiB** (goal <= 64 MiB: {}).\n",
+                    static_cast<double>(s["peak_rss_bytes"].get<std::uint64_t>()) / (1 << 20),
+                    yes_no(g["peak_rss_at_most_64_mib"]));
+  md += fmt::format(
+      "- Heap allocations in the receive, decode and writer loops after warm-up: "
+      "**{}** (goal 0: {}).\n\n",
+      s["hot_path_allocations"].dump(), yes_no(g["zero_hot_path_allocations"]));
+  for (const char* who : {"daemon", "bare_recvmmsg", "recvfrom"}) {
+    md += fmt::format(
+        "Trials, {}:\n\n| offered | achieved | delivered | lost | passed |\n"
+        "|---:|---:|---:|---:|:---:|\n",
+        who);
+    for (const auto& t : r["trials"][who]) {
+      md +=
+          fmt::format("| {} | {} | {} | {} | {} |\n", rate(t["offered_pps"].get<double>()),
+                      rate(t["achieved_pps"].get<double>()), rate(t["delivered_pps"].get<double>()),
+                      t["lost"].get<std::uint64_t>(), t.value("passed", false) ? "yes" : "no");
+    }
+    md += "\n";
+  }
+  return md;
+}
+
+std::string zero_loss_svg(const ordered_json& r) {
+  double lo = r["settings"]["min_rate"].get<double>() / 1.5;
+  double hi = r["settings"]["max_rate"].get<double>() * 1.5;
+  const auto& t = r["trials"];
+  std::vector<Series> delivered = {
+      series(t["daemon"], "pandarcapd", "#1f77b4", "delivered_pps"),
+      series(t["bare_recvmmsg"], "bare recvmmsg", "#2ca02c", "delivered_pps"),
+      series(t["recvfrom"], "recvfrom", "#ff7f0e", "delivered_pps")};
+  std::string svg =
+      R"(<svg xmlns="http://www.w3.org/2000/svg" width="1000" height="440" font-family="sans-serif">)"
+      "\n<rect width=\"1000\" height=\"440\" fill=\"white\"/>\n";
+  const Panel left(70, 40, 380, 330, lo, hi, lo, hi, true);
+  left.frame(svg, "Offered vs delivered (log-log)", "delivered packets/s");
+  left.plot(svg, {"ideal", "#bbb", {{lo, lo}, {hi, hi}}});
+  for (const Series& s : delivered)
+    left.plot(svg, s);
+  for (std::size_t i = 0; i < delivered.size(); ++i) {
+    svg += fmt::format(R"(<text x="80" y="{}" font-size="12" fill="{}">{}</text>)"
+                       "\n",
+                       60 + 16 * i, delivered[i].colour, delivered[i].name);
+  }
+
+  // Daemon loss per stage, in % of the packets sent.
+  std::vector<Series> stages;
+  const std::vector<std::pair<std::string, std::string>> names = {
+      {"kernel_drops", "#d62728"},
+      {"ring_overruns", "#9467bd"},
+      {"rejected", "#8c564b"},
+      {"pcap_packets_not_recorded", "#e377c2"},
+      {"unaccounted", "#7f7f7f"}};
+  double top = 1;
+  for (const auto& [stage, colour] : names) {
+    Series s{stage, colour, {}};
+    for (const auto& trial : t["daemon"]) {
+      const double sent = std::max(1.0, trial["sent"].get<double>());
+      const double pct = 100 * trial["loss_by_stage"][stage].get<double>() / sent;
+      s.points.emplace_back(trial["achieved_pps"].get<double>(), pct);
+      top = std::max(top, pct);
+    }
+    std::sort(s.points.begin(), s.points.end());
+    stages.push_back(s);
+  }
+  const Panel right(580, 40, 380, 330, lo, hi, 0, top * 1.1, false);
+  right.frame(svg, "pandarcapd loss per stage", "% of packets sent");
+  for (const Series& s : stages)
+    right.plot(svg, s);
+  for (std::size_t i = 0; i < stages.size(); ++i) {
+    svg += fmt::format(R"(<text x="590" y="{}" font-size="12" fill="{}">{}</text>)"
+                       "\n",
+                       60 + 16 * i, stages[i].colour, stages[i].name);
+  }
+  svg += "</svg>\n";
+  return svg;
+}
+
+}  // namespace pandarcap::bench
