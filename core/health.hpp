@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "decoder.hpp"
@@ -79,6 +80,11 @@ struct HealthGauges {
   std::string reason;  // one line saying why the state is not ok ("" when ok)
 };
 
+struct HotPathAllocations {
+  std::uint64_t receive = 0, decode = 0, writer = 0;
+  std::uint64_t total() const noexcept { return receive + decode + writer; }
+};
+
 struct HealthSnapshot {
   std::int64_t unix_time_ns = 0;  // when it was taken (CLOCK_REALTIME)
   std::string sensor;             // the `sensor` label (config: health.sensor_name)
@@ -88,6 +94,9 @@ struct HealthSnapshot {
   HealthGauges gauges;
   // Kernel receive timestamp -> decoded, since start-up; empty when replaying a file.
   LatencyHistogram latency;
+  // Heap allocations made by the receive, decode and writer loops after warm-up; absent where
+  // they cannot be counted (sanitizer builds).
+  std::optional<HotPathAllocations> hot_path_allocations;
 };
 
 }  // namespace pandarcap

@@ -198,6 +198,16 @@ std::string to_prometheus(const HealthSnapshot& h) {
            h.gauges.state == state ? 1 : 0);
   }
 
+  if (const auto& a = h.hot_path_allocations) {
+    family(out, "hot_path_allocations_total", "counter",
+           "Heap allocations in the receive, decode and writer loops after warm-up, by thread");
+    for (const auto& [thread, n] :
+         {std::pair{"receive", a->receive}, std::pair{"decode", a->decode},
+          std::pair{"writer", a->writer}}) {
+      append("pandarcap_hot_path_allocations_total{{{},thread=\"{}\"}} {}\n", sensor, thread, n);
+    }
+  }
+
   // Buckets at powers of two (exact edges of the histogram), 8.2 µs .. 1.07 s.
   family(out, "receive_to_decoded_latency_seconds", "histogram",
          "Kernel receive timestamp to decoded, per packet (live capture only)");
@@ -227,6 +237,11 @@ std::string to_json_line(const HealthSnapshot& h) {
   for (const CounterField& f : kCounters)
     counters[f.json] = h.counters.*f.member;
   counters["packets_rejected"] = h.counters.packets_rejected;
+  if (const auto& a = h.hot_path_allocations) {
+    counters["hot_path_allocations"] = a->total();
+    counters["hot_path_allocations_by_thread"] = {
+        {"receive", a->receive}, {"decode", a->decode}, {"writer", a->writer}};
+  }
   for (std::size_t i = 1; i < kRejectReasonCount; ++i) {
     counters["rejects"][std::string(to_string(static_cast<RejectReason>(i)))] =
         h.counters.rejects[i];

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <thread>
 
+#include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 
 namespace pandarcap {
@@ -138,6 +139,8 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
                        std::atomic<std::uint64_t>& heartbeat) {
   std::int64_t next_snapshot_ns = coarse_monotonic_ns();
   std::int64_t next_raw_flush_ns = next_snapshot_ns;
+  const std::int64_t warm_ns = next_snapshot_ns + kWarmUpNs;
+  bool hot = false;
   for (;;) {
     ReceiveCounters::add(heartbeat, 1);
     // Read the flag before looking at the ring: if the producer was done then, an empty ring now
@@ -161,6 +164,10 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
       last_packet_monotonic_ns_ = coarse_monotonic_ns();
     }
     const std::int64_t now = coarse_monotonic_ns();
+    if (!hot && now >= warm_ns) {
+      alloc::mark_this_thread_hot(alloc::HotThread::kDecode);
+      hot = true;
+    }
     if (now >= next_raw_flush_ns) {
       // Keep the pcap no more than ~100 ms behind, even at low packet rates.
       flush_raw();

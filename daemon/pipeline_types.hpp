@@ -82,6 +82,10 @@ struct Heartbeats {
 };
 
 // Written only by the receive (or replay) thread, read by the writer for health.
+// The receive, decode and writer loops count heap allocations (see allocation_counter.hpp) from
+// this long after they start: the first frame, file and health record are behind them by then.
+inline constexpr std::int64_t kWarmUpNs = 2'000'000'000;
+
 struct ReceiveCounters {
   std::atomic<std::uint64_t> datagrams{0};
   std::atomic<std::uint64_t> bytes{0};

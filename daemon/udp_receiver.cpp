@@ -15,6 +15,7 @@
 #include <fstream>
 #include <system_error>
 
+#include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 
 namespace pandarcap {
@@ -154,10 +155,16 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
                       ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
   Batch& batch = *buffers_;
   std::int64_t next_meminfo_ns = 0;
+  const std::int64_t warm_ns = coarse_monotonic_ns() + kWarmUpNs;
+  bool hot = false;
 
   while (!stop.load(std::memory_order_relaxed)) {
     ReceiveCounters::add(heartbeat, 1);
     const std::int64_t now = coarse_monotonic_ns();
+    if (!hot && now >= warm_ns) {
+      alloc::mark_this_thread_hot(alloc::HotThread::kReceive);
+      hot = true;
+    }
     if (now >= next_meminfo_ns) {
       read_kernel_drops(counters);
       next_meminfo_ns = now + 1'000'000'000;

@@ -13,6 +13,7 @@
 
 #include "core/health_format.hpp"
 #include "core/pcd.hpp"
+#include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/file_output.hpp"
 
@@ -178,6 +179,11 @@ HealthSnapshot Writer::build_health(std::int64_t now) {
   h.decoder = options_.decoder;
   HealthCounters& c = h.counters;
   h.latency = decode_.latency;
+  if (alloc::counting_available()) {
+    h.hot_path_allocations = HotPathAllocations{alloc::hot_allocations(alloc::HotThread::kReceive),
+                                                alloc::hot_allocations(alloc::HotThread::kDecode),
+                                                alloc::hot_allocations(alloc::HotThread::kWriter)};
+  }
   c.datagrams_received = receive_.datagrams.load(std::memory_order_relaxed);
   c.bytes_received = receive_.bytes.load(std::memory_order_relaxed);
   c.foreign_datagrams = receive_.foreign.load(std::memory_order_relaxed);
@@ -321,9 +327,15 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
                  ringbuf::SpscQueue<StatusLine>& status_out) {
   std::int64_t next_tick = monotonic_ns() + kSecondNs;
   std::uint32_t seen_generation = rotate_generation.load(std::memory_order_relaxed);
+  const std::int64_t warm_ns = monotonic_ns() + kWarmUpNs;
+  bool hot = false;
   bool ended = false;
   while (!ended) {
     ReceiveCounters::add(heartbeat, 1);
+    if (!hot && monotonic_ns() >= warm_ns) {
+      alloc::mark_this_thread_hot(alloc::HotThread::kWriter);
+      hot = true;
+    }
     if (WriterMessage* message = from_decoder_.front()) {
       switch (message->kind) {
         case WriterMessage::Kind::kFrame:
