@@ -25,6 +25,7 @@ HealthSnapshot distinct_snapshot() {
   for (int i = 0; i < 100; ++i)
     h.latency.record(100'000 + i * 1000);  // 100 .. 199 µs
   h.latency.record(3'000'000);             // one 3 ms outlier
+  h.hot_path_allocations = HotPathAllocations{0, 0, 7};
   HealthCounters& c = h.counters;
   std::uint64_t v = 1000;
   for (std::uint64_t* field : {&c.datagrams_received,
@@ -182,6 +183,22 @@ TEST_CASE("Latency is a Prometheus histogram and percentiles in the JSON line", 
   CHECK(latency.at("p99_us").get<double>() >= 199.0);
   CHECK(latency.at("p99_us").get<double>() <= 199.0 * 1.125);
   CHECK(latency.at("p999_us").get<double>() == 3000.0);  // the outlier, capped at the max
+}
+
+TEST_CASE("Hot-path allocations: per thread when counted, absent when not", "[health]") {
+  HealthSnapshot h = distinct_snapshot();
+  const std::string sensor = R"(sensor="front \"left\"\\lidar")";
+  auto s = samples(to_prometheus(h));
+  CHECK(s.at("pandarcap_hot_path_allocations_total{" + sensor + ",thread=\"decode\"}") == "0");
+  CHECK(s.at("pandarcap_hot_path_allocations_total{" + sensor + ",thread=\"writer\"}") == "7");
+  auto j = nlohmann::json::parse(to_json_line(h));
+  CHECK(j.at("counters").at("hot_path_allocations") == 7);
+  CHECK(j.at("counters").at("hot_path_allocations_by_thread").at("writer") == 7);
+  h.hot_path_allocations.reset();  // a sanitizer build: nothing claimed
+  s = samples(to_prometheus(h));
+  CHECK(s.count("pandarcap_hot_path_allocations_total{" + sensor + ",thread=\"writer\"}") == 0);
+  j = nlohmann::json::parse(to_json_line(h));
+  CHECK_FALSE(j.at("counters").contains("hot_path_allocations"));
 }
 
 TEST_CASE("promtool accepts the Prometheus file", "[health]") {
