@@ -246,8 +246,9 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(c.at("rejects").at("bad_return_mode") == 14);
   CHECK(c.at("rejects").size() == kRejectReasonCount - 1);
   CHECK(c.at("filtered_points").at("dual_too_close") == 24);
-  // 31 scalar counters in the table + packets_rejected + the two reason maps.
-  CHECK(c.size() == 34);
+  // 31 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
+  // allocation total and its per-thread map.
+  CHECK(c.size() == 36);
   const auto& g = j.at("gauges");
   CHECK(g.at("rpm_tail") == 600.0);
   CHECK(g.at("rpm_measured") == 599.5);
