@@ -4,7 +4,6 @@
 
 #include <cmath>
 #include <ctime>
-#include <nlohmann/json.hpp>
 
 namespace pandarcap {
 
@@ -120,25 +119,23 @@ constexpr GaugeField kGauges[] = {
 
 constexpr const char* kReturnModes[] = {"last", "strongest", "dual"};
 
-void family(std::string& out, std::string_view name, std::string_view type, std::string_view help) {
-  fmt::format_to(std::back_inserter(out), "# HELP pandarcap_{} {}\n# TYPE pandarcap_{} {}\n", name,
-                 help, name, type);
+void family(std::string& out, std::string_view name, std::string_view type, std::string_view help,
+            std::string_view suffix = {}) {
+  fmt::format_to(std::back_inserter(out), "# HELP pandarcap_{}{} {}\n# TYPE pandarcap_{}{} {}\n",
+                 name, suffix, help, name, suffix, type);
 }
 
-std::string rfc3339(std::int64_t unix_ns) {
+void append_rfc3339(std::string& out, std::int64_t unix_ns) {
   const std::time_t seconds = static_cast<std::time_t>(unix_ns / 1'000'000'000);
   const auto millis = static_cast<int>((unix_ns % 1'000'000'000) / 1'000'000);
   std::tm tm{};
   gmtime_r(&seconds, &tm);
-  return fmt::format("{:04}-{:02}-{:02}T{:02}:{:02}:{:02}.{:03}Z", tm.tm_year + 1900, tm.tm_mon + 1,
-                     tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, millis);
+  fmt::format_to(std::back_inserter(out), "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}.{:03}Z",
+                 tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec,
+                 millis);
 }
 
-}  // namespace
-
-std::string escape_label_value(std::string_view value) {
-  std::string out;
-  out.reserve(value.size());
+void append_label_value(std::string& out, std::string_view value) {
   for (const char c : value) {
     if (c == '\\') {
       out += "\\\\";
@@ -150,23 +147,106 @@ std::string escape_label_value(std::string_view value) {
       out += c;
     }
   }
+}
+
+// Length of the valid UTF-8 sequence starting at s[i], or 0 when it is not valid.
+std::size_t utf8_sequence(std::string_view s, std::size_t i) {
+  const auto b = static_cast<unsigned char>(s[i]);
+  std::size_t n = 0;
+  unsigned min = 0;
+  if (b >= 0xC2 && b <= 0xDF) {
+    n = 2, min = 0x80;
+  } else if (b >= 0xE0 && b <= 0xEF) {
+    n = 3, min = 0x800;
+  } else if (b >= 0xF0 && b <= 0xF4) {
+    n = 4, min = 0x10000;
+  } else {
+    return 0;
+  }
+  if (i + n > s.size()) return 0;
+  unsigned code = b & (0x7F >> n);
+  for (std::size_t k = 1; k < n; ++k) {
+    const auto c = static_cast<unsigned char>(s[i + k]);
+    if ((c & 0xC0) != 0x80) return 0;
+    code = (code << 6) | (c & 0x3F);
+  }
+  if (code < min || code > 0x10FFFF || (code >= 0xD800 && code <= 0xDFFF)) return 0;
+  return n;
+}
+
+// A JSON string. Bytes that are not valid UTF-8 (an error message may carry some) become U+FFFD.
+void append_json_string(std::string& out, std::string_view s) {
+  out += '"';
+  for (std::size_t i = 0; i < s.size();) {
+    const auto c = static_cast<unsigned char>(s[i]);
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += static_cast<char>(c);
+      ++i;
+    } else if (c < 0x20) {
+      fmt::format_to(std::back_inserter(out), "\\u{:04x}", c);
+      ++i;
+    } else if (c < 0x80) {
+      out += static_cast<char>(c);
+      ++i;
+    } else if (const std::size_t n = utf8_sequence(s, i); n != 0) {
+      out.append(s.substr(i, n));
+      i += n;
+    } else {
+      out += "\\ufffd";
+      ++i;
+    }
+  }
+  out += '"';
+}
+
+// A JSON number; JSON has no NaN or infinity, so those become null.
+void append_json_number(std::string& out, double v) {
+  if (std::isfinite(v)) {
+    fmt::format_to(std::back_inserter(out), "{}", v);
+  } else {
+    out += "null";
+  }
+}
+
+}  // namespace
+
+std::string escape_label_value(std::string_view value) {
+  std::string out;
+  out.reserve(value.size());
+  append_label_value(out, value);
   return out;
 }
 
-std::string to_prometheus(const HealthSnapshot& h) {
-  std::string out;
-  out.reserve(16 * 1024);
-  const std::string sensor = fmt::format("sensor=\"{}\"", escape_label_value(h.sensor));
+void render_prometheus(const HealthSnapshot& h, std::string& out) {
+  out.clear();
+  // The sensor label, escaped once per file into a stack buffer (a name longer than ~250
+  // characters would spill to the heap; nothing shorter allocates).
+  fmt::basic_memory_buffer<char, 512> label;
+  fmt::format_to(std::back_inserter(label), "sensor=\"");
+  for (const char c : h.sensor) {
+    if (c == '\\' || c == '"') label.push_back('\\');
+    if (c == '\n') {
+      label.append(std::string_view("\\n"));
+    } else {
+      label.push_back(c);
+    }
+  }
+  label.push_back('"');
+  const std::string_view sensor(label.data(), label.size());
   const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
     fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
   };
 
   family(out, "build_info", "gauge", "pandarcap version and decoder target; always 1");
-  append("pandarcap_build_info{{{},version=\"{}\",decoder=\"{}\"}} 1\n", sensor,
-         escape_label_value(h.version), escape_label_value(h.decoder));
+  append("pandarcap_build_info{{{},version=\"", sensor);
+  append_label_value(out, h.version);
+  out += "\",decoder=\"";
+  append_label_value(out, h.decoder);
+  out += "\"} 1\n";
 
   for (const CounterField& f : kCounters) {
-    family(out, std::string(f.prometheus) + "_total", "counter", f.help);
+    family(out, f.prometheus, "counter", f.help, "_total");
     append("pandarcap_{}_total{{{}}} {}\n", f.prometheus, sensor, h.counters.*f.member);
   }
   family(out, "packets_rejected_total", "counter", "Packets that failed validation, by reason");
@@ -221,51 +301,83 @@ std::string to_prometheus(const HealthSnapshot& h) {
          static_cast<double>(h.latency.sum_ns()) / 1e9);
   append("pandarcap_receive_to_decoded_latency_seconds_count{{{}}} {}\n", sensor,
          h.latency.count());
+}
+
+void render_json_line(const HealthSnapshot& h, std::string& out) {
+  out.clear();
+  const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
+    fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
+  };
+  out += "{\"time\":\"";
+  append_rfc3339(out, h.unix_time_ns);
+  append("\",\"unix_time_ns\":{},\"sensor\":", h.unix_time_ns);
+  append_json_string(out, h.sensor);
+  out += ",\"version\":";
+  append_json_string(out, h.version);
+  out += ",\"decoder\":";
+  append_json_string(out, h.decoder);
+  append(",\"state\":\"{}\",\"reason\":", to_string(h.gauges.state));
+  append_json_string(out, h.gauges.reason);
+
+  out += ",\"counters\":{";
+  bool first = true;
+  for (const CounterField& f : kCounters) {
+    append("{}\"{}\":{}", first ? "" : ",", f.json, h.counters.*f.member);
+    first = false;
+  }
+  append(",\"packets_rejected\":{}", h.counters.packets_rejected);
+  if (const auto& a = h.hot_path_allocations) {
+    append(
+        ",\"hot_path_allocations\":{},\"hot_path_allocations_by_thread\":"
+        "{{\"receive\":{},\"decode\":{},\"writer\":{}}}",
+        a->total(), a->receive, a->decode, a->writer);
+  }
+  out += ",\"rejects\":{";
+  for (std::size_t i = 1; i < kRejectReasonCount; ++i) {
+    append("{}\"{}\":{}", i == 1 ? "" : ",", to_string(static_cast<RejectReason>(i)),
+           h.counters.rejects[i]);
+  }
+  out += "},\"filtered_points\":{";
+  for (std::size_t i = 0; i < kFilterReasonCount; ++i) {
+    append("{}\"{}\":{}", i == 0 ? "" : ",", to_string(static_cast<FilterReason>(i)),
+           h.counters.filtered_points[i]);
+  }
+  out += "}}";
+
+  out += ",\"gauges\":{";
+  first = true;
+  for (const GaugeField& f : kGauges) {
+    append("{}\"{}\":", first ? "" : ",", f.json);
+    append_json_number(out, h.gauges.*f.member);
+    first = false;
+  }
+  out += ",\"return_mode\":";
+  append_json_string(out, h.gauges.return_mode);
+  append(",\"high_temperature\":{}}}", h.gauges.high_temperature);
+
+  // Percentiles are bucket upper edges (at most 12.5 % high); max is exact.
+  const auto us = [&](double q) { return static_cast<double>(h.latency.quantile_ns(q)) / 1e3; };
+  append(",\"latency\":{{\"count\":{},\"p50_us\":", h.latency.count());
+  append_json_number(out, us(0.5));
+  out += ",\"p99_us\":";
+  append_json_number(out, us(0.99));
+  out += ",\"p999_us\":";
+  append_json_number(out, us(0.999));
+  out += ",\"max_us\":";
+  append_json_number(out, static_cast<double>(h.latency.max_ns()) / 1e3);
+  out += "}}\n";
+}
+
+std::string to_prometheus(const HealthSnapshot& h) {
+  std::string out;
+  render_prometheus(h, out);
   return out;
 }
 
 std::string to_json_line(const HealthSnapshot& h) {
-  nlohmann::ordered_json j;
-  j["time"] = rfc3339(h.unix_time_ns);
-  j["unix_time_ns"] = h.unix_time_ns;
-  j["sensor"] = h.sensor;
-  j["version"] = h.version;
-  j["decoder"] = h.decoder;
-  j["state"] = to_string(h.gauges.state);
-  j["reason"] = h.gauges.reason;
-  nlohmann::ordered_json counters;
-  for (const CounterField& f : kCounters)
-    counters[f.json] = h.counters.*f.member;
-  counters["packets_rejected"] = h.counters.packets_rejected;
-  if (const auto& a = h.hot_path_allocations) {
-    counters["hot_path_allocations"] = a->total();
-    counters["hot_path_allocations_by_thread"] = {
-        {"receive", a->receive}, {"decode", a->decode}, {"writer", a->writer}};
-  }
-  for (std::size_t i = 1; i < kRejectReasonCount; ++i) {
-    counters["rejects"][std::string(to_string(static_cast<RejectReason>(i)))] =
-        h.counters.rejects[i];
-  }
-  for (std::size_t i = 0; i < kFilterReasonCount; ++i) {
-    counters["filtered_points"][std::string(to_string(static_cast<FilterReason>(i)))] =
-        h.counters.filtered_points[i];
-  }
-  j["counters"] = std::move(counters);
-  nlohmann::ordered_json gauges;
-  for (const GaugeField& f : kGauges)
-    gauges[f.json] = h.gauges.*f.member;
-  gauges["return_mode"] = h.gauges.return_mode;
-  gauges["high_temperature"] = h.gauges.high_temperature;
-  j["gauges"] = std::move(gauges);
-  // Percentiles are bucket upper edges (at most 12.5 % high); max is exact.
-  const auto us = [&](double q) { return static_cast<double>(h.latency.quantile_ns(q)) / 1e3; };
-  j["latency"] = {{"count", h.latency.count()},
-                  {"p50_us", us(0.5)},
-                  {"p99_us", us(0.99)},
-                  {"p999_us", us(0.999)},
-                  {"max_us", static_cast<double>(h.latency.max_ns()) / 1e3}};
-  // A reason may hold bytes from an error message that are not UTF-8: replace, never throw.
-  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+  std::string out;
+  render_json_line(h, out);
+  return out;
 }
 
 }  // namespace pandarcap

@@ -8,8 +8,9 @@
 // alert can say `pandarcap_state{state!="ok"} == 1`.
 //
 // The JSON line has the keys `time` (RFC 3339 UTC), `unix_time_ns`, `sensor`, `version`,
-// `state`, `reason`, `counters` {name: value, with `rejects` and `filtered_points` as
-// {reason: value}} and `gauges` {name: value}. Names match the HealthCounters/HealthGauges
+// `decoder`, `state`, `reason`, `counters` {name: value, with `rejects` and `filtered_points` as
+// {reason: value}}, `gauges` {name: value} and `latency` {count, p50_us, p99_us, p999_us,
+// max_us}. Names match the HealthCounters/HealthGauges
 // fields one-to-one, so the accounting identity can be checked from either output.
 #pragma once
 
@@ -24,6 +25,11 @@ std::string to_prometheus(const HealthSnapshot& snapshot);
 
 // One JSON object and a '\n'.
 std::string to_json_line(const HealthSnapshot& snapshot);
+
+// The same, written into `out` (cleared first). Once `out` has grown to the size of a record,
+// rendering again allocates nothing: the writer thread renders every second with these.
+void render_prometheus(const HealthSnapshot& snapshot, std::string& out);
+void render_json_line(const HealthSnapshot& snapshot, std::string& out);
 
 // Escapes a Prometheus label value (backslash, double quote, newline).
 std::string escape_label_value(std::string_view value);

@@ -12,19 +12,25 @@ static_assert(std::endian::native == std::endian::little,
               "PCD binary data is written in host order; readers assume little-endian");
 
 std::string pcd_header(std::size_t points) {
-  return fmt::format(
-      "# .PCD v0.7 - Point Cloud Data file format\n"
-      "VERSION 0.7\n"
-      "FIELDS x y z intensity channel return_type timestamp\n"
-      "SIZE 4 4 4 1 1 1 8\n"
-      "TYPE F F F U U U F\n"
-      "COUNT 1 1 1 1 1 1 1\n"
-      "WIDTH {}\n"
-      "HEIGHT 1\n"
-      "VIEWPOINT 0 0 0 1 0 0 0\n"
-      "POINTS {}\n"
-      "DATA binary\n",
-      points, points);
+  std::string out;
+  append_pcd_header(out, points);
+  return out;
+}
+
+void append_pcd_header(std::string& out, std::size_t points) {
+  fmt::format_to(std::back_inserter(out),
+                 "# .PCD v0.7 - Point Cloud Data file format\n"
+                 "VERSION 0.7\n"
+                 "FIELDS x y z intensity channel return_type timestamp\n"
+                 "SIZE 4 4 4 1 1 1 8\n"
+                 "TYPE F F F U U U F\n"
+                 "COUNT 1 1 1 1 1 1 1\n"
+                 "WIDTH {}\n"
+                 "HEIGHT 1\n"
+                 "VIEWPOINT 0 0 0 1 0 0 0\n"
+                 "POINTS {}\n"
+                 "DATA binary\n",
+                 points, points);
 }
 
 std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint8_t> out) noexcept {

@@ -24,6 +24,8 @@ inline constexpr std::size_t kPcdPointBytes = 3 * 4 + 3 * 1 + 8;  // 23
 
 // The ASCII header for `points` points, ending with "DATA binary\n".
 std::string pcd_header(std::size_t points);
+// The same, appended to `out` (no allocation once `out` has room for it).
+void append_pcd_header(std::string& out, std::size_t points);
 
 // Encodes points into `out` (which must hold points.size() * kPcdPointBytes bytes) and returns
 // the bytes written. No allocation.

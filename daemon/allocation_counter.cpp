@@ -16,6 +16,10 @@ void mark_this_thread_hot(HotThread thread) noexcept {
   t_hot = static_cast<int>(thread);
 }
 
+void mark_this_thread_cold() noexcept {
+  t_hot = -1;
+}
+
 std::uint64_t hot_allocations(HotThread thread) noexcept {
   return g_hot_allocations[static_cast<int>(thread)].load(std::memory_order_relaxed);
 }

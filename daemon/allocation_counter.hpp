@@ -18,6 +18,8 @@ enum class HotThread : int { kReceive = 0, kDecode = 1, kWriter = 2 };
 inline constexpr int kHotThreads = 3;
 
 void mark_this_thread_hot(HotThread thread) noexcept;
+// Leaving the loop (shutdown: final flushes, renames, the last health record): stop counting.
+void mark_this_thread_cold() noexcept;
 std::uint64_t hot_allocations(HotThread thread) noexcept;
 bool counting_available() noexcept;
 

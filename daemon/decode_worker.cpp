@@ -178,6 +178,7 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
       next_snapshot_ns = now + 1'000'000'000;
     }
   }
+  alloc::mark_this_thread_cold();
   decoder_.flush();
   flush_raw();
   send_snapshot(WriterMessage::Kind::kEnd);

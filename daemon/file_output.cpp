@@ -11,13 +11,17 @@
 namespace pandarcap {
 namespace {
 
-[[noreturn]] void fail(const std::string& what, const std::filesystem::path& path) {
-  throw std::system_error(errno, std::generic_category(), what + " '" + path.string() + "'");
+[[noreturn]] void fail(const std::string& what, std::string_view path) {
+  throw std::system_error(errno, std::generic_category(), what + " '" + std::string(path) + "'");
 }
 
 }  // namespace
 
-OutputFile::OutputFile(std::filesystem::path path, Mode mode) : path_(std::move(path)) {
+void OutputFile::open(std::string_view path, Mode mode) {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  size_ = 0;
+  path_.assign(path);
   const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | (mode == Mode::kAppend ? O_APPEND : O_TRUNC);
   do {
     fd_ = ::open(path_.c_str(), flags, 0644);
@@ -67,17 +71,36 @@ void write_file_replacing(const std::filesystem::path& path, std::string_view te
     std::filesystem::remove(temporary, ignored);
     throw;
   }
+  if (::rename(temporary.c_str(), path.c_str()) != 0) fail("cannot rename to", path.native());
+}
+
+void write_file_replacing(const std::string& path, const std::string& temporary,
+                          std::string_view text, OutputFile& file) {
+  try {
+    file.open(temporary, OutputFile::Mode::kCreate);
+    file.write(text);
+    file.close();
+  } catch (...) {
+    ::unlink(temporary.c_str());
+    throw;
+  }
   if (::rename(temporary.c_str(), path.c_str()) != 0) fail("cannot rename to", path);
 }
 
 std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis) {
+  std::string stamp;
+  append_utc_file_stamp(stamp, unix_ns, with_millis);
+  return stamp;
+}
+
+void append_utc_file_stamp(std::string& out, std::int64_t unix_ns, bool with_millis) {
   const std::time_t seconds = static_cast<std::time_t>(unix_ns / 1'000'000'000);
   std::tm tm{};
   gmtime_r(&seconds, &tm);
-  std::string stamp = fmt::format("{:04}{:02}{:02}T{:02}{:02}{:02}", tm.tm_year + 1900,
-                                  tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec);
-  if (with_millis) stamp += fmt::format(".{:03}", (unix_ns / 1'000'000) % 1000);
-  return stamp + "Z";
+  fmt::format_to(std::back_inserter(out), "{:04}{:02}{:02}T{:02}{:02}{:02}", tm.tm_year + 1900,
+                 tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec);
+  if (with_millis) fmt::format_to(std::back_inserter(out), ".{:03}", (unix_ns / 1'000'000) % 1000);
+  out += 'Z';
 }
 
 }  // namespace pandarcap

@@ -15,9 +15,14 @@ namespace pandarcap {
 class OutputFile {
  public:
   enum class Mode { kCreate, kAppend };
+  OutputFile() = default;  // closed; open() it
   // Opens (creating, truncating for kCreate) `path`. Throws std::system_error.
-  OutputFile(std::filesystem::path path, Mode mode);
+  OutputFile(const std::filesystem::path& path, Mode mode) { open(path.native(), mode); }
   ~OutputFile();
+  // Opens another file with this object (closing the current one). Reusing one OutputFile keeps
+  // its path buffer, so reopening allocates nothing once the buffer has grown.
+  void open(std::string_view path, Mode mode);
+  bool is_open() const noexcept { return fd_ >= 0; }
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
 
@@ -28,16 +33,20 @@ class OutputFile {
   // Closes, reporting a failed close (a deferred write error on some file systems).
   void close();
   std::uint64_t size() const noexcept { return size_; }
-  const std::filesystem::path& path() const noexcept { return path_; }
+  const std::string& path() const noexcept { return path_; }
 
  private:
-  std::filesystem::path path_;
+  std::string path_;
   int fd_ = -1;
   std::uint64_t size_ = 0;  // for kAppend: the size at open plus what was written
 };
 
 // Writes `text` to `path` through a temporary file in the same directory and a rename.
 void write_file_replacing(const std::filesystem::path& path, std::string_view text);
+// The same with the temporary name and the file object given, for a file rewritten every second:
+// nothing is allocated.
+void write_file_replacing(const std::string& path, const std::string& temporary,
+                          std::string_view text, OutputFile& file);
 
 // The temporary name used for `path` while it is being written: ".<name>.tmp", hidden from
 // globs such as *.pcd and *.prom (node_exporter's textfile collector reads only *.prom).
@@ -45,5 +54,6 @@ std::filesystem::path temporary_name(const std::filesystem::path& path);
 
 // "20261122T120000.123Z" (with_millis) or "20261122T120000Z", for file names.
 std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis);
+void append_utc_file_stamp(std::string& out, std::int64_t unix_ns, bool with_millis);
 
 }  // namespace pandarcap

@@ -244,6 +244,7 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
       ring.notify();
     }
   }
+  alloc::mark_this_thread_cold();
 }
 
 }  // namespace pandarcap

@@ -51,11 +51,22 @@ void Writer::prepare() {
     // The angles the recording was decoded with travel with it.
     write_file_replacing(raw_dir_ / "calibration.csv", options_.calibration_csv);
   }
+  prom_path_ = (health_dir_ / "pandarcap.prom").native();
+  prom_temporary_path_ = temporary_name(prom_path_).native();
+  jsonl_path_ = (health_dir_ / "health.jsonl").native();
+  jsonl_rotated_path_ = jsonl_path_ + ".1";
+  prom_text_.reserve(64 * 1024);
+  json_text_.reserve(8 * 1024);
+  frame_path_.reserve(4096);
+  frame_temporary_path_.reserve(4096);
+  pcd_header_.reserve(1024);
   // Proves the health directory is writable before the daemon reports ready.
-  health_ = build_health(start_monotonic_ns_);
+  build_health(start_monotonic_ns_);
   if (options_.prometheus) {
-    write_file_replacing(health_dir_ / "pandarcap.prom", to_prometheus(health_));
+    render_prometheus(health_, prom_text_);
+    write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, health_file_);
   }
+  if (options_.jsonl) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
 }
 
 void Writer::write_failed(const std::exception& error, std::uint64_t bytes) {
@@ -90,30 +101,42 @@ void Writer::enforce_retention(std::deque<std::pair<std::filesystem::path, std::
 void Writer::write_frame(FrameArena& arena) {
   const Frame& frame = arena.frame;
   const std::span<const Point> points = frame.used();
-  const std::string header = pcd_header(points.size());
-  const std::uint64_t expected = header.size() + points.size() * kPcdPointBytes;
-  const std::filesystem::path path =
-      frames_dir_ / fmt::format("frame_{:06}_{}{}.pcd", frame.info.sequence,
-                                utc_file_stamp(frame.info.start_ns, true),
-                                frame.info.partial ? "_partial" : "");
-  const std::filesystem::path temporary = temporary_name(path);
+  pcd_header_.clear();
+  append_pcd_header(pcd_header_, points.size());
+  const std::uint64_t expected = pcd_header_.size() + points.size() * kPcdPointBytes;
+  // frames/frame_000123_20261122T120000.123Z[_partial].pcd, written as frames/.<name>.tmp.
+  frame_path_.assign(frames_dir_.native());
+  frame_path_ += '/';
+  const std::size_t name_at = frame_path_.size();
+  fmt::format_to(std::back_inserter(frame_path_), "frame_{:06}_", frame.info.sequence);
+  append_utc_file_stamp(frame_path_, frame.info.start_ns, true);
+  frame_path_ += frame.info.partial ? "_partial.pcd" : ".pcd";
+  frame_temporary_path_.assign(frame_path_, 0, name_at);
+  frame_temporary_path_ += '.';
+  frame_temporary_path_.append(frame_path_, name_at);
+  frame_temporary_path_ += ".tmp";
   try {
-    OutputFile file(temporary, OutputFile::Mode::kCreate);
-    file.write(header);
+    frame_file_.open(frame_temporary_path_, OutputFile::Mode::kCreate);
+    frame_file_.write(pcd_header_);
     for (std::size_t i = 0; i < points.size(); i += kPcdChunkPoints) {
       const auto chunk = points.subspan(i, std::min(kPcdChunkPoints, points.size() - i));
       const std::size_t n = encode_pcd_points(chunk, pcd_buffer_);
-      file.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
+      frame_file_.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
     }
-    file.close();
-    std::filesystem::rename(temporary, path);
+    frame_file_.close();
+    if (::rename(frame_temporary_path_.c_str(), frame_path_.c_str()) != 0) {
+      throw std::system_error(errno, std::generic_category(),
+                              "cannot rename to '" + frame_path_ + "'");
+    }
     ++frames_written_;
     pcd_bytes_ += expected;
-    frame_files_.emplace_back(path, expected);
-    enforce_retention(frame_files_, options_.frames_max_files, options_.frames_max_bytes);
+    // Retention keeps a list of names (one allocation per file); without it, no list.
+    if (options_.frames_max_files != 0 || options_.frames_max_bytes != 0) {
+      frame_files_.emplace_back(frame_path_, expected);
+      enforce_retention(frame_files_, options_.frames_max_files, options_.frames_max_bytes);
+    }
   } catch (const std::exception& error) {
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
+    ::unlink(frame_temporary_path_.c_str());
     write_failed(error, expected);
   }
 }
@@ -171,8 +194,9 @@ void Writer::rotate_outputs() {
   close_pcap();
 }
 
-HealthSnapshot Writer::build_health(std::int64_t now) {
-  HealthSnapshot h;
+void Writer::build_health(std::int64_t now) {
+  // Filled in place: its strings keep their capacity from one second to the next.
+  HealthSnapshot& h = health_;
   h.unix_time_ns = realtime_ns();
   h.sensor = options_.sensor_name;
   h.version = options_.version;
@@ -221,7 +245,7 @@ HealthSnapshot Writer::build_health(std::int64_t now) {
 
   HealthGauges& g = h.gauges;
   g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;
-  g.return_mode = s.return_mode ? std::string(to_string(*s.return_mode)) : std::string();
+  g.return_mode.assign(s.return_mode ? to_string(*s.return_mode) : std::string_view());
   g.high_temperature = s.last_high_temperature;
   g.rpm_tail = s.last_rpm;
   const double span_s = static_cast<double>(decode_.monotonic_ns - decode_prev_.monotonic_ns) / 1e9;
@@ -233,18 +257,24 @@ HealthSnapshot Writer::build_health(std::int64_t now) {
   // final tick at shutdown can be a fraction of a second long (and sees the flushed partials),
   // so a window under half a second keeps the previous second's rate.
   const auto complete = decode_.frames.frames_complete - decode_prev_.frames.frames_complete;
-  g.frame_rate_hz =
-      span_s >= 0.5 ? static_cast<double>(complete) / span_s : health_.gauges.frame_rate_hz;
+  if (span_s >= 0.5) g.frame_rate_hz = static_cast<double>(complete) / span_s;
   g.seconds_since_last_packet =
       decode_.last_packet_monotonic_ns == 0
           ? -1.0
           : static_cast<double>(now - decode_.last_packet_monotonic_ns) / 1e9;
 
   // State: error > no_data > degraded > ok; the reason names what changed since the last tick.
+  // The problems are written straight into the reason (cleared, its capacity kept), and the
+  // reason is cut back to what the winning state says.
   const HealthCounters& p = previous_counters_;
-  std::vector<std::string> problems;
+  std::string& problems = g.reason;
+  problems.clear();
+  const auto problem = [&]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
+    if (!problems.empty()) problems += "; ";
+    fmt::format_to(std::back_inserter(problems), format, std::forward<Args>(args)...);
+  };
   const auto grew = [&](std::uint64_t now_value, std::uint64_t before, const char* what) {
-    if (now_value > before) problems.push_back(fmt::format("{} {}", now_value - before, what));
+    if (now_value > before) problem("{} {}", now_value - before, what);
   };
   grew(c.kernel_drops, p.kernel_drops, "kernel drops");
   grew(c.ring_overruns, p.ring_overruns, "ring overruns");
@@ -254,36 +284,35 @@ HealthSnapshot Writer::build_health(std::int64_t now) {
   grew(c.azimuth_gaps, p.azimuth_gaps, "azimuth gaps");
   grew(c.packets_rejected, p.packets_rejected, "packets rejected");
   grew(c.static_timestamp_packets, p.static_timestamp_packets, "static timestamps");
-  if (g.high_temperature) problems.emplace_back("sensor high-temperature flag set");
+  if (g.high_temperature) problem("sensor high-temperature flag set");
   if (options_.expected_return_mode != "any" && !g.return_mode.empty() &&
       g.return_mode != options_.expected_return_mode) {
-    problems.push_back(
-        fmt::format("return mode {} (expected {})", g.return_mode, options_.expected_return_mode));
+    problem("return mode {} (expected {})", g.return_mode, options_.expected_return_mode);
   }
   if (g.seconds_since_last_packet >= 0 && g.rpm_tail > 0 &&
       std::abs(g.rpm_tail - options_.expected_rpm) > 0.1 * options_.expected_rpm) {
-    problems.push_back(
-        fmt::format("motor at {:.0f} RPM (expected {})", g.rpm_tail, options_.expected_rpm));
+    problem("motor at {:.0f} RPM (expected {})", g.rpm_tail, options_.expected_rpm);
   }
   if (write_errors_ > write_errors_at_last_tick_) {
     g.state = HealthState::kError;
-    g.reason =
-        fmt::format("{} write errors: {}", write_errors_ - write_errors_at_last_tick_, last_error_);
+    g.reason.clear();
+    fmt::format_to(std::back_inserter(g.reason), "{} write errors: {}",
+                   write_errors_ - write_errors_at_last_tick_, last_error_);
   } else if (g.seconds_since_last_packet < 0 ||
              g.seconds_since_last_packet > options_.no_data_timeout_seconds) {
     g.state = HealthState::kNoData;
-    g.reason = g.seconds_since_last_packet < 0
-                   ? std::string("no packet received yet")
-                   : fmt::format("no packet for {:.1f} s", g.seconds_since_last_packet);
+    g.reason.clear();
+    if (g.seconds_since_last_packet < 0) {
+      g.reason += "no packet received yet";
+    } else {
+      fmt::format_to(std::back_inserter(g.reason), "no packet for {:.1f} s",
+                     g.seconds_since_last_packet);
+    }
   } else if (!problems.empty()) {
     g.state = HealthState::kDegraded;
-    for (const std::string& problem : problems) {
-      g.reason += (g.reason.empty() ? "" : "; ") + problem;
-    }
   } else {
     g.state = HealthState::kOk;
   }
-  return h;
 }
 
 void Writer::write_health(bool final) {
@@ -295,26 +324,34 @@ void Writer::write_health(bool final) {
       write_failed(error, 0);
     }
   }
-  health_ = build_health(now);
+  build_health(now);
   previous_counters_ = health_.counters;
   write_errors_at_last_tick_ = write_errors_;
   decode_prev_ = decode_;
   try {
     if (options_.prometheus) {
-      write_file_replacing(health_dir_ / "pandarcap.prom", to_prometheus(health_));
+      render_prometheus(health_, prom_text_);
+      write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, health_file_);
     }
     if (options_.jsonl) {
-      const std::string line = to_json_line(health_);
-      const std::filesystem::path path = health_dir_ / "health.jsonl";
-      std::error_code ec;
-      const auto size = std::filesystem::file_size(path, ec);
-      if (!ec && options_.jsonl_rotate_bytes != 0 &&
-          size + line.size() > options_.jsonl_rotate_bytes) {
-        std::filesystem::rename(path, health_dir_ / "health.jsonl.1");
+      render_json_line(health_, json_text_);
+      // Kept open between ticks (appending); reopened after rotation or a failed write.
+      if (!jsonl_file_.is_open()) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
+      if (options_.jsonl_rotate_bytes != 0 &&
+          jsonl_file_.size() + json_text_.size() > options_.jsonl_rotate_bytes) {
+        jsonl_file_.close();
+        if (::rename(jsonl_path_.c_str(), jsonl_rotated_path_.c_str()) != 0) {
+          throw std::system_error(errno, std::generic_category(),
+                                  "cannot rename to '" + jsonl_rotated_path_ + "'");
+        }
+        jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
       }
-      OutputFile file(path, OutputFile::Mode::kAppend);
-      file.write(line);
-      file.close();
+      try {
+        jsonl_file_.write(json_text_);
+      } catch (...) {
+        jsonl_file_.close();  // reopen next time (the file may have been removed)
+        throw;
+      }
     }
   } catch (const std::exception& error) {
     write_failed(error, 0);
@@ -383,6 +420,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       next_tick = std::max(next_tick + kSecondNs, now);
     }
   }
+  alloc::mark_this_thread_cold();
   close_pcap();
   write_health(true);
 }

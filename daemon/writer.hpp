@@ -29,6 +29,7 @@
 #include "core/health.hpp"
 #include "core/pcap_writer.hpp"
 #include "daemon/decode_worker.hpp"
+#include "daemon/file_output.hpp"
 #include "daemon/pipeline_types.hpp"
 
 namespace pandarcap {
@@ -88,7 +89,7 @@ class Writer {
   void close_pcap();
   void rotate_outputs();
   void write_health(bool final);
-  HealthSnapshot build_health(std::int64_t now_monotonic_ns);
+  void build_health(std::int64_t now_monotonic_ns);  // into health_
   void write_failed(const std::exception& error, std::uint64_t bytes);
   void enforce_retention(std::deque<std::pair<std::filesystem::path, std::uint64_t>>& files,
                          std::uint64_t max_files, std::uint64_t max_bytes);
@@ -119,6 +120,15 @@ class Writer {
   std::string last_error_;
   HealthCounters previous_counters_{};
   HealthSnapshot health_;
+
+  // Buffers and files reused every second and every frame, so that once warm the writer loop
+  // allocates nothing (file names and rendered text are built in place; see README "Latency and
+  // allocations").
+  std::string prom_path_, prom_temporary_path_, jsonl_path_, jsonl_rotated_path_;
+  std::string prom_text_, json_text_;
+  OutputFile health_file_, jsonl_file_;
+  std::string frame_path_, frame_temporary_path_, pcd_header_;
+  OutputFile frame_file_;
 };
 
 }  // namespace pandarcap
