@@ -8,6 +8,7 @@
 
 #include "bench/decode_bench.hpp"
 #include "bench/ring_bench.hpp"
+#include "bench/write_bench.hpp"
 #include "bench/zero_loss.hpp"
 #include "daemon/cli_args.hpp"
 
@@ -23,6 +24,8 @@ Subcommands:
             search), against a bare recvmmsg receiver and a recvfrom receiver searched the same
             way in the same run; the daemon's CPU, latency, RSS and allocations at one sensor's
             rate; a JSON report, a Markdown summary and an SVG plot.
+  write     the writer's formats: PCD frames (encode, encode + write) and pcap recording, in
+            points/s, packets/s and MB/s, and what one sensor's stream costs of a core.
   ring      SPSC packet ring (batches 1, 8, 32) and typed queue against a mutex + condition
             variable queue measured in the same run: items/s, round-trip latency, and the CPU
             an idle consumer uses at the sensor's packet rate.
@@ -90,6 +93,12 @@ Options:
   --capture FILE         send this capture's packets (default: the simulated sensor)
   --work-dir DIR         keep daemon logs there (default: a temporary directory, removed)
   --daemon-only          skip the reference receivers
+  --burst-factor X       bursts at X times the rate ...
+  --burst-ms M           ... lasting M ms ...
+  --burst-every S        ... every S seconds (default 1); all three apply to every trial
+  --foreign-fraction F   also send F x the valid packets from 127.0.0.2 (dropped as foreign
+                         only when the daemon's config sets sensor_ip)
+  --malformed-fraction F also send F x the valid packets as random-length random bytes
   -h, --help             this text
 
 JSON keys: daemon_zero_loss_pps, daemon_loss_at_most_0_5_percent_pps,
@@ -131,6 +140,16 @@ int run_zero_loss(int argc, char** argv) {
       options.work_dir = std::string(args.value(arg));
     } else if (arg == "--daemon-only") {
       options.skip_references = true;
+    } else if (arg == "--burst-factor") {
+      options.traffic.burst_factor = args.number(arg, 1, 1000);
+    } else if (arg == "--burst-ms") {
+      options.traffic.burst_ms = args.number(arg, 0, 60'000);
+    } else if (arg == "--burst-every") {
+      options.traffic.burst_every_s = args.number(arg, 0.001, 3600);
+    } else if (arg == "--foreign-fraction") {
+      options.traffic.foreign_fraction = args.number(arg, 0, 10);
+    } else if (arg == "--malformed-fraction") {
+      options.traffic.malformed_fraction = args.number(arg, 0, 10);
     } else {
       args.usage_error(fmt::format("unknown option '{}'", arg));
     }
@@ -156,6 +175,61 @@ int run_zero_loss(int argc, char** argv) {
   } else {
     std::fputs(pandarcap::bench::zero_loss_markdown(report).c_str(), stdout);
   }
+  return 0;
+}
+
+constexpr std::string_view kWriteUsage = R"(Usage: pandarcap-bench write [OPTIONS]
+
+Options:
+  --json               print one JSON object instead of a table
+  --frames N           PCD frames to write (default 50; one simulated revolution each)
+  --packets N          pcap records to write (default 200000)
+  --dir DIR            write the files there (default: a temporary directory, removed)
+  -h, --help           this text
+
+JSON keys: points_per_frame, pcd_encode, pcd_encode_and_write, pcap_write (each with
+items_per_s, mb_per_s, items_per_cpu_s, cpu_fraction_of_wall), sensor_pcd_cpu_fraction,
+sensor_pcap_cpu_fraction, method.
+)";
+
+int run_write(int argc, char** argv) {
+  pandarcap::CliArgs args(argc, argv, kWriteUsage);
+  pandarcap::bench::WriteBenchOptions options;
+  bool json = false;
+  while (args.more()) {
+    const std::string_view arg = args.next();
+    if (arg == "--json") {
+      json = true;
+    } else if (arg == "--frames") {
+      options.frames = static_cast<int>(args.integer(arg, 1, 100'000));
+    } else if (arg == "--packets") {
+      options.packets = static_cast<int>(args.integer(arg, 1, 100'000'000));
+    } else if (arg == "--dir") {
+      options.directory = std::string(args.value(arg));
+    } else {
+      args.usage_error(fmt::format("unknown option '{}'", arg));
+    }
+  }
+  nlohmann::ordered_json report;
+  try {
+    report = pandarcap::bench::run_write_bench(options);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "pandarcap-bench write: %s\n", e.what());
+    return 1;
+  }
+  if (json) {
+    std::puts(report.dump(2).c_str());
+    return 0;
+  }
+  std::printf("%-22s %14s %10s %16s\n", "", "items/s", "MB/s", "items/CPU-s");
+  for (const char* key : {"pcd_encode", "pcd_encode_and_write", "pcap_write"}) {
+    const auto& r = report[key];
+    std::printf("%-22s %14.0f %10.1f %16.0f\n", key, r["items_per_s"].get<double>(),
+                r["mb_per_s"].get<double>(), r["items_per_cpu_s"].get<double>());
+  }
+  std::printf("one sensor: PCD %.2f %% of a core, pcap %.2f %% of a core\n",
+              100 * report["sensor_pcd_cpu_fraction"].get<double>(),
+              100 * report["sensor_pcap_cpu_fraction"].get<double>());
   return 0;
 }
 
@@ -241,12 +315,17 @@ int run_ring(int argc, char** argv) {
 
 int main(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kUsage);
-  if (!args.more()) args.usage_error("a subcommand is required (decode, ring, zero-loss)");
+  if (!args.more()) args.usage_error("a subcommand is required (decode, ring, write, zero-loss)");
   const std::string_view subcommand = args.next();
   // The subcommand parses the rest, with "pandarcap-bench SUBCOMMAND" as its program name.
   static char ring_name[] = "pandarcap-bench ring";
   static char decode_name[] = "pandarcap-bench decode";
   static char zero_loss_name[] = "pandarcap-bench zero-loss";
+  static char write_name[] = "pandarcap-bench write";
+  if (subcommand == "write") {
+    argv[1] = write_name;
+    return run_write(argc - 1, argv + 1);
+  }
   if (subcommand == "zero-loss") {
     argv[1] = zero_loss_name;
     return run_zero_loss(argc - 1, argv + 1);

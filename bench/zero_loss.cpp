@@ -154,7 +154,7 @@ class Harness {
 
   // One trial of the real daemon at `rate`; its outputs are removed afterwards (a fast trial
   // writes gigabytes of pcap).
-  ordered_json daemon_trial(double rate, double seconds, bool keep_cpu_detail) {
+  ordered_json daemon_trial(double rate, double seconds) {
     const fs::path dir = work_ / fmt::format("daemon_{:03d}", trials_++);
     fs::create_directories(dir);
     const fs::path out = dir / "out";
@@ -179,7 +179,7 @@ class Harness {
       }
     }
     const auto cpu_before = thread_ticks(process.pid());
-    GeneratorOptions g;
+    GeneratorOptions g = o_.traffic;
     g.port = port;
     g.rate_pps = rate;
     g.seconds = seconds;
@@ -237,7 +237,7 @@ class Harness {
         {"hot_path_allocations", h["counters"].contains("hot_path_allocations")
                                      ? ordered_json(counter(h, "hot_path_allocations"))
                                      : ordered_json(nullptr)}};
-    if (keep_cpu_detail) {
+    {
       const double tick = static_cast<double>(::sysconf(_SC_CLK_TCK));
       double total = 0;
       ordered_json per_thread;
@@ -259,7 +259,7 @@ class Harness {
 
   ordered_json reference_trial(ReferenceReceiver::Kind kind, double rate, double seconds) {
     ReferenceReceiver receiver(kind, o_.receive_buffer_bytes);
-    GeneratorOptions g;
+    GeneratorOptions g = o_.traffic;
     g.port = receiver.port();
     g.rate_pps = rate;
     g.seconds = seconds;
@@ -342,13 +342,10 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   const auto within = [&](const ordered_json& t) {
     return t["loss_fraction"].get<double>() <= o.loss_threshold;
   };
-  const auto daemon = [&](double rate) {
-    return harness.daemon_trial(rate, o.trial_seconds, false);
-  };
+  const auto daemon = [&](double rate) { return harness.daemon_trial(rate, o.trial_seconds); };
 
   // At the sensor's rate first: the daemon's cost when it is doing its real job.
-  ordered_json at_sensor =
-      harness.daemon_trial(o.sensor_rate, std::max(o.trial_seconds, 3.0), true);
+  ordered_json at_sensor = harness.daemon_trial(o.sensor_rate, std::max(o.trial_seconds, 3.0));
 
   const SearchResult daemon_zero =
       search(daemon, zero, o.min_rate, o.max_rate, o.steps, trials["daemon"]);

@@ -16,6 +16,8 @@
 #include <optional>
 #include <string>
 
+#include "bench/udp_traffic.hpp"
+
 namespace pandarcap::bench {
 
 struct ZeroLossOptions {
@@ -31,6 +33,9 @@ struct ZeroLossOptions {
   double loss_threshold = 0.005;  // the second search: highest rate at <= 0.5 % loss
   std::uint64_t receive_buffer_bytes = 8u << 20;  // reference receivers, as the daemon's default
   bool skip_references = false;                   // only the daemon (quick checks)
+  // Bursts and extra (foreign, malformed) traffic for every trial; destination, port, rate and
+  // length are set per trial.
+  GeneratorOptions traffic;
 };
 
 // Runs the whole measurement and returns the report. Throws std::runtime_error when the daemon

@@ -153,3 +153,18 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "
   CHECK(svg.str().rfind("<svg ", 0) == 0);
   CHECK_THAT(svg.str(), Catch::Contains("</svg>") && Catch::Contains("<polyline"));
 }
+
+TEST_CASE("pandarcap-bench write --json: PCD and pcap rates from one run", "[bench][cli]") {
+  const auto result = test::run_command(bench() + " write --json --frames 3 --packets 5000");
+  REQUIRE(result.exit_code == 0);
+  const json report = json::parse(result.out);
+  CHECK(report["points_per_frame"].get<std::size_t>() > 50'000);  // one simulated revolution
+  for (const char* key : {"pcd_encode", "pcd_encode_and_write", "pcap_write"}) {
+    INFO(key);
+    CHECK(report[key]["items_per_s"].get<double>() > 0);
+    CHECK(report[key]["mb_per_s"].get<double>() > 0);
+  }
+  // The sensor's share follows from the rates: 10 frames/s and 3600 packets/s.
+  CHECK(report["sensor_pcap_cpu_fraction"].get<double>() ==
+        Approx(3600.0 / report["pcap_write"]["items_per_cpu_s"].get<double>()));
+}

@@ -1,0 +1,130 @@
+#include "bench/write_bench.hpp"
+
+#include <fmt/format.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <array>
+#include <filesystem>
+#include <vector>
+
+#include "core/frame_collector.hpp"
+#include "core/pcap_writer.hpp"
+#include "core/pcd.hpp"
+#include "core/stream_decoder.hpp"
+#include "core/synthetic_sensor.hpp"
+#include "daemon/file_output.hpp"
+
+namespace pandarcap::bench {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+double seconds(clockid_t clock) {
+  timespec ts{};
+  clock_gettime(clock, &ts);
+  return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) / 1e9;
+}
+
+// Wall and thread-CPU time of `work`.
+template <typename Work>
+std::pair<double, double> timed(Work&& work) {
+  const double wall = seconds(CLOCK_MONOTONIC), cpu = seconds(CLOCK_THREAD_CPUTIME_ID);
+  work();
+  return {seconds(CLOCK_MONOTONIC) - wall, seconds(CLOCK_THREAD_CPUTIME_ID) - cpu};
+}
+
+// One complete revolution of the simulated sensor, decoded.
+std::vector<Point> one_frame() {
+  std::vector<Point> points;
+  FrameCollector collector(4, 200'000, [&](const Frame& frame) {
+    if (!frame.info.partial && points.empty()) {
+      points.assign(frame.used().begin(), frame.used().end());
+    }
+  });
+  StreamDecoder decoder(Calibration::nominal(), {}, collector);
+  SyntheticSensor sensor({});
+  std::array<std::uint8_t, kMaxPacketBytes> packet{};
+  while (points.empty()) {
+    const std::size_t size = sensor.next(packet);
+    decoder.process({packet.data(), size});
+  }
+  return points;
+}
+
+}  // namespace
+
+nlohmann::ordered_json run_write_bench(const WriteBenchOptions& o) {
+  const bool temporary = o.directory.empty();
+  const fs::path dir =
+      temporary ? fs::temp_directory_path() / fmt::format("pandarcap-write-{}", ::getpid())
+                : fs::path(o.directory);
+  fs::create_directories(dir);
+
+  const std::vector<Point> frame = one_frame();
+  std::vector<std::uint8_t> buffer(4096 * kPcdPointBytes);
+  const auto encode = [&](OutputFile* file) {
+    if (file) file->write(pcd_header(frame.size()));
+    for (std::size_t i = 0; i < frame.size(); i += 4096) {
+      const auto chunk = std::span(frame).subspan(i, std::min<std::size_t>(4096, frame.size() - i));
+      const std::size_t n = encode_pcd_points(chunk, buffer);
+      if (file) file->write(std::span<const std::uint8_t>(buffer.data(), n));
+    }
+  };
+  const double points = static_cast<double>(frame.size()) * o.frames;
+  const double pcd_bytes = points * kPcdPointBytes;
+  const auto [encode_wall, encode_cpu] = timed([&] {
+    for (int f = 0; f < o.frames; ++f)
+      encode(nullptr);
+  });
+  OutputFile file;
+  const auto [write_wall, write_cpu] = timed([&] {
+    for (int f = 0; f < o.frames; ++f) {
+      file.open((dir / fmt::format("frame_{:03}.pcd", f)).native(), OutputFile::Mode::kCreate);
+      encode(&file);
+      file.close();
+    }
+  });
+
+  SyntheticSensor sensor({});
+  std::array<std::uint8_t, kMaxPacketBytes> packet{};
+  const std::size_t size = sensor.next(packet);
+  std::uint64_t pcap_bytes = 0;
+  const auto [pcap_wall, pcap_cpu] = timed([&] {
+    PcapWriter pcap((dir / "bench.pcap").string());
+    for (int k = 0; k < o.packets; ++k) {
+      pcap.write({packet.data(), size}, 1'795'348'800'000'000'000 + k * 277'800LL,
+                 Endpoint{0xC0A801C9, 2368}, Endpoint{0xFFFFFFFF, 2368});
+    }
+    pcap.close();
+    pcap_bytes = pcap.bytes();
+  });
+
+  if (temporary) {
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+  }
+  const auto rates = [](double items, double bytes, double wall, double cpu) {
+    return nlohmann::ordered_json{{"items_per_s", items / wall},
+                                  {"mb_per_s", bytes / wall / 1e6},
+                                  {"items_per_cpu_s", items / cpu},
+                                  {"cpu_fraction_of_wall", cpu / wall}};
+  };
+  nlohmann::ordered_json report;
+  report["points_per_frame"] = frame.size();
+  report["pcd_encode"] = rates(points, pcd_bytes, encode_wall, encode_cpu);
+  report["pcd_encode_and_write"] = rates(points, pcd_bytes, write_wall, write_cpu);
+  report["pcap_write"] = rates(o.packets, static_cast<double>(pcap_bytes), pcap_wall, pcap_cpu);
+  // What one dual-return sensor needs: 10 frames/s of this size and 3600 packets/s.
+  report["sensor_pcd_cpu_fraction"] =
+      10.0 * static_cast<double>(frame.size()) /
+      report["pcd_encode_and_write"]["items_per_cpu_s"].get<double>();
+  report["sensor_pcap_cpu_fraction"] =
+      3600.0 / report["pcap_write"]["items_per_cpu_s"].get<double>();
+  report["method"] =
+      "one thread; items are points (PCD) or packets (pcap); files in a temporary directory";
+  return report;
+}
+
+}  // namespace pandarcap::bench
