@@ -93,6 +93,7 @@ Options:
   --capture FILE         send this capture's packets (default: the simulated sensor)
   --work-dir DIR         keep daemon logs there (default: a temporary directory, removed)
   --daemon-only          skip the reference receivers
+  --from-report FILE     measure nothing: render a saved report.json again (with --report-dir)
   --burst-factor X       bursts at X times the rate ...
   --burst-ms M           ... lasting M ms ...
   --burst-every S        ... every S seconds (default 1); all three apply to every trial
@@ -113,7 +114,7 @@ int run_zero_loss(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kZeroLossUsage);
   pandarcap::bench::ZeroLossOptions options;
   bool json = false;
-  std::string report_dir;
+  std::string report_dir, from_report;
   while (args.more()) {
     const std::string_view arg = args.next();
     if (arg == "--json") {
@@ -140,6 +141,8 @@ int run_zero_loss(int argc, char** argv) {
       options.work_dir = std::string(args.value(arg));
     } else if (arg == "--daemon-only") {
       options.skip_references = true;
+    } else if (arg == "--from-report") {
+      from_report = std::string(args.value(arg));
     } else if (arg == "--burst-factor") {
       options.traffic.burst_factor = args.number(arg, 1, 1000);
     } else if (arg == "--burst-ms") {
@@ -157,7 +160,8 @@ int run_zero_loss(int argc, char** argv) {
   if (options.max_rate < options.min_rate) args.usage_error("--max-rate is below --min-rate");
   nlohmann::ordered_json report;
   try {
-    report = pandarcap::bench::run_zero_loss(options);
+    report = from_report.empty() ? pandarcap::bench::run_zero_loss(options)
+                                 : nlohmann::ordered_json::parse(std::ifstream(from_report));
   } catch (const std::exception& e) {
     std::fprintf(stderr, "pandarcap-bench zero-loss: %s\n", e.what());
     return 1;

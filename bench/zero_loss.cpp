@@ -366,7 +366,8 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   }
 
   report["daemon_zero_loss_pps"] = daemon_zero.pps;
-  report["daemon_loss_at_most_0_5_percent_pps"] = daemon_within.pps;
+  // Zero loss is within 0.5 %: a noisier second search cannot report less than the first.
+  report["daemon_loss_at_most_0_5_percent_pps"] = std::max(daemon_within.pps, daemon_zero.pps);
   report["bare_recvmmsg_zero_loss_pps"] = bare.pps;
   report["recvfrom_zero_loss_pps"] = recvfrom.pps;
   report["daemon_vs_bare"] = bare.pps > 0 ? daemon_zero.pps / bare.pps : 0.0;

@@ -35,7 +35,7 @@ Series series(const ordered_json& trials, const std::string& name, const std::st
   Series s{name, colour, {}};
   for (const auto& t : trials) {
     if (t.contains(y_key))
-      s.points.emplace_back(t["achieved_pps"].get<double>(), t[y_key].get<double>());
+      s.points.emplace_back(t["offered_pps"].get<double>(), t[y_key].get<double>());
   }
   std::sort(s.points.begin(), s.points.end());
   return s;
@@ -75,7 +75,26 @@ class Panel {
     svg += fmt::format(
         R"svg(<text x="{}" y="{}" font-size="12" text-anchor="middle" transform="rotate(-90 {} {})">{}</text>)svg"
         "\n",
-        x0_ - 48, y0_ + h_ / 2, x0_ - 48, y0_ + h_ / 2, ylabel);
+        x0_ - 60, y0_ + h_ / 2, x0_ - 60, y0_ + h_ / 2, ylabel);
+    // y ticks: decades on a log axis, fifths on a linear one (a percentage here).
+    if (log_y_) {
+      for (double d = std::ceil(std::log10(ymin_)); d <= std::log10(ymax_); d += 1) {
+        const double v = std::pow(10, d);
+        svg += fmt::format(R"(<line x1="{0}" y1="{1}" x2="{2}" y2="{1}" stroke="#ddd"/>)"
+                           R"(<text x="{3}" y="{4}" font-size="11" text-anchor="end">{5}</text>)"
+                           "\n",
+                           x0_, y(v), x0_ + w_, x0_ - 4, y(v) + 4, rate(v));
+      }
+    } else {
+      for (int k = 0; k <= 5; ++k) {
+        const double v = ymin_ + (ymax_ - ymin_) * k / 5;
+        svg +=
+            fmt::format(R"(<line x1="{0}" y1="{1}" x2="{2}" y2="{1}" stroke="#ddd"/>)"
+                        R"(<text x="{3}" y="{4}" font-size="11" text-anchor="end">{5:.1f}</text>)"
+                        "\n",
+                        x0_, y(v), x0_ + w_, x0_ - 4, y(v) + 4, v);
+      }
+    }
     for (double d = std::ceil(lx0_); d <= lx1_; d += 1) {
       const double v = std::pow(10, d);
       svg += fmt::format(R"(<line x1="{0}" y1="{1}" x2="{0}" y2="{2}" stroke="#ddd"/>)"
@@ -120,7 +139,7 @@ std::string zero_loss_markdown(const ordered_json& r) {
       r["settings"]["traffic"].get<std::string>(), r["settings"]["trial_seconds"].get<double>(),
       rate(r["settings"]["min_rate"].get<double>()), rate(r["settings"]["max_rate"].get<double>()));
   md += "| receiver | zero-loss rate (packets/s) |\n|---|---:|\n";
-  md += fmt::format("| pandarcapd (frames, pcap and health on) | {} |\n",
+  md += fmt::format("| pandarcapd (config: {}) | {} |\n", env["daemon_config"].get<std::string>(),
                     rate(r["daemon_zero_loss_pps"].get<double>()));
   md += fmt::format("| pandarcapd at <= 0.5 % loss | {} |\n",
                     rate(r["daemon_loss_at_most_0_5_percent_pps"].get<double>()));
@@ -193,13 +212,13 @@ std::string zero_loss_svg(const ordered_json& r) {
   std::string svg =
       R"(<svg xmlns="http://www.w3.org/2000/svg" width="1000" height="440" font-family="sans-serif">)"
       "\n<rect width=\"1000\" height=\"440\" fill=\"white\"/>\n";
-  const Panel left(70, 40, 380, 330, lo, hi, lo, hi, true);
+  const Panel left(90, 40, 370, 330, lo, hi, lo, hi, true);
   left.frame(svg, "Offered vs delivered (log-log)", "delivered packets/s");
   left.plot(svg, {"ideal", "#bbb", {{lo, lo}, {hi, hi}}});
   for (const Series& s : delivered)
     left.plot(svg, s);
   for (std::size_t i = 0; i < delivered.size(); ++i) {
-    svg += fmt::format(R"(<text x="80" y="{}" font-size="12" fill="{}">{}</text>)"
+    svg += fmt::format(R"(<text x="100" y="{}" font-size="12" fill="{}">{}</text>)"
                        "\n",
                        60 + 16 * i, delivered[i].colour, delivered[i].name);
   }
@@ -218,18 +237,18 @@ std::string zero_loss_svg(const ordered_json& r) {
     for (const auto& trial : t["daemon"]) {
       const double sent = std::max(1.0, trial["sent"].get<double>());
       const double pct = 100 * trial["loss_by_stage"][stage].get<double>() / sent;
-      s.points.emplace_back(trial["achieved_pps"].get<double>(), pct);
+      s.points.emplace_back(trial["offered_pps"].get<double>(), pct);
       top = std::max(top, pct);
     }
     std::sort(s.points.begin(), s.points.end());
     stages.push_back(s);
   }
-  const Panel right(580, 40, 380, 330, lo, hi, 0, top * 1.1, false);
+  const Panel right(600, 40, 370, 330, lo, hi, 0, top * 1.1, false);
   right.frame(svg, "pandarcapd loss per stage", "% of packets sent");
   for (const Series& s : stages)
     right.plot(svg, s);
   for (std::size_t i = 0; i < stages.size(); ++i) {
-    svg += fmt::format(R"(<text x="590" y="{}" font-size="12" fill="{}">{}</text>)"
+    svg += fmt::format(R"(<text x="640" y="{}" font-size="12" fill="{}">{}</text>)"
                        "\n",
                        60 + 16 * i, stages[i].colour, stages[i].name);
   }
