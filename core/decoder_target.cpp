@@ -18,7 +18,7 @@ constexpr std::array<std::pair<DecoderTarget, std::string_view>, 7> kNames = {{
 }};
 
 // What "auto" prefers, best first. AVX-512 leaves 8 of its 48 lanes idle on a 40-channel block,
-// yet `pandarcap-bench decode` measured it 8-16 % faster than AVX2 on this workload (README
+// yet `pandarcap-bench decode` measured it 12-18 % faster than AVX2 on this workload (README
 // "Performance"), so it goes first.
 constexpr std::array kAutoPreference = {
     DecoderTarget::kAvx512, DecoderTarget::kAvx2, DecoderTarget::kSse4,  DecoderTarget::kSve2,

@@ -140,6 +140,8 @@ HWY_INLINE void emit(const SimdDecoderTables& t, const ChannelConstants& k, std:
   const DF df;
   const DI di;
   const DU du;
+  // Nothing kept (no returns, or a dual pair merged into the strongest echo): nothing to build.
+  if (hn::AllFalse(di, keep)) return;
 
   const auto r =
       hn::Mul(hn::ConvertTo(df, records.distance), hn::Set(df, static_cast<float>(kDistanceUnitM)));
