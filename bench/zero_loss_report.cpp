@@ -41,6 +41,15 @@ Series series(const ordered_json& trials, const std::string& name, const std::st
   return s;
 }
 
+// Series names in their colours, one per line from (x, 60).
+void legend(std::string& svg, const std::vector<Series>& series, int x) {
+  for (std::size_t i = 0; i < series.size(); ++i) {
+    svg += fmt::format(R"(<text x="{}" y="{}" font-size="12" fill="{}">{}</text>)"
+                       "\n",
+                       x, 60 + 16 * i, series[i].colour, series[i].name);
+  }
+}
+
 class Panel {
  public:
   Panel(double x0, double y0, double w, double h, double xmin, double xmax, double ymin,
@@ -217,11 +226,7 @@ std::string zero_loss_svg(const ordered_json& r) {
   left.plot(svg, {"ideal", "#bbb", {{lo, lo}, {hi, hi}}});
   for (const Series& s : delivered)
     left.plot(svg, s);
-  for (std::size_t i = 0; i < delivered.size(); ++i) {
-    svg += fmt::format(R"(<text x="100" y="{}" font-size="12" fill="{}">{}</text>)"
-                       "\n",
-                       60 + 16 * i, delivered[i].colour, delivered[i].name);
-  }
+  legend(svg, delivered, 100);
 
   // Daemon loss per stage, in % of the packets sent.
   std::vector<Series> stages;
@@ -247,11 +252,7 @@ std::string zero_loss_svg(const ordered_json& r) {
   right.frame(svg, "pandarcapd loss per stage", "% of packets sent");
   for (const Series& s : stages)
     right.plot(svg, s);
-  for (std::size_t i = 0; i < stages.size(); ++i) {
-    svg += fmt::format(R"(<text x="640" y="{}" font-size="12" fill="{}">{}</text>)"
-                       "\n",
-                       60 + 16 * i, stages[i].colour, stages[i].name);
-  }
+  legend(svg, stages, 640);
   svg += "</svg>\n";
   return svg;
 }
