@@ -1,7 +1,6 @@
 #include "bench/decode_bench.hpp"
 
 #include <fmt/format.h>
-#include <time.h>
 
 #include <algorithm>
 #include <array>
@@ -12,6 +11,7 @@
 #include "core/capture_reader.hpp"
 #include "core/simd_decoder.hpp"
 #include "core/synthetic_sensor.hpp"
+#include "daemon/clocks.hpp"
 
 namespace pandarcap::bench {
 
@@ -67,12 +67,6 @@ Stream load_stream(const DecodeBenchOptions& options) {
   return stream;
 }
 
-std::int64_t thread_cpu_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
-}
-
 // Decodes the whole stream `passes` times; returns the points written. Kept out of line so
 // callgrind can count exactly this function (--toggle-collect='*decode_passes*').
 [[gnu::noinline]] std::uint64_t decode_passes(const PacketDecoder& decoder, const Stream& stream,
@@ -97,13 +91,13 @@ struct Sample {
 
 Sample measure(const PacketDecoder& decoder, const Stream& stream, double seconds) {
   // Size the run from one pass, then time enough passes to fill `seconds` of CPU.
-  std::int64_t start = thread_cpu_ns();
+  double start = thread_cpu_seconds();
   decode_passes(decoder, stream, 1);
-  const double one_pass_s = std::max(1e-9, static_cast<double>(thread_cpu_ns() - start) / 1e9);
+  const double one_pass_s = std::max(1e-9, thread_cpu_seconds() - start);
   const int passes = std::clamp(static_cast<int>(seconds / one_pass_s), 1, 1'000'000);
-  start = thread_cpu_ns();
+  start = thread_cpu_seconds();
   const std::uint64_t points = decode_passes(decoder, stream, passes);
-  const double elapsed = std::max(1e-9, static_cast<double>(thread_cpu_ns() - start) / 1e9);
+  const double elapsed = std::max(1e-9, thread_cpu_seconds() - start);
   return {static_cast<double>(stream.packets()) * passes / elapsed,
           static_cast<double>(points) / elapsed};
 }

@@ -15,6 +15,7 @@
 #include "bench/thread_pinning.hpp"
 #include "core/packet.hpp"
 #include "core/timing.hpp"
+#include "daemon/clocks.hpp"
 #include "ringbuf/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
@@ -282,12 +283,6 @@ Latency mutex_queue_round_trip(const Placement& where, std::size_t capacity, std
 // 600 RPM, the highest rate of a 10 Hz sensor) and notifies; the consumer waits in
 // wait_for_data() as the decode worker does. Reports the consumer thread's CPU time over wall
 // time.
-
-double thread_cpu_seconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) * 1e-9;
-}
 
 nlohmann::ordered_json idle_consumer_cpu(const Placement& where, std::size_t capacity,
                                          double seconds) {

@@ -17,22 +17,11 @@
 
 #include "core/capture_reader.hpp"
 #include "core/synthetic_sensor.hpp"
+#include "daemon/clocks.hpp"
 
 namespace pandarcap::bench {
 
 namespace {
-
-std::int64_t now_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
-}
-
-double thread_cpu_seconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) / 1e9;
-}
 
 sockaddr_in ipv4(const std::string& ip, std::uint16_t port) {
   sockaddr_in a{};
@@ -114,10 +103,10 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
 
   GeneratorResult result;
   double foreign_credit = 0, malformed_credit = 0;
-  const std::int64_t start = now_ns();
+  const std::int64_t start = monotonic_ns();
   const auto end = start + static_cast<std::int64_t>(o.seconds * 1e9);
   for (;;) {
-    const std::int64_t now = now_ns();
+    const std::int64_t now = monotonic_ns();
     if (now >= end) break;
     const double elapsed = static_cast<double>(now - start) / 1e9;
     const auto due = static_cast<std::uint64_t>(due_packets(o, elapsed));
@@ -169,7 +158,7 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
       }
     }
   }
-  result.seconds = static_cast<double>(now_ns() - start) / 1e9;
+  result.seconds = static_cast<double>(monotonic_ns() - start) / 1e9;
   result.achieved_pps = static_cast<double>(result.sent) / result.seconds;
   if (foreign_fd >= 0) ::close(foreign_fd);
   ::close(fd);

@@ -1,7 +1,6 @@
 #include "bench/write_bench.hpp"
 
 #include <fmt/format.h>
-#include <time.h>
 #include <unistd.h>
 
 #include <array>
@@ -13,6 +12,7 @@
 #include "core/pcd.hpp"
 #include "core/stream_decoder.hpp"
 #include "core/synthetic_sensor.hpp"
+#include "daemon/clocks.hpp"
 #include "daemon/file_output.hpp"
 
 namespace pandarcap::bench {
@@ -21,18 +21,13 @@ namespace {
 
 namespace fs = std::filesystem;
 
-double seconds(clockid_t clock) {
-  timespec ts{};
-  clock_gettime(clock, &ts);
-  return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) / 1e9;
-}
-
-// Wall and thread-CPU time of `work`.
+// Wall and thread-CPU time of `work`, in seconds.
 template <typename Work>
 std::pair<double, double> timed(Work&& work) {
-  const double wall = seconds(CLOCK_MONOTONIC), cpu = seconds(CLOCK_THREAD_CPUTIME_ID);
+  const std::int64_t wall = monotonic_ns();
+  const double cpu = thread_cpu_seconds();
   work();
-  return {seconds(CLOCK_MONOTONIC) - wall, seconds(CLOCK_THREAD_CPUTIME_ID) - cpu};
+  return {static_cast<double>(monotonic_ns() - wall) / 1e9, thread_cpu_seconds() - cpu};
 }
 
 // One complete revolution of the simulated sensor, decoded.
