@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
+#include <stdexcept>
 #include <string_view>
 
 #include "bench/decode_bench.hpp"
@@ -72,6 +74,28 @@ best_target, best_vs_scalar, auto_target, goals, method.
 Exit status: 0, 2 if the capture cannot be used, 64 for a usage error (or a target this CPU
 cannot run).
 )";
+
+// Runs a benchmark; when it throws, says so as "pandarcap-bench SUBCOMMAND: what" and returns
+// nothing.
+template <typename Run>
+std::optional<nlohmann::ordered_json> run_reporting_errors(std::string_view subcommand, Run&& run) {
+  try {
+    return run();
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "pandarcap-bench {}: {}\n", subcommand, e.what());
+    return std::nullopt;
+  }
+}
+
+// Prints a report: one JSON object with --json, otherwise the subcommand's own rendering.
+template <typename Print>
+void print_report(const nlohmann::ordered_json& report, bool json, Print&& print) {
+  if (json) {
+    std::puts(report.dump(2).c_str());
+  } else {
+    print(report);
+  }
+}
 
 constexpr std::string_view kZeroLossUsage = R"(Usage: pandarcap-bench zero-loss [OPTIONS]
 
@@ -158,14 +182,14 @@ int run_zero_loss(int argc, char** argv) {
     }
   }
   if (options.max_rate < options.min_rate) args.usage_error("--max-rate is below --min-rate");
-  nlohmann::ordered_json report;
-  try {
-    report = from_report.empty() ? pandarcap::bench::run_zero_loss(options)
-                                 : nlohmann::ordered_json::parse(std::ifstream(from_report));
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "pandarcap-bench zero-loss: %s\n", e.what());
-    return 1;
-  }
+  const auto result = run_reporting_errors("zero-loss", [&] {
+    if (from_report.empty()) return pandarcap::bench::run_zero_loss(options);
+    std::ifstream saved(from_report);
+    if (!saved) throw std::runtime_error(fmt::format("cannot read '{}'", from_report));
+    return nlohmann::ordered_json::parse(saved);
+  });
+  if (!result) return 1;
+  const nlohmann::ordered_json& report = *result;
   if (!report_dir.empty()) {
     std::filesystem::create_directories(report_dir);
     std::ofstream(std::filesystem::path(report_dir) / "report.json") << report.dump(2) << "\n";
@@ -174,11 +198,9 @@ int run_zero_loss(int argc, char** argv) {
     std::ofstream(std::filesystem::path(report_dir) / "plot.svg")
         << pandarcap::bench::zero_loss_svg(report);
   }
-  if (json) {
-    std::puts(report.dump(2).c_str());
-  } else {
-    std::fputs(pandarcap::bench::zero_loss_markdown(report).c_str(), stdout);
-  }
+  print_report(report, json, [](const nlohmann::ordered_json& r) {
+    std::fputs(pandarcap::bench::zero_loss_markdown(r).c_str(), stdout);
+  });
   return 0;
 }
 
@@ -214,26 +236,10 @@ int run_write(int argc, char** argv) {
       args.usage_error(fmt::format("unknown option '{}'", arg));
     }
   }
-  nlohmann::ordered_json report;
-  try {
-    report = pandarcap::bench::run_write_bench(options);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "pandarcap-bench write: %s\n", e.what());
-    return 1;
-  }
-  if (json) {
-    std::puts(report.dump(2).c_str());
-    return 0;
-  }
-  std::printf("%-22s %14s %10s %16s\n", "", "items/s", "MB/s", "items/CPU-s");
-  for (const char* key : {"pcd_encode", "pcd_encode_and_write", "pcap_write"}) {
-    const auto& r = report[key];
-    std::printf("%-22s %14.0f %10.1f %16.0f\n", key, r["items_per_s"].get<double>(),
-                r["mb_per_s"].get<double>(), r["items_per_cpu_s"].get<double>());
-  }
-  std::printf("one sensor: PCD %.2f %% of a core, pcap %.2f %% of a core\n",
-              100 * report["sensor_pcd_cpu_fraction"].get<double>(),
-              100 * report["sensor_pcap_cpu_fraction"].get<double>());
+  const auto report =
+      run_reporting_errors("write", [&] { return pandarcap::bench::run_write_bench(options); });
+  if (!report) return 1;
+  print_report(*report, json, pandarcap::bench::print_write_report);
   return 0;
 }
 
@@ -263,18 +269,10 @@ int run_decode(int argc, char** argv) {
       args.usage_error(fmt::format("unknown option '{}'", arg));
     }
   }
-  nlohmann::ordered_json report;
-  try {
-    report = pandarcap::bench::run_decode_bench(options);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "pandarcap-bench decode: %s\n", e.what());
-    return 2;
-  }
-  if (json) {
-    std::puts(report.dump(2).c_str());
-  } else {
-    pandarcap::bench::print_decode_report(report);
-  }
+  const auto report =
+      run_reporting_errors("decode", [&] { return pandarcap::bench::run_decode_bench(options); });
+  if (!report) return 2;
+  print_report(*report, json, pandarcap::bench::print_decode_report);
   return 0;
 }
 
@@ -307,11 +305,7 @@ int run_ring(int argc, char** argv) {
     }
   }
   const nlohmann::ordered_json report = pandarcap::bench::run_ring_bench(options);
-  if (json) {
-    std::puts(report.dump(2).c_str());
-  } else {
-    pandarcap::bench::print_ring_report(report);
-  }
+  print_report(report, json, pandarcap::bench::print_ring_report);
   return report["order_errors"].get<std::uint64_t>() == 0 ? 0 : 1;
 }
 

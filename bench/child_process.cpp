@@ -83,7 +83,11 @@ std::optional<int> ChildProcess::wait_exit(std::chrono::milliseconds timeout) {
 }
 
 std::string ChildProcess::log() const {
-  std::ifstream in(log_path_);
+  return read_file(log_path_);
+}
+
+std::string read_file(const std::filesystem::path& path) {
+  std::ifstream in(path);
   std::stringstream s;
   s << in.rdbuf();
   return s.str();

@@ -36,6 +36,9 @@ class ChildProcess {
   std::filesystem::path log_path_;
 };
 
+// The whole file as text ("" when it cannot be read): logs, /proc files.
+std::string read_file(const std::filesystem::path& path);
+
 // Polls `condition` every few milliseconds until it returns true (-> true) or `timeout` passes
 // (-> false).
 bool wait_until(const std::function<bool()>& condition, std::chrono::milliseconds timeout);

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <cstdio>
 #include <filesystem>
 #include <vector>
 
@@ -120,6 +121,18 @@ nlohmann::ordered_json run_write_bench(const WriteBenchOptions& o) {
   report["method"] =
       "one thread; items are points (PCD) or packets (pcap); files in a temporary directory";
   return report;
+}
+
+void print_write_report(const nlohmann::ordered_json& report) {
+  std::printf("%-22s %14s %10s %16s\n", "", "items/s", "MB/s", "items/CPU-s");
+  for (const char* key : {"pcd_encode", "pcd_encode_and_write", "pcap_write"}) {
+    const auto& r = report[key];
+    std::printf("%-22s %14.0f %10.1f %16.0f\n", key, r["items_per_s"].get<double>(),
+                r["mb_per_s"].get<double>(), r["items_per_cpu_s"].get<double>());
+  }
+  std::printf("one sensor: PCD %.2f %% of a core, pcap %.2f %% of a core\n",
+              100 * report["sensor_pcd_cpu_fraction"].get<double>(),
+              100 * report["sensor_pcap_cpu_fraction"].get<double>());
 }
 
 }  // namespace pandarcap::bench

@@ -18,4 +18,7 @@ struct WriteBenchOptions {
 
 nlohmann::ordered_json run_write_bench(const WriteBenchOptions& options);
 
+// Prints the report as a short table.
+void print_write_report(const nlohmann::ordered_json& report);
+
 }  // namespace pandarcap::bench

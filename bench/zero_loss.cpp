@@ -27,12 +27,7 @@ namespace fs = std::filesystem;
 using nlohmann::ordered_json;
 using namespace std::chrono_literals;
 
-std::string read_file(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using harness::read_file;
 
 // a / b, 0 when b is 0.
 double ratio(double a, std::uint64_t b) {
