@@ -135,16 +135,19 @@ void append_rfc3339(std::string& out, std::int64_t unix_ns) {
                  millis);
 }
 
-void append_label_value(std::string& out, std::string_view value) {
+// Appends `value` escaped as a Prometheus label value: to a std::string, or to the stack buffer
+// the sensor label is built in.
+template <typename Buffer>
+void append_label_value(Buffer& out, std::string_view value) {
   for (const char c : value) {
-    if (c == '\\') {
-      out += "\\\\";
-    } else if (c == '"') {
-      out += "\\\"";
+    if (c == '\\' || c == '"') {
+      out.push_back('\\');
+      out.push_back(c);
     } else if (c == '\n') {
-      out += "\\n";
+      out.push_back('\\');
+      out.push_back('n');
     } else {
-      out += c;
+      out.push_back(c);
     }
   }
 }
@@ -224,14 +227,7 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
   // characters would spill to the heap; nothing shorter allocates).
   fmt::basic_memory_buffer<char, 512> label;
   fmt::format_to(std::back_inserter(label), "sensor=\"");
-  for (const char c : h.sensor) {
-    if (c == '\\' || c == '"') label.push_back('\\');
-    if (c == '\n') {
-      label.append(std::string_view("\\n"));
-    } else {
-      label.push_back(c);
-    }
-  }
+  append_label_value(label, h.sensor);
   label.push_back('"');
   const std::string_view sensor(label.data(), label.size());
   const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
