@@ -60,6 +60,25 @@ std::map<std::string, std::uint64_t> thread_ticks(int pid) {
   return ticks;
 }
 
+// The daemon's CPU between two thread_ticks() readings `seconds` apart, in total and per thread.
+ordered_json cpu_use(const std::map<std::string, std::uint64_t>& before,
+                     const std::map<std::string, std::uint64_t>& after, double seconds,
+                     std::uint64_t packets) {
+  const double tick = static_cast<double>(::sysconf(_SC_CLK_TCK));
+  double total = 0;
+  ordered_json per_thread;
+  for (const auto& [name, ticks] : after) {
+    const auto start = before.count(name) ? before.at(name) : 0;
+    const double cpu_s = static_cast<double>(ticks - start) / tick;
+    total += cpu_s;
+    per_thread[name] = {{"cpu_fraction_of_one_core", cpu_s / seconds},
+                        {"cpu_us_per_packet", ratio(cpu_s * 1e6, packets)}};
+  }
+  return {{"cpu_fraction_of_one_core", total / seconds},
+          {"cpu_by_thread", per_thread},
+          {"cpu_resolution_s", 1.0 / tick}};
+}
+
 std::uint64_t peak_rss_bytes(int pid) {
   std::istringstream status(read_file(fmt::format("/proc/{}/status", pid)));
   std::string line;
@@ -232,21 +251,7 @@ class Harness {
         {"hot_path_allocations", h["counters"].contains("hot_path_allocations")
                                      ? ordered_json(counter(h, "hot_path_allocations"))
                                      : ordered_json(nullptr)}};
-    {
-      const double tick = static_cast<double>(::sysconf(_SC_CLK_TCK));
-      double total = 0;
-      ordered_json per_thread;
-      for (const auto& [name, after] : cpu_after) {
-        const auto before = cpu_before.count(name) ? cpu_before.at(name) : 0;
-        const double cpu_s = static_cast<double>(after - before) / tick;
-        total += cpu_s;
-        per_thread[name] = {{"cpu_fraction_of_one_core", cpu_s / sent.seconds},
-                            {"cpu_us_per_packet", ratio(cpu_s * 1e6, sent.sent)}};
-      }
-      t["cpu_fraction_of_one_core"] = total / sent.seconds;
-      t["cpu_by_thread"] = per_thread;
-      t["cpu_resolution_s"] = 1.0 / tick;
-    }
+    t.update(cpu_use(cpu_before, cpu_after, sent.seconds, sent.sent));
     std::error_code ec;
     fs::remove_all(out, ec);
     return t;
