@@ -57,7 +57,17 @@ void OutputFile::close() {
 }
 
 std::filesystem::path temporary_name(const std::filesystem::path& path) {
-  return path.parent_path() / ("." + path.filename().string() + ".tmp");
+  std::string name;
+  assign_temporary_name(name, path.native());
+  return name;
+}
+
+void assign_temporary_name(std::string& out, std::string_view path) {
+  const std::size_t name_at = path.rfind('/') + 1;  // npos + 1 == 0: no directory
+  out.assign(path.substr(0, name_at));
+  out += '.';
+  out.append(path.substr(name_at));
+  out += ".tmp";
 }
 
 void write_file_replacing(const std::filesystem::path& path, std::string_view text) {

@@ -51,6 +51,8 @@ void write_file_replacing(const std::string& path, const std::string& temporary,
 // The temporary name used for `path` while it is being written: ".<name>.tmp", hidden from
 // globs such as *.pcd and *.prom (node_exporter's textfile collector reads only *.prom).
 std::filesystem::path temporary_name(const std::filesystem::path& path);
+// The same into `out` (its capacity reused: no allocation once it has grown).
+void assign_temporary_name(std::string& out, std::string_view path);
 
 // "20261122T120000.123Z" (with_millis) or "20261122T120000Z", for file names.
 std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis);

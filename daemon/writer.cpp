@@ -52,7 +52,7 @@ void Writer::prepare() {
     write_file_replacing(raw_dir_ / "calibration.csv", options_.calibration_csv);
   }
   prom_path_ = (health_dir_ / "pandarcap.prom").native();
-  prom_temporary_path_ = temporary_name(prom_path_).native();
+  assign_temporary_name(prom_temporary_path_, prom_path_);
   jsonl_path_ = (health_dir_ / "health.jsonl").native();
   jsonl_rotated_path_ = jsonl_path_ + ".1";
   prom_text_.reserve(64 * 1024);
@@ -106,15 +106,10 @@ void Writer::write_frame(FrameArena& arena) {
   const std::uint64_t expected = pcd_header_.size() + points.size() * kPcdPointBytes;
   // frames/frame_000123_20261122T120000.123Z[_partial].pcd, written as frames/.<name>.tmp.
   frame_path_.assign(frames_dir_.native());
-  frame_path_ += '/';
-  const std::size_t name_at = frame_path_.size();
-  fmt::format_to(std::back_inserter(frame_path_), "frame_{:06}_", frame.info.sequence);
+  fmt::format_to(std::back_inserter(frame_path_), "/frame_{:06}_", frame.info.sequence);
   append_utc_file_stamp(frame_path_, frame.info.start_ns, true);
   frame_path_ += frame.info.partial ? "_partial.pcd" : ".pcd";
-  frame_temporary_path_.assign(frame_path_, 0, name_at);
-  frame_temporary_path_ += '.';
-  frame_temporary_path_.append(frame_path_, name_at);
-  frame_temporary_path_ += ".tmp";
+  assign_temporary_name(frame_temporary_path_, frame_path_);
   try {
     frame_file_.open(frame_temporary_path_, OutputFile::Mode::kCreate);
     frame_file_.write(pcd_header_);
