@@ -79,6 +79,18 @@ std::optional<std::string> multicast_or_empty(const std::string& s) {
   return std::nullopt;
 }
 
+// node_exporter's textfile collector reads only files named *.prom.
+std::optional<std::string> prom_file_or_empty(const std::string& s) {
+  if (s.empty()) return std::nullopt;
+  if (s.size() < 6 || !s.ends_with(".prom") || s.ends_with("/.prom")) {
+    return fmt::format(
+        "\"{}\" must be a file name ending in .prom (node_exporter's textfile "
+        "collector reads no other)",
+        s);
+  }
+  return std::nullopt;
+}
+
 std::optional<std::string> one_of(const std::string& s, std::initializer_list<const char*> names) {
   std::string list;
   for (const char* n : names) {
@@ -136,6 +148,7 @@ template <typename Config, typename Visitor>
 void for_each_key(Config& c, Visitor&& v) {
   constexpr std::int64_t kU32 = std::numeric_limits<std::uint32_t>::max();
   constexpr std::int64_t kI64 = std::numeric_limits<std::int64_t>::max();
+  constexpr std::int64_t kMaxCpu = 1023;  // CPU_SETSIZE - 1
   v("", "log_level", c.log_level, &log_level);
   v("", "decoder", c.decoder, &decoder_name);
 
@@ -183,6 +196,17 @@ void for_each_key(Config& c, Visitor&& v) {
   v("health", "prometheus", h.prometheus, std::monostate{});
   v("health", "jsonl", h.jsonl, std::monostate{});
   v("health", "jsonl_rotate_bytes", h.jsonl_rotate_bytes, IntRange{0, kI64});
+  v("health", "directory", h.directory, &any_string);
+  v("health", "prometheus_file", h.prometheus_file, &prom_file_or_empty);
+
+  auto& t = c.threads;
+  v("threads", "receive_cpu", t.receive_cpu, IntRange{-1, kMaxCpu});
+  v("threads", "decode_cpu", t.decode_cpu, IntRange{-1, kMaxCpu});
+  v("threads", "writer_cpu", t.writer_cpu, IntRange{-1, kMaxCpu});
+  v("threads", "receive_priority", t.receive_priority, IntRange{0, 99});
+  v("threads", "decode_priority", t.decode_priority, IntRange{0, 99});
+  v("threads", "writer_priority", t.writer_priority, IntRange{0, 99});
+  v("threads", "lock_memory", t.lock_memory, std::monostate{});
 }
 
 std::string dotted(std::string_view table, std::string_view key) {

@@ -1,7 +1,8 @@
 // Everything pandarcapd can be configured with, and its defaults. The TOML file
 // (config/pandarcap.toml documents every key) maps onto this one-to-one: table [sensor] holds
-// the established LiDAR-driver parameter names, then [ring], [arenas], [output] and [health].
-// The defaults are what `pandarcapd --replay FILE` runs with when no config file is given.
+// the established LiDAR-driver parameter names, then [ring], [arenas], [output], [health] and
+// [threads]. The defaults are what `pandarcapd --replay FILE` runs with when no config file is
+// given.
 #pragma once
 
 #include <cstdint>
@@ -56,6 +57,20 @@ struct HealthSection {
   bool prometheus = true;                        // health/pandarcap.prom
   bool jsonl = true;                             // health/health.jsonl
   std::uint64_t jsonl_rotate_bytes = 64u << 20;  // rotate health.jsonl; 0 = never
+  std::string directory;        // health.jsonl (and pandarcap.prom); "" = OUTPUT-DIR/health
+  std::string prometheus_file;  // the .prom file; "" = HEALTH-DIR/pandarcap.prom
+};
+
+// Optional placement of the threads on a dedicated PC (best effort: what the limits refuse is
+// logged, never fatal). CPU -1 = not pinned; priority 0 = normal scheduling, 1..99 = SCHED_FIFO.
+struct ThreadsSection {
+  int receive_cpu = -1;
+  int decode_cpu = -1;
+  int writer_cpu = -1;
+  int receive_priority = 0;
+  int decode_priority = 0;
+  int writer_priority = 0;
+  bool lock_memory = false;  // mlockall once started
 };
 
 struct DaemonConfig {
@@ -69,6 +84,7 @@ struct DaemonConfig {
   ArenaSection arenas;
   OutputSection output;
   HealthSection health;
+  ThreadsSection threads;
 };
 
 }  // namespace pandarcap

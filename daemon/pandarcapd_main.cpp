@@ -48,6 +48,7 @@
 #include "daemon/replay_source.hpp"
 #include "daemon/sd_notify.hpp"
 #include "daemon/simulated_sender.hpp"
+#include "daemon/thread_tuning.hpp"
 #include "daemon/udp_receiver.hpp"
 #include "daemon/writer.hpp"
 #include "ringbuf/packet_slot.hpp"
@@ -271,16 +272,16 @@ struct Pipeline {
   std::atomic<std::uint32_t> rotate_generation{0};
 };
 
-void print_summary(const std::filesystem::path& dir) {
-  const std::filesystem::path jsonl = dir / "health" / "health.jsonl";
+void print_summary(const std::filesystem::path& dir, const WriterOptions& wo) {
+  const std::filesystem::path jsonl = wo.health_dir / "health.jsonl";
   std::ifstream in(jsonl);
   std::string line, last;
   while (std::getline(in, line)) {
     if (!line.empty()) last = line;
   }
   fmt::print("outputs in {}:\n  frames  {}\n  raw     {}\n  health  {} and {}\n", dir.string(),
-             (dir / "frames").string(), (dir / "raw").string(),
-             (dir / "health" / "pandarcap.prom").string(), jsonl.string());
+             (dir / "frames").string(), (dir / "raw").string(), wo.prometheus_file.string(),
+             jsonl.string());
   if (last.empty()) return;
   try {
     const auto h = nlohmann::json::parse(last);
@@ -412,6 +413,14 @@ int run(int argc, char** argv) {
   const std::filesystem::path output_dir = config.output.directory;
   WriterOptions wo;
   wo.output_dir = output_dir;
+  wo.health_dir = config.health.directory.empty() ? output_dir / "health"
+                                                  : std::filesystem::path(config.health.directory);
+  wo.prometheus_file = config.health.prometheus_file.empty()
+                           ? wo.health_dir / "pandarcap.prom"
+                           : std::filesystem::path(config.health.prometheus_file);
+  if (const char* stall = std::getenv("PANDARCAP_TEST_STALL_WRITER_FILE")) {
+    wo.test_stall_file = stall;
+  }
   wo.frames = config.output.frames;
   wo.frames_max_files = config.output.frames_max_files;
   wo.frames_max_bytes = config.output.frames_max_bytes;
@@ -466,16 +475,20 @@ int run(int argc, char** argv) {
 
   ReplayResult replay_result;
   // Named threads (`top -H`, /proc/PID/task/*/comm) so each stage's CPU can be measured.
+  const ThreadsSection& placement = config.threads;
   std::thread writer_thread([&] {
     name_this_thread("pc-writer");
+    place_this_thread("writer", {placement.writer_cpu, placement.writer_priority});
     writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status);
   });
   std::thread decode_thread([&] {
     name_this_thread("pc-decode");
+    place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
     worker.run(pipe.source_done, pipe.heartbeats.decode);
   });
   std::thread source_thread([&] {
     name_this_thread(replay ? "pc-replay" : "pc-receive");
+    place_this_thread("receive", {placement.receive_cpu, placement.receive_priority});
     if (replay) {
       replay_result =
           replay->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive);
@@ -494,6 +507,7 @@ int run(int argc, char** argv) {
     });
   }
 
+  if (config.threads.lock_memory) lock_all_memory();
   systemd::ready();
   spdlog::info("ready: writing to {}", output_dir.string());
 
@@ -559,7 +573,7 @@ int run(int argc, char** argv) {
       status = 1;
     }
   }
-  print_summary(output_dir);
+  print_summary(output_dir, wo);
   return status;
 }
 

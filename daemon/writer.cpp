@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -35,7 +36,6 @@ Writer::Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_dec
       receive_(receive),
       frames_dir_(options.output_dir / "frames"),
       raw_dir_(options.output_dir / "raw"),
-      health_dir_(options.output_dir / "health"),
       pcd_buffer_(kPcdChunkPoints * kPcdPointBytes) {}
 
 Writer::~Writer() = default;
@@ -44,23 +44,26 @@ void Writer::prepare() {
   start_monotonic_ns_ = monotonic_ns();
   last_tick_ns_ = start_monotonic_ns_;
   decode_.monotonic_ns = decode_prev_.monotonic_ns = start_monotonic_ns_;
-  std::filesystem::create_directories(health_dir_);
+  std::filesystem::create_directories(options_.health_dir);
+  if (options_.prometheus && options_.prometheus_file.has_parent_path()) {
+    std::filesystem::create_directories(options_.prometheus_file.parent_path());
+  }
   if (options_.frames) std::filesystem::create_directories(frames_dir_);
   if (options_.pcap) {
     std::filesystem::create_directories(raw_dir_);
     // The angles the recording was decoded with travel with it.
     write_file_replacing(raw_dir_ / "calibration.csv", options_.calibration_csv);
   }
-  prom_path_ = (health_dir_ / "pandarcap.prom").native();
+  prom_path_ = options_.prometheus_file.native();
   assign_temporary_name(prom_temporary_path_, prom_path_);
-  jsonl_path_ = (health_dir_ / "health.jsonl").native();
+  jsonl_path_ = (options_.health_dir / "health.jsonl").native();
   jsonl_rotated_path_ = jsonl_path_ + ".1";
   prom_text_.reserve(64 * 1024);
   json_text_.reserve(8 * 1024);
   frame_path_.reserve(4096);
   frame_temporary_path_.reserve(4096);
   pcd_header_.reserve(1024);
-  // Proves the health directory is writable before the daemon reports ready.
+  // Proves the health directories are writable before the daemon reports ready.
   build_health(start_monotonic_ns_);
   if (options_.prometheus) {
     render_prometheus(health_, prom_text_);
@@ -354,6 +357,15 @@ void Writer::write_health(bool final) {
   (void) final;
 }
 
+void Writer::stall_while_test_file_exists() const {
+  if (::access(options_.test_stall_file.c_str(), F_OK) != 0) return;
+  spdlog::warn("test hook: writer stalled while {} exists", options_.test_stall_file);
+  const timespec pause{0, 20'000'000};
+  while (::access(options_.test_stall_file.c_str(), F_OK) == 0)
+    ::nanosleep(&pause, nullptr);
+  spdlog::warn("test hook: writer resumed");
+}
+
 void Writer::run(std::atomic<std::uint64_t>& heartbeat,
                  const std::atomic<std::uint32_t>& rotate_generation,
                  ringbuf::SpscQueue<StatusLine>& status_out) {
@@ -402,6 +414,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
     }
     const std::int64_t now = monotonic_ns();
     if (now >= next_tick) {
+      if (!options_.test_stall_file.empty()) stall_while_test_file_exists();
       write_health(false);
       StatusLine status;
       const HealthCounters& c = health_.counters;

@@ -35,7 +35,9 @@
 namespace pandarcap {
 
 struct WriterOptions {
-  std::filesystem::path output_dir;
+  std::filesystem::path output_dir;       // frames/ and raw/ go under it
+  std::filesystem::path health_dir;       // health.jsonl
+  std::filesystem::path prometheus_file;  // the .prom textfile
   bool frames = true;
   std::uint64_t frames_max_files = 0;
   std::uint64_t frames_max_bytes = 0;
@@ -55,6 +57,10 @@ struct WriterOptions {
   int expected_rpm = 600;
   Endpoint pcap_destination;  // the synthesised destination of recorded packets
   std::string calibration_csv;
+  // Test hook (PANDARCAP_TEST_STALL_WRITER_FILE): while this file exists, the writer stops at its
+  // next once-a-second tick, without a heartbeat, as a writer stuck on a dead disk would. Lets
+  // the tests see the watchdog stop and frames drop (counted) behind a stalled writer. "" = off.
+  std::string test_stall_file;
 };
 
 // One line for sd_notify STATUS=, handed to the main thread once a second.
@@ -89,6 +95,7 @@ class Writer {
   void close_pcap();
   void rotate_outputs();
   void write_health(bool final);
+  void stall_while_test_file_exists() const;
   void build_health(std::int64_t now_monotonic_ns);  // into health_
   void write_failed(const std::exception& error, std::uint64_t bytes);
   void enforce_retention(std::deque<std::pair<std::filesystem::path, std::uint64_t>>& files,
@@ -99,7 +106,7 @@ class Writer {
   DecodeWorker::ArenaQueue& arenas_back_;
   DecodeWorker::RawQueue& raw_back_;
   const ReceiveCounters& receive_;
-  std::filesystem::path frames_dir_, raw_dir_, health_dir_;
+  std::filesystem::path frames_dir_, raw_dir_;
 
   std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
   std::unique_ptr<PcapWriter> pcap_;

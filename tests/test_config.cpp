@@ -61,6 +61,15 @@ DaemonConfig everything_changed() {
   c.health.prometheus = false;
   c.health.jsonl = false;
   c.health.jsonl_rotate_bytes = 0;
+  c.health.directory = "/var/log/pandarcap/front";
+  c.health.prometheus_file = "/var/lib/prometheus/node-exporter/pandarcap-front.prom";
+  c.threads.receive_cpu = 1;
+  c.threads.decode_cpu = 0;
+  c.threads.writer_cpu = 1023;
+  c.threads.receive_priority = 50;
+  c.threads.decode_priority = 40;
+  c.threads.writer_priority = 1;
+  c.threads.lock_memory = true;
   return c;
 }
 
@@ -87,6 +96,8 @@ TEST_CASE("to_toml reads back to the same configuration", "[config]") {
   CHECK(back.output.pcap_max_bytes == changed.output.pcap_max_bytes);
   CHECK(back.ring.slots == changed.ring.slots);
   CHECK_FALSE(back.health.jsonl);
+  CHECK(back.threads.receive_priority == 50);
+  CHECK(back.threads.lock_memory);
 }
 
 TEST_CASE("A float key accepts an integer; an integer key refuses a float", "[config]") {
@@ -134,6 +145,10 @@ TEST_CASE("Integers are range-checked before narrowing, so nothing wraps", "[con
   CHECK(error_of("[ring]\nreceive_batch = 4294967297\n") ==
         "t.toml:2:17: ring.receive_batch: 4294967297 is out of range (1..1024)");
   CHECK(error_of("[arenas]\ncount = 1\n") == "t.toml:2:9: arenas.count: 1 is out of range (2..64)");
+  CHECK(error_of("[threads]\nreceive_cpu = -2\n") ==
+        "t.toml:2:15: threads.receive_cpu: -2 is out of range (-1..1023)");
+  CHECK(error_of("[threads]\ndecode_priority = 100\n") ==
+        "t.toml:2:19: threads.decode_priority: 100 is out of range (0..99)");
   CHECK(error_of("[output]\nframe_decimation = 0\n").find("output.frame_decimation: 0 is out") !=
         std::string::npos);
 }
@@ -184,6 +199,12 @@ TEST_CASE("Strings are checked: addresses, names from a fixed set, labels", "[co
   CHECK(error_of("decoder = \"avx512\"\n") == "(accepted)");  // the CPU is checked at start-up
   CHECK(error_of("[output]\ndirectory = \"\"\n") ==
         "t.toml:2:13: output.directory: must not be empty");
+  CHECK(error_of("[health]\nprometheus_file = \"/var/lib/x/pandarcap.txt\"\n") ==
+        "t.toml:2:19: health.prometheus_file: \"/var/lib/x/pandarcap.txt\" must be a file name "
+        "ending in .prom (node_exporter's textfile collector reads no other)");
+  CHECK(error_of("[health]\nprometheus_file = \"/var/lib/x/.prom\"\n").find("must be a file") !=
+        std::string::npos);
+  CHECK(error_of("[health]\nprometheus_file = \"a.prom\"\n") == "(accepted)");
   CHECK(error_of("[sensor]\nsensor_ip = \"\"\nmulticast_ip = \"239.255.0.1\"\n") == "(accepted)");
 }
 

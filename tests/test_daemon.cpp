@@ -4,7 +4,6 @@
 // Every wait is a condition with a deadline (wait_until / wait_exit), never a bare sleep.
 #include <signal.h>
 #include <sys/socket.h>
-#include <sys/un.h>
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
@@ -403,49 +402,4 @@ TEST_CASE("a bad configuration exits 78 with file:line:col", "[daemon][config]")
   CHECK(printed.exit_code == 0);
   CHECK(printed.out.find("data_port = 2369") != std::string::npos);
   CHECK(printed.out.find("max_range = 150") != std::string::npos);
-}
-
-TEST_CASE("sd_notify: READY, STATUS, WATCHDOG, STOPPING over NOTIFY_SOCKET", "[daemon]") {
-  test::ScratchDir dir("daemon-notify");
-  const fs::path socket_path = dir / "notify.sock";
-  const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  REQUIRE(fd >= 0);
-  sockaddr_un address{};
-  address.sun_family = AF_UNIX;
-  std::snprintf(address.sun_path, sizeof address.sun_path, "%s", socket_path.c_str());
-  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0);
-  const timeval timeout{0, 100'000};
-  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
-
-  harness::ChildProcess daemon(pandarcapd(), {"--simulate", "--output-dir", (dir / "out").string()},
-                               dir / "log.txt",
-                               {"NOTIFY_SOCKET=" + socket_path.string(), "WATCHDOG_USEC=500000"});
-  std::string messages;
-  const auto receive = [&] {
-    char buffer[512];
-    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
-    if (n > 0) messages.append(buffer, static_cast<std::size_t>(n)).append("\n");
-  };
-  const bool running = harness::wait_until(
-      [&] {
-        receive();
-        return messages.find("READY=1") != std::string::npos &&
-               messages.find("STATUS=") != std::string::npos &&
-               messages.find("WATCHDOG=1") != std::string::npos;
-      },
-      15s);
-  INFO(messages);
-  INFO(daemon.log());
-  CHECK(running);
-  daemon.signal(SIGTERM);
-  CHECK(harness::wait_until(
-      [&] {
-        receive();
-        return messages.find("STOPPING=1") != std::string::npos;
-      },
-      10s));
-  CHECK(daemon.wait_exit(10s) == 0);
-  // READY comes before the first STATUS.
-  CHECK(messages.find("READY=1") < messages.find("STATUS="));
-  ::close(fd);
 }

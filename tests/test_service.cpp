@@ -1,0 +1,226 @@
+// pandarcapd as a service on a vehicle PC.
+//
+// The notify protocol without systemd: the test binds the datagram socket systemd would
+// (NOTIFY_SOCKET) and asks for a watchdog (WATCHDOG_USEC), then checks what a supervisor relies
+// on: READY once started, WATCHDOG=1 at half the interval while every loop makes progress, no
+// WATCHDOG while a loop is stalled (so systemd would restart the service), WATCHDOG again once it
+// recovers, STOPPING on SIGTERM and a clean exit.
+//
+// Thread placement ([threads]): what was granted is what /proc shows, what was refused is logged
+// and the daemon runs on. Health files go where [health] says (node_exporter's directory).
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bench/child_process.hpp"
+#include "test_support.hpp"
+
+using namespace pandarcap;
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+namespace {
+
+// The receiving end of NOTIFY_SOCKET: every datagram the daemon sent, in order.
+class NotifyListener {
+ public:
+  explicit NotifyListener(const fs::path& path) {
+    fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    REQUIRE(fd_ >= 0);
+    sockaddr_un address{};
+    address.sun_family = AF_UNIX;
+    REQUIRE(path.native().size() < sizeof address.sun_path);
+    std::snprintf(address.sun_path, sizeof address.sun_path, "%s", path.c_str());
+    REQUIRE(::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0);
+    const timeval timeout{0, 50'000};
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+  }
+  ~NotifyListener() { ::close(fd_); }
+  NotifyListener(const NotifyListener&) = delete;
+  NotifyListener& operator=(const NotifyListener&) = delete;
+
+  // Takes everything queued, waiting up to ~50 ms for the first datagram.
+  void receive() {
+    char buffer[512];
+    for (int flags = 0;; flags = MSG_DONTWAIT) {
+      const ssize_t n = ::recv(fd_, buffer, sizeof buffer, flags);
+      if (n <= 0) return;
+      messages_.emplace_back(buffer, static_cast<std::size_t>(n));
+    }
+  }
+  // Messages received so far that contain `text` (a datagram may carry several lines).
+  std::size_t count(const std::string& text) const {
+    std::size_t n = 0;
+    for (const auto& m : messages_)
+      n += m.find(text) != std::string::npos ? 1 : 0;
+    return n;
+  }
+  // Index of the first message containing `text`, or the number of messages.
+  std::size_t first(const std::string& text) const {
+    for (std::size_t i = 0; i < messages_.size(); ++i)
+      if (messages_[i].find(text) != std::string::npos) return i;
+    return messages_.size();
+  }
+  std::string all() const {
+    std::string text;
+    for (const auto& m : messages_)
+      text += m + "\n";
+    return text;
+  }
+
+ private:
+  int fd_ = -1;
+  std::vector<std::string> messages_;
+};
+
+}  // namespace
+
+TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, resumes, STOPPING",
+          "[daemon][systemd]") {
+  test::ScratchDir dir("daemon-watchdog");
+  NotifyListener notify(dir / "notify.sock");
+  const fs::path stall_file = dir / "stall-writer";
+  // 400 ms asked for: the daemon pings every 200 ms while all three loops progress.
+  harness::ChildProcess daemon(
+      test::binary("pandarcapd"), {"--simulate", "--output-dir", (dir / "out").string()},
+      dir / "log.txt",
+      {"NOTIFY_SOCKET=" + (dir / "notify.sock").string(), "WATCHDOG_USEC=400000",
+       "PANDARCAP_TEST_STALL_WRITER_FILE=" + stall_file.string()});
+
+  const auto until = [&](const std::function<bool()>& condition, std::chrono::milliseconds limit) {
+    return harness::wait_until(
+        [&] {
+          notify.receive();
+          return condition();
+        },
+        limit);
+  };
+  const bool healthy =
+      until([&] { return notify.count("READY=1") == 1 && notify.count("WATCHDOG=1") >= 4; }, 15s);
+  INFO(notify.all());
+  INFO(daemon.log());
+  REQUIRE(healthy);
+  CHECK(notify.first("READY=1") < notify.first("WATCHDOG=1"));
+  CHECK(until([&] { return notify.count("STATUS=") >= 1; }, 5s));
+
+  SECTION("a stalled writer silences the watchdog until it recovers") {
+    std::ofstream(stall_file).put('\n');
+    REQUIRE(harness::wait_until(
+        [&] { return daemon.log().find("test hook: writer stalled") != std::string::npos; }, 5s));
+    // A ping already due when the writer stopped may still go out; after that, none. Healthy,
+    // 1.2 s would bring about six.
+    notify.receive();
+    const std::size_t at_stall = notify.count("WATCHDOG=1");
+    const auto window_end = std::chrono::steady_clock::now() + 1200ms;
+    while (std::chrono::steady_clock::now() < window_end)
+      notify.receive();
+    CHECK(notify.count("WATCHDOG=1") - at_stall <= 1);
+
+    fs::remove(stall_file);
+    const std::size_t before_resume = notify.count("WATCHDOG=1");
+    CHECK(until([&] { return notify.count("WATCHDOG=1") >= before_resume + 2; }, 5s));
+    CHECK(daemon.log().find("test hook: writer resumed") != std::string::npos);
+  }
+
+  daemon.signal(SIGTERM);
+  CHECK(until([&] { return notify.count("STOPPING=1") == 1; }, 10s));
+  CHECK(daemon.wait_exit(10s) == 0);
+  CHECK(notify.first("READY=1") < notify.first("STOPPING=1"));
+}
+
+namespace {
+
+// /proc/PID/task/*: thread name -> {Cpus_allowed_list, scheduling policy (0 other, 1 FIFO)}.
+struct ThreadState {
+  std::string cpus;
+  int policy = -1;
+};
+std::map<std::string, ThreadState> threads_of(int pid) {
+  std::map<std::string, ThreadState> threads;
+  for (const auto& task :
+       fs::directory_iterator(fs::path("/proc") / std::to_string(pid) / "task")) {
+    std::string name = harness::read_file(task.path() / "comm");
+    if (!name.empty() && name.back() == '\n') name.pop_back();
+    ThreadState state;
+    std::istringstream status(harness::read_file(task.path() / "status"));
+    for (std::string line; std::getline(status, line);) {
+      if (line.rfind("Cpus_allowed_list:", 0) == 0) {
+        state.cpus = line.substr(line.find_first_not_of(" \t", 18));
+      }
+    }
+    // Field 41 of stat is the policy; the command name (field 2) may hold spaces, so count
+    // from the closing parenthesis.
+    const std::string stat = harness::read_file(task.path() / "stat");
+    std::istringstream fields(stat.substr(stat.rfind(')') + 2));
+    std::string field;
+    for (int i = 3; i <= 41 && fields >> field; ++i)
+      if (i == 41) state.policy = std::stoi(field);
+    threads[name] = state;
+  }
+  return threads;
+}
+
+}  // namespace
+
+TEST_CASE("[threads]: pinning and SCHED_FIFO as granted, refusals logged, health paths honoured",
+          "[daemon][systemd]") {
+  test::ScratchDir dir("daemon-threads");
+  const fs::path config = dir / "threads.toml";
+  std::ofstream(config) << "[health]\n"
+                           "directory = \""
+                        << (dir / "log").string()
+                        << "\"\n"
+                           "prometheus_file = \""
+                        << (dir / "textfile" / "pandarcap-front.prom").string()
+                        << "\"\n"
+                           "[threads]\n"
+                           "receive_cpu = 0\n"
+                           "decode_cpu = 0\n"
+                           "writer_cpu = 1023\n"  // no such CPU here: refused, logged
+                           "receive_priority = 5\n";
+  harness::ChildProcess daemon(
+      test::binary("pandarcapd"),
+      {"-c", config.string(), "--simulate", "--output-dir", (dir / "out").string()},
+      dir / "log.txt");
+  REQUIRE(harness::wait_until(
+      [&] { return daemon.log().find("ready: writing to") != std::string::npos; }, 15s));
+  const auto threads = threads_of(daemon.pid());
+  const std::string log = daemon.log();
+  INFO(log);
+  REQUIRE(threads.count("pc-receive") == 1);
+  REQUIRE(threads.count("pc-decode") == 1);
+  CHECK(threads.at("pc-receive").cpus == "0");
+  CHECK(threads.at("pc-decode").cpus == "0");
+  CHECK(threads.at("pc-writer").cpus != "1023");
+  CHECK(log.find("writer thread: cannot pin to CPU 1023") != std::string::npos);
+  // Whether SCHED_FIFO is allowed depends on where the test runs (root, a container without
+  // CAP_SYS_NICE, RLIMIT_RTPRIO): what the log claims must match what the kernel shows.
+  if (log.find("receive thread: SCHED_FIFO priority 5\n") != std::string::npos) {
+    CHECK(threads.at("pc-receive").policy == 1);
+  } else {
+    CHECK(log.find("receive thread: SCHED_FIFO priority 5 refused") != std::string::npos);
+    CHECK(threads.at("pc-receive").policy == 0);
+  }
+  CHECK(threads.at("pc-decode").policy == 0);
+
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait_exit(10s) == 0);
+  CHECK(fs::exists(dir / "log" / "health.jsonl"));
+  CHECK(harness::read_file(dir / "textfile" / "pandarcap-front.prom")
+            .find("pandarcap_datagrams_received_total{sensor=\"pandar40p\"}") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "out" / "health"));
+  // Only finished files in the collector's directory: it would read a stray *.prom.
+  for (const auto& entry : fs::directory_iterator(dir / "textfile"))
+    CHECK(entry.path().filename() == "pandarcap-front.prom");
+}
