@@ -1,6 +1,6 @@
 // A small command-line reader shared by the binaries: walks argv, takes option values, and turns
 // every mistake into one line on stderr plus exit status 64 (EX_USAGE). `-h`/`--help` print the
-// usage text and exit 0.
+// usage text and `--version` the program's name and version, and exit 0.
 #pragma once
 
 #include <fmt/format.h>
@@ -25,11 +25,16 @@ class CliArgs {
 
   bool more() const { return index_ < argc_; }
 
-  // The next argument; handles --help itself.
+  // The next argument; handles --help and --version itself.
   std::string_view next() {
     std::string_view arg = argv_[index_++];
     if (arg == "-h" || arg == "--help") {
       std::fwrite(usage_.data(), 1, usage_.size(), stdout);
+      std::exit(0);
+    }
+    if (arg == "--version") {
+      std::printf("%.*s %s\n", static_cast<int>(program_.size()), program_.data(),
+                  PANDARCAP_VERSION);
       std::exit(0);
     }
     return arg;

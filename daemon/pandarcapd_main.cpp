@@ -80,6 +80,8 @@ Configuration:
                          defaults apply, and the options below override either
   --check-config         validate the configuration, print the result and exit (0 or 78)
   --print-config         print the effective configuration as TOML and exit
+  --print-calibration    print the angle-correction table in effect (the calibration file, or
+                         the nominal Pandar40P table) as CSV and exit
 
 Sources:
   --simulate             start a simulated sensor that sends over loopback to the daemon's own
@@ -124,6 +126,7 @@ struct Options {
   std::optional<std::string> config_path;
   bool check_config = false;
   bool print_config = false;
+  bool print_calibration = false;
   bool simulate = false;
   std::optional<std::string> replay;
   std::optional<double> rate;
@@ -148,6 +151,8 @@ Options parse_options(int argc, char** argv) {
       o.check_config = true;
     } else if (arg == "--print-config") {
       o.print_config = true;
+    } else if (arg == "--print-calibration") {
+      o.print_calibration = true;
     } else if (arg == "--simulate") {
       o.simulate = true;
     } else if (arg == "--replay") {
@@ -208,9 +213,6 @@ Options parse_options(int argc, char** argv) {
     } else if (arg == "--log-level") {
       const std::string level(args.value(arg));
       set([level](DaemonConfig& c) { c.log_level = level; });
-    } else if (arg == "--version") {
-      fmt::print("pandarcapd {}\n", kVersion);
-      std::exit(0);
     } else {
       args.usage_error(fmt::format("unknown option '{}'", arg));
     }
@@ -327,10 +329,11 @@ int run(int argc, char** argv) {
 
   // 2. Logging and calibration.
   setup_logging(config.log_level);
-  spdlog::info("pandarcapd {} starting ({})", kVersion,
-               options.simulate ? "simulated sensor"
-               : options.replay ? "replay of " + *options.replay
-                                : "live capture");
+  if (!options.print_calibration)
+    spdlog::info("pandarcapd {} starting ({})", kVersion,
+                 options.simulate ? "simulated sensor"
+                 : options.replay ? "replay of " + *options.replay
+                                  : "live capture");
   Calibration calibration;
   try {
     calibration = config.sensor.calibration_file.empty()
@@ -339,6 +342,10 @@ int run(int argc, char** argv) {
   } catch (const std::exception& error) {
     spdlog::critical("{}", error.what());
     return kExitConfig;
+  }
+  if (options.print_calibration) {
+    fmt::print("{}", calibration.to_csv());
+    return 0;
   }
   if (calibration.is_nominal()) {
     spdlog::warn(

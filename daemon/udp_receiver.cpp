@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <string>
 #include <system_error>
 
 #include "daemon/allocation_counter.hpp"
@@ -38,11 +39,13 @@ in_addr parse_ipv4(const std::string& text, const char* what) {
   return address;
 }
 
-std::uint64_t read_rmem_max() {
+// The limit as text for the warning; a sandbox (systemd's ProtectKernelTunables=/ProcSubset=)
+// may hide /proc/sys.
+std::string read_rmem_max() {
   std::ifstream in("/proc/sys/net/core/rmem_max");
   std::uint64_t value = 0;
-  in >> value;
-  return value;
+  if (!(in >> value)) return "not readable here";
+  return std::to_string(value);
 }
 
 }  // namespace
@@ -90,7 +93,8 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
   if (granted_rcvbuf_ < static_cast<std::uint64_t>(requested)) {
     spdlog::warn(
         "socket receive buffer: {} bytes requested, {} granted: net.core.rmem_max ({}) caps it; "
-        "raise it with 'sysctl -w net.core.rmem_max={}' (or run with CAP_NET_ADMIN)",
+        "raise it with 'sysctl -w net.core.rmem_max={}' (the package's "
+        "/usr/lib/sysctl.d/60-pandarcap.conf does at boot)",
         requested, granted_rcvbuf_, read_rmem_max(), requested);
   } else {
     spdlog::info("socket receive buffer: {} bytes", granted_rcvbuf_);
