@@ -85,10 +85,11 @@ void write_all(std::FILE* file, std::span<const std::uint8_t> data, const std::s
 
 }  // namespace
 
-PcapWriter::PcapWriter(const std::string& path) : path_(path) {
+PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer) : path_(path) {
   errno = 0;
   file_ = std::fopen(path.c_str(), "wb");
   if (file_ == nullptr) throw_write_error(path, errno);
+  if (!buffer.empty()) std::setvbuf(file_, buffer.data(), _IOFBF, buffer.size());
   ByteWriter<kGlobalHeaderBytes> header;
   header.native_u32(kPcapMagicMicroseconds);
   header.native_u16(kPcapVersionMajor);

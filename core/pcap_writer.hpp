@@ -10,6 +10,7 @@
 // is buffered past flush(); close() (or the destructor) flushes. Not thread-safe.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <span>
@@ -19,10 +20,17 @@
 
 namespace pandarcap {
 
+// The stdio buffer the daemon gives its recordings: the decoder hands over raw packets at
+// least every 100 ms, and 1 MiB holds that much of one sensor (~0.5 MB) twice over.
+inline constexpr std::size_t kPcapStdioBufferBytes = 1 << 20;
+
 class PcapWriter {
  public:
   // Creates (truncates) `path` and writes the pcap global header. Throws std::system_error.
-  explicit PcapWriter(const std::string& path);
+  // `buffer`, if given, is the stdio buffer (it must outlive the writer): with stdio's default
+  // 4 KiB a recording at one sensor's rate costs a write(2) every three packets; a buffer that
+  // holds what arrives between two flush() calls makes it one per flush.
+  explicit PcapWriter(const std::string& path, std::span<char> buffer = {});
   ~PcapWriter();
   PcapWriter(const PcapWriter&) = delete;
   PcapWriter& operator=(const PcapWriter&) = delete;

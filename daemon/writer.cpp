@@ -36,7 +36,8 @@ Writer::Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_dec
       receive_(receive),
       frames_dir_(options.output_dir / "frames"),
       raw_dir_(options.output_dir / "raw"),
-      pcd_buffer_(kPcdChunkPoints * kPcdPointBytes) {}
+      pcd_buffer_(kPcdChunkPoints * kPcdPointBytes),
+      pcap_buffer_(kPcapStdioBufferBytes) {}
 
 Writer::~Writer() = default;
 
@@ -143,7 +144,7 @@ void Writer::open_pcap(std::int64_t first_packet_ns) {
   pcap_final_path_ = raw_dir_ / fmt::format("pandarcap_{}_{:04}.pcap",
                                             utc_file_stamp(first_packet_ns, false), pcap_index_++);
   const std::filesystem::path part = pcap_final_path_.string() + ".part";
-  pcap_ = std::make_unique<PcapWriter>(part.string());
+  pcap_ = std::make_unique<PcapWriter>(part.string(), pcap_buffer_);
   pcap_opened_monotonic_ns_ = monotonic_ns();
 }
 
@@ -181,6 +182,15 @@ void Writer::write_raw(RawBatch& batch) {
       // A broken file is abandoned (renamed as it stands); the next packet starts a new one.
       write_failed(error, packet.length);
       if (pcap_) close_pcap();
+    }
+  }
+  // Each batch reaches the file whole: a crash loses at most the batch being written.
+  if (pcap_) {
+    try {
+      pcap_->flush();
+    } catch (const std::exception& error) {
+      write_failed(error, 0);
+      close_pcap();
     }
   }
   if (pcap_) pcap_bytes_ = pcap_->bytes();

@@ -109,6 +109,7 @@ class Writer {
   std::filesystem::path frames_dir_, raw_dir_;
 
   std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
+  std::vector<char> pcap_buffer_;         // the pcap's stdio buffer, allocated once
   std::unique_ptr<PcapWriter> pcap_;
   std::filesystem::path pcap_final_path_;
   std::int64_t pcap_opened_monotonic_ns_ = 0;
