@@ -277,7 +277,8 @@ class Harness {
             {"zero_loss", lost == 0},
             {"kernel_drops", receiver.kernel_drops()},
             {"receive_buffer_granted", receiver.receive_buffer_granted()},
-            {"cpu_us_per_packet", ratio(receiver.cpu_seconds() * 1e6, received)}};
+            {"cpu_us_per_packet", ratio(receiver.cpu_seconds() * 1e6, received)},
+            {"cpu_fraction_of_one_core", receiver.cpu_seconds() / sent.seconds}};
   }
 
  private:
@@ -344,8 +345,15 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   };
   const auto daemon = [&](double rate) { return harness.daemon_trial(rate, o.trial_seconds); };
 
-  // At the sensor's rate first: the daemon's cost when it is doing its real job.
-  ordered_json at_sensor = harness.daemon_trial(o.sensor_rate, std::max(o.trial_seconds, 3.0));
+  // At the sensor's rate first: the daemon's cost when it is doing its real job, and the floor
+  // under it on this machine: a bare recvmmsg loop woken by the same traffic, doing nothing else.
+  const double sensor_seconds = std::max(o.trial_seconds, 3.0);
+  ordered_json at_sensor = harness.daemon_trial(o.sensor_rate, sensor_seconds);
+  ordered_json bare_at_sensor;
+  if (!o.skip_references) {
+    bare_at_sensor = harness.reference_trial(ReferenceReceiver::Kind::kRecvmmsg, o.sensor_rate,
+                                             sensor_seconds);
+  }
 
   const SearchResult daemon_zero =
       search(daemon, zero, o.min_rate, o.max_rate, o.steps, trials["daemon"]);
@@ -382,6 +390,8 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
                               {"lost", at_sensor["lost"]},
                               {"cpu_fraction_of_one_core", at_sensor["cpu_fraction_of_one_core"]},
                               {"cpu_by_thread", at_sensor["cpu_by_thread"]},
+                              {"bare_recvmmsg_cpu_fraction_of_one_core",
+                               bare_at_sensor.value("cpu_fraction_of_one_core", 0.0)},
                               {"latency_p50_us", latency.value("p50_us", 0.0)},
                               {"latency_p99_us", latency.value("p99_us", 0.0)},
                               {"latency_p999_us", latency.value("p999_us", 0.0)},

@@ -180,7 +180,14 @@ std::string zero_loss_markdown(const ordered_json& r) {
                            100 * t["cpu_fraction_of_one_core"].get<double>(),
                            t["cpu_us_per_packet"].get<double>());
   }
-  md += ": " + threads + ".\n";
+  md += ": " + threads + ".";
+  if (const double bare = s.value("bare_recvmmsg_cpu_fraction_of_one_core", 0.0); bare > 0) {
+    md += fmt::format(
+        " The floor on this machine: a bare recvmmsg loop woken by the same traffic, doing "
+        "nothing else, used {:.2f} % ({:.1f}x less than the daemon's three threads).",
+        100 * bare, s["cpu_fraction_of_one_core"].get<double>() / bare);
+  }
+  md += "\n";
   md += fmt::format(
       "- Receive-to-decoded latency: p50 {:.0f} µs, **p99 {:.0f} µs** (goal <= 1 ms: {}), p99.9 "
       "{:.0f} µs, max {:.0f} µs.\n",

@@ -106,6 +106,14 @@ TEST_CASE("pandarcap-bench decode --json: every supported target, ratios from on
   }
 }
 
+namespace {
+std::string md_text(const std::filesystem::path& report_dir) {
+  std::stringstream md;
+  md << std::ifstream(report_dir / "summary.md").rdbuf();
+  return md.str();
+}
+}  // namespace
+
 TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "[bench][cli]") {
   test::ScratchDir dir("zero-loss");
   const auto report_dir = dir / "report";
@@ -140,6 +148,9 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "
   }
   CHECK(s["lost"] == 0);
   CHECK(s["cpu_fraction_of_one_core"].get<double>() > 0);
+  // The floor beside it: a bare receiver under the same traffic, measured in the same run.
+  CHECK(s["bare_recvmmsg_cpu_fraction_of_one_core"].get<double>() > 0);
+  CHECK_THAT(md_text(report_dir), Catch::Contains("The floor on this machine"));
   CHECK(s["latency_p99_us"].get<double>() > 0);
   CHECK(s["peak_rss_bytes"].get<std::uint64_t>() > (1u << 20));
   CHECK(report["environment"]["cores"].get<int>() >= 1);
