@@ -351,8 +351,8 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   ordered_json at_sensor = harness.daemon_trial(o.sensor_rate, sensor_seconds);
   ordered_json bare_at_sensor;
   if (!o.skip_references) {
-    bare_at_sensor = harness.reference_trial(ReferenceReceiver::Kind::kRecvmmsg, o.sensor_rate,
-                                             sensor_seconds);
+    bare_at_sensor =
+        harness.reference_trial(ReferenceReceiver::Kind::kRecvmmsg, o.sensor_rate, sensor_seconds);
   }
 
   const SearchResult daemon_zero =

@@ -2,6 +2,7 @@
 
 #include <time.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <thread>
@@ -104,7 +105,11 @@ void DecodeWorker::flush_raw() {
 
 void DecodeWorker::process(const ringbuf::PacketSlot& slot) {
   if (options_.record_raw) record_raw(slot);
-  decoder_.process(std::span<const std::uint8_t>(slot.payload, slot.length));
+  // A cut datagram (MSG_TRUNC live, snapped in a file) is rejected as bad_length whatever its
+  // kept length: an empty payload is exactly that reject. The kept length never exceeds the slot.
+  const std::size_t length =
+      slot.truncated ? 0 : std::min<std::size_t>(slot.length, sizeof slot.payload);
+  decoder_.process(std::span<const std::uint8_t>(slot.payload, length));
 }
 
 DecodeSnapshot DecodeWorker::snapshot() const {

@@ -13,12 +13,25 @@
 namespace pandarcap {
 namespace {
 
-void sleep_until_monotonic(std::int64_t deadline_ns) noexcept {
-  const timespec ts{static_cast<time_t>(deadline_ns / 1'000'000'000),
-                    static_cast<long>(deadline_ns % 1'000'000'000)};
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+// Sleeps until `deadline_ns` (CLOCK_MONOTONIC) in slices of at most 100 ms, beating the heartbeat
+// between them, and returns early on a stop request: a long pause in a recording (or a timestamp
+// decades ahead in a crafted file) never holds the thread or silences the watchdog.
+void sleep_until_monotonic(std::int64_t deadline_ns, const std::atomic<bool>& stop,
+                           std::atomic<std::uint64_t>& heartbeat) noexcept {
+  for (;;) {
+    const std::int64_t now = monotonic_ns();
+    if (now >= deadline_ns || stop.load(std::memory_order_relaxed)) return;
+    const std::int64_t until = std::min(deadline_ns, now + 100'000'000);
+    const timespec ts{static_cast<time_t>(until / 1'000'000'000),
+                      static_cast<long>(until % 1'000'000'000)};
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);  // EINTR: the loop re-checks
+    ReceiveCounters::add(heartbeat, 1);
   }
 }
+
+// The longest wait a recording can ask for between two packets at --rate: 1e15 ns (11.6 days).
+// Bounding it keeps start + offset far inside int64 whatever the file's timestamps say.
+constexpr double kMaxReplayOffsetNs = 1e15;
 
 }  // namespace
 
@@ -65,9 +78,18 @@ ReplayResult ReplaySource::run(ringbuf::PacketRing& ring, const std::atomic<bool
       // Recorded pace: packet k goes out (t_k - t_0) / rate after the first.
       publish();
       if (!first_record_ns) first_record_ns = record.timestamp_ns;
+      // In double: a crafted file's timestamps may be anything, and their difference must not
+      // overflow (nor a huge offset the conversion back to an integer).
       const double offset =
-          static_cast<double>(record.timestamp_ns - *first_record_ns) / *options_.rate;
-      sleep_until_monotonic(start_ns + static_cast<std::int64_t>(std::max(0.0, offset)));
+          (static_cast<double>(record.timestamp_ns) - static_cast<double>(*first_record_ns)) /
+          *options_.rate;
+      sleep_until_monotonic(
+          start_ns + static_cast<std::int64_t>(std::clamp(offset, 0.0, kMaxReplayOffsetNs)), stop,
+          heartbeat);
+      if (stop.load(std::memory_order_relaxed)) {  // stopped while waiting: not sent
+        result.stopped = true;
+        break;
+      }
     }
     ReceiveCounters::add(counters.datagrams, 1);
     ReceiveCounters::add(counters.bytes, record.udp_payload_length);
@@ -88,8 +110,12 @@ ReplayResult ReplaySource::run(ringbuf::PacketRing& ring, const std::atomic<bool
     const std::size_t kept = std::min(record.payload.size(), sizeof slot.payload);
     std::memcpy(slot.payload, record.payload.data(), kept);
     slot.length = static_cast<std::uint32_t>(kept);
-    slot.truncated = record.udp_payload_length > sizeof slot.payload;
-    if (slot.truncated || record.snapped) ReceiveCounters::add(counters.truncated, 1);
+    // A datagram the file holds only part of (snaplen) is not the packet the sensor sent, even
+    // when the part happens to have a valid length: it is rejected (bad_length), as the live
+    // path rejects a datagram the kernel had to cut.
+    slot.truncated = record.udp_payload_length > sizeof slot.payload || record.snapped ||
+                     record.udp_payload_length != record.payload.size();
+    if (slot.truncated) ReceiveCounters::add(counters.truncated, 1);
     slot.receive_time_ns = record.timestamp_ns;
     slot.source = sockaddr_in{};
     slot.source.sin_family = AF_INET;

@@ -26,9 +26,10 @@ struct alignas(kCacheLine) PacketSlot {
   static_assert(kPayloadCapacity >= kMaxAcceptedDatagram);
 
   std::uint8_t payload[kPayloadCapacity];
-  // The datagram's length on the wire; if it exceeds kPayloadCapacity, only kPayloadCapacity
-  // bytes were kept and `truncated` is set.
+  // Bytes kept in `payload` (at most kPayloadCapacity).
   std::uint32_t length;
+  // The datagram was longer than what was kept (MSG_TRUNC on the live path; a record a capture
+  // file holds only part of, on replay): the decoder rejects it as bad_length.
   bool truncated;
   // Kernel receive time (SO_TIMESTAMPNS, CLOCK_REALTIME ns), or the time recvmmsg returned when
   // the kernel gave none; 0 for replayed packets that had no capture time.

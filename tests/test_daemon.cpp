@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -20,6 +21,8 @@
 #include "bench/child_process.hpp"
 #include "core/capture_reader.hpp"
 #include "core/decoder_target.hpp"
+#include "core/pcap_writer.hpp"
+#include "core/synthetic_sensor.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;
@@ -402,4 +405,74 @@ TEST_CASE("a bad configuration exits 78 with file:line:col", "[daemon][config]")
   CHECK(printed.exit_code == 0);
   CHECK(printed.out.find("data_port = 2369") != std::string::npos);
   CHECK(printed.out.find("max_range = 150") != std::string::npos);
+}
+
+namespace {
+
+// A pcap of simulated 1266-byte packets (with UDP sequence) at the given record times.
+fs::path write_capture(const fs::path& path, const std::vector<std::int64_t>& times_ns) {
+  SyntheticSensorConfig config;
+  config.udp_sequence = true;
+  SyntheticSensor sensor(config);
+  std::array<std::uint8_t, kMaxPacketBytes> packet{};
+  PcapWriter pcap(path.string());
+  for (const std::int64_t t : times_ns) {
+    const std::size_t size = sensor.next(packet);
+    pcap.write({packet.data(), size}, t, Endpoint{0xC0A801C9, 2368}, Endpoint{0x7F000001, 2368});
+  }
+  pcap.close();
+  return path;
+}
+
+}  // namespace
+
+TEST_CASE("replay: a datagram the file holds only part of is rejected, not decoded as shorter",
+          "[daemon][replay]") {
+  test::ScratchDir dir("daemon-snapped");
+  const fs::path capture = write_capture(
+      dir / "snapped.pcap",
+      {1'700'000'000'000'000'000, 1'700'000'000'000'278'000, 1'700'000'000'000'556'000});
+  // Cut the second record to 1262 bytes of UDP payload (snaplen): its headers still say 1266.
+  std::string bytes = harness::read_file(capture);
+  const std::size_t record = 24 + 16 + 42 + 1266;  // start of the second record header
+  const std::uint32_t kept = 42 + 1262;
+  std::memcpy(&bytes[record + 8], &kept, 4);  // incl_len (native order, as written)
+  bytes.erase(record + 16 + kept, 4);
+  std::ofstream(capture, std::ios::binary | std::ios::trunc) << bytes;
+
+  const auto run = test::run_command(pandarcapd() + " --replay '" + capture.string() +
+                                     "' --output-dir '" + (dir / "out").string() + "' 2>&1");
+  INFO(run.out);
+  REQUIRE(run.exit_code == 0);
+  const json h = last_health(dir / "out");
+  CHECK(counter(h, "datagrams_received") == 3);
+  CHECK(counter(h, "packets_accepted") == 2);
+  CHECK(counter(h, "packets_rejected") == 1);
+  CHECK(h["counters"]["rejects"].value("bad_length", 0) == 1);
+  CHECK(counter(h, "truncated_datagrams") == 1);
+  check_accounting(h);
+}
+
+TEST_CASE("replay --rate: timestamps decades apart neither overflow nor hold SIGTERM",
+          "[daemon][replay]") {
+  test::ScratchDir dir("daemon-rate-gap");
+  // 1970, then 2036: at --rate 0.001 the wait would be 2.1e21 ns, far past int64. (Classic pcap
+  // times past 2038 come back from libpcap as negative: its seconds field is signed.)
+  const fs::path capture =
+      write_capture(dir / "gap.pcap", {1'000'000'000, 2'100'000'000'000'000'000});
+  harness::ChildProcess daemon(
+      pandarcapd(),
+      {"--replay", capture.string(), "--rate", "0.001", "--output-dir", (dir / "out").string()},
+      dir / "log.txt");
+  // The first packet is through (health written) while the replay waits for the second.
+  REQUIRE(harness::wait_until(
+      [&] {
+        const json h = last_health(dir / "out");
+        return counter(h, "packets_accepted") == 1;
+      },
+      15s));
+  daemon.signal(SIGTERM);
+  INFO(daemon.log());
+  CHECK(daemon.wait_exit(5s) == 0);
+  CHECK(counter(last_health(dir / "out"), "packets_accepted") == 1);
 }
