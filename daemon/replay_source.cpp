@@ -110,11 +110,10 @@ ReplayResult ReplaySource::run(ringbuf::PacketRing& ring, const std::atomic<bool
     const std::size_t kept = std::min(record.payload.size(), sizeof slot.payload);
     std::memcpy(slot.payload, record.payload.data(), kept);
     slot.length = static_cast<std::uint32_t>(kept);
-    // A datagram the file holds only part of (snaplen) is not the packet the sensor sent, even
-    // when the part happens to have a valid length: it is rejected (bad_length), as the live
-    // path rejects a datagram the kernel had to cut.
-    slot.truncated = record.udp_payload_length > sizeof slot.payload || record.snapped ||
-                     record.udp_payload_length != record.payload.size();
+    // A datagram the file holds only part of (snapped: fewer bytes than its UDP length) is not
+    // the packet the sensor sent, even when the part happens to have a valid length: it is
+    // rejected (bad_length), as the live path rejects a datagram the kernel had to cut.
+    slot.truncated = record.udp_payload_length > sizeof slot.payload || record.snapped;
     if (slot.truncated) ReceiveCounters::add(counters.truncated, 1);
     slot.receive_time_ns = record.timestamp_ns;
     slot.source = sockaddr_in{};
