@@ -274,7 +274,8 @@ struct Pipeline {
   std::atomic<std::uint32_t> rotate_generation{0};
 };
 
-void print_summary(const std::filesystem::path& dir, const WriterOptions& wo) {
+void print_summary(const WriterOptions& wo) {
+  const std::filesystem::path& dir = wo.output_dir;
   const std::filesystem::path jsonl = wo.health_dir / "health.jsonl";
   std::ifstream in(jsonl);
   std::string line, last;
@@ -580,7 +581,7 @@ int run(int argc, char** argv) {
       status = 1;
     }
   }
-  print_summary(output_dir, wo);
+  print_summary(wo);
   return status;
 }
 
