@@ -10,6 +10,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace pandarcap::harness {
@@ -38,6 +39,10 @@ class ChildProcess {
 
 // The whole file as text ("" when it cannot be read): logs, /proc files.
 std::string read_file(const std::filesystem::path& path);
+
+// A memory figure from /proc/PID/status, in bytes: `field` is "VmRSS" (resident now), "VmHWM"
+// (peak resident), ...; 0 when the process or the field is gone.
+std::uint64_t process_memory_bytes(int pid, std::string_view field);
 
 // Polls `condition` every few milliseconds until it returns true (-> true) or `timeout` passes
 // (-> false).

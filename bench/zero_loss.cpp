@@ -79,15 +79,6 @@ ordered_json cpu_use(const std::map<std::string, std::uint64_t>& before,
           {"cpu_resolution_s", 1.0 / tick}};
 }
 
-std::uint64_t peak_rss_bytes(int pid) {
-  std::istringstream status(read_file(fmt::format("/proc/{}/status", pid)));
-  std::string line;
-  while (std::getline(status, line)) {
-    if (line.rfind("VmHWM:", 0) == 0) return std::stoull(line.substr(6)) * 1024;  // kB
-  }
-  return 0;
-}
-
 std::optional<ordered_json> last_health(const fs::path& out) {
   std::ifstream in(out / "health" / "health.jsonl");
   std::string line, last;
@@ -199,7 +190,7 @@ class Harness {
     g.seconds = seconds;
     const GeneratorResult sent = run_generator(source_, g);
     const auto cpu_after = thread_ticks(process.pid());
-    const std::uint64_t rss = peak_rss_bytes(process.pid());
+    const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
     // Let the daemon count everything (it reads kernel drops once a second), then stop it.
     harness::wait_until(
         [&] {

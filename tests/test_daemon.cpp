@@ -477,19 +477,6 @@ TEST_CASE("replay --rate: timestamps decades apart neither overflow nor hold SIG
   CHECK(counter(last_health(dir / "out"), "packets_accepted") == 1);
 }
 
-namespace {
-
-// VmRSS of a process, bytes (0 if unreadable).
-std::uint64_t resident_bytes(int pid) {
-  std::istringstream status(harness::read_file("/proc/" + std::to_string(pid) + "/status"));
-  for (std::string line; std::getline(status, line);) {
-    if (line.rfind("VmRSS:", 0) == 0) return std::stoull(line.substr(6)) * 1024;  // kB
-  }
-  return 0;
-}
-
-}  // namespace
-
 TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blocks, RSS flat",
           "[daemon][reliability]") {
   test::ScratchDir dir("daemon-slow-writer");
@@ -501,7 +488,7 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   // Warm: every arena has been filled and written at least once (10 frames a second, 4 arenas).
   REQUIRE(
       harness::wait_until([&] { return counter(last_health(out), "frames_written") >= 8; }, 15s));
-  const std::uint64_t rss_before = resident_bytes(daemon.pid());
+  const std::uint64_t rss_before = harness::process_memory_bytes(daemon.pid(), "VmRSS");
   const std::uint64_t dropped_before = counter(last_health(out), "frames_dropped_no_arena");
   CHECK(dropped_before == 0);
 
@@ -512,7 +499,7 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   const auto stalled_at = std::chrono::steady_clock::now();
   while (std::chrono::steady_clock::now() - stalled_at < 2s)
     CHECK(daemon.wait_exit(100ms) == std::nullopt);  // still running, the receiver included
-  const std::uint64_t rss_stalled = resident_bytes(daemon.pid());
+  const std::uint64_t rss_stalled = harness::process_memory_bytes(daemon.pid(), "VmRSS");
   fs::remove(stall);
   REQUIRE(harness::wait_until(
       [&] { return counter(last_health(out), "frames_dropped_no_arena") > 0; }, 10s));
