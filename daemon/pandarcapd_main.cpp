@@ -17,6 +17,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
@@ -110,16 +111,21 @@ Overrides (same names as the configuration keys):
   --udp-sequence         the simulated sensor appends a UDP sequence number
   --decoder NAME         decoder: auto (default), scalar, sse4, avx2, avx512, neon, sve, sve2
   --log-level LEVEL      trace, debug, info, warn, error, critical, off
+  --allow-root           run even as root (refused otherwise: pandarcapd needs no privilege,
+                         and a parser of network packets should not hold one; the systemd unit
+                         runs it as the user pandarcap)
   --version              print the version and exit
   -h, --help             this text
 
 Exit status: 0 done, 1 runtime failure, 64 usage error, 66 capture file unreadable,
-73 output directory not writable, 78 invalid configuration or calibration file.
+73 output directory not writable, 77 run as root without --allow-root, 78 invalid
+configuration or calibration file.
 )";
 
 constexpr int kExitUsage = 64;
 constexpr int kExitNoInput = 66;
 constexpr int kExitCantCreate = 73;
+constexpr int kExitNoPermission = 77;
 constexpr int kExitConfig = 78;
 
 struct Options {
@@ -128,6 +134,7 @@ struct Options {
   bool print_config = false;
   bool print_calibration = false;
   bool simulate = false;
+  bool allow_root = false;
   std::optional<std::string> replay;
   std::optional<double> rate;
   std::optional<double> duration_s;
@@ -155,6 +162,8 @@ Options parse_options(int argc, char** argv) {
       o.print_calibration = true;
     } else if (arg == "--simulate") {
       o.simulate = true;
+    } else if (arg == "--allow-root") {
+      o.allow_root = true;
     } else if (arg == "--replay") {
       o.replay = std::string(args.value(arg));
     } else if (arg == "--top-speed") {
@@ -348,6 +357,16 @@ int run(int argc, char** argv) {
     fmt::print("{}", calibration.to_csv());
     return 0;
   }
+  // Checked before any socket or output file is opened. Reading the configuration and printing
+  // tables above is harmless as root; parsing what arrives from the network is not.
+  if (::geteuid() == 0 && !options.allow_root) {
+    spdlog::critical(
+        "refusing to run as root: pandarcapd needs no privilege (UDP on any port it is given, "
+        "files it owns). Run it as an unprivileged user (the systemd unit uses 'pandarcap'), or "
+        "pass --allow-root to accept the risk (containers, CI)");
+    return kExitNoPermission;
+  }
+  if (::geteuid() == 0) spdlog::warn("running as root (--allow-root)");
   if (calibration.is_nominal()) {
     spdlog::warn(
         "calibration: nominal Pandar40P table in use (no calibration_file); per-unit "

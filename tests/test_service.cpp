@@ -93,7 +93,7 @@ TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, res
   const fs::path stall_file = dir / "stall-writer";
   // 400 ms asked for: the daemon pings every 200 ms while all three loops progress.
   harness::ChildProcess daemon(
-      test::binary("pandarcapd"), {"--simulate", "--output-dir", (dir / "out").string()},
+      test::binary("pandarcapd"), {"--allow-root", "--simulate", "--output-dir", (dir / "out").string()},
       dir / "log.txt",
       {"NOTIFY_SOCKET=" + (dir / "notify.sock").string(), "WATCHDOG_USEC=400000",
        "PANDARCAP_TEST_STALL_WRITER_FILE=" + stall_file.string()});
@@ -191,7 +191,7 @@ TEST_CASE("[threads]: pinning and SCHED_FIFO as granted, refusals logged, health
                            "receive_priority = 5\n";
   harness::ChildProcess daemon(
       test::binary("pandarcapd"),
-      {"-c", config.string(), "--simulate", "--output-dir", (dir / "out").string()},
+      {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", (dir / "out").string()},
       dir / "log.txt");
   REQUIRE(harness::wait_until(
       [&] { return daemon.log().find("ready: writing to") != std::string::npos; }, 15s));
