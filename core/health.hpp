@@ -21,8 +21,8 @@ namespace pandarcap {
 enum class HealthState : std::uint8_t {
   kOk,        // packets arriving and decoding
   kNoData,    // no packet for longer than the no-data timeout (a silent sensor, not a hang)
-  kDegraded,  // data flows but something is being lost or looks wrong (see reason)
-  kError,     // the daemon cannot do its job (e.g. cannot write outputs)
+  kDegraded,  // data flows but something is being lost, looks wrong or cannot be written (reason)
+  kError,     // the daemon cannot do its job: its socket fails
 };
 inline constexpr std::size_t kHealthStateCount = 4;
 std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "degraded", "error"
@@ -35,6 +35,7 @@ struct HealthCounters {
   std::uint64_t truncated_datagrams = 0;  // larger than a ring slot (MSG_TRUNC)
   std::uint64_t kernel_drops = 0;         // socket buffer overflows reported by the kernel
   std::uint64_t ring_overruns = 0;        // ring full: datagram dropped by the receive thread
+  std::uint64_t receive_errors = 0;       // recvmmsg failures (not timeouts): state "error"
   // Decode side.
   std::uint64_t packets_accepted = 0;
   std::uint64_t packets_rejected = 0;                       // = sum(rejects)

@@ -90,6 +90,8 @@ constexpr CounterField kCounters[] = {
    "Bytes written to pcap files"},
   {"pcd_bytes_written", "pcd_written_bytes", &HealthCounters::pcd_bytes_written,
    "Bytes written to PCD files"},
+  {"receive_errors", "receive_errors", &HealthCounters::receive_errors,
+   "Failed receive calls on the socket"},
   {"write_errors", "write_errors", &HealthCounters::write_errors, "Failed writes"},
   {"bytes_not_written", "not_written_bytes", &HealthCounters::bytes_not_written,
    "Bytes lost to failed writes"},

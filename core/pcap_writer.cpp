@@ -1,5 +1,8 @@
 #include "pcap_writer.hpp"
 
+#include <stdio_ext.h>
+#include <unistd.h>
+
 #include <array>
 #include <cerrno>
 #include <cstring>
@@ -169,6 +172,8 @@ void PcapWriter::flush() {
   if (file_ == nullptr) throw_write_error(path_, EBADF);
   errno = 0;
   if (std::fflush(file_) != 0) throw_write_error(path_, errno);
+  flushed_records_ = records_;
+  flushed_bytes_ = bytes_;
 }
 
 void PcapWriter::close() {
@@ -176,6 +181,24 @@ void PcapWriter::close() {
   errno = 0;
   // fclose releases the stream even when its final flush fails, so the handle is dropped first.
   if (std::fclose(std::exchange(file_, nullptr)) != 0) throw_write_error(path_, errno);
+  flushed_records_ = records_;
+  flushed_bytes_ = bytes_;
+}
+
+PcapWriter::Dropped PcapWriter::abandon() noexcept {
+  const Dropped dropped{records_ - flushed_records_, bytes_ - flushed_bytes_};
+  if (file_ != nullptr) {
+    // Buffered bytes would otherwise be written (in part) by fclose, after the cut.
+    __fpurge(file_);
+    // What reached the file past the last good flush is a prefix of a record at best.
+    if (::ftruncate(::fileno(file_), static_cast<off_t>(flushed_bytes_)) != 0) {
+      // Nothing more can be done here; the reader stops at the cut record (kTruncated).
+    }
+    std::fclose(std::exchange(file_, nullptr));
+  }
+  records_ = flushed_records_;
+  bytes_ = flushed_bytes_;
+  return dropped;
 }
 
 }  // namespace pandarcap

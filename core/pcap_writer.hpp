@@ -7,7 +7,9 @@
 // computed", legal for IPv4).
 //
 // Errors: every failing write throws std::system_error carrying errno and the file name. Nothing
-// is buffered past flush(); close() (or the destructor) flushes. Not thread-safe.
+// is buffered past flush(); close() (or the destructor) flushes. After a failure (a full disk),
+// abandon() cuts the file back to what the last successful flush() wrote, which always ends on
+// a record boundary, so the file stays readable to its end. Not thread-safe.
 #pragma once
 
 #include <cstddef>
@@ -43,8 +45,20 @@ class PcapWriter {
   void flush();
   void close();
 
+  // What abandon() dropped: the records (and their bytes) written since the last good flush.
+  struct Dropped {
+    std::uint64_t records = 0;
+    std::uint64_t bytes = 0;
+  };
+  // Discards whatever is buffered, truncates the file to the last successful flush and closes
+  // it, without throwing. The file then holds flushed_records() whole records (0: possibly not
+  // even the global header; the caller removes it).
+  Dropped abandon() noexcept;
+
   std::uint64_t records() const noexcept { return records_; }
   std::uint64_t bytes() const noexcept { return bytes_; }  // file size so far
+  std::uint64_t flushed_records() const noexcept { return flushed_records_; }
+  std::uint64_t flushed_bytes() const noexcept { return flushed_bytes_; }
   const std::string& path() const noexcept { return path_; }
 
  private:
@@ -53,6 +67,8 @@ class PcapWriter {
   std::uint16_t ip_id_ = 0;
   std::uint64_t records_ = 0;
   std::uint64_t bytes_ = 0;
+  std::uint64_t flushed_records_ = 0;  // as of the last flush() that succeeded
+  std::uint64_t flushed_bytes_ = 0;
 };
 
 }  // namespace pandarcap

@@ -141,7 +141,7 @@ void DecodeWorker::send_snapshot(WriterMessage::Kind kind) {
 }
 
 void DecodeWorker::run(const std::atomic<bool>& producer_done,
-                       std::atomic<std::uint64_t>& heartbeat) {
+                       std::atomic<std::uint64_t>& heartbeat, LiveClock& live) {
   std::int64_t next_snapshot_ns = coarse_monotonic_ns();
   std::int64_t next_raw_flush_ns = next_snapshot_ns;
   const std::int64_t warm_ns = next_snapshot_ns + kWarmUpNs;
@@ -167,6 +167,7 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
       }
       ring_.release(batch.size());
       last_packet_monotonic_ns_ = coarse_monotonic_ns();
+      live.last_packet_monotonic_ns.store(last_packet_monotonic_ns_, std::memory_order_relaxed);
     }
     const std::int64_t now = coarse_monotonic_ns();
     if (!hot && now >= warm_ns) {

@@ -49,6 +49,10 @@ void OutputFile::write(std::span<const std::uint8_t> bytes) {
   }
 }
 
+void OutputFile::truncate(std::uint64_t size) noexcept {
+  if (fd_ >= 0 && ::ftruncate(fd_, static_cast<off_t>(size)) == 0) size_ = size;
+}
+
 void OutputFile::close() {
   if (fd_ < 0) return;
   const int fd = fd_;

@@ -277,6 +277,7 @@ struct Pipeline {
   DecodeWorker::WriterQueue to_writer;
   ringbuf::SpscQueue<StatusLine> status;
   ReceiveCounters receive;
+  LiveClock live;
   Heartbeats heartbeats;
   std::atomic<bool> stop_source{false};
   std::atomic<bool> source_done{false};
@@ -467,7 +468,7 @@ int run(int argc, char** argv) {
   wo.expected_rpm = config.sensor.rotation_speed;
   wo.calibration_csv = calibration.to_csv();
   wo.pcap_destination = Endpoint{0, receiver ? receiver->bound_port() : config.sensor.data_port};
-  Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive);
+  Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live);
   try {
     writer.prepare();
   } catch (const std::exception& error) {
@@ -511,7 +512,7 @@ int run(int argc, char** argv) {
   std::thread decode_thread([&] {
     name_this_thread("pc-decode");
     place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
-    worker.run(pipe.source_done, pipe.heartbeats.decode);
+    worker.run(pipe.source_done, pipe.heartbeats.decode, pipe.live);
   });
   std::thread source_thread([&] {
     name_this_thread(replay ? "pc-replay" : "pc-receive");

@@ -81,6 +81,14 @@ struct Heartbeats {
   std::atomic<std::uint64_t> writer{0};
 };
 
+// When the decoder last took a packet (CLOCK_MONOTONIC ns, 0 = never), stored once per batch. The
+// writer reads it at every wake-up (at least every 100 ms) rather than from the once-a-second
+// counter snapshot, so silence and its end show in the health within a tenth of a second of
+// the no-data timeout instead of up to a second later.
+struct LiveClock {
+  std::atomic<std::int64_t> last_packet_monotonic_ns{0};
+};
+
 // Written only by the receive (or replay) thread, read by the writer for health.
 // The receive, decode and writer loops count heap allocations (see allocation_counter.hpp) from
 // this long after they start: the first frame, file and health record are behind them by then.

@@ -10,9 +10,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <system_error>
 
 #include "core/health_format.hpp"
+#include "core/pcap_recovery.hpp"
 #include "core/pcd.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
@@ -28,12 +30,13 @@ constexpr std::size_t kPcdChunkPoints = 4096;
 
 Writer::Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_decoder,
                DecodeWorker::ArenaQueue& arenas_back, DecodeWorker::RawQueue& raw_back,
-               const ReceiveCounters& receive)
+               const ReceiveCounters& receive, const LiveClock& live)
     : options_(options),
       from_decoder_(from_decoder),
       arenas_back_(arenas_back),
       raw_back_(raw_back),
       receive_(receive),
+      live_(live),
       frames_dir_(options.output_dir / "frames"),
       raw_dir_(options.output_dir / "raw"),
       pcd_buffer_(kPcdChunkPoints * kPcdPointBytes),
@@ -59,6 +62,7 @@ void Writer::prepare() {
   assign_temporary_name(prom_temporary_path_, prom_path_);
   jsonl_path_ = (options_.health_dir / "health.jsonl").native();
   jsonl_rotated_path_ = jsonl_path_ + ".1";
+  finish_leftovers();
   prom_text_.reserve(64 * 1024);
   json_text_.reserve(8 * 1024);
   frame_path_.reserve(4096);
@@ -71,6 +75,79 @@ void Writer::prepare() {
     write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, health_file_);
   }
   if (options_.jsonl) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
+}
+
+void Writer::finish_leftovers() {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  // Recordings left open: cut back to their last whole record and given their final name.
+  if (options_.pcap) {
+    for (const auto& entry : fs::directory_iterator(raw_dir_, ec)) {
+      const std::string part = entry.path().native();
+      if (!part.ends_with(".pcap.part")) continue;
+      try {
+        const PcapRecovery recovered = finish_interrupted_pcap(part);
+        if (!recovered.ours) {
+          spdlog::warn("{}: not a recording of ours; left as it is", part);
+          continue;
+        }
+        if (recovered.records == 0) {
+          fs::remove(part);
+          spdlog::warn("{}: left by an interrupted run with no whole record; removed", part);
+          continue;
+        }
+        fs::path finished = part.substr(0, part.size() - 5);  // without ".part"
+        if (fs::exists(finished))
+          finished.replace_filename(finished.stem().string() + "_recovered.pcap");
+        fs::rename(part, finished);
+        spdlog::warn(
+            "{}: left by an interrupted run; finished as {} ({} whole records, {} bytes of "
+            "a cut record removed)",
+            part, finished.filename().string(), recovered.records, recovered.cut_bytes);
+      } catch (const std::exception& error) {
+        spdlog::error("{}: cannot finish a recording left by an interrupted run: {}", part,
+                      error.what());
+      }
+    }
+  }
+  // Temporary files (".NAME.tmp") hold nothing that was ever complete: removed.
+  const auto remove_temporaries = [&](const fs::path& dir) {
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      const std::string name = entry.path().filename().native();
+      if (name.size() > 5 && name.front() == '.' && name.ends_with(".tmp") &&
+          entry.is_regular_file(ec)) {
+        fs::remove(entry.path(), ec);
+        spdlog::info("{}: temporary file of an interrupted run removed", entry.path().string());
+      }
+    }
+  };
+  if (options_.frames) remove_temporaries(frames_dir_);
+  if (options_.pcap) remove_temporaries(raw_dir_);
+  // The health directory may be shared (node_exporter's): only our own temporary name.
+  if (options_.prometheus && fs::remove(prom_temporary_path_, ec)) {
+    spdlog::info("{}: temporary file of an interrupted run removed", prom_temporary_path_);
+  }
+  // A health line cut short (a crash mid-append, a full disk) is dropped: readers then never see
+  // two lines glued together.
+  if (options_.jsonl) {
+    std::ifstream in(jsonl_path_, std::ios::binary | std::ios::ate);
+    const std::streamoff size = in ? static_cast<std::streamoff>(in.tellg()) : 0;
+    if (size > 0) {
+      std::streamoff keep = size;
+      char c = 0;
+      while (keep > 0) {
+        in.seekg(keep - 1);
+        in.get(c);
+        if (c == '\n') break;
+        --keep;
+      }
+      if (keep < size) {
+        fs::resize_file(jsonl_path_, static_cast<std::uintmax_t>(keep), ec);
+        spdlog::warn("{}: a line cut short by an interrupted run removed ({} bytes)", jsonl_path_,
+                     size - keep);
+      }
+    }
+  }
 }
 
 void Writer::write_failed(const std::exception& error, std::uint64_t bytes) {
@@ -150,12 +227,39 @@ void Writer::open_pcap(std::int64_t first_packet_ns) {
 
 void Writer::close_pcap() {
   if (!pcap_) return;
+  try {
+    // Flushed first: a failing flush leaves the file to be cut back to whole records; once it
+    // succeeded, fclose has nothing left to write.
+    pcap_->flush();
+    pcap_->close();
+  } catch (const std::exception& error) {
+    abandon_pcap(error, 0);
+    return;
+  }
+  finish_pcap_file();
+}
+
+void Writer::abandon_pcap(const std::exception& error, std::uint64_t failed_bytes) {
+  // The records buffered since the last good flush never reached the file whole: they are taken
+  // back from the recorded count (which no health record has reported yet: every tick flushes
+  // first) and counted as not written, with the record being written when it failed.
+  const PcapWriter::Dropped dropped = pcap_->abandon();
+  pcap_packets_ -= dropped.records;
+  write_failed(error, dropped.bytes + failed_bytes);
+  finish_pcap_file();
+}
+
+void Writer::finish_pcap_file() {
   const std::string part = pcap_->path();
   try {
-    pcap_->close();
-    std::filesystem::rename(part, pcap_final_path_);
-    pcap_files_.emplace_back(pcap_final_path_, pcap_->bytes());
-    enforce_retention(pcap_files_, options_.pcap_max_files, options_.pcap_max_bytes);
+    if (pcap_->flushed_records() == 0) {
+      std::filesystem::remove(part);  // not even one record: nothing worth keeping
+    } else {
+      std::filesystem::rename(part, pcap_final_path_);
+      pcap_bytes_closed_ += pcap_->flushed_bytes();
+      pcap_files_.emplace_back(pcap_final_path_, pcap_->flushed_bytes());
+      enforce_retention(pcap_files_, options_.pcap_max_files, options_.pcap_max_bytes);
+    }
   } catch (const std::exception& error) {
     write_failed(error, 0);
   }
@@ -179,9 +283,13 @@ void Writer::write_raw(RawBatch& batch) {
                    options_.pcap_destination);
       ++pcap_packets_;
     } catch (const std::exception& error) {
-      // A broken file is abandoned (renamed as it stands); the next packet starts a new one.
-      write_failed(error, packet.length);
-      if (pcap_) close_pcap();
+      // A failing file is cut back to its whole records and closed; the next packet starts a
+      // new one (and fails again, counted, while the disk stays full).
+      if (pcap_) {
+        abandon_pcap(error, packet.length);
+      } else {
+        write_failed(error, packet.length);  // the file could not even be created
+      }
     }
   }
   // Each batch reaches the file whole: a crash loses at most the batch being written.
@@ -189,11 +297,9 @@ void Writer::write_raw(RawBatch& batch) {
     try {
       pcap_->flush();
     } catch (const std::exception& error) {
-      write_failed(error, 0);
-      close_pcap();
+      abandon_pcap(error, 0);
     }
   }
-  if (pcap_) pcap_bytes_ = pcap_->bytes();
 }
 
 void Writer::rotate_outputs() {
@@ -222,6 +328,7 @@ void Writer::build_health(std::int64_t now) {
   c.truncated_datagrams = receive_.truncated.load(std::memory_order_relaxed);
   c.kernel_drops = receive_.kernel_drops.load(std::memory_order_relaxed);
   c.ring_overruns = receive_.ring_overruns.load(std::memory_order_relaxed);
+  c.receive_errors = receive_.receive_errors.load(std::memory_order_relaxed);
   const StreamStats& s = decode_.stream;
   c.packets_accepted = s.accepted;
   c.rejects = s.rejects;
@@ -246,7 +353,7 @@ void Writer::build_health(std::int64_t now) {
   c.frames_written = frames_written_;
   c.pcap_packets_written = pcap_packets_;
   c.pcap_packets_not_recorded = decode_.raw_packets_dropped;
-  c.pcap_bytes_written = pcap_bytes_;
+  c.pcap_bytes_written = pcap_bytes_closed_ + (pcap_ ? pcap_->bytes() : 0);
   c.pcd_bytes_written = pcd_bytes_;
   c.write_errors = write_errors_;
   c.bytes_not_written = bytes_not_written_;
@@ -266,10 +373,7 @@ void Writer::build_health(std::int64_t now) {
   // so a window under half a second keeps the previous second's rate.
   const auto complete = decode_.frames.frames_complete - decode_prev_.frames.frames_complete;
   if (span_s >= 0.5) g.frame_rate_hz = static_cast<double>(complete) / span_s;
-  g.seconds_since_last_packet =
-      decode_.last_packet_monotonic_ns == 0
-          ? -1.0
-          : static_cast<double>(now - decode_.last_packet_monotonic_ns) / 1e9;
+  g.seconds_since_last_packet = seconds_since_last_packet(now);
 
   // State: error > no_data > degraded > ok; the reason names what changed since the last tick.
   // The problems are written straight into the reason (cleared, its capacity kept), and the
@@ -284,6 +388,11 @@ void Writer::build_health(std::int64_t now) {
   const auto grew = [&](std::uint64_t now_value, std::uint64_t before, const char* what) {
     if (now_value > before) problem("{} {}", now_value - before, what);
   };
+  if (write_errors_ > write_errors_at_last_tick_) {
+    problem("{} write errors ({} bytes not written): {}",
+            write_errors_ - write_errors_at_last_tick_,
+            bytes_not_written_ - bytes_not_written_at_last_tick_, last_error_);
+  }
   grew(c.kernel_drops, p.kernel_drops, "kernel drops");
   grew(c.ring_overruns, p.ring_overruns, "ring overruns");
   grew(c.frames_dropped_no_arena, p.frames_dropped_no_arena, "frames dropped (no free arena)");
@@ -301,13 +410,14 @@ void Writer::build_health(std::int64_t now) {
       std::abs(g.rpm_tail - options_.expected_rpm) > 0.1 * options_.expected_rpm) {
     problem("motor at {:.0f} RPM (expected {})", g.rpm_tail, options_.expected_rpm);
   }
-  if (write_errors_ > write_errors_at_last_tick_) {
+  // Failing writes degrade (capture goes on, and every byte not written is counted; they lead
+  // the reason). A failing socket is an error: the daemon is not capturing.
+  if (c.receive_errors > p.receive_errors) {
     g.state = HealthState::kError;
     g.reason.clear();
-    fmt::format_to(std::back_inserter(g.reason), "{} write errors: {}",
-                   write_errors_ - write_errors_at_last_tick_, last_error_);
-  } else if (g.seconds_since_last_packet < 0 ||
-             g.seconds_since_last_packet > options_.no_data_timeout_seconds) {
+    fmt::format_to(std::back_inserter(g.reason), "{} receive errors: the socket is failing",
+                   c.receive_errors - p.receive_errors);
+  } else if (silent(now)) {
     g.state = HealthState::kNoData;
     g.reason.clear();
     if (g.seconds_since_last_packet < 0) {
@@ -323,18 +433,32 @@ void Writer::build_health(std::int64_t now) {
   }
 }
 
+double Writer::seconds_since_last_packet(std::int64_t now) const noexcept {
+  // The snapshot's time can be newer than the live one only at the end (the final snapshot).
+  const std::int64_t last = std::max(live_.last_packet_monotonic_ns.load(std::memory_order_relaxed),
+                                     decode_.last_packet_monotonic_ns);
+  return last == 0 ? -1.0 : static_cast<double>(std::max<std::int64_t>(now - last, 0)) / 1e9;
+}
+
+bool Writer::silent(std::int64_t now) const noexcept {
+  const double since = seconds_since_last_packet(now);
+  return since < 0 || since > options_.no_data_timeout_seconds;
+}
+
 void Writer::write_health(bool final) {
   const std::int64_t now = monotonic_ns();
   if (pcap_) {
     try {
       pcap_->flush();  // the recording on disk is at most a second behind
     } catch (const std::exception& error) {
-      write_failed(error, 0);
+      abandon_pcap(error, 0);
     }
   }
   build_health(now);
+  reported_silent_ = silent(now);
   previous_counters_ = health_.counters;
   write_errors_at_last_tick_ = write_errors_;
+  bytes_not_written_at_last_tick_ = bytes_not_written_;
   decode_prev_ = decode_;
   try {
     if (options_.prometheus) {
@@ -354,9 +478,12 @@ void Writer::write_health(bool final) {
         }
         jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
       }
+      const std::uint64_t before = jsonl_file_.size();
       try {
         jsonl_file_.write(json_text_);
       } catch (...) {
+        // A line cut short (a full disk) would glue itself to the next one: take it back.
+        jsonl_file_.truncate(before);
         jsonl_file_.close();  // reopen next time (the file may have been removed)
         throw;
       }
@@ -423,7 +550,9 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       rotate_outputs();
     }
     const std::int64_t now = monotonic_ns();
-    if (now >= next_tick) {
+    // Packets stopped or started again since the last health: say so now, not at the next tick.
+    const bool silence_changed = silent(now) != reported_silent_;
+    if (now >= next_tick || silence_changed) {
       if (!options_.test_stall_file.empty()) stall_while_test_file_exists();
       write_health(false);
       StatusLine status;
@@ -435,7 +564,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
                        c.kernel_drops + c.ring_overruns + c.frames_dropped_no_arena,
                        health_.gauges.reason.empty() ? "" : " - ", health_.gauges.reason);
       status_out.try_push(status);
-      next_tick = std::max(next_tick + kSecondNs, now);
+      next_tick = silence_changed ? now + kSecondNs : std::max(next_tick + kSecondNs, now);
     }
   }
   alloc::mark_this_thread_cold();

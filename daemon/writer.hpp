@@ -9,10 +9,15 @@
 //     rotated by size and age and on SIGHUP, with retention, and the calibration CSV in use saved
 //     beside it as DIR/raw/calibration.csv;
 //   - every second writes DIR/health/pandarcap.prom (temporary file + rename) and appends one line
-//     to DIR/health/health.jsonl (rotated to health.jsonl.1 past jsonl_rotate_bytes).
+//     to DIR/health/health.jsonl (rotated to health.jsonl.1 past jsonl_rotate_bytes); and at once,
+//     outside that schedule, when packets stop for longer than the no-data timeout or start
+//     again (checked at every wake-up, at least every 100 ms), the schedule restarting from there.
 // Arenas and batches go back to the decoder as soon as they are written. A write error is
 // counted (write_errors, bytes_not_written), logged at most every 10 s, and makes the state
-// "error"; the thread carries on with the next file. A slow disk holds arenas longer, so the
+// "degraded" with the error as the reason; the thread carries on with the next file. A pcap whose
+// write failed is cut back to its last whole record and closed (a full disk never leaves a
+// recording that readers choke on), a frame's temporary file is removed, a health line cut short
+// is taken back. A slow disk holds arenas longer, so the
 // decoder runs out and drops frames (counted) — the receive thread never waits for the disk.
 #pragma once
 
@@ -52,7 +57,7 @@ struct WriterOptions {
   std::string sensor_name;
   std::string version;
   std::string decoder;  // decoder target in use, reported in the health output
-  double no_data_timeout_seconds = 2.0;
+  double no_data_timeout_seconds = 1.0;
   std::string expected_return_mode = "any";
   int expected_rpm = 600;
   Endpoint pcap_destination;  // the synthesised destination of recorded packets
@@ -72,7 +77,7 @@ class Writer {
  public:
   Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_decoder,
          DecodeWorker::ArenaQueue& arenas_back, DecodeWorker::RawQueue& raw_back,
-         const ReceiveCounters& receive);
+         const ReceiveCounters& receive, const LiveClock& live);
   ~Writer();
 
   // Creates the output directories and proves they are writable (writes calibration.csv and a
@@ -93,10 +98,17 @@ class Writer {
   void write_raw(RawBatch& batch);
   void open_pcap(std::int64_t first_packet_ns);
   void close_pcap();
+  // After a failed write: cut the file back to whole records, count what was lost, close it.
+  void abandon_pcap(const std::exception& error, std::uint64_t failed_bytes);
+  void finish_pcap_file();  // rename .part (or remove it if it holds no record)
+  void finish_leftovers();  // at start: what an interrupted run left (see prepare())
   void rotate_outputs();
   void write_health(bool final);
   void stall_while_test_file_exists() const;
   void build_health(std::int64_t now_monotonic_ns);  // into health_
+  // Seconds since the decoder's last packet (-1: none yet), and whether that is silence.
+  double seconds_since_last_packet(std::int64_t now_monotonic_ns) const noexcept;
+  bool silent(std::int64_t now_monotonic_ns) const noexcept;
   void write_failed(const std::exception& error, std::uint64_t bytes);
   void enforce_retention(std::deque<std::pair<std::filesystem::path, std::uint64_t>>& files,
                          std::uint64_t max_files, std::uint64_t max_bytes);
@@ -106,6 +118,8 @@ class Writer {
   DecodeWorker::ArenaQueue& arenas_back_;
   DecodeWorker::RawQueue& raw_back_;
   const ReceiveCounters& receive_;
+  const LiveClock& live_;
+  bool reported_silent_ = true;  // the last health written said "no data"
   std::filesystem::path frames_dir_, raw_dir_;
 
   std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
@@ -121,9 +135,10 @@ class Writer {
   std::int64_t start_monotonic_ns_ = 0;
   std::int64_t last_tick_ns_ = 0;
   std::uint64_t frames_written_ = 0, frames_written_prev_ = 0;
-  std::uint64_t pcd_bytes_ = 0, pcap_packets_ = 0, pcap_bytes_ = 0;
+  std::uint64_t pcd_bytes_ = 0, pcap_packets_ = 0;
+  std::uint64_t pcap_bytes_closed_ = 0;  // in finished files; the open one adds its own
   std::uint64_t write_errors_ = 0, bytes_not_written_ = 0;
-  std::uint64_t write_errors_at_last_tick_ = 0;
+  std::uint64_t write_errors_at_last_tick_ = 0, bytes_not_written_at_last_tick_ = 0;
   std::int64_t last_error_log_ns_ = -1;
   std::string last_error_;
   HealthCounters previous_counters_{};

@@ -73,7 +73,7 @@ TEST_CASE("inspect --json on the real single 1266-byte packet", "[cli][real]") {
 
 TEST_CASE("pandarcapd --simulate records a capture that inspect decodes", "[cli][simulate]") {
   test::ScratchDir dir("simulate");
-  const auto result = test::run_command(quoted(test::binary("pandarcapd")) +
+  const auto result = test::run_command(quoted(test::binary("pandarcapd")) + " --allow-root" +
                                         " --simulate --duration 1 --rpm 1200 --return-mode last "
                                         "--udp-sequence --log-level warn --output-dir " +
                                         quoted(dir.path()) + " 2>&1");

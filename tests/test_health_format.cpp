@@ -34,6 +34,7 @@ HealthSnapshot distinct_snapshot() {
                                &c.truncated_datagrams,
                                &c.kernel_drops,
                                &c.ring_overruns,
+                               &c.receive_errors,
                                &c.packets_accepted,
                                &c.sequence_gaps,
                                &c.sequence_lost,
@@ -248,7 +249,7 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(c.at("filtered_points").at("dual_too_close") == 24);
   // 31 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
   // allocation total and its per-thread map.
-  CHECK(c.size() == 36);
+  CHECK(c.size() == 37);
   const auto& g = j.at("gauges");
   CHECK(g.at("rpm_tail") == 600.0);
   CHECK(g.at("rpm_measured") == 599.5);

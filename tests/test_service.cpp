@@ -13,6 +13,8 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <array>
+#include <atomic>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cstdio>
@@ -21,9 +23,11 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "bench/child_process.hpp"
+#include "core/synthetic_sensor.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;
@@ -50,10 +54,10 @@ class NotifyListener {
   NotifyListener(const NotifyListener&) = delete;
   NotifyListener& operator=(const NotifyListener&) = delete;
 
-  // Takes everything queued, waiting up to ~50 ms for the first datagram.
-  void receive() {
+  // Takes everything queued, waiting up to ~50 ms for the first datagram (`wait`) or not at all.
+  void receive(bool wait = true) {
     char buffer[512];
-    for (int flags = 0;; flags = MSG_DONTWAIT) {
+    for (int flags = wait ? 0 : MSG_DONTWAIT;; flags = MSG_DONTWAIT) {
       const ssize_t n = ::recv(fd_, buffer, sizeof buffer, flags);
       if (n <= 0) return;
       messages_.emplace_back(buffer, static_cast<std::size_t>(n));
@@ -93,8 +97,8 @@ TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, res
   const fs::path stall_file = dir / "stall-writer";
   // 400 ms asked for: the daemon pings every 200 ms while all three loops progress.
   harness::ChildProcess daemon(
-      test::binary("pandarcapd"), {"--allow-root", "--simulate", "--output-dir", (dir / "out").string()},
-      dir / "log.txt",
+      test::binary("pandarcapd"),
+      {"--allow-root", "--simulate", "--output-dir", (dir / "out").string()}, dir / "log.txt",
       {"NOTIFY_SOCKET=" + (dir / "notify.sock").string(), "WATCHDOG_USEC=400000",
        "PANDARCAP_TEST_STALL_WRITER_FILE=" + stall_file.string()});
 
@@ -223,4 +227,126 @@ TEST_CASE("[threads]: pinning and SCHED_FIFO as granted, refusals logged, health
   // Only finished files in the collector's directory: it would read a stray *.prom.
   for (const auto& entry : fs::directory_iterator(dir / "textfile"))
     CHECK(entry.path().filename() == "pandarcap-front.prom");
+}
+
+namespace {
+
+// The state in the last line of OUT/health/health.jsonl ("" before the first), and how many lines
+// there are.
+struct HealthTail {
+  std::string state;
+  std::size_t lines = 0;
+};
+HealthTail health_tail(const fs::path& out) {
+  std::ifstream in(out / "health" / "health.jsonl");
+  HealthTail tail;
+  std::string line, last;
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    last = line;
+    ++tail.lines;
+  }
+  const auto key = last.find("\"state\":\"");
+  if (key != std::string::npos) {
+    const auto begin = key + 9;
+    tail.state = last.substr(begin, last.find('"', begin) - begin);
+  }
+  return tail;
+}
+
+// Sends the simulated sensor's stream, continuing where it stopped, at 3600 packets/s (one
+// dual-return sensor) in 10 ms slices, from 127.0.0.1 to `port`.
+class PacedSensor {
+ public:
+  explicit PacedSensor(std::uint16_t port) : port_(port), sensor_(SyntheticSensorConfig{}) {}
+  // Sends for `duration`, calling `between` after every slice; returns when done.
+  void send_for(std::chrono::milliseconds duration, const std::function<void()>& between = {}) {
+    const auto end = std::chrono::steady_clock::now() + duration;
+    auto next = std::chrono::steady_clock::now();
+    while (next < end) {
+      std::vector<std::vector<std::uint8_t>> slice(36);
+      for (auto& payload : slice) {
+        std::array<std::uint8_t, kMaxPacketBytes> packet{};
+        payload.assign(packet.begin(), packet.begin() + sensor_.next(packet));
+      }
+      harness::send_udp("127.0.0.1", port_, slice);
+      if (between) between();
+      next += 10ms;
+      std::this_thread::sleep_until(next);  // pacing the sender, not waiting for the daemon
+    }
+  }
+
+ private:
+  std::uint16_t port_;
+  SyntheticSensor sensor_;
+};
+
+}  // namespace
+
+TEST_CASE(
+    "no data: within 1.5 s health says no_data, keeps updating, the watchdog pings; "
+    "back to ok within 1 s of the first packet",
+    "[daemon][systemd][reliability]") {
+  test::ScratchDir dir("daemon-no-data");
+  NotifyListener notify(dir / "notify.sock");
+  const fs::path out = dir / "out";
+  const std::uint16_t port = harness::free_udp_port();
+  harness::ChildProcess daemon(
+      test::binary("pandarcapd"),
+      {"--allow-root", "--host-ip", "127.0.0.1", "--port", std::to_string(port), "--sensor-ip",
+       "127.0.0.1", "--output-dir", out.string()},
+      dir / "log.txt", {"NOTIFY_SOCKET=" + (dir / "notify.sock").string(), "WATCHDOG_USEC=400000"});
+  const auto until = [&](const std::function<bool()>& condition, std::chrono::milliseconds limit) {
+    return harness::wait_until(
+        [&] {
+          notify.receive();
+          return condition();
+        },
+        limit);
+  };
+  INFO(daemon.log());
+  REQUIRE(until([&] { return notify.count("READY=1") == 1 && health_tail(out).lines >= 1; }, 15s));
+  CHECK(health_tail(out).state == "no_data");  // nothing sent yet
+
+  PacedSensor sensor(port);
+  // The listener keeps reading meanwhile, as systemd does: a full notify socket would block the
+  // daemon's sd_notify (libsystemd sends blocking), and with it the daemon's main thread.
+  sensor.send_for(1500ms, [&] { notify.receive(false); });
+  REQUIRE(until([&] { return health_tail(out).state == "ok"; }, 5s));
+
+  // The sensor stops (its last packet has just been sent).
+  const auto stopped = std::chrono::steady_clock::now();
+  REQUIRE(until([&] { return health_tail(out).state == "no_data"; }, 5s));
+  const auto to_no_data = std::chrono::steady_clock::now() - stopped;
+  INFO("no_data after " << std::chrono::duration<double>(to_no_data).count() << " s");
+  CHECK(to_no_data <= 1500ms);
+
+  // Silent, the daemon carries on: a health line every second, a watchdog ping every 200 ms.
+  const std::size_t lines = health_tail(out).lines;
+  const std::size_t pings = notify.count("WATCHDOG=1");
+  REQUIRE(until([&] { return health_tail(out).lines >= lines + 2; }, 5s));
+  CHECK(health_tail(out).state == "no_data");
+  CHECK(notify.count("WATCHDOG=1") >= pings + 4);
+  CHECK(notify.all().find("STATUS=no_data") != std::string::npos);
+
+  // It comes back: the first packets go out now; ok within a second of them.
+  std::atomic<bool> resume_done{false};
+  std::thread resume([&] {
+    sensor.send_for(2000ms);
+    resume_done = true;
+  });
+  const auto resumed = std::chrono::steady_clock::now();
+  const bool ok_again = until([&] { return health_tail(out).state == "ok"; }, 5s);
+  const auto to_ok = std::chrono::steady_clock::now() - resumed;
+  until([&] { return resume_done.load(); }, 10s);
+  resume.join();
+  INFO("ok after " << std::chrono::duration<double>(to_ok).count() << " s");
+  CHECK(ok_again);
+  CHECK(to_ok <= 1000ms);
+
+  daemon.signal(SIGTERM);
+  CHECK(until([&] { return notify.count("STOPPING=1") == 1; }, 10s));
+  const auto status = daemon.wait_exit(10s);
+  INFO(daemon.log());
+  CHECK(status == 0);
 }

@@ -1,0 +1,27 @@
+// Finishing a recording that a crash (SIGKILL, power loss) or a full disk left open: pandarcapd
+// writes raw/NAME.pcap.part and renames it only when it closes the file, so a ".part" found at
+// start-up is one an earlier run never finished. Its last record may be cut anywhere; everything
+// before it is whole. finish_interrupted_pcap() finds the end of the last whole record and cuts
+// the file there, so that tcpdump, libpcap and pandarcap-inspect read it to the end.
+//
+// Only classic pcap in this machine's byte order with microsecond times, as PcapWriter writes, is
+// touched; anything else is left as it is (`ours` false).
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace pandarcap {
+
+struct PcapRecovery {
+  bool ours = false;             // a PcapWriter file: global header present and recognised
+  std::uint64_t records = 0;     // whole records kept
+  std::uint64_t kept_bytes = 0;  // the file's length now
+  std::uint64_t cut_bytes = 0;   // bytes of a cut record (or garbage) removed from the end
+};
+
+// Scans `path` and truncates it after its last whole record. Throws std::system_error when the
+// file cannot be read or truncated.
+PcapRecovery finish_interrupted_pcap(const std::string& path);
+
+}  // namespace pandarcap

@@ -1,0 +1,349 @@
+// pandarcapd against a vehicle's faults: a full disk and power cuts (SIGKILL). The real binary,
+// real files; the full disk is a small tmpfs mounted in a private mount namespace made for the
+// test (unshare), so nothing outside the test sees it.
+//
+// What must hold:
+//   - disk full: the daemon keeps receiving, counts write errors and bytes not written, health
+//     says "degraded" with the reason; when space returns, writing resumes within 2 s; every
+//     closed pcap passes `tcpdump -r`, every PCD is whole;
+//   - SIGKILL at random moments, 50 times, while frames are written and pcaps rotate: the health
+//     file always parses, every recording is readable up to its last whole record, what a killed
+//     run left is finished or removed at the next start, and temporary files and descriptors do
+//     not pile up.
+#include <fcntl.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench/child_process.hpp"
+#include "core/capture_reader.hpp"
+#include "core/pcd.hpp"
+#include "test_support.hpp"
+
+using namespace pandarcap;
+using namespace std::chrono_literals;
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+namespace {
+
+// Every line of a JSON-lines file, parsed; a line that does not parse fails the test.
+std::vector<json> json_lines(const fs::path& path) {
+  std::ifstream in(path);
+  std::vector<json> lines;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    INFO(path.string() << ": " << line);
+    const json parsed = json::parse(line, nullptr, false);
+    CHECK_FALSE(parsed.is_discarded());
+    if (!parsed.is_discarded()) lines.push_back(parsed);
+  }
+  return lines;
+}
+
+std::uint64_t counter(const json& line, const char* name) {
+  return line.is_object() ? line["counters"].value(name, std::uint64_t{0}) : 0;
+}
+
+std::vector<fs::path> files_ending(const fs::path& dir, const std::string& suffix) {
+  std::vector<fs::path> files;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    if (entry.path().native().ends_with(suffix)) files.push_back(entry.path());
+  }
+  return files;
+}
+
+// Temporary and unfinished files anywhere under `dir`: ".NAME.tmp" and "NAME.pcap.part".
+std::set<fs::path> unfinished_files(const fs::path& dir) {
+  std::set<fs::path> found;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(dir, ec);
+       it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    const std::string name = it->path().filename().native();
+    if ((name.front() == '.' && name.ends_with(".tmp")) || name.ends_with(".pcap.part")) {
+      found.insert(it->path());
+    }
+  }
+  return found;
+}
+
+// A PCD as pandarcapd writes it is whole: the header's POINTS times the point size is exactly
+// what follows DATA binary.
+bool pcd_is_whole(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  std::string line;
+  std::uint64_t points = 0;
+  bool data = false;
+  while (!data && std::getline(in, line)) {
+    if (line.rfind("POINTS ", 0) == 0) points = std::stoull(line.substr(7));
+    data = line == "DATA binary";
+  }
+  if (!data) return false;
+  const auto header = static_cast<std::uint64_t>(in.tellg());
+  return fs::file_size(file) == header + points * kPcdPointBytes;
+}
+
+// Reads a capture to its end: how it ended and how many records it held.
+std::pair<CaptureStatus, std::size_t> read_capture(const fs::path& file) {
+  CaptureReader reader(file.string());
+  CaptureRecord record;
+  std::size_t records = 0;
+  CaptureStatus status;
+  while ((status = reader.next(record)) == CaptureStatus::kRecord)
+    ++records;
+  return {status, records};
+}
+
+bool tcpdump_reads(const fs::path& file) {
+  return test::run_command("tcpdump -nr '" + file.string() + "' >/dev/null 2>&1").exit_code == 0;
+}
+
+// A Prometheus text file: promtool's word when it is installed, else every sample line has a
+// metric name and a number. Either way the state gauge must be there.
+bool prometheus_file_parses(const fs::path& file) {
+  const std::string text = harness::read_file(file);
+  if (text.find("pandarcap_state{") == std::string::npos) return false;
+  if (test::run_command("command -v promtool >/dev/null").exit_code == 0) {
+    return test::run_command("promtool check metrics < '" + file.string() + "' >/dev/null 2>&1")
+               .exit_code == 0;
+  }
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.empty() || line.front() == '#') continue;
+    const auto space = line.rfind(' ');
+    if (space == std::string::npos || space + 1 == line.size()) return false;
+  }
+  return text.ends_with("\n");
+}
+
+std::size_t open_descriptors(int pid) {
+  std::size_t n = 0;
+  std::error_code ec;
+  for (auto it = fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd", ec);
+       it != fs::directory_iterator(); it.increment(ec))
+    ++n;
+  return n;
+}
+
+bool logged(const harness::ChildProcess& daemon, const std::string& text) {
+  return daemon.log().find(text) != std::string::npos;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "SIGKILL at random moments, 50 times: health parses, recordings readable, leftovers "
+    "finished at the next start, no temporary-file or descriptor growth",
+    "[daemon][reliability][crash]") {
+  test::ScratchDir dir("daemon-crash");
+  const fs::path out = dir / "out";
+  const fs::path config = dir / "crash.toml";
+  // Small pcaps (a rotation about every 50 ms of the simulated sensor) and bounded retention:
+  // the kills land while frames are written and recordings rotate.
+  std::ofstream(config) << "[output]\npcap_rotate_bytes = 262144\npcap_max_files = 20\n"
+                           "frames_max_files = 20\n";
+  const std::uint64_t seed = std::random_device{}();
+  INFO("seed " << seed);
+  std::mt19937_64 random(seed);
+  std::uniform_int_distribution<int> kill_after_ms(0, 600);
+  std::size_t fewest_fds = SIZE_MAX, most_fds = 0;
+  std::size_t leftovers_seen = 0, parts_seen = 0;  // what the kills left, over all runs
+
+  for (int run = 0; run < 50; ++run) {
+    INFO("run " << run);
+    const std::set<fs::path> left_before = unfinished_files(out);
+    std::vector<fs::path> parts_before;
+    for (const fs::path& file : left_before)
+      if (file.native().ends_with(".pcap.part")) parts_before.push_back(file);
+    leftovers_seen += left_before.size();
+    parts_seen += parts_before.size();
+    harness::ChildProcess daemon(
+        test::binary("pandarcapd"),
+        {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
+        dir / ("log-" + std::to_string(run) + ".txt"));
+    REQUIRE(harness::wait_until([&] { return logged(daemon, "ready:"); }, 20s));
+    INFO(daemon.log());
+    // What the killed run left is gone by the time the new one is ready: temporary files removed,
+    // each .part finished under its final name (or removed when it held no whole record).
+    for (const fs::path& file : left_before) {
+      INFO(file.string());
+      CHECK_FALSE(fs::exists(file));
+    }
+    for (const fs::path& part : parts_before) {
+      const fs::path finished = part.native().substr(0, part.native().size() - 5);
+      if (fs::exists(finished)) {
+        CHECK(read_capture(finished).first == CaptureStatus::kEnd);
+      }
+    }
+    // Every health line of every run so far parses (a line cut by a kill was dropped at start).
+    json_lines(out / "health" / "health.jsonl");
+    const std::size_t fds = open_descriptors(daemon.pid());
+    fewest_fds = std::min(fewest_fds, fds);
+    most_fds = std::max(most_fds, fds);
+
+    // The random moment: this sleep is the experiment's variable, not a wait for the daemon.
+    std::this_thread::sleep_for(std::chrono::milliseconds(kill_after_ms(random)));
+    daemon.signal(SIGKILL);
+    REQUIRE(daemon.wait_exit(10s) == -SIGKILL);
+
+    // As the kill left it: the health file parses (rename is atomic), every recording reads to
+    // its end or to a cut last record, never to an error, and every PCD is whole.
+    CHECK(prometheus_file_parses(out / "health" / "pandarcap.prom"));
+    for (const fs::path& pcap : files_ending(out / "raw", ".pcap")) {
+      INFO(pcap.string());
+      CHECK(read_capture(pcap).first == CaptureStatus::kEnd);
+    }
+    for (const fs::path& part : files_ending(out / "raw", ".pcap.part")) {
+      INFO(part.string());
+      const auto [status, records] = read_capture(part);
+      CHECK((status == CaptureStatus::kEnd || status == CaptureStatus::kTruncated));
+    }
+    for (const fs::path& pcd : files_ending(out / "frames", ".pcd")) {
+      INFO(pcd.string());
+      CHECK(pcd_is_whole(pcd));
+    }
+    // At most what one run has open at once: a pcap, a frame, a health file and calibration.csv.
+    CHECK(unfinished_files(out).size() <= 4);
+  }
+  // The kills did land mid-write: unfinished recordings were there to finish.
+  INFO(leftovers_seen << " unfinished files found at start, " << parts_seen << " of them pcaps");
+  CHECK(parts_seen >= 10);
+  // The same descriptors in every run (±2: a frame or pcap may be open at the moment of the
+  // count).
+  CHECK(most_fds - fewest_fds <= 2);
+
+  // A last, clean run finishes everything and leaves nothing unfinished behind.
+  harness::ChildProcess last(test::binary("pandarcapd"),
+                             {"--allow-root", "-c", config.string(), "--simulate", "--duration",
+                              "1", "--output-dir", out.string()},
+                             dir / "log-last.txt");
+  CHECK(last.wait_exit(30s) == 0);
+  INFO(last.log());
+  CHECK(unfinished_files(out).empty());
+  for (const fs::path& pcap : files_ending(out / "raw", ".pcap")) {
+    INFO(pcap.string());
+    CHECK(tcpdump_reads(pcap));
+  }
+  CHECK(json_lines(out / "health" / "health.jsonl").size() >= 2);
+}
+
+TEST_CASE(
+    "disk full: capture goes on, errors and bytes not written counted, degraded with the "
+    "reason; space back: writing resumes within 2 s; closed files stay readable",
+    "[daemon][reliability][disk]") {
+  // A private mount namespace for the tmpfs: as root directly, otherwise in a user namespace
+  // where this user is root (then the daemon is "root" there too, hence --allow-root).
+  const std::string userns = ::geteuid() == 0 ? "" : "--user --map-root-user ";
+  if (test::run_command("unshare " + userns + "--mount true 2>/dev/null").exit_code != 0) {
+    WARN("cannot create a mount namespace here (no root, no user namespaces): not tested");
+    return;
+  }
+  test::ScratchDir dir("daemon-disk-full");
+  const fs::path mount_point = dir / "out";
+  fs::create_directories(mount_point);
+  const fs::path health = dir / "health";  // on the real disk: the test reads it throughout
+  const fs::path config = dir / "disk.toml";
+  std::ofstream(config) << "[output]\ndirectory = \"" << mount_point.string()
+                        << "\"\npcap_rotate_bytes = 262144\n[health]\ndirectory = \""
+                        << health.string() << "\"\n";
+  // unshare execs sh, which mounts the tmpfs and execs pandarcapd: one process, one pid.
+  std::vector<std::string> args;
+  if (::geteuid() != 0) args = {"--user", "--map-root-user"};
+  for (const std::string& arg :
+       {std::string("--mount"), std::string("--propagation"), std::string("private"),
+        std::string("--"), std::string("/bin/sh"), std::string("-c"),
+        std::string("mount -t tmpfs -o size=8m pandarcap-test \"$0\" && exec \"$@\""),
+        mount_point.string(), test::binary("pandarcapd").string(), std::string("--allow-root"),
+        std::string("-c"), config.string(), std::string("--simulate")})
+    args.push_back(arg);
+  harness::ChildProcess daemon("/usr/bin/unshare", args, dir / "log.txt");
+  const fs::path view =
+      fs::path("/proc") / std::to_string(daemon.pid()) / "root" / mount_point.relative_path();
+  const auto last_line = [&] {
+    const auto lines = json_lines(health / "health.jsonl");
+    return lines.empty() ? json() : lines.back();
+  };
+  INFO(daemon.log());
+  REQUIRE(harness::wait_until([&] { return logged(daemon, "ready:"); }, 20s));
+  REQUIRE(harness::wait_until([&] { return counter(last_line(), "frames_written") >= 2; }, 10s));
+
+  // 8 MB fill in about a second: frames and pcaps start failing.
+  REQUIRE(harness::wait_until([&] { return counter(last_line(), "write_errors") > 0; }, 20s));
+  json full = last_line();
+  {
+    INFO(full.dump());
+    CHECK(full["state"] == "degraded");
+    CHECK(full["reason"].get<std::string>().find("No space left on device") != std::string::npos);
+    CHECK(counter(full, "bytes_not_written") > 0);
+  }
+  // Capture goes on: two more seconds later more packets were received and decoded, more writes
+  // failed, and nothing was lost before the writer (kernel, ring).
+  const std::size_t lines_at_full = json_lines(health / "health.jsonl").size();
+  REQUIRE(harness::wait_until(
+      [&] { return json_lines(health / "health.jsonl").size() >= lines_at_full + 2; }, 10s));
+  const json later = last_line();
+  {
+    INFO(later.dump());
+    CHECK(counter(later, "datagrams_received") > counter(full, "datagrams_received"));
+    CHECK(counter(later, "packets_accepted") > counter(full, "packets_accepted"));
+    CHECK(counter(later, "write_errors") > counter(full, "write_errors"));
+    CHECK(counter(later, "bytes_not_written") > counter(full, "bytes_not_written"));
+    CHECK(counter(later, "kernel_drops") == 0);
+    CHECK(counter(later, "ring_overruns") == 0);
+    CHECK(later["state"] == "degraded");
+  }
+  // What was finished is readable: every closed pcap (cut back to whole records when its write
+  // failed) passes tcpdump, every PCD is whole.
+  const auto check_outputs = [&] {
+    const auto pcaps = files_ending(view / "raw", ".pcap");
+    CHECK_FALSE(pcaps.empty());
+    for (const fs::path& pcap : pcaps) {
+      INFO(pcap.string());
+      CHECK(tcpdump_reads(pcap));
+      CHECK(read_capture(pcap).first == CaptureStatus::kEnd);
+    }
+    for (const fs::path& pcd : files_ending(view / "frames", ".pcd")) {
+      INFO(pcd.string());
+      CHECK(pcd_is_whole(pcd));
+    }
+  };
+  check_outputs();
+
+  // Space returns: the frames are moved off (deleted). A new frame lands within 2 s.
+  for (const fs::path& pcd : files_ending(view / "frames", ".pcd"))
+    fs::remove(pcd);
+  const auto freed = std::chrono::steady_clock::now();
+  const bool resumed =
+      harness::wait_until([&] { return !files_ending(view / "frames", ".pcd").empty(); }, 5s);
+  const auto to_resume = std::chrono::steady_clock::now() - freed;
+  INFO("a frame written " << std::chrono::duration<double>(to_resume).count()
+                          << " s after space returned");
+  CHECK(resumed);
+  CHECK(to_resume <= 2s);
+  CHECK(harness::wait_until(
+      [&] { return counter(last_line(), "frames_written") > counter(later, "frames_written"); },
+      3s));
+  check_outputs();
+
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait_exit(20s) == 0);
+  // The final health line is there, consistent: every datagram accounted for.
+  const json final_line = last_line();
+  INFO(final_line.dump());
+  CHECK(counter(final_line, "datagrams_received") ==
+        counter(final_line, "packets_accepted") + counter(final_line, "packets_rejected") +
+            counter(final_line, "foreign_datagrams") + counter(final_line, "ring_overruns"));
+}

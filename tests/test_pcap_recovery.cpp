@@ -1,0 +1,162 @@
+// Recordings left unfinished: PcapWriter::abandon() after a failed write, and
+// finish_interrupted_pcap() for a ".part" a killed run left. Either way the file must end on a
+// whole record, so readers (libpcap, tcpdump) read it to the end, and nothing else is touched.
+#include <catch2/catch.hpp>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "core/capture_reader.hpp"
+#include "core/pcap_recovery.hpp"
+#include "core/pcap_writer.hpp"
+#include "test_support.hpp"
+
+using namespace pandarcap;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr Endpoint kSource{0x7F000001, 10000};
+constexpr Endpoint kDestination{0x7F000001, 2368};
+constexpr std::int64_t kTime = 1'795'348'800'000'000'000;
+
+std::vector<std::uint8_t> payload(std::size_t n, std::uint8_t fill) {
+  return std::vector<std::uint8_t>(n, fill);
+}
+
+// Reads `path` to its end: the records and how the read ended.
+struct ReadBack {
+  std::vector<std::size_t> sizes;
+  CaptureStatus status = CaptureStatus::kError;
+};
+ReadBack read_back(const fs::path& path) {
+  CaptureReader reader(path.string());
+  CaptureRecord record;
+  ReadBack result;
+  while ((result.status = reader.next(record)) == CaptureStatus::kRecord)
+    result.sizes.push_back(record.payload.size());
+  return result;
+}
+
+// A recording of `records` datagrams of 1262 bytes, closed properly; returns its size.
+std::uint64_t write_recording(const fs::path& path, int records) {
+  PcapWriter writer(path.string());
+  for (int i = 0; i < records; ++i)
+    writer.write(payload(1262, static_cast<std::uint8_t>(i)), kTime + i * 1000, kSource,
+                 kDestination);
+  writer.close();
+  return writer.bytes();
+}
+
+}  // namespace
+
+TEST_CASE("finish_interrupted_pcap cuts a record cut anywhere and keeps every whole one",
+          "[pcap][recovery]") {
+  test::ScratchDir dir("pcap-recovery");
+  const fs::path whole = dir / "whole.pcap";
+  const std::uint64_t three = write_recording(whole, 3);
+  const std::uint64_t record_bytes = 16 + 42 + 1262;
+  REQUIRE(three == 24 + 3 * record_bytes);
+  // A fourth record written in part: inside its header, at its end of header, inside its data,
+  // one byte short of whole.
+  const fs::path four = dir / "four.pcap";
+  const std::uint64_t full = write_recording(four, 4);
+  for (const std::uint64_t cut_at : {three + 1, three + 15, three + 16, three + 700, full - 1}) {
+    const fs::path part = dir / ("cut-" + std::to_string(cut_at) + ".pcap.part");
+    fs::copy_file(four, part);
+    fs::resize_file(part, cut_at);
+    INFO("cut at " << cut_at);
+    CHECK(read_back(part).status == CaptureStatus::kTruncated);  // as a crash leaves it
+    const PcapRecovery recovered = finish_interrupted_pcap(part.string());
+    CHECK(recovered.ours);
+    CHECK(recovered.records == 3);
+    CHECK(recovered.kept_bytes == three);
+    CHECK(recovered.cut_bytes == cut_at - three);
+    CHECK(fs::file_size(part) == three);
+    const ReadBack after = read_back(part);
+    CHECK(after.status == CaptureStatus::kEnd);
+    CHECK(after.sizes == std::vector<std::size_t>(3, 1262));
+  }
+  // A whole file is left as it is.
+  const PcapRecovery untouched = finish_interrupted_pcap(whole.string());
+  CHECK(untouched.records == 3);
+  CHECK(untouched.cut_bytes == 0);
+  CHECK(fs::file_size(whole) == three);
+}
+
+TEST_CASE("finish_interrupted_pcap: headers only, empty, garbage tails and foreign files",
+          "[pcap][recovery]") {
+  test::ScratchDir dir("pcap-recovery-edges");
+  const fs::path header_only = dir / "header.pcap.part";
+  write_recording(header_only, 0);
+  PcapRecovery r = finish_interrupted_pcap(header_only.string());
+  CHECK(r.ours);
+  CHECK(r.records == 0);
+  CHECK(r.kept_bytes == 24);
+
+  const fs::path empty = dir / "empty.pcap.part";
+  std::ofstream(empty).close();
+  r = finish_interrupted_pcap(empty.string());
+  CHECK_FALSE(r.ours);  // the caller removes it: no record
+  CHECK(r.records == 0);
+
+  // A record header claiming more than the snap length is where the good part ends.
+  const fs::path garbage = dir / "garbage.pcap.part";
+  const std::uint64_t two = write_recording(garbage, 2);
+  {
+    std::ofstream out(garbage, std::ios::binary | std::ios::app);
+    const std::vector<char> junk(40, '\xff');
+    out.write(junk.data(), static_cast<std::streamsize>(junk.size()));
+  }
+  r = finish_interrupted_pcap(garbage.string());
+  CHECK(r.records == 2);
+  CHECK(r.cut_bytes == 40);
+  CHECK(fs::file_size(garbage) == two);
+
+  // Not a file of ours (here: text): reported, not touched.
+  const fs::path foreign = dir / "foreign.pcap.part";
+  std::ofstream(foreign) << "this is not a capture file, whatever its name says\n";
+  const auto size = fs::file_size(foreign);
+  r = finish_interrupted_pcap(foreign.string());
+  CHECK_FALSE(r.ours);
+  CHECK(fs::file_size(foreign) == size);
+
+  CHECK_THROWS_AS(finish_interrupted_pcap((dir / "missing.pcap.part").string()), std::system_error);
+}
+
+TEST_CASE("PcapWriter::abandon keeps what the last good flush wrote and counts the rest",
+          "[pcap][recovery]") {
+  test::ScratchDir dir("pcap-abandon");
+  const fs::path path = dir / "a.pcap.part";
+  PcapWriter writer(path.string());
+  for (int i = 0; i < 3; ++i)
+    writer.write(payload(1262, 1), kTime, kSource, kDestination);
+  writer.flush();
+  CHECK(writer.flushed_records() == 3);
+  const std::uint64_t flushed = writer.flushed_bytes();
+  for (int i = 0; i < 2; ++i)
+    writer.write(payload(100, 2), kTime, kSource, kDestination);
+  CHECK(writer.records() == 5);
+  const PcapWriter::Dropped dropped = writer.abandon();
+  CHECK(dropped.records == 2);
+  CHECK(dropped.bytes == 2 * (16 + 42 + 100));
+  CHECK(writer.records() == 3);
+  CHECK(fs::file_size(path) == flushed);
+  const ReadBack back = read_back(path);
+  CHECK(back.status == CaptureStatus::kEnd);
+  CHECK(back.sizes == std::vector<std::size_t>(3, 1262));
+  // Abandoned is closed: further writes fail loudly, closing again is harmless.
+  CHECK_THROWS_AS(writer.write(payload(10, 0), kTime, kSource, kDestination), std::system_error);
+  CHECK_NOTHROW(writer.close());
+
+  // Nothing ever flushed: the file is cut to nothing.
+  const fs::path never = dir / "never.pcap.part";
+  PcapWriter unflushed(never.string());
+  unflushed.write(payload(1262, 1), kTime, kSource, kDestination);
+  const PcapWriter::Dropped all = unflushed.abandon();
+  CHECK(all.records == 1);
+  CHECK(unflushed.flushed_records() == 0);
+  CHECK(fs::file_size(never) == 0);
+}
