@@ -121,7 +121,7 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
     }
     const auto n = static_cast<unsigned>(std::min<std::uint64_t>(due - result.sent, batch));
     for (unsigned i = 0; i < n; ++i) {
-      const std::uint64_t k = result.sent + i;
+      const std::uint64_t k = o.first_sequence + result.sent + i;
       const auto& body = source.bodies[k % source.bodies.size()];
       sequences[i] = static_cast<std::uint32_t>(k);  // little-endian on the wire, as the sensor
       iovecs[i][0] = {const_cast<std::uint8_t*>(body.data()), kPacketBytes};

@@ -34,6 +34,9 @@ struct GeneratorOptions {
   double rate_pps = 3600;
   double seconds = 10;
   int batch = 32;  // datagrams per sendmmsg
+  // The first packet's UDP sequence (and place in the source's bodies): a second run that
+  // continues a first one's stream starts at the first one's `sent`.
+  std::uint64_t first_sequence = 0;
   // Bursts: every `burst_every_s`, `burst_ms` at `burst_factor` x the rate.
   double burst_factor = 1;
   double burst_ms = 0;
@@ -45,7 +48,7 @@ struct GeneratorOptions {
 };
 
 struct GeneratorResult {
-  std::uint64_t sent = 0;  // valid packets, sequences 0 .. sent-1
+  std::uint64_t sent = 0;  // valid packets, sequences first_sequence .. first_sequence+sent-1
   std::uint64_t foreign_sent = 0;
   std::uint64_t malformed_sent = 0;
   std::uint64_t send_errors = 0;  // sendmmsg failures other than a full socket buffer

@@ -162,7 +162,17 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
   const std::int64_t warm_ns = coarse_monotonic_ns() + kWarmUpNs;
   bool hot = false;
 
-  while (!stop.load(std::memory_order_relaxed)) {
+  // On stop, what the socket already holds is still taken (without waiting, for at most
+  // kDrainNs against a sender that does not stop): datagrams the kernel accepted are then either
+  // received or counted as dropped, none left uncounted in the buffer.
+  constexpr std::int64_t kDrainNs = 200'000'000;
+  std::int64_t drain_until = 0;  // 0: not stopping
+  for (;;) {
+    if (drain_until == 0 && stop.load(std::memory_order_relaxed)) {
+      drain_until = coarse_monotonic_ns() + kDrainNs;
+    }
+    const bool draining = drain_until != 0;
+    if (draining && coarse_monotonic_ns() >= drain_until) break;
     ReceiveCounters::add(heartbeat, 1);
     const std::int64_t now = coarse_monotonic_ns();
     if (!hot && now >= warm_ns) {
@@ -179,7 +189,10 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
     if (overrun) {
       // Ring full. Wait (briefly) for a datagram, then drop what is waiting and count it.
       pollfd pfd{fd_, POLLIN, 0};
-      if (::poll(&pfd, 1, 1) <= 0) continue;
+      if (::poll(&pfd, 1, draining ? 0 : 1) <= 0) {
+        if (draining) break;
+        continue;
+      }
       slots = batch.scratch;
     }
 
@@ -196,13 +209,15 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
       header.msg_controllen = batch.control[i].size();
       header.msg_flags = 0;
     }
-    const int received = ::recvmmsg(fd_, batch.headers.data(), static_cast<unsigned>(n),
-                                    MSG_WAITFORONE | (overrun ? MSG_DONTWAIT : 0), nullptr);
+    const int received =
+        ::recvmmsg(fd_, batch.headers.data(), static_cast<unsigned>(n),
+                   MSG_WAITFORONE | (overrun || draining ? MSG_DONTWAIT : 0), nullptr);
     if (received <= 0) {
       if (received < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
         ReceiveCounters::add(counters.receive_errors, 1);
       }
-      continue;  // timeout: check the stop flag
+      if (draining) break;  // the socket is empty
+      continue;             // timeout: check the stop flag
     }
 
     std::uint64_t bytes = 0;
@@ -248,6 +263,7 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
       ring.notify();
     }
   }
+  read_kernel_drops(counters);  // the last second's drops, for the final health
   alloc::mark_this_thread_cold();
 }
 
