@@ -46,8 +46,10 @@ struct HealthCounters {
   std::uint64_t sequence_reordered = 0;
   std::uint64_t sequence_resets = 0;
   std::uint64_t azimuth_gaps = 0;  // without a UDP sequence: azimuth jumped more than expected
-  std::uint64_t static_timestamp_packets = 0;  // packet time did not advance
-  std::uint64_t invalid_time_packets = 0;      // bad tail date or microseconds
+  std::uint64_t static_timestamp_packets = 0;    // packet time did not advance
+  std::uint64_t backward_timestamp_packets = 0;  // packet time went back
+  std::uint64_t timestamp_jump_packets = 0;      // packet time leapt forward by more than 1 s
+  std::uint64_t invalid_time_packets = 0;        // bad tail date or microseconds
   std::uint64_t high_temperature_packets = 0;
   std::uint64_t return_mode_changes = 0;
   std::uint64_t points = 0;

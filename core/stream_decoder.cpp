@@ -70,7 +70,13 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   const PacketTime time = clock_.convert(packet.utc(), packet.timestamp_us());
   if (time.status == PacketTimeStatus::kBadDate) ++stats_.bad_date;
   if (time.status == PacketTimeStatus::kBadMicroseconds) ++stats_.bad_microseconds;
-  if (previous_t0_ns_ && *previous_t0_ns_ == time.t0_ns) ++stats_.static_timestamps;
+  if (previous_t0_ns_) {
+    // Counted, not corrected: frames are cut by azimuth, so a clock that freezes, steps back or
+    // leaps (a PTP/GPS resync, a sensor reboot) never tears a frame; the health reports it.
+    if (time.t0_ns == *previous_t0_ns_) ++stats_.static_timestamps;
+    if (time.t0_ns < *previous_t0_ns_) ++stats_.backward_timestamps;
+    if (time.t0_ns - *previous_t0_ns_ > kTimestampJumpNs) ++stats_.timestamp_jumps;
+  }
   track_azimuth(packet.azimuth_cdeg(0), time.t0_ns, rpm, mode, sequence_present);
   previous_t0_ns_ = time.t0_ns;
   stats_.last_t0_ns = time.t0_ns;

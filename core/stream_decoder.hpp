@@ -30,14 +30,20 @@ struct StreamDecoderConfig {
   double cut_angle_deg = 0.0;
 };
 
+// Consecutive packets are 0.28 to 0.56 ms apart; a second is far more than any loss the sequence
+// or azimuth checks would not already show.
+inline constexpr std::int64_t kTimestampJumpNs = 1'000'000'000;
+
 struct StreamStats {
   std::uint64_t packets = 0;
   std::uint64_t accepted = 0;
   std::array<std::uint64_t, kRejectReasonCount> rejects{};  // indexed by RejectReason
-  std::uint64_t bad_date = 0;           // accepted, absolute time invalid (date out of range)
-  std::uint64_t bad_microseconds = 0;   // accepted, µs field > 1'000'000
-  std::uint64_t static_timestamps = 0;  // packet time did not advance from the previous packet
-  std::uint64_t high_temperature = 0;   // packets with the shutdown flag set
+  std::uint64_t bad_date = 0;             // accepted, absolute time invalid (date out of range)
+  std::uint64_t bad_microseconds = 0;     // accepted, µs field > 1'000'000
+  std::uint64_t static_timestamps = 0;    // packet time did not advance from the previous packet
+  std::uint64_t backward_timestamps = 0;  // packet time went back from the previous packet
+  std::uint64_t timestamp_jumps = 0;      // packet time leapt forward by more than kTimestampJumpNs
+  std::uint64_t high_temperature = 0;     // packets with the shutdown flag set
   std::uint64_t return_mode_changes = 0;
   std::uint64_t sequence_packets = 0;      // accepted packets that carried a UDP sequence
   std::optional<ReturnMode> return_mode;   // of the last accepted packet

@@ -248,6 +248,8 @@ int run(const Options& options) {
       {"bad_date", s.bad_date},
       {"bad_microseconds", s.bad_microseconds},
       {"static_timestamps", s.static_timestamps},
+      {"backward_timestamps", s.backward_timestamps},
+      {"timestamp_jumps", s.timestamp_jumps},
       {"high_temperature_packets", s.high_temperature},
       {"points", s.points},
       {"filtered", filtered},

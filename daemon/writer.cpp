@@ -340,6 +340,8 @@ void Writer::build_health(std::int64_t now) {
   c.sequence_resets = decode_.sequence.resets;
   c.azimuth_gaps = s.azimuth_gaps;
   c.static_timestamp_packets = s.static_timestamps;
+  c.backward_timestamp_packets = s.backward_timestamps;
+  c.timestamp_jump_packets = s.timestamp_jumps;
   c.invalid_time_packets = s.bad_date + s.bad_microseconds;
   c.high_temperature_packets = s.high_temperature;
   c.return_mode_changes = s.return_mode_changes;
@@ -401,6 +403,8 @@ void Writer::build_health(std::int64_t now) {
   grew(c.azimuth_gaps, p.azimuth_gaps, "azimuth gaps");
   grew(c.packets_rejected, p.packets_rejected, "packets rejected");
   grew(c.static_timestamp_packets, p.static_timestamp_packets, "static timestamps");
+  grew(c.backward_timestamp_packets, p.backward_timestamp_packets, "timestamps going back");
+  grew(c.timestamp_jump_packets, p.timestamp_jump_packets, "timestamp jumps");
   if (g.high_temperature) problem("sensor high-temperature flag set");
   if (options_.expected_return_mode != "any" && !g.return_mode.empty() &&
       g.return_mode != options_.expected_return_mode) {

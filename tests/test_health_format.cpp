@@ -43,6 +43,8 @@ HealthSnapshot distinct_snapshot() {
                                &c.sequence_resets,
                                &c.azimuth_gaps,
                                &c.static_timestamp_packets,
+                               &c.backward_timestamp_packets,
+                               &c.timestamp_jump_packets,
                                &c.invalid_time_packets,
                                &c.high_temperature_packets,
                                &c.return_mode_changes,
@@ -249,7 +251,7 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(c.at("filtered_points").at("dual_too_close") == 24);
   // 31 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
   // allocation total and its per-thread map.
-  CHECK(c.size() == 37);
+  CHECK(c.size() == 39);
   const auto& g = j.at("gauges");
   CHECK(g.at("rpm_tail") == 600.0);
   CHECK(g.at("rpm_measured") == 599.5);

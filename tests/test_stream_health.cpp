@@ -94,3 +94,83 @@ TEST_CASE("real capture: no azimuth gaps and a measured speed near 600 RPM", "[s
   CHECK(decoder.stats().azimuth_gaps == 0);
   CHECK(measured_rpm(decoder.stats()) == Approx(600).margin(6));
 }
+
+namespace {
+
+// Two seconds of the simulated sensor (600 RPM, dual) with each packet's tail time changed by
+// `alter(index, tail)`; the stream's counters and frames.
+struct ClockRun {
+  StreamStats stats;
+  AssemblerStats frames;
+};
+template <typename Alter>
+ClockRun run_with_clock(Alter&& alter) {
+  SyntheticSensor sensor(SyntheticSensorConfig{});
+  FrameCollector frames(3, kDefaultFrameCapacityPoints, [](const Frame&) {});
+  StreamDecoder decoder(Calibration::nominal(), {}, frames);
+  std::array<std::uint8_t, kMaxPacketBytes> buffer{};
+  Tail previous;
+  for (int k = 0; k < 7200; ++k) {
+    PacketContents contents = sensor.next_contents();
+    const Tail original = contents.tail;
+    alter(k, contents.tail, previous);
+    previous = original;
+    const std::size_t size = encode(contents, buffer);
+    REQUIRE(decoder.process(std::span(buffer).first(size)) == RejectReason::kNone);
+  }
+  decoder.flush();
+  return {decoder.stats(), decoder.frames()};
+}
+
+}  // namespace
+
+TEST_CASE(
+    "packet clock frozen, stepping back and leaping: each counted; only the leap cuts a "
+    "frame",
+    "[stream][health][time]") {
+  const ClockRun clean = run_with_clock([](int, Tail&, const Tail&) {});
+  CHECK(clean.stats.static_timestamps == 0);
+  CHECK(clean.stats.backward_timestamps == 0);
+  CHECK(clean.stats.timestamp_jumps == 0);
+  CHECK(clean.frames.discontinuities == 0);
+  REQUIRE(clean.frames.frames_complete >= 18);
+
+  Tail frozen;
+  const auto freeze_and_step_back = [&](int k, Tail& tail, const Tail& previous) {
+    // Frozen: packets 1000..1009 carry packet 999's time.
+    if (k == 999) frozen = tail;
+    if (k >= 1000 && k <= 1009) {
+      tail.utc = frozen.utc;
+      tail.timestamp_us = frozen.timestamp_us;
+    }
+    // Back: packet 3000 is 5 ms older than packet 2999 (a clock stepped back by a resync).
+    if (k == 3000) {
+      tail.utc = previous.utc;
+      tail.timestamp_us = previous.timestamp_us >= 5000 ? previous.timestamp_us - 5000 : 0;
+    }
+  };
+  const ClockRun moody = run_with_clock(freeze_and_step_back);
+  CHECK(moody.stats.static_timestamps == 10);
+  CHECK(moody.stats.backward_timestamps == 1);
+  CHECK(moody.stats.timestamp_jumps == 0);
+  CHECK(moody.stats.bad_date == 0);
+  CHECK(moody.stats.azimuth_gaps == 0);
+  // Frames are cut by azimuth: a frozen or stepped-back clock changes no frame and loses no point.
+  CHECK(moody.frames.frames_complete == clean.frames.frames_complete);
+  CHECK(moody.frames.frames_partial == clean.frames.frames_partial);
+  CHECK(moody.frames.discontinuities == 0);
+  CHECK(moody.stats.points == clean.stats.points);
+
+  // Leap: from packet 5000 on, a minute later (a sensor that found its GPS time). More than half
+  // a revolution of packet time between two packets is a discontinuity to the assembler (as
+  // after a loss or a restart): the frame in progress ends partial, the next starts afresh.
+  const ClockRun leap = run_with_clock([&](int k, Tail& tail, const Tail& previous) {
+    freeze_and_step_back(k, tail, previous);
+    if (k >= 5000) tail.utc.minute = static_cast<std::uint8_t>((tail.utc.minute + 1) % 60);
+  });
+  CHECK(leap.stats.timestamp_jumps == 1);
+  CHECK(leap.stats.backward_timestamps == 1);
+  CHECK(leap.frames.discontinuities == 1);
+  CHECK(leap.frames.frames_complete + 1 == clean.frames.frames_complete);
+  CHECK(leap.stats.points == clean.stats.points);
+}
