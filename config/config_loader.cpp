@@ -456,12 +456,20 @@ DaemonConfig load_config_file(const std::filesystem::path& path) {
   if (!in) {
     throw ConfigError(fmt::format("{}: cannot read: {}", path.string(), std::strerror(errno)));
   }
-  std::ostringstream text;
-  text << in.rdbuf();
+  // Read with a bound: a configuration is a few kB, and a path such as /dev/zero must not eat
+  // the memory before the parser gets to say what is wrong.
+  constexpr std::size_t kMaxConfigBytes = 1 << 20;
+  std::string text(kMaxConfigBytes + 1, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
   if (in.bad()) {
     throw ConfigError(fmt::format("{}: cannot read: {}", path.string(), std::strerror(errno)));
   }
-  return parse_config(text.str(), path.string());
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  if (text.size() > kMaxConfigBytes) {
+    throw ConfigError(fmt::format("{}:1:1: larger than {} bytes: not a pandarcapd configuration",
+                                  path.string(), kMaxConfigBytes));
+  }
+  return parse_config(text, path.string());
 }
 
 void validate_config(const DaemonConfig& config, const std::string& source_name) {

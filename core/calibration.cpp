@@ -159,10 +159,17 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
 Calibration Calibration::load(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw CalibrationError(fmt::format("{}: cannot open calibration file", path));
-  std::ostringstream text;
-  text << in.rdbuf();
+  // Bounded: the table is ~1 kB; /dev/zero or a huge file must not exhaust memory first.
+  constexpr std::size_t kMaxCalibrationBytes = 1 << 20;
+  std::string text(kMaxCalibrationBytes + 1, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
   if (in.bad()) throw CalibrationError(fmt::format("{}: cannot read calibration file", path));
-  return parse(text.str(), path);
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  if (text.size() > kMaxCalibrationBytes) {
+    throw CalibrationError(fmt::format("{}:1:1: larger than {} bytes: not a calibration table",
+                                       path, kMaxCalibrationBytes));
+  }
+  return parse(text, path);
 }
 
 std::string Calibration::to_csv() const {

@@ -124,7 +124,11 @@ FrameKind parse_frame(const LinkLayer& link, std::span<const std::uint8_t> frame
 // Record time in ns. pcapng timestamps are 64-bit, so a corrupt one can exceed what int64 ns can
 // hold (year 2262): saturate rather than overflow.
 std::int64_t timestamp_ns(const timeval& ts, bool nanosecond) noexcept {
-  const std::int64_t seconds = ts.tv_sec;
+  std::int64_t seconds = ts.tv_sec;
+  // Classic pcap stores seconds as an unsigned 32-bit number (to 2106), which libpcap 1.10 hands
+  // over sign-extended: 2038-2106 arrive as -2^31..-1. (A pcapng time there would be a 64-bit
+  // count past 2^63 s: corrupt either way.)
+  if (seconds < 0 && seconds >= -(std::int64_t{1} << 31)) seconds += std::int64_t{1} << 32;
   const std::int64_t fraction = nanosecond ? ts.tv_usec : std::int64_t{ts.tv_usec} * 1000;
   std::int64_t ns = 0;
   if (__builtin_mul_overflow(seconds, kNsPerSecond, &ns) ||

@@ -104,6 +104,9 @@ PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer) : path_(
   try {
     write_all(file_, header.written(), path_);
     bytes_ = kGlobalHeaderBytes;
+    // At once, so that the file is a valid (empty) capture from here on even if the process
+    // dies before its first flush. One write per file.
+    flush();
   } catch (...) {
     std::fclose(file_);  // the destructor does not run for a throwing constructor
     throw;

@@ -28,7 +28,8 @@ inline constexpr std::size_t kPcapStdioBufferBytes = 1 << 20;
 
 class PcapWriter {
  public:
-  // Creates (truncates) `path` and writes the pcap global header. Throws std::system_error.
+  // Creates (truncates) `path` and writes the pcap global header, flushed at once: from then on
+  // the file is a valid (empty) capture, and a full disk shows here. Throws std::system_error.
   // `buffer`, if given, is the stdio buffer (it must outlive the writer): with stdio's default
   // 4 KiB a recording at one sensor's rate costs a write(2) every three packets; a buffer that
   // holds what arrives between two flush() calls makes it one per flush.

@@ -23,8 +23,9 @@ namespace pandarcap {
 namespace {
 
 constexpr std::size_t kMaxBatch = 1024;
-// Room for SO_TIMESTAMPNS (a timespec) and SO_RXQ_OVFL (a u32), with headers and alignment.
-constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(uint32_t));
+// Room for SO_TIMESTAMPNS (a timespec), with header and alignment. (Kernel drops are read with
+// SO_MEMINFO on a timer, not from SO_RXQ_OVFL, whose count only arrives with the next packet.)
+constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec));
 
 [[noreturn]] void fail(const std::string& what) {
   throw std::system_error(errno, std::generic_category(), what);
@@ -101,7 +102,6 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
   }
 
   if (::setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) != 0) fail("SO_TIMESTAMPNS");
-  if (::setsockopt(fd_, SOL_SOCKET, SO_RXQ_OVFL, &on, sizeof on) != 0) fail("SO_RXQ_OVFL");
   const timeval timeout{0, 100'000};
   if (::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout) != 0) {
     fail("SO_RCVTIMEO");
@@ -236,7 +236,9 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
       slot.receive_time_ns = fallback_time;
       for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;
            c = CMSG_NXTHDR(const_cast<msghdr*>(&message.msg_hdr), c)) {
-        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS) {
+        // The length is the kernel's to set, but it is checked before the copy all the same.
+        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS &&
+            c->cmsg_len >= CMSG_LEN(sizeof(timespec))) {
           timespec ts{};
           std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
           slot.receive_time_ns = ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;

@@ -96,6 +96,11 @@ TEST_CASE("each kind of bad calibration file names its line and column", "[calib
   require_error("", "1:1", "40 of 40 channels missing");
 }
 
+TEST_CASE("an endless or huge calibration file is refused after a bounded read", "[calibration]") {
+  CHECK_THROWS_WITH(Calibration::load("/dev/zero"),
+                    "/dev/zero:1:1: larger than 1048576 bytes: not a calibration table");
+}
+
 TEST_CASE("loading a missing file is a clear error naming it", "[calibration]") {
   try {
     (void)Calibration::load("/nonexistent/cal.csv");

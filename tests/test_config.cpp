@@ -234,4 +234,7 @@ TEST_CASE("Files: an unreadable file is named, a readable one is parsed with its
   CHECK_THROWS_WITH(load_config_file(bad),
                     bad.string() + ":3:9: arenas.count: 100 is out of range (2..64)");
   std::filesystem::remove_all(dir);
+  // An endless or huge file is refused after a bounded read, not loaded into memory.
+  CHECK_THROWS_WITH(load_config_file("/dev/zero"),
+                    "/dev/zero:1:1: larger than 1048576 bytes: not a pandarcapd configuration");
 }

@@ -208,6 +208,9 @@ TEST_CASE(
     }
     for (const fs::path& part : files_ending(out / "raw", ".pcap.part")) {
       INFO(part.string());
+      // Killed between creating the file and writing its 24-byte header: nothing to read yet
+      // (the next start removes it).
+      if (fs::file_size(part) < 24) continue;
       const auto [status, records] = read_capture(part);
       CHECK((status == CaptureStatus::kEnd || status == CaptureStatus::kTruncated));
     }

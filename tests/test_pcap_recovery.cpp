@@ -151,12 +151,16 @@ TEST_CASE("PcapWriter::abandon keeps what the last good flush wrote and counts t
   CHECK_THROWS_AS(writer.write(payload(10, 0), kTime, kSource, kDestination), std::system_error);
   CHECK_NOTHROW(writer.close());
 
-  // Nothing ever flushed: the file is cut to nothing.
+  // No record ever flushed: the global header, written at once on creation, is all that stays
+  // (a valid, empty capture; the daemon removes such a file).
   const fs::path never = dir / "never.pcap.part";
   PcapWriter unflushed(never.string());
+  CHECK(fs::file_size(never) == 24);
   unflushed.write(payload(1262, 1), kTime, kSource, kDestination);
   const PcapWriter::Dropped all = unflushed.abandon();
   CHECK(all.records == 1);
+  CHECK(all.bytes == 16 + 42 + 1262);
   CHECK(unflushed.flushed_records() == 0);
-  CHECK(fs::file_size(never) == 0);
+  CHECK(fs::file_size(never) == 24);
+  CHECK(read_back(never).status == CaptureStatus::kEnd);
 }
