@@ -135,10 +135,11 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
   if (!capture || !calibration) return;
   test::ScratchDir dir("daemon-replay");
   const fs::path out = dir / "out";
-  harness::ChildProcess daemon(pandarcapd_path(),
-                               {"--allow-root", "--replay", capture->string(), "--top-speed", "--calibration",
-                                calibration->string(), "--output-dir", out.string()},
-                               dir / "log.txt");
+  harness::ChildProcess daemon(
+      pandarcapd_path(),
+      {"--allow-root", "--replay", capture->string(), "--top-speed", "--calibration",
+       calibration->string(), "--output-dir", out.string()},
+      dir / "log.txt");
   const auto status = daemon.wait_exit(60s);
   INFO(daemon.log());
   REQUIRE(status == 0);
@@ -187,10 +188,11 @@ TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all ac
   test::ScratchDir dir("daemon-live");
   const fs::path out = dir / "out";
   const std::uint16_t port = harness::free_udp_port();
-  harness::ChildProcess daemon(pandarcapd_path(),
-                               {"--allow-root", "--host-ip", "127.0.0.1", "--port", std::to_string(port),
-                                "--sensor-ip", "127.0.0.1", "--output-dir", out.string()},
-                               dir / "log.txt");
+  harness::ChildProcess daemon(
+      pandarcapd_path(),
+      {"--allow-root", "--host-ip", "127.0.0.1", "--port", std::to_string(port), "--sensor-ip",
+       "127.0.0.1", "--output-dir", out.string()},
+      dir / "log.txt");
   // Ready once the first health file is there (written before the threads start).
   REQUIRE(harness::wait_until([&] { return fs::exists(out / "health" / "pandarcap.prom"); }, 10s));
   REQUIRE(
@@ -243,10 +245,10 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
   test::ScratchDir dir("daemon-hup");
   const fs::path out = dir / "out";
   const std::uint16_t port = harness::free_udp_port();
-  harness::ChildProcess daemon(
-      pandarcapd_path(),
-      {"--allow-root", "--host-ip", "127.0.0.1", "--port", std::to_string(port), "--output-dir", out.string()},
-      dir / "log.txt");
+  harness::ChildProcess daemon(pandarcapd_path(),
+                               {"--allow-root", "--host-ip", "127.0.0.1", "--port",
+                                std::to_string(port), "--output-dir", out.string()},
+                               dir / "log.txt");
   REQUIRE(
       harness::wait_until([&] { return daemon.log().find("ready") != std::string::npos; }, 10s));
   const auto seen = [&](std::uint64_t n) {
@@ -276,9 +278,10 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
 TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon]") {
   test::ScratchDir dir("daemon-simulate");
   const fs::path out = dir / "out";
-  harness::ChildProcess daemon(pandarcapd_path(),
-                               {"--allow-root", "--simulate", "--duration", "4", "--output-dir", out.string()},
-                               dir / "log.txt");
+  harness::ChildProcess daemon(
+      pandarcapd_path(),
+      {"--allow-root", "--simulate", "--duration", "4", "--output-dir", out.string()},
+      dir / "log.txt");
   const auto status = daemon.wait_exit(30s);
   INFO(daemon.log());
   REQUIRE(status == 0);
@@ -466,10 +469,10 @@ TEST_CASE("replay --rate: timestamps decades apart neither overflow nor hold SIG
   // times past 2038 come back from libpcap as negative: its seconds field is signed.)
   const fs::path capture =
       write_capture(dir / "gap.pcap", {1'000'000'000, 2'100'000'000'000'000'000});
-  harness::ChildProcess daemon(
-      pandarcapd_path(),
-      {"--allow-root", "--replay", capture.string(), "--rate", "0.001", "--output-dir", (dir / "out").string()},
-      dir / "log.txt");
+  harness::ChildProcess daemon(pandarcapd_path(),
+                               {"--allow-root", "--replay", capture.string(), "--rate", "0.001",
+                                "--output-dir", (dir / "out").string()},
+                               dir / "log.txt");
   // The first packet is through (health written) while the replay waits for the second.
   REQUIRE(harness::wait_until(
       [&] {
@@ -488,9 +491,9 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   test::ScratchDir dir("daemon-slow-writer");
   const fs::path out = dir / "out";
   const fs::path stall = dir / "stall-writer";
-  harness::ChildProcess daemon(pandarcapd_path(), {"--allow-root", "--simulate", "--output-dir", out.string()},
-                               dir / "log.txt",
-                               {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
+  harness::ChildProcess daemon(
+      pandarcapd_path(), {"--allow-root", "--simulate", "--output-dir", out.string()},
+      dir / "log.txt", {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
   // Warm: every arena has been filled and written at least once (10 frames a second, 4 arenas).
   REQUIRE(
       harness::wait_until([&] { return counter(last_health(out), "frames_written") >= 8; }, 15s));

@@ -50,8 +50,8 @@ TEST_CASE("as root without --allow-root: refused with 77 before any socket or fi
     WARN("cannot become uid 0 here (no root, user namespaces disabled): not tested");
     return;
   }
-  const auto refused = test::run_command(as_root + daemon + " --simulate --duration 1 --output-dir '" +
-                                         out.string() + "' 2>&1");
+  const auto refused = test::run_command(
+      as_root + daemon + " --simulate --duration 1 --output-dir '" + out.string() + "' 2>&1");
   INFO(refused.out);
   CHECK(refused.exit_code == 77);
   CHECK(refused.out.find("refusing to run as root") != std::string::npos);
@@ -59,9 +59,9 @@ TEST_CASE("as root without --allow-root: refused with 77 before any socket or fi
   CHECK_FALSE(fs::exists(out));  // nothing was created
 
   // Told to, it runs (and says so).
-  const auto allowed = test::run_command(as_root + daemon +
-                                         " --allow-root --simulate --duration 1 --output-dir '" +
-                                         out.string() + "' 2>&1");
+  const auto allowed =
+      test::run_command(as_root + daemon + " --allow-root --simulate --duration 1 --output-dir '" +
+                        out.string() + "' 2>&1");
   INFO(allowed.out);
   CHECK(allowed.exit_code == 0);
   CHECK(allowed.out.find("running as root (--allow-root)") != std::string::npos);
@@ -79,8 +79,8 @@ TEST_CASE("an unprivileged user captures with no capability (CapEff 0)", "[daemo
     // Drop to nobody the way a service manager does: uid, gid and groups, so the kernel clears
     // the permitted and effective sets. The scratch directory must be its.
     REQUIRE(::chown(dir.path().c_str(), 65534, 65534) == 0);
-    args.insert(args.begin(), {"--reuid=65534", "--regid=65534", "--clear-groups", "--",
-                               program.string()});
+    args.insert(args.begin(),
+                {"--reuid=65534", "--regid=65534", "--clear-groups", "--", program.string()});
     program = "/usr/bin/setpriv";
   }
   harness::ChildProcess daemon(program, args, dir / "log.txt");

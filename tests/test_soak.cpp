@@ -32,7 +32,7 @@ namespace {
 std::size_t open_descriptors(int pid) {
   std::size_t n = 0;
   for (const auto& entry : fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd")) {
-    (void) entry;
+    (void)entry;
     ++n;
   }
   return n;
@@ -44,9 +44,10 @@ std::uint64_t counter(const json& record, const char* name) {
 
 }  // namespace
 
-TEST_CASE("soak: 10 x a dual-return sensor, all outputs and rotation: zero loss, flat memory and "
-          "descriptors, every second in the health record",
-          "[.soak]") {
+TEST_CASE(
+    "soak: 10 x a dual-return sensor, all outputs and rotation: zero loss, flat memory and "
+    "descriptors, every second in the health record",
+    "[.soak]") {
   const char* seconds_env = std::getenv("PANDARCAP_SOAK_SECONDS");
   const double seconds = seconds_env != nullptr ? std::atof(seconds_env) : 60.0;
   REQUIRE(seconds >= 20);
@@ -55,17 +56,17 @@ TEST_CASE("soak: 10 x a dual-return sensor, all outputs and rotation: zero loss,
   const std::uint16_t port = harness::free_udp_port();
   // Rotation every 5 s and bounded retention, so the disk holds a few hundred MB at most.
   const fs::path config = dir / "soak.toml";
-  std::ofstream(config) << "[sensor]\nhost_ip = \"127.0.0.1\"\nsensor_ip = \"127.0.0.1\"\n"
-                        << "data_port = " << port << "\n"
-                        << "[output]\npcap_rotate_seconds = 5\npcap_max_files = 4\n"
-                           "frames_max_files = 50\n[arenas]\ncount = 16\n[health]\njsonl_rotate_bytes = 0\n";
-  harness::ChildProcess daemon(test::binary("pandarcapd"),
-                               {"--allow-root", "-c", config.string(), "--output-dir",
-                                out.string()},
-                               dir / "log.txt");
+  std::ofstream(config)
+      << "[sensor]\nhost_ip = \"127.0.0.1\"\nsensor_ip = \"127.0.0.1\"\n"
+      << "data_port = " << port << "\n"
+      << "[output]\npcap_rotate_seconds = 5\npcap_max_files = 4\n"
+         "frames_max_files = 50\n[arenas]\ncount = 16\n[health]\njsonl_rotate_bytes = 0\n";
+  harness::ChildProcess daemon(
+      test::binary("pandarcapd"),
+      {"--allow-root", "-c", config.string(), "--output-dir", out.string()}, dir / "log.txt");
   INFO(daemon.log());
-  REQUIRE(harness::wait_until([&] { return daemon.log().find("ready:") != std::string::npos; },
-                              20s));
+  REQUIRE(
+      harness::wait_until([&] { return daemon.log().find("ready:") != std::string::npos; }, 20s));
 
   const auto source = bench::TrafficSource::synthetic(ReturnMode::kDual, 3600);
   bench::GeneratorOptions traffic;
@@ -98,8 +99,7 @@ TEST_CASE("soak: 10 x a dual-return sensor, all outputs and rotation: zero loss,
           if (!line.empty()) last = line;
         if (last.empty()) return false;
         const json record = json::parse(last);
-        return counter(record, "datagrams_received") + counter(record, "kernel_drops") >=
-               sent.sent;
+        return counter(record, "datagrams_received") + counter(record, "kernel_drops") >= sent.sent;
       },
       20s));
   daemon.signal(SIGTERM);
