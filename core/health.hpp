@@ -65,6 +65,7 @@ struct HealthCounters {
   // Writer.
   std::uint64_t pcap_packets_written = 0;
   std::uint64_t pcap_packets_not_recorded = 0;  // no free raw batch (writer behind): not in pcap
+  std::uint64_t pcap_packets_not_written = 0;   // lost to failed writes (a full disk)
   std::uint64_t pcap_bytes_written = 0;
   std::uint64_t pcd_bytes_written = 0;
   std::uint64_t write_errors = 0;

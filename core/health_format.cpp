@@ -90,6 +90,8 @@ constexpr CounterField kCounters[] = {
   {"pcap_packets_not_recorded", "pcap_packets_not_recorded",
    &HealthCounters::pcap_packets_not_recorded,
    "Packets left out of the pcap because the writer was behind"},
+  {"pcap_packets_not_written", "pcap_packets_not_written",
+   &HealthCounters::pcap_packets_not_written, "Packets lost from the pcap to failed writes"},
   {"pcap_bytes_written", "pcap_written_bytes", &HealthCounters::pcap_bytes_written,
    "Bytes written to pcap files"},
   {"pcd_bytes_written", "pcd_written_bytes", &HealthCounters::pcd_bytes_written,

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <stdexcept>
 #include <system_error>
 
 #include "core/health_format.hpp"
@@ -221,7 +222,14 @@ void Writer::open_pcap(std::int64_t first_packet_ns) {
   pcap_final_path_ = raw_dir_ / fmt::format("pandarcap_{}_{:04}.pcap",
                                             utc_file_stamp(first_packet_ns, false), pcap_index_++);
   const std::filesystem::path part = pcap_final_path_.string() + ".part";
-  pcap_ = std::make_unique<PcapWriter>(part.string(), pcap_buffer_);
+  try {
+    pcap_ = std::make_unique<PcapWriter>(part.string(), pcap_buffer_);
+  } catch (...) {
+    // Created but not even its header written (a full disk): not left behind, one per attempt.
+    std::error_code ignored;
+    std::filesystem::remove(part, ignored);
+    throw;
+  }
   pcap_opened_monotonic_ns_ = monotonic_ns();
 }
 
@@ -245,6 +253,7 @@ void Writer::abandon_pcap(const std::exception& error, std::uint64_t failed_byte
   // first) and counted as not written, with the record being written when it failed.
   const PcapWriter::Dropped dropped = pcap_->abandon();
   pcap_packets_ -= dropped.records;
+  pcap_packets_not_written_ += dropped.records;
   write_failed(error, dropped.bytes + failed_bytes);
   finish_pcap_file();
 }
@@ -267,8 +276,14 @@ void Writer::finish_pcap_file() {
 }
 
 void Writer::write_raw(RawBatch& batch) {
+  bool failed = false;  // the disk failed on this batch: the rest is not tried (counted)
   for (std::size_t i = 0; i < batch.size; ++i) {
     const RawPacket& packet = batch.packets[i];
+    if (failed) {
+      ++pcap_packets_not_written_;
+      bytes_not_written_ += packet.length;
+      continue;
+    }
     try {
       if (pcap_ &&
           ((options_.pcap_rotate_bytes != 0 && pcap_->bytes() >= options_.pcap_rotate_bytes) ||
@@ -282,14 +297,21 @@ void Writer::write_raw(RawBatch& batch) {
                    Endpoint{ntohl(packet.source.sin_addr.s_addr), ntohs(packet.source.sin_port)},
                    options_.pcap_destination);
       ++pcap_packets_;
+    } catch (const std::invalid_argument& error) {
+      // This packet cannot be recorded (a time outside what pcap can hold); the file is fine.
+      ++pcap_packets_not_written_;
+      write_failed(error, packet.length);
     } catch (const std::exception& error) {
-      // A failing file is cut back to its whole records and closed; the next packet starts a
-      // new one (and fails again, counted, while the disk stays full).
+      // A failing file is cut back to its whole records and closed. The next batch starts a new
+      // one (and fails again, counted, while the disk stays full): at most one attempt per
+      // batch, not one per packet.
+      ++pcap_packets_not_written_;
       if (pcap_) {
         abandon_pcap(error, packet.length);
       } else {
         write_failed(error, packet.length);  // the file could not even be created
       }
+      failed = true;
     }
   }
   // Each batch reaches the file whole: a crash loses at most the batch being written.
@@ -355,6 +377,7 @@ void Writer::build_health(std::int64_t now) {
   c.frames_written = frames_written_;
   c.pcap_packets_written = pcap_packets_;
   c.pcap_packets_not_recorded = decode_.raw_packets_dropped;
+  c.pcap_packets_not_written = pcap_packets_not_written_;
   c.pcap_bytes_written = pcap_bytes_closed_ + (pcap_ ? pcap_->bytes() : 0);
   c.pcd_bytes_written = pcd_bytes_;
   c.write_errors = write_errors_;

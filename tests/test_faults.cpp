@@ -306,11 +306,14 @@ TEST_CASE(
     CHECK(counter(later, "bytes_not_written") > counter(full, "bytes_not_written"));
     CHECK(counter(later, "kernel_drops") == 0);
     CHECK(counter(later, "ring_overruns") == 0);
+    CHECK(counter(later, "pcap_packets_not_written") > 0);
     CHECK(later["state"] == "degraded");
   }
   // What was finished is readable: every closed pcap (cut back to whole records when its write
   // failed) passes tcpdump, every PCD is whole.
   const auto check_outputs = [&] {
+    // Failed attempts leave nothing behind: at most the one recording open now.
+    CHECK(files_ending(view / "raw", ".pcap.part").size() <= 1);
     const auto pcaps = files_ending(view / "raw", ".pcap");
     CHECK_FALSE(pcaps.empty());
     for (const fs::path& pcap : pcaps) {
@@ -349,4 +352,9 @@ TEST_CASE(
   CHECK(counter(final_line, "datagrams_received") ==
         counter(final_line, "packets_accepted") + counter(final_line, "packets_rejected") +
             counter(final_line, "foreign_datagrams") + counter(final_line, "ring_overruns"));
+  // And every packet is in a pcap or counted as not there.
+  CHECK(counter(final_line, "pcap_packets_written") +
+            counter(final_line, "pcap_packets_not_recorded") +
+            counter(final_line, "pcap_packets_not_written") ==
+        counter(final_line, "packets_accepted") + counter(final_line, "packets_rejected"));
 }

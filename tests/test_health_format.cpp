@@ -58,6 +58,7 @@ HealthSnapshot distinct_snapshot() {
                                &c.frames_written,
                                &c.pcap_packets_written,
                                &c.pcap_packets_not_recorded,
+                               &c.pcap_packets_not_written,
                                &c.pcap_bytes_written,
                                &c.pcd_bytes_written,
                                &c.write_errors,
@@ -251,7 +252,7 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(c.at("filtered_points").at("dual_too_close") == 24);
   // 31 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
   // allocation total and its per-thread map.
-  CHECK(c.size() == 39);
+  CHECK(c.size() == 40);
   const auto& g = j.at("gauges");
   CHECK(g.at("rpm_tail") == 600.0);
   CHECK(g.at("rpm_measured") == 599.5);
