@@ -100,7 +100,7 @@ TEST_CASE("to_toml reads back to the same configuration", "[config]") {
   CHECK(back.threads.lock_memory);
 }
 
-TEST_CASE("A float key accepts an integer; an integer key refuses a float", "[config]") {
+TEST_CASE("A float key accepts an integer - an integer key refuses a float", "[config]") {
   CHECK(parse_config("[sensor]\nmax_range = 120\n", "t.toml").sensor.max_range == 120.0);
   CHECK(error_of("[sensor]\ndata_port = 2368.0\n") ==
         "t.toml:2:13: sensor.data_port: expected an integer, found a floating-point number");

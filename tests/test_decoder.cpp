@@ -178,7 +178,7 @@ TEST_CASE("range filter: 0 is no return, limits are inclusive, counts per reason
   CHECK(n.filtered[FilterReason::kAboveMaxRange] == 3);
 }
 
-TEST_CASE("dual return: even block is last, odd is strongest; duplicates merge", "[decoder]") {
+TEST_CASE("dual return: even block is last, odd is strongest - duplicates merge", "[decoder]") {
   PacketContents p = empty_packet(ReturnMode::kDual, 4500);
   // Pair (0, 1):
   p.distance_raw[0][0] = 2000;  // ch 0: two distinct echoes -> last + strongest
@@ -244,7 +244,7 @@ TEST_CASE("dual return: even block is last, odd is strongest; duplicates merge",
   CHECK(find(0, 0)->timestamp_ns == find(1, 0)->timestamp_ns);
 }
 
-TEST_CASE("the dual threshold is configurable; 0 keeps every non-identical pair", "[decoder]") {
+TEST_CASE("the dual threshold is configurable - 0 keeps every non-identical pair", "[decoder]") {
   PacketContents p = empty_packet(ReturnMode::kDual);
   p.distance_raw[0][0] = 1501;
   p.distance_raw[1][0] = 1500;

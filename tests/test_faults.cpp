@@ -245,7 +245,7 @@ TEST_CASE(
 
 TEST_CASE(
     "disk full: capture goes on, errors and bytes not written counted, degraded with the "
-    "reason; space back: writing resumes within 2 s; closed files stay readable",
+    "reason - space back: writing resumes within 2 s - closed files stay readable",
     "[daemon][reliability][disk]") {
   // A private mount namespace for the tmpfs: as root directly, otherwise in a user namespace
   // where this user is root (then the daemon is "root" there too, hence --allow-root).

@@ -432,7 +432,7 @@ const ModeCase kModeCases[] = {{ReturnMode::kStrongest, 20, 600},
 // ---------------------------------------------------------------------------------------------
 // Hand-made streams.
 
-TEST_CASE("every point lands in the revolution of its corrected azimuth; cut per channel",
+TEST_CASE("every point lands in the revolution of its corrected azimuth - cut per channel",
           "[assembler]") {
   for (const ModeCase& mc : kModeCases) {
     for (int cut : {0, 9000, 35999, 12345}) {

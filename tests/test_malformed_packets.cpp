@@ -113,7 +113,7 @@ void check_untouched(const StreamStats& before, const StreamStats& after) {
 }  // namespace
 
 TEST_CASE(
-    "malformed packets raise exactly their own reject counter; the stream decodes as without "
+    "malformed packets raise exactly their own reject counter - the stream decodes as without "
     "them",
     "[malformed][stream]") {
   SyntheticSensorConfig sensor_config;

@@ -67,7 +67,7 @@ TEST_CASE("a skip ahead is one gap event and counts the missing packets", "[sequ
   CHECK(classified(s) == 5);
 }
 
-TEST_CASE("a gap of exactly kMaxGap is loss; one more is a reset", "[sequence]") {
+TEST_CASE("a gap of exactly kMaxGap is loss - one more is a reset", "[sequence]") {
   SECTION("kMaxGap ahead") {
     SequenceTracker tracker;
     tracker.observe(1000);
@@ -144,7 +144,7 @@ TEST_CASE("a late packet repeated straight after itself is a duplicate", "[seque
   CHECK(s.lost == 1);
 }
 
-TEST_CASE("the reorder window is kReorderWindow back; further back is a reset", "[sequence]") {
+TEST_CASE("the reorder window is kReorderWindow back - further back is a reset", "[sequence]") {
   const std::uint32_t high = 5000;
   SECTION("exactly kReorderWindow back") {
     SequenceTracker tracker;
@@ -167,7 +167,8 @@ TEST_CASE("the reorder window is kReorderWindow back; further back is a reset", 
   }
 }
 
-TEST_CASE("0xFFFFFFFF -> 0 is in order; gaps and late packets work across the wrap", "[sequence]") {
+TEST_CASE("0xFFFFFFFF -> 0 is in order - gaps and late packets work across the wrap",
+          "[sequence]") {
   SECTION("in order through the wrap") {
     SequenceTracker tracker;
     const auto v = feed(tracker, {0xFFFFFFFEu, 0xFFFFFFFFu, 0u, 1u, 2u});

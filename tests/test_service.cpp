@@ -284,7 +284,7 @@ class PacedSensor {
 }  // namespace
 
 TEST_CASE(
-    "no data: within 1.5 s health says no_data, keeps updating, the watchdog pings; "
+    "no data: within 1.5 s health says no_data, keeps updating, the watchdog pings - "
     "back to ok within 1 s of the first packet",
     "[daemon][systemd][reliability]") {
   test::ScratchDir dir("daemon-no-data");

@@ -125,7 +125,7 @@ ClockRun run_with_clock(Alter&& alter) {
 }  // namespace
 
 TEST_CASE(
-    "packet clock frozen, stepping back and leaping: each counted; only the leap cuts a "
+    "packet clock frozen, stepping back and leaping: each counted - only the leap cuts a "
     "frame",
     "[stream][health][time]") {
   const ClockRun clean = run_with_clock([](int, Tail&, const Tail&) {});
