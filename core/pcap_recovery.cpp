@@ -14,6 +14,7 @@ namespace {
 
 constexpr std::uint32_t kMagicMicroseconds = 0xA1B2C3D4;
 constexpr std::uint32_t kSnaplen = 262144;  // PcapWriter's; no record of ours is longer
+constexpr std::uint32_t kLinktypeEthernet = 1;
 constexpr std::size_t kGlobalHeaderBytes = 24;
 constexpr std::size_t kRecordHeaderBytes = 16;
 
@@ -58,14 +59,31 @@ PcapRecovery finish_interrupted_pcap(const std::string& path) {
 
   PcapRecovery result;
   std::array<std::uint8_t, kGlobalHeaderBytes> header{};
-  if (size >= kGlobalHeaderBytes && read_at(fd, 0, header.data(), header.size(), path)) {
+  if (size < kGlobalHeaderBytes) {
+    // Killed between creating the file and writing its header: ours if what is there is the
+    // start of the header PcapWriter writes (an empty file included). No record either way.
+    if (size > 0 && !read_at(fd, 0, header.data(), static_cast<std::size_t>(size), path)) {
+      return result;
+    }
+    std::array<std::uint8_t, kGlobalHeaderBytes> expected{};  // as PcapWriter lays it out
+    const auto put = [&](std::size_t at, auto value) {
+      std::memcpy(&expected[at], &value, sizeof value);
+    };
+    put(0, kMagicMicroseconds);
+    put(4, std::uint16_t{2});  // version 2.4
+    put(6, std::uint16_t{4});
+    put(16, kSnaplen);
+    put(20, kLinktypeEthernet);
+    result.ours = std::memcmp(header.data(), expected.data(), static_cast<std::size_t>(size)) == 0;
+    result.kept_bytes = size;
+    return result;
+  }
+  if (read_at(fd, 0, header.data(), header.size(), path)) {
     result.ours =
         u32_at(header.data()) == kMagicMicroseconds && u32_at(header.data() + 16) == kSnaplen;
   }
   if (!result.ours) {
-    // Too short to hold even the header (a crash right after creating it), or not ours: an
-    // empty file is cut to nothing (the caller removes it); anything else is left alone.
-    result.kept_bytes = size;
+    result.kept_bytes = size;  // not a recording of ours: left alone
     return result;
   }
   std::uint64_t end = kGlobalHeaderBytes;  // end of the last whole record

@@ -5,7 +5,9 @@
 // the file there, so that tcpdump, libpcap and pandarcap-inspect read it to the end.
 //
 // Only classic pcap in this machine's byte order with microsecond times, as PcapWriter writes, is
-// touched; anything else is left as it is (`ours` false).
+// touched; anything else is left as it is (`ours` false). A file shorter than the global header
+// whose bytes begin that header (an empty one included) is ours, with no record: the process
+// died between creating it and writing the header.
 #pragma once
 
 #include <cstdint>

@@ -96,11 +96,25 @@ TEST_CASE("finish_interrupted_pcap: headers only, empty, garbage tails and forei
   CHECK(r.records == 0);
   CHECK(r.kept_bytes == 24);
 
+  // Killed before the header was all written: ours, no record (the caller removes it).
   const fs::path empty = dir / "empty.pcap.part";
   std::ofstream(empty).close();
   r = finish_interrupted_pcap(empty.string());
-  CHECK_FALSE(r.ours);  // the caller removes it: no record
+  CHECK(r.ours);
   CHECK(r.records == 0);
+  for (const std::uintmax_t cut : {1u, 4u, 23u}) {
+    const fs::path part = dir / ("header-cut-" + std::to_string(cut) + ".pcap.part");
+    fs::copy_file(header_only, part);
+    fs::resize_file(part, cut);
+    r = finish_interrupted_pcap(part.string());
+    INFO("header cut to " << cut << " bytes");
+    CHECK(r.ours);
+    CHECK(r.records == 0);
+  }
+  // A short file that is not the start of our header is not ours.
+  const fs::path short_text = dir / "short.pcap.part";
+  std::ofstream(short_text) << "hello";
+  CHECK_FALSE(finish_interrupted_pcap(short_text.string()).ours);
 
   // A record header claiming more than the snap length is where the good part ends.
   const fs::path garbage = dir / "garbage.pcap.part";
