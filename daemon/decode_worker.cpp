@@ -120,7 +120,6 @@ DecodeSnapshot DecodeWorker::snapshot() const {
   s.frames_decimated = frames_decimated_;
   s.raw_packets_dropped = raw_dropped_;
   s.monotonic_ns = coarse_monotonic_ns();
-  s.last_packet_monotonic_ns = last_packet_monotonic_ns_;
   s.latency = latency_;
   return s;
 }
@@ -166,8 +165,7 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
         }
       }
       ring_.release(batch.size());
-      last_packet_monotonic_ns_ = coarse_monotonic_ns();
-      live.last_packet_monotonic_ns.store(last_packet_monotonic_ns_, std::memory_order_relaxed);
+      live.last_packet_monotonic_ns.store(coarse_monotonic_ns(), std::memory_order_relaxed);
     }
     const std::int64_t now = coarse_monotonic_ns();
     if (!hot && now >= warm_ns) {

@@ -74,7 +74,6 @@ class DecodeWorker final : public FrameSink {
   std::uint64_t frames_finished_ = 0;
   std::uint64_t frames_decimated_ = 0;
   std::uint64_t raw_dropped_ = 0;
-  std::int64_t last_packet_monotonic_ns_ = 0;
   LatencyHistogram latency_;
 };
 

@@ -59,10 +59,9 @@ struct DecodeSnapshot {
   SequenceStats sequence;
   AssemblerStats frames;
   std::uint64_t frames_decimated = 0;
-  std::uint64_t raw_packets_dropped = 0;      // no empty RawBatch: not recorded to pcap
-  std::int64_t monotonic_ns = 0;              // when it was taken
-  std::int64_t last_packet_monotonic_ns = 0;  // 0 before the first packet
-  LatencyHistogram latency;  // kernel receive timestamp -> decoded (live sources only)
+  std::uint64_t raw_packets_dropped = 0;  // no empty RawBatch: not recorded to pcap
+  std::int64_t monotonic_ns = 0;  // when it was taken (the last packet's time is in LiveClock)
+  LatencyHistogram latency;       // kernel receive timestamp -> decoded (live sources only)
 };
 
 // Messages are copied into the queue's preallocated cells; a snapshot travels by value.

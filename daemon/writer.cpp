@@ -461,9 +461,7 @@ void Writer::build_health(std::int64_t now) {
 }
 
 double Writer::seconds_since_last_packet(std::int64_t now) const noexcept {
-  // The snapshot's time can be newer than the live one only at the end (the final snapshot).
-  const std::int64_t last = std::max(live_.last_packet_monotonic_ns.load(std::memory_order_relaxed),
-                                     decode_.last_packet_monotonic_ns);
+  const std::int64_t last = live_.last_packet_monotonic_ns.load(std::memory_order_relaxed);
   return last == 0 ? -1.0 : static_cast<double>(std::max<std::int64_t>(now - last, 0)) / 1e9;
 }
 
