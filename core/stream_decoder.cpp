@@ -71,8 +71,9 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   if (time.status == PacketTimeStatus::kBadDate) ++stats_.bad_date;
   if (time.status == PacketTimeStatus::kBadMicroseconds) ++stats_.bad_microseconds;
   if (previous_t0_ns_) {
-    // Counted, not corrected: frames are cut by azimuth, so a clock that freezes, steps back or
-    // leaps (a PTP/GPS resync, a sensor reboot) never tears a frame; the health reports it.
+    // Counted, not corrected: frames are cut by azimuth, so a clock that freezes or steps back
+    // (a PTP/GPS resync) changes no frame; a leap of more than half a revolution is a gap to the
+    // assembler and ends the frame in progress, as a loss would. The health reports each.
     if (time.t0_ns == *previous_t0_ns_) ++stats_.static_timestamps;
     if (time.t0_ns < *previous_t0_ns_) ++stats_.backward_timestamps;
     if (time.t0_ns - *previous_t0_ns_ > kTimestampJumpNs) ++stats_.timestamp_jumps;
