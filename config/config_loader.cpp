@@ -12,15 +12,14 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <limits>
 #include <map>
 #include <optional>
 #include <set>
-#include <sstream>
 #include <variant>
 
 #include "core/decoder_target.hpp"
+#include "core/text_file.hpp"
 
 namespace pandarcap {
 namespace {
@@ -452,24 +451,19 @@ DaemonConfig parse_config(std::string_view toml_text, const std::string& source_
 }
 
 DaemonConfig load_config_file(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    throw ConfigError(fmt::format("{}: cannot read: {}", path.string(), std::strerror(errno)));
+  const TextFile file = read_text_file(path.string());
+  switch (file.status) {
+    case TextFile::Status::kOk:
+      break;
+    case TextFile::Status::kCannotOpen:
+    case TextFile::Status::kCannotRead:
+      throw ConfigError(
+          fmt::format("{}: cannot read: {}", path.string(), std::strerror(file.error_number)));
+    case TextFile::Status::kTooLarge:
+      throw ConfigError(fmt::format("{}:1:1: larger than {} bytes: not a pandarcapd configuration",
+                                    path.string(), kMaxOperatorFileBytes));
   }
-  // Read with a bound: a configuration is a few kB, and a path such as /dev/zero must not eat
-  // the memory before the parser gets to say what is wrong.
-  constexpr std::size_t kMaxConfigBytes = 1 << 20;
-  std::string text(kMaxConfigBytes + 1, '\0');
-  in.read(text.data(), static_cast<std::streamsize>(text.size()));
-  if (in.bad()) {
-    throw ConfigError(fmt::format("{}: cannot read: {}", path.string(), std::strerror(errno)));
-  }
-  text.resize(static_cast<std::size_t>(in.gcount()));
-  if (text.size() > kMaxConfigBytes) {
-    throw ConfigError(fmt::format("{}:1:1: larger than {} bytes: not a pandarcapd configuration",
-                                  path.string(), kMaxConfigBytes));
-  }
-  return parse_config(text, path.string());
+  return parse_config(file.text, path.string());
 }
 
 void validate_config(const DaemonConfig& config, const std::string& source_name) {

@@ -5,9 +5,9 @@
 #include <bitset>
 #include <charconv>
 #include <cmath>
-#include <fstream>
-#include <sstream>
 #include <vector>
+
+#include "text_file.hpp"
 
 namespace pandarcap {
 
@@ -157,19 +157,19 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
 }
 
 Calibration Calibration::load(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw CalibrationError(fmt::format("{}: cannot open calibration file", path));
-  // Bounded: the table is ~1 kB; /dev/zero or a huge file must not exhaust memory first.
-  constexpr std::size_t kMaxCalibrationBytes = 1 << 20;
-  std::string text(kMaxCalibrationBytes + 1, '\0');
-  in.read(text.data(), static_cast<std::streamsize>(text.size()));
-  if (in.bad()) throw CalibrationError(fmt::format("{}: cannot read calibration file", path));
-  text.resize(static_cast<std::size_t>(in.gcount()));
-  if (text.size() > kMaxCalibrationBytes) {
-    throw CalibrationError(fmt::format("{}:1:1: larger than {} bytes: not a calibration table",
-                                       path, kMaxCalibrationBytes));
+  const TextFile file = read_text_file(path);
+  switch (file.status) {
+    case TextFile::Status::kOk:
+      break;
+    case TextFile::Status::kCannotOpen:
+      throw CalibrationError(fmt::format("{}: cannot open calibration file", path));
+    case TextFile::Status::kCannotRead:
+      throw CalibrationError(fmt::format("{}: cannot read calibration file", path));
+    case TextFile::Status::kTooLarge:
+      throw CalibrationError(fmt::format("{}:1:1: larger than {} bytes: not a calibration table",
+                                         path, kMaxOperatorFileBytes));
   }
-  return parse(text, path);
+  return parse(file.text, path);
 }
 
 std::string Calibration::to_csv() const {
