@@ -4,19 +4,16 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cstring>
 #include <system_error>
 
+#include "pcap_writer.hpp"
+
 namespace pandarcap {
 namespace {
-
-constexpr std::uint32_t kMagicMicroseconds = 0xA1B2C3D4;
-constexpr std::uint32_t kSnaplen = 262144;  // PcapWriter's; no record of ours is longer
-constexpr std::uint32_t kLinktypeEthernet = 1;
-constexpr std::size_t kGlobalHeaderBytes = 24;
-constexpr std::size_t kRecordHeaderBytes = 16;
 
 [[noreturn]] void fail(const char* what, const std::string& path) {
   throw std::system_error(errno, std::generic_category(), std::string(what) + " '" + path + "'");
@@ -57,43 +54,25 @@ PcapRecovery finish_interrupted_pcap(const std::string& path) {
   if (::fstat(fd, &info) != 0) fail("cannot stat", path);
   const auto size = static_cast<std::uint64_t>(info.st_size);
 
+  // Ours: the file begins with PcapWriter's global header, or, shorter than it (killed between
+  // creating the file and writing the header; empty included), with the start of it.
   PcapRecovery result;
-  std::array<std::uint8_t, kGlobalHeaderBytes> header{};
-  if (size < kGlobalHeaderBytes) {
-    // Killed between creating the file and writing its header: ours if what is there is the
-    // start of the header PcapWriter writes (an empty file included). No record either way.
-    if (size > 0 && !read_at(fd, 0, header.data(), static_cast<std::size_t>(size), path)) {
-      return result;
-    }
-    std::array<std::uint8_t, kGlobalHeaderBytes> expected{};  // as PcapWriter lays it out
-    const auto put = [&](std::size_t at, auto value) {
-      std::memcpy(&expected[at], &value, sizeof value);
-    };
-    put(0, kMagicMicroseconds);
-    put(4, std::uint16_t{2});  // version 2.4
-    put(6, std::uint16_t{4});
-    put(16, kSnaplen);
-    put(20, kLinktypeEthernet);
-    result.ours = std::memcmp(header.data(), expected.data(), static_cast<std::size_t>(size)) == 0;
-    result.kept_bytes = size;
+  std::array<std::uint8_t, kPcapGlobalHeaderBytes> header{};
+  const auto present = static_cast<std::size_t>(std::min<std::uint64_t>(size, header.size()));
+  if (present > 0 && !read_at(fd, 0, header.data(), present, path)) return result;
+  result.ours = std::memcmp(header.data(), pcap_global_header().data(), present) == 0;
+  if (!result.ours || size < kPcapGlobalHeaderBytes) {
+    result.kept_bytes = size;  // not a recording of ours (left alone), or one with no record
     return result;
   }
-  if (read_at(fd, 0, header.data(), header.size(), path)) {
-    result.ours =
-        u32_at(header.data()) == kMagicMicroseconds && u32_at(header.data() + 16) == kSnaplen;
-  }
-  if (!result.ours) {
-    result.kept_bytes = size;  // not a recording of ours: left alone
-    return result;
-  }
-  std::uint64_t end = kGlobalHeaderBytes;  // end of the last whole record
-  std::array<std::uint8_t, kRecordHeaderBytes> record{};
+  std::uint64_t end = kPcapGlobalHeaderBytes;  // end of the last whole record
+  std::array<std::uint8_t, kPcapRecordHeaderBytes> record{};
   while (read_at(fd, end, record.data(), record.size(), path)) {
     const std::uint32_t captured = u32_at(record.data() + 8);
     const std::uint32_t original = u32_at(record.data() + 12);
     // A header that cannot be one of ours is where the good part ends.
-    if (captured > kSnaplen || captured != original) break;
-    const std::uint64_t next = end + kRecordHeaderBytes + captured;
+    if (captured > kPcapSnaplen || captured != original) break;
+    const std::uint64_t next = end + kPcapRecordHeaderBytes + captured;
     if (next > size) break;  // the record's bytes never all reached the file
     end = next;
     ++result.records;

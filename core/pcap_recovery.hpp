@@ -4,8 +4,8 @@
 // before it is whole. finish_interrupted_pcap() finds the end of the last whole record and cuts
 // the file there, so that tcpdump, libpcap and pandarcap-inspect read it to the end.
 //
-// Only classic pcap in this machine's byte order with microsecond times, as PcapWriter writes, is
-// touched; anything else is left as it is (`ours` false). A file shorter than the global header
+// Only a file that begins with PcapWriter's own global header (pcap_global_header()) is touched;
+// anything else is left as it is (`ours` false). A file shorter than the global header
 // whose bytes begin that header (an empty one included) is ours, with no record: the process
 // died between creating it and writing the header.
 #pragma once
@@ -16,7 +16,7 @@
 namespace pandarcap {
 
 struct PcapRecovery {
-  bool ours = false;             // a PcapWriter file: global header present and recognised
+  bool ours = false;             // a PcapWriter file: its global header (or the start of it)
   std::uint64_t records = 0;     // whole records kept
   std::uint64_t kept_bytes = 0;  // the file's length now
   std::uint64_t cut_bytes = 0;   // bytes of a cut record (or garbage) removed from the end

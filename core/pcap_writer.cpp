@@ -3,6 +3,7 @@
 #include <stdio_ext.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cstring>
@@ -16,12 +17,7 @@ namespace {
 constexpr std::uint32_t kPcapMagicMicroseconds = 0xA1B2C3D4;  // native order: readers detect it
 constexpr std::uint16_t kPcapVersionMajor = 2;
 constexpr std::uint16_t kPcapVersionMinor = 4;
-// Not 65535: the largest record (a 65507-byte payload) is a 65549-byte frame, and readers cut
-// records to the file's snaplen. 262144 is libpcap's maximum and tcpdump's default.
-constexpr std::uint32_t kSnaplen = 262144;
 constexpr std::uint32_t kLinktypeEthernet = 1;
-constexpr std::size_t kGlobalHeaderBytes = 24;
-constexpr std::size_t kRecordHeaderBytes = 16;
 
 constexpr std::size_t kEthernetBytes = 14;
 constexpr std::size_t kIpv4Bytes = 20;
@@ -88,22 +84,29 @@ void write_all(std::FILE* file, std::span<const std::uint8_t> data, const std::s
 
 }  // namespace
 
-PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer) : path_(path) {
-  errno = 0;
-  file_ = std::fopen(path.c_str(), "wb");
-  if (file_ == nullptr) throw_write_error(path, errno);
-  if (!buffer.empty()) std::setvbuf(file_, buffer.data(), _IOFBF, buffer.size());
-  ByteWriter<kGlobalHeaderBytes> header;
+std::array<std::uint8_t, kPcapGlobalHeaderBytes> pcap_global_header() noexcept {
+  ByteWriter<kPcapGlobalHeaderBytes> header;
   header.native_u32(kPcapMagicMicroseconds);
   header.native_u16(kPcapVersionMajor);
   header.native_u16(kPcapVersionMinor);
   header.native_u32(0);  // thiszone: timestamps are UTC
   header.native_u32(0);  // sigfigs
-  header.native_u32(kSnaplen);
+  header.native_u32(kPcapSnaplen);
   header.native_u32(kLinktypeEthernet);
+  std::array<std::uint8_t, kPcapGlobalHeaderBytes> bytes{};
+  std::copy(header.written().begin(), header.written().end(), bytes.begin());
+  return bytes;
+}
+
+PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer) : path_(path) {
+  errno = 0;
+  file_ = std::fopen(path.c_str(), "wb");
+  if (file_ == nullptr) throw_write_error(path, errno);
+  if (!buffer.empty()) std::setvbuf(file_, buffer.data(), _IOFBF, buffer.size());
+  const auto header = pcap_global_header();
   try {
-    write_all(file_, header.written(), path_);
-    bytes_ = kGlobalHeaderBytes;
+    write_all(file_, header, path_);
+    bytes_ = kPcapGlobalHeaderBytes;
     // At once, so that the file is a valid (empty) capture from here on even if the process
     // dies before its first flush. One write per file.
     flush();
@@ -135,7 +138,7 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload, std::int64_t t
   const auto ip_length = static_cast<std::uint16_t>(kIpv4Bytes + udp_length);
   const auto frame_bytes = static_cast<std::uint32_t>(kHeadersBytes + udp_payload.size());
 
-  ByteWriter<kRecordHeaderBytes + kHeadersBytes> out;
+  ByteWriter<kPcapRecordHeaderBytes + kHeadersBytes> out;
   out.native_u32(static_cast<std::uint32_t>(seconds));
   out.native_u32(static_cast<std::uint32_t>(microseconds));
   out.native_u32(frame_bytes);  // captured length
@@ -147,7 +150,7 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload, std::int64_t t
   out.bytes(kSourceMac.data(), kSourceMac.size());
   out.be_u16(0x0800);  // ethertype IPv4
 
-  const std::size_t ip_offset = kRecordHeaderBytes + kEthernetBytes;
+  const std::size_t ip_offset = kPcapRecordHeaderBytes + kEthernetBytes;
   out.be_u16(0x4500);  // version 4, IHL 5 (no options), DSCP/ECN 0
   out.be_u16(ip_length);
   out.be_u16(ip_id_++);

@@ -12,6 +12,7 @@
 // a record boundary, so the file stays readable to its end. Not thread-safe.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
@@ -21,6 +22,17 @@
 #include "capture_reader.hpp"
 
 namespace pandarcap {
+
+// The classic-pcap layout PcapWriter writes; core/pcap_recovery.cpp reads it back.
+inline constexpr std::size_t kPcapGlobalHeaderBytes = 24;
+inline constexpr std::size_t kPcapRecordHeaderBytes = 16;
+// Not 65535: the largest record (a 65507-byte payload) is a 65549-byte frame, and readers cut
+// records to the file's snaplen. 262144 is libpcap's maximum and tcpdump's default.
+inline constexpr std::uint32_t kPcapSnaplen = 262144;
+
+// The 24-byte global header every PcapWriter file begins with (native byte order, microsecond
+// times, LINKTYPE_ETHERNET, snaplen kPcapSnaplen).
+std::array<std::uint8_t, kPcapGlobalHeaderBytes> pcap_global_header() noexcept;
 
 // The stdio buffer the daemon gives its recordings: the decoder hands over raw packets at
 // least every 100 ms, and 1 MiB holds that much of one sensor (~0.5 MB) twice over.
