@@ -29,6 +29,8 @@ using namespace pandarcap;
 using namespace std::chrono_literals;
 using nlohmann::json;
 namespace fs = std::filesystem;
+using test::health_counter;
+using test::health_records;
 
 namespace {
 
@@ -60,31 +62,17 @@ std::vector<std::vector<std::uint8_t>> recorded(const fs::path& dir) {
   return all;
 }
 
-std::vector<json> health_lines(const fs::path& dir) {
-  std::ifstream in(dir / "health" / "health.jsonl");
-  std::vector<json> lines;
-  std::string line;
-  while (std::getline(in, line)) {
-    if (!line.empty()) lines.push_back(json::parse(line));
-  }
-  return lines;
-}
-
 json last_health(const fs::path& dir) {
-  const auto lines = health_lines(dir);
+  const auto lines = health_records(dir);
   return lines.empty() ? json() : lines.back();
-}
-
-std::uint64_t counter(const json& health, const char* name) {
-  return health.is_object() ? health["counters"].value(name, std::uint64_t{0}) : 0;
 }
 
 // received = accepted + rejected + foreign + overruns, from the JSON line.
 void check_accounting(const json& h) {
   INFO(h.dump());
-  CHECK(counter(h, "datagrams_received") ==
-        counter(h, "packets_accepted") + counter(h, "packets_rejected") +
-            counter(h, "foreign_datagrams") + counter(h, "ring_overruns"));
+  CHECK(health_counter(h, "datagrams_received") ==
+        health_counter(h, "packets_accepted") + health_counter(h, "packets_rejected") +
+            health_counter(h, "foreign_datagrams") + health_counter(h, "ring_overruns"));
 }
 
 // No temporary or partial file anywhere under `dir`.
@@ -147,18 +135,18 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
   // Health: every datagram accounted for, numbers as the capture holds them.
   const json h = last_health(out);
   REQUIRE(h.is_object());
-  CHECK(counter(h, "datagrams_received") == 1439);
-  CHECK(counter(h, "packets_accepted") == 1439);
-  CHECK(counter(h, "packets_rejected") == 0);
+  CHECK(health_counter(h, "datagrams_received") == 1439);
+  CHECK(health_counter(h, "packets_accepted") == 1439);
+  CHECK(health_counter(h, "packets_rejected") == 0);
   check_accounting(h);
-  CHECK(counter(h, "frames_complete") == 2);
-  CHECK(counter(h, "frames_written") ==
-        counter(h, "frames_complete") + counter(h, "frames_partial"));
+  CHECK(health_counter(h, "frames_complete") == 2);
+  CHECK(health_counter(h, "frames_written") ==
+        health_counter(h, "frames_complete") + health_counter(h, "frames_partial"));
   CHECK(fs::exists(out / "health" / "pandarcap.prom"));
 
   // Frames: one PCD per frame; the complete ones hold the points the decoder verified.
   const auto pcds = files_with(out / "frames", ".pcd");
-  CHECK(pcds.size() == counter(h, "frames_written"));
+  CHECK(pcds.size() == health_counter(h, "frames_written"));
   std::multiset<std::size_t> complete_points;
   for (const fs::path& pcd : pcds) {
     if (pcd.filename().string().find("_partial") == std::string::npos) {
@@ -206,7 +194,7 @@ TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all ac
   const bool all_seen = harness::wait_until(
       [&] {
         const json h = last_health(out);
-        return counter(h, "datagrams_received") + counter(h, "kernel_drops") >= sent;
+        return health_counter(h, "datagrams_received") + health_counter(h, "kernel_drops") >= sent;
       },
       20s);
   INFO(daemon.log());
@@ -221,18 +209,18 @@ TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all ac
 
   const json h = last_health(out);
   INFO(h.dump());
-  CHECK(counter(h, "datagrams_received") + counter(h, "kernel_drops") == sent);
-  CHECK(counter(h, "foreign_datagrams") == foreign.size());
-  CHECK(counter(h, "packets_rejected") == 0);
+  CHECK(health_counter(h, "datagrams_received") + health_counter(h, "kernel_drops") == sent);
+  CHECK(health_counter(h, "foreign_datagrams") == foreign.size());
+  CHECK(health_counter(h, "packets_rejected") == 0);
   check_accounting(h);
   // What was accepted was recorded, byte for byte (no kernel drops expected on loopback; if there
   // were any, the recording is a prefix-preserving subset).
   const auto raw = recorded(out / "raw");
-  CHECK(raw.size() == counter(h, "packets_accepted"));
-  if (counter(h, "kernel_drops") == 0) CHECK(raw == payloads);
+  CHECK(raw.size() == health_counter(h, "packets_accepted"));
+  if (health_counter(h, "kernel_drops") == 0) CHECK(raw == payloads);
   // The frame in progress at SIGTERM was finished as partial, and nothing was left half-written.
-  CHECK(files_with(out / "frames", ".pcd").size() == counter(h, "frames_written"));
-  CHECK(counter(h, "frames_written") >= 3);
+  CHECK(files_with(out / "frames", ".pcd").size() == health_counter(h, "frames_written"));
+  CHECK(health_counter(h, "frames_written") >= 3);
   check_no_temporary_files(out);
 }
 
@@ -255,7 +243,7 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
     return harness::wait_until(
         [&] {
           const json h = last_health(out);
-          return counter(h, "pcap_packets_written") + counter(h, "kernel_drops") >= n;
+          return health_counter(h, "pcap_packets_written") + health_counter(h, "kernel_drops") >= n;
         },
         20s);
   };
@@ -271,7 +259,7 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
   const json h = last_health(out);
   INFO(daemon.log());
   CHECK(files_with(out / "raw", ".pcap").size() == 2);
-  if (counter(h, "kernel_drops") == 0) CHECK(recorded(out / "raw") == payloads);
+  if (health_counter(h, "kernel_drops") == 0) CHECK(recorded(out / "raw") == payloads);
   check_no_temporary_files(out);
 }
 
@@ -288,16 +276,17 @@ TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon]")
   const json h = last_health(out);
   INFO(h.dump());
   // 4 s of dual return at 600 RPM is ~14400 packets; allow for start-up and scheduling.
-  CHECK(counter(h, "packets_accepted") > 10000);
-  CHECK(counter(h, "packets_rejected") == 0);
+  CHECK(health_counter(h, "packets_accepted") > 10000);
+  CHECK(health_counter(h, "packets_rejected") == 0);
   check_accounting(h);
-  CHECK(counter(h, "frames_complete") >= 10);
-  CHECK(counter(h, "pcap_packets_written") == counter(h, "datagrams_received"));
-  CHECK(health_lines(out).size() >= 2);  // one per second, plus the final one
+  CHECK(health_counter(h, "frames_complete") >= 10);
+  CHECK(health_counter(h, "pcap_packets_written") == health_counter(h, "datagrams_received"));
+  CHECK(health_records(out).size() >= 2);  // one per second, plus the final one
   // Every packet that reached the decoder has a receive-to-decoded latency; at the sensor's
   // rate it is well under a second, and the percentiles are ordered.
   const json& latency = h.at("latency");
-  CHECK(latency.at("count") == counter(h, "packets_accepted") + counter(h, "packets_rejected"));
+  CHECK(latency.at("count") ==
+        health_counter(h, "packets_accepted") + health_counter(h, "packets_rejected"));
   CHECK(latency.at("p50_us").get<double>() > 0);
   CHECK(latency.at("p50_us").get<double>() <= latency.at("p99_us").get<double>());
   CHECK(latency.at("p99_us").get<double>() <= latency.at("max_us").get<double>());
@@ -368,9 +357,9 @@ TEST_CASE("replay waits for free arenas: two arenas at top speed still write eve
   INFO(result.out);
   REQUIRE(result.exit_code == 0);
   const json h = last_health(out);
-  CHECK(counter(h, "frames_dropped_no_arena") == 0);
-  CHECK(counter(h, "pcap_packets_not_recorded") == 0);
-  CHECK(counter(h, "frames_written") == 6);
+  CHECK(health_counter(h, "frames_dropped_no_arena") == 0);
+  CHECK(health_counter(h, "pcap_packets_not_recorded") == 0);
+  CHECK(health_counter(h, "frames_written") == 6);
   CHECK(files_with(out / "frames", ".pcd").size() == 6);
   CHECK(recorded(out / "raw").size() == 1439);
 }
@@ -454,11 +443,11 @@ TEST_CASE("replay: a datagram the file holds only part of is rejected, not decod
   INFO(run.out);
   REQUIRE(run.exit_code == 0);
   const json h = last_health(dir / "out");
-  CHECK(counter(h, "datagrams_received") == 3);
-  CHECK(counter(h, "packets_accepted") == 2);
-  CHECK(counter(h, "packets_rejected") == 1);
+  CHECK(health_counter(h, "datagrams_received") == 3);
+  CHECK(health_counter(h, "packets_accepted") == 2);
+  CHECK(health_counter(h, "packets_rejected") == 1);
   CHECK(h["counters"]["rejects"].value("bad_length", 0) == 1);
-  CHECK(counter(h, "truncated_datagrams") == 1);
+  CHECK(health_counter(h, "truncated_datagrams") == 1);
   check_accounting(h);
 }
 
@@ -477,13 +466,13 @@ TEST_CASE("replay --rate: timestamps decades apart neither overflow nor hold SIG
   REQUIRE(harness::wait_until(
       [&] {
         const json h = last_health(dir / "out");
-        return counter(h, "packets_accepted") == 1;
+        return health_counter(h, "packets_accepted") == 1;
       },
       15s));
   daemon.signal(SIGTERM);
   INFO(daemon.log());
   CHECK(daemon.wait_exit(5s) == 0);
-  CHECK(counter(last_health(dir / "out"), "packets_accepted") == 1);
+  CHECK(health_counter(last_health(dir / "out"), "packets_accepted") == 1);
 }
 
 TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blocks, RSS flat",
@@ -495,10 +484,10 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
       pandarcapd_path(), {"--allow-root", "--simulate", "--output-dir", out.string()},
       dir / "log.txt", {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
   // Warm: every arena has been filled and written at least once (10 frames a second, 4 arenas).
-  REQUIRE(
-      harness::wait_until([&] { return counter(last_health(out), "frames_written") >= 8; }, 15s));
+  REQUIRE(harness::wait_until(
+      [&] { return health_counter(last_health(out), "frames_written") >= 8; }, 15s));
   const std::uint64_t rss_before = harness::process_memory_bytes(daemon.pid(), "VmRSS");
-  const std::uint64_t dropped_before = counter(last_health(out), "frames_dropped_no_arena");
+  const std::uint64_t dropped_before = health_counter(last_health(out), "frames_dropped_no_arena");
   CHECK(dropped_before == 0);
 
   // The scenario: the writer stops (a disk that hangs) for two seconds, twenty frames' worth.
@@ -511,7 +500,7 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   const std::uint64_t rss_stalled = harness::process_memory_bytes(daemon.pid(), "VmRSS");
   fs::remove(stall);
   REQUIRE(harness::wait_until(
-      [&] { return counter(last_health(out), "frames_dropped_no_arena") > 0; }, 10s));
+      [&] { return health_counter(last_health(out), "frames_dropped_no_arena") > 0; }, 10s));
 
   daemon.signal(SIGTERM);
   INFO(daemon.log());
@@ -519,15 +508,15 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   const json h = last_health(out);
   INFO(h.dump());
   // Drops only as counted frame drops: nothing lost before the decoder.
-  CHECK(counter(h, "frames_dropped_no_arena") >= 10);
-  CHECK(counter(h, "kernel_drops") == 0);
-  CHECK(counter(h, "ring_overruns") == 0);
-  CHECK(counter(h, "packets_accepted") == counter(h, "datagrams_received"));
+  CHECK(health_counter(h, "frames_dropped_no_arena") >= 10);
+  CHECK(health_counter(h, "kernel_drops") == 0);
+  CHECK(health_counter(h, "ring_overruns") == 0);
+  CHECK(health_counter(h, "packets_accepted") == health_counter(h, "datagrams_received"));
   check_accounting(h);
   // Every frame that had an arena was written; the dropped ones are exactly the counted ones.
-  CHECK(counter(h, "frames_written") ==
-        counter(h, "frames_complete") + counter(h, "frames_partial"));
-  CHECK(files_with(out / "frames", ".pcd").size() == counter(h, "frames_written"));
+  CHECK(health_counter(h, "frames_written") ==
+        health_counter(h, "frames_complete") + health_counter(h, "frames_partial"));
+  CHECK(files_with(out / "frames", ".pcd").size() == health_counter(h, "frames_written"));
   // Fixed memory: the stall grew nothing (the queues and arenas are preallocated).
   CHECK(rss_stalled <= rss_before + (2u << 20));
 }

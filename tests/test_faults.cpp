@@ -35,27 +35,11 @@ using namespace pandarcap;
 using namespace std::chrono_literals;
 using nlohmann::json;
 namespace fs = std::filesystem;
+using test::health_counter;
+using test::json_lines;
+using test::open_descriptors;
 
 namespace {
-
-// Every line of a JSON-lines file, parsed; a line that does not parse fails the test.
-std::vector<json> json_lines(const fs::path& path) {
-  std::ifstream in(path);
-  std::vector<json> lines;
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty()) continue;
-    INFO(path.string() << ": " << line);
-    const json parsed = json::parse(line, nullptr, false);
-    CHECK_FALSE(parsed.is_discarded());
-    if (!parsed.is_discarded()) lines.push_back(parsed);
-  }
-  return lines;
-}
-
-std::uint64_t counter(const json& line, const char* name) {
-  return line.is_object() ? line["counters"].value(name, std::uint64_t{0}) : 0;
-}
 
 std::vector<fs::path> files_ending(const fs::path& dir, const std::string& suffix) {
   std::vector<fs::path> files;
@@ -127,15 +111,6 @@ bool prometheus_file_parses(const fs::path& file) {
     if (space == std::string::npos || space + 1 == line.size()) return false;
   }
   return text.ends_with("\n");
-}
-
-std::size_t open_descriptors(int pid) {
-  std::size_t n = 0;
-  std::error_code ec;
-  for (auto it = fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd", ec);
-       it != fs::directory_iterator(); it.increment(ec))
-    ++n;
-  return n;
 }
 
 bool logged(const harness::ChildProcess& daemon, const std::string& text) {
@@ -281,16 +256,18 @@ TEST_CASE(
   };
   INFO(daemon.log());
   REQUIRE(harness::wait_until([&] { return logged(daemon, "ready:"); }, 20s));
-  REQUIRE(harness::wait_until([&] { return counter(last_line(), "frames_written") >= 2; }, 10s));
+  REQUIRE(
+      harness::wait_until([&] { return health_counter(last_line(), "frames_written") >= 2; }, 10s));
 
   // 8 MB fill in about a second: frames and pcaps start failing.
-  REQUIRE(harness::wait_until([&] { return counter(last_line(), "write_errors") > 0; }, 20s));
+  REQUIRE(
+      harness::wait_until([&] { return health_counter(last_line(), "write_errors") > 0; }, 20s));
   json full = last_line();
   {
     INFO(full.dump());
     CHECK(full["state"] == "degraded");
     CHECK(full["reason"].get<std::string>().find("No space left on device") != std::string::npos);
-    CHECK(counter(full, "bytes_not_written") > 0);
+    CHECK(health_counter(full, "bytes_not_written") > 0);
   }
   // Capture goes on: two more seconds later more packets were received and decoded, more writes
   // failed, and nothing was lost before the writer (kernel, ring).
@@ -300,13 +277,13 @@ TEST_CASE(
   const json later = last_line();
   {
     INFO(later.dump());
-    CHECK(counter(later, "datagrams_received") > counter(full, "datagrams_received"));
-    CHECK(counter(later, "packets_accepted") > counter(full, "packets_accepted"));
-    CHECK(counter(later, "write_errors") > counter(full, "write_errors"));
-    CHECK(counter(later, "bytes_not_written") > counter(full, "bytes_not_written"));
-    CHECK(counter(later, "kernel_drops") == 0);
-    CHECK(counter(later, "ring_overruns") == 0);
-    CHECK(counter(later, "pcap_packets_not_written") > 0);
+    CHECK(health_counter(later, "datagrams_received") > health_counter(full, "datagrams_received"));
+    CHECK(health_counter(later, "packets_accepted") > health_counter(full, "packets_accepted"));
+    CHECK(health_counter(later, "write_errors") > health_counter(full, "write_errors"));
+    CHECK(health_counter(later, "bytes_not_written") > health_counter(full, "bytes_not_written"));
+    CHECK(health_counter(later, "kernel_drops") == 0);
+    CHECK(health_counter(later, "ring_overruns") == 0);
+    CHECK(health_counter(later, "pcap_packets_not_written") > 0);
     CHECK(later["state"] == "degraded");
   }
   // What was finished is readable: every closed pcap (cut back to whole records when its write
@@ -340,7 +317,10 @@ TEST_CASE(
   CHECK(resumed);
   CHECK(to_resume <= 2s);
   CHECK(harness::wait_until(
-      [&] { return counter(last_line(), "frames_written") > counter(later, "frames_written"); },
+      [&] {
+        return health_counter(last_line(), "frames_written") >
+               health_counter(later, "frames_written");
+      },
       3s));
   check_outputs();
 
@@ -349,12 +329,15 @@ TEST_CASE(
   // The final health line is there, consistent: every datagram accounted for.
   const json final_line = last_line();
   INFO(final_line.dump());
-  CHECK(counter(final_line, "datagrams_received") ==
-        counter(final_line, "packets_accepted") + counter(final_line, "packets_rejected") +
-            counter(final_line, "foreign_datagrams") + counter(final_line, "ring_overruns"));
+  CHECK(health_counter(final_line, "datagrams_received") ==
+        health_counter(final_line, "packets_accepted") +
+            health_counter(final_line, "packets_rejected") +
+            health_counter(final_line, "foreign_datagrams") +
+            health_counter(final_line, "ring_overruns"));
   // And every packet is in a pcap or counted as not there.
-  CHECK(counter(final_line, "pcap_packets_written") +
-            counter(final_line, "pcap_packets_not_recorded") +
-            counter(final_line, "pcap_packets_not_written") ==
-        counter(final_line, "packets_accepted") + counter(final_line, "packets_rejected"));
+  CHECK(health_counter(final_line, "pcap_packets_written") +
+            health_counter(final_line, "pcap_packets_not_recorded") +
+            health_counter(final_line, "pcap_packets_not_written") ==
+        health_counter(final_line, "packets_accepted") +
+            health_counter(final_line, "packets_rejected"));
 }

@@ -27,20 +27,10 @@ using namespace pandarcap;
 using namespace std::chrono_literals;
 using nlohmann::json;
 namespace fs = std::filesystem;
+using test::health_counter;
+using test::health_records;
 
 namespace {
-
-std::vector<json> health_records(const fs::path& out) {
-  std::ifstream in(out / "health" / "health.jsonl");
-  std::vector<json> lines;
-  for (std::string line; std::getline(in, line);)
-    if (!line.empty()) lines.push_back(json::parse(line));
-  return lines;
-}
-
-std::uint64_t counter(const json& record, const std::string& name) {
-  return record.is_object() ? record["counters"].value(name, std::uint64_t{0}) : 0;
-}
 
 // The counters the identities below use.
 const std::vector<std::string> kCounters = {
@@ -65,16 +55,22 @@ struct LiveDaemon {
     return harness::wait_until([&] { return process->log().find("ready:") != std::string::npos; },
                                20s);
   }
-  // Ends the stream with `packets` more at a gentle 1000 packets/s, continuing its sequence after
-  // `before` packets, so that its last packet certainly arrives and the sequence tracker sees
-  // every gap (a loss at the very end of a stream is invisible to sequence numbers).
-  bench::GeneratorResult gentle_tail(const bench::TrafficSource& source, std::uint64_t before) {
+  // Sends the simulated sensor's stream (dual return) to the daemon as `traffic` says, then ends
+  // it with 0.2 s more at a gentle 1000 packets/s, continuing its sequence, so that its last
+  // packet certainly arrives and the sequence tracker sees every gap (a loss at the very end of a
+  // stream is invisible to sequence numbers). `sent` counts the tail's packets too.
+  bench::GeneratorResult send(bench::GeneratorOptions traffic) {
+    const auto source = bench::TrafficSource::synthetic(ReturnMode::kDual, 3600);
+    traffic.port = port;
+    bench::GeneratorResult sent = bench::run_generator(source, traffic);
+    REQUIRE(sent.send_errors == 0);
     bench::GeneratorOptions tail;
     tail.port = port;
     tail.rate_pps = 1000;
     tail.seconds = 0.2;
-    tail.first_sequence = before;
-    return bench::run_generator(source, tail);
+    tail.first_sequence = sent.sent;
+    sent.sent += bench::run_generator(source, tail).sent;
+    return sent;
   }
   // Waits until the daemon has seen or counted as dropped `total` datagrams, then stops it and
   // returns the final health record.
@@ -82,8 +78,8 @@ struct LiveDaemon {
     harness::wait_until(
         [&] {
           const auto records = health_records(out);
-          return !records.empty() && counter(records.back(), "datagrams_received") +
-                                             counter(records.back(), "kernel_drops") >=
+          return !records.empty() && health_counter(records.back(), "datagrams_received") +
+                                             health_counter(records.back(), "kernel_drops") >=
                                          total;
         },
         15s);
@@ -105,24 +101,18 @@ struct LiveDaemon {
 void check_per_second_records(const std::vector<json>& records, const json& final_record) {
   REQUIRE(records.size() >= 3);
   for (const std::string& name : kCounters) {
-    std::uint64_t total = counter(records.front(), name);
+    std::uint64_t total = health_counter(records.front(), name);
     for (std::size_t i = 1; i < records.size(); ++i) {
-      const std::uint64_t before = counter(records[i - 1], name);
-      const std::uint64_t now = counter(records[i], name);
+      const std::uint64_t before = health_counter(records[i - 1], name);
+      const std::uint64_t now = health_counter(records[i], name);
       INFO(name << " in record " << i);
       CHECK(now >= before);
       total += now - before;
     }
     INFO(name);
-    CHECK(total == counter(final_record, name));
+    CHECK(total == health_counter(final_record, name));
   }
-  for (std::size_t i = 1; i + 1 < records.size(); ++i) {
-    const double gap = records[i]["gauges"]["uptime_seconds"].get<double>() -
-                       records[i - 1]["gauges"]["uptime_seconds"].get<double>();
-    INFO("records " << i - 1 << " and " << i << " are " << gap << " s apart");
-    CHECK(gap > 0.0);
-    CHECK(gap <= 1.5);
-  }
+  test::check_record_spacing(records, 0.0);
 }
 
 }  // namespace
@@ -139,41 +129,38 @@ TEST_CASE(
   INFO(daemon.process->log());
   REQUIRE(daemon.ready());
 
-  const auto source = bench::TrafficSource::synthetic(ReturnMode::kDual, 3600);
   bench::GeneratorOptions traffic;
-  traffic.port = daemon.port;
   traffic.rate_pps = 10000;
   traffic.seconds = 3.5;
   // 30 ms at 50x the rate at the start of every second: 15,000 packets in a burst-second.
   traffic.burst_factor = 50;
   traffic.burst_ms = 30;
   traffic.burst_every_s = 1;
-  bench::GeneratorResult sent = bench::run_generator(source, traffic);
-  REQUIRE(sent.send_errors == 0);
-  sent.sent += daemon.gentle_tail(source, sent.sent).sent;
+  const bench::GeneratorResult sent = daemon.send(traffic);
   const json final_record = daemon.stop_after(sent.sent);
   INFO(daemon.process->log());
   INFO(final_record.dump());
   CHECK(daemon.exit_status == 0);
 
-  const std::uint64_t kernel = counter(final_record, "kernel_drops");
-  const std::uint64_t overruns = counter(final_record, "ring_overruns");
-  const std::uint64_t rejected = counter(final_record, "packets_rejected");
-  const std::uint64_t accepted = counter(final_record, "packets_accepted");
+  const std::uint64_t kernel = health_counter(final_record, "kernel_drops");
+  const std::uint64_t overruns = health_counter(final_record, "ring_overruns");
+  const std::uint64_t rejected = health_counter(final_record, "packets_rejected");
+  const std::uint64_t accepted = health_counter(final_record, "packets_accepted");
   INFO("sent " << sent.sent << ": " << kernel << " kernel drops, " << overruns << " ring overruns, "
                << rejected << " rejected, " << accepted << " accepted");
   REQUIRE(kernel + overruns > 0);  // it was an overload
   CHECK(sent.sent == kernel + rejected + overruns + accepted);
-  CHECK(counter(final_record, "datagrams_received") == accepted + rejected + overruns);
+  CHECK(health_counter(final_record, "datagrams_received") == accepted + rejected + overruns);
   CHECK(rejected == 0);
   // The sequence numbers agree: what is missing from the stream is what was dropped before the
   // decoder.
-  CHECK(counter(final_record, "sequence_lost") == kernel + overruns);
-  CHECK(counter(final_record, "sequence_gaps") >= 1);
-  CHECK(counter(final_record, "sequence_gaps") <= counter(final_record, "sequence_lost"));
+  CHECK(health_counter(final_record, "sequence_lost") == kernel + overruns);
+  CHECK(health_counter(final_record, "sequence_gaps") >= 1);
+  CHECK(health_counter(final_record, "sequence_gaps") <=
+        health_counter(final_record, "sequence_lost"));
   // Every packet that reached the decoder was recorded, unless counted as not recorded.
-  CHECK(counter(final_record, "pcap_packets_written") +
-            counter(final_record, "pcap_packets_not_recorded") ==
+  CHECK(health_counter(final_record, "pcap_packets_written") +
+            health_counter(final_record, "pcap_packets_not_recorded") ==
         accepted + rejected);
   check_per_second_records(health_records(daemon.out), final_record);
   // The Prometheus file holds the same final totals.
@@ -193,37 +180,34 @@ TEST_CASE(
   INFO(daemon.process->log());
   REQUIRE(daemon.ready());
 
-  const auto source = bench::TrafficSource::synthetic(ReturnMode::kDual, 3600);
   bench::GeneratorOptions traffic;
-  traffic.port = daemon.port;
   traffic.rate_pps = 40000;
   traffic.seconds = 3;
   traffic.foreign_fraction = 1;    // as many copies from 127.0.0.2 ...
   traffic.malformed_fraction = 4;  // ... and four times as many random datagrams
   traffic.burst_factor = 10;       // with bursts at 10x: the flood peaks past 2M datagrams/s
   traffic.burst_ms = 50;
-  bench::GeneratorResult sent = bench::run_generator(source, traffic);
-  REQUIRE(sent.send_errors == 0);
-  sent.sent += daemon.gentle_tail(source, sent.sent).sent;
+  const bench::GeneratorResult sent = daemon.send(traffic);
   const std::uint64_t total = sent.sent + sent.foreign_sent + sent.malformed_sent;
   const json final_record = daemon.stop_after(total);
   INFO(daemon.process->log());
   INFO(final_record.dump());
   CHECK(daemon.exit_status == 0);  // no crash: a clean exit on SIGTERM
 
-  const std::uint64_t kernel = counter(final_record, "kernel_drops");
-  const std::uint64_t overruns = counter(final_record, "ring_overruns");
-  const std::uint64_t rejected = counter(final_record, "packets_rejected");
-  const std::uint64_t foreign = counter(final_record, "foreign_datagrams");
-  const std::uint64_t accepted = counter(final_record, "packets_accepted");
+  const std::uint64_t kernel = health_counter(final_record, "kernel_drops");
+  const std::uint64_t overruns = health_counter(final_record, "ring_overruns");
+  const std::uint64_t rejected = health_counter(final_record, "packets_rejected");
+  const std::uint64_t foreign = health_counter(final_record, "foreign_datagrams");
+  const std::uint64_t accepted = health_counter(final_record, "packets_accepted");
   INFO("sent " << sent.sent << " valid, " << sent.foreign_sent << " foreign, "
                << sent.malformed_sent << " random: " << kernel << " kernel drops, " << overruns
                << " ring overruns, " << rejected << " rejected, " << foreign << " foreign, "
                << accepted << " accepted");
   // Every datagram sent is received or counted as dropped by the kernel, and every received one
   // is accepted, rejected, foreign or overrun.
-  CHECK(total == counter(final_record, "datagrams_received") + kernel);
-  CHECK(counter(final_record, "datagrams_received") == accepted + rejected + foreign + overruns);
+  CHECK(total == health_counter(final_record, "datagrams_received") + kernel);
+  CHECK(health_counter(final_record, "datagrams_received") ==
+        accepted + rejected + foreign + overruns);
   CHECK(rejected > 0);
   CHECK(foreign > 0);
   // Only the random datagrams are rejected, at most all of them.
@@ -231,8 +215,8 @@ TEST_CASE(
   CHECK(foreign <= sent.foreign_sent);
   // The valid stream: every packet accepted or lost, and the loss is what the sequence numbers
   // say (drops fall on all three kinds of traffic, so the stream's share is only bounded).
-  CHECK(accepted + counter(final_record, "sequence_lost") == sent.sent);
-  CHECK(counter(final_record, "sequence_lost") <= kernel + overruns);
+  CHECK(accepted + health_counter(final_record, "sequence_lost") == sent.sent);
+  CHECK(health_counter(final_record, "sequence_lost") <= kernel + overruns);
   // The randoms are counted by reason; none of them decoded into a frame of garbage.
   std::uint64_t by_reason = 0;
   for (const auto& [reason, n] : final_record["counters"]["rejects"].items())

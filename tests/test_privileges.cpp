@@ -87,12 +87,8 @@ TEST_CASE("an unprivileged user captures with no capability (CapEff 0)", "[daemo
   // Capturing: packets from the simulated sensor arrive over its UDP socket.
   const bool receiving = harness::wait_until(
       [&] {
-        std::ifstream in(out / "health" / "health.jsonl");
-        std::string line, last;
-        while (std::getline(in, line))
-          last = line;
-        if (last.empty()) return false;
-        return nlohmann::json::parse(last)["counters"].value("packets_accepted", 0) > 0;
+        const auto records = test::health_records(out);
+        return !records.empty() && test::health_counter(records.back(), "packets_accepted") > 0;
       },
       15s);
   INFO(daemon.log());

@@ -63,6 +63,16 @@ class NotifyListener {
       messages_.emplace_back(buffer, static_cast<std::size_t>(n));
     }
   }
+  // Polls `condition` until it holds or `limit` passes, taking the daemon's messages meanwhile,
+  // as systemd reads its socket at once (a full socket would block the daemon's sd_notify).
+  bool wait_for(const std::function<bool()>& condition, std::chrono::milliseconds limit) {
+    return harness::wait_until(
+        [&] {
+          receive();
+          return condition();
+        },
+        limit);
+  }
   // Messages received so far that contain `text` (a datagram may carry several lines).
   std::size_t count(const std::string& text) const {
     std::size_t n = 0;
@@ -102,21 +112,13 @@ TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, res
       {"NOTIFY_SOCKET=" + (dir / "notify.sock").string(), "WATCHDOG_USEC=400000",
        "PANDARCAP_TEST_STALL_WRITER_FILE=" + stall_file.string()});
 
-  const auto until = [&](const std::function<bool()>& condition, std::chrono::milliseconds limit) {
-    return harness::wait_until(
-        [&] {
-          notify.receive();
-          return condition();
-        },
-        limit);
-  };
-  const bool healthy =
-      until([&] { return notify.count("READY=1") == 1 && notify.count("WATCHDOG=1") >= 4; }, 15s);
+  const bool healthy = notify.wait_for(
+      [&] { return notify.count("READY=1") == 1 && notify.count("WATCHDOG=1") >= 4; }, 15s);
   INFO(notify.all());
   INFO(daemon.log());
   REQUIRE(healthy);
   CHECK(notify.first("READY=1") < notify.first("WATCHDOG=1"));
-  CHECK(until([&] { return notify.count("STATUS=") >= 1; }, 5s));
+  CHECK(notify.wait_for([&] { return notify.count("STATUS=") >= 1; }, 5s));
 
   SECTION("a stalled writer silences the watchdog until it recovers") {
     std::ofstream(stall_file).put('\n');
@@ -133,12 +135,12 @@ TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, res
 
     fs::remove(stall_file);
     const std::size_t before_resume = notify.count("WATCHDOG=1");
-    CHECK(until([&] { return notify.count("WATCHDOG=1") >= before_resume + 2; }, 5s));
+    CHECK(notify.wait_for([&] { return notify.count("WATCHDOG=1") >= before_resume + 2; }, 5s));
     CHECK(daemon.log().find("test hook: writer resumed") != std::string::npos);
   }
 
   daemon.signal(SIGTERM);
-  CHECK(until([&] { return notify.count("STOPPING=1") == 1; }, 10s));
+  CHECK(notify.wait_for([&] { return notify.count("STOPPING=1") == 1; }, 10s));
   CHECK(daemon.wait_exit(10s) == 0);
   CHECK(notify.first("READY=1") < notify.first("STOPPING=1"));
 }
@@ -238,19 +240,10 @@ struct HealthTail {
   std::size_t lines = 0;
 };
 HealthTail health_tail(const fs::path& out) {
-  std::ifstream in(out / "health" / "health.jsonl");
+  const auto records = test::health_records(out);
   HealthTail tail;
-  std::string line, last;
-  while (std::getline(in, line)) {
-    if (line.empty()) continue;
-    last = line;
-    ++tail.lines;
-  }
-  const auto key = last.find("\"state\":\"");
-  if (key != std::string::npos) {
-    const auto begin = key + 9;
-    tail.state = last.substr(begin, last.find('"', begin) - begin);
-  }
+  tail.lines = records.size();
+  if (!records.empty()) tail.state = records.back().value("state", "");
   return tail;
 }
 
@@ -296,27 +289,20 @@ TEST_CASE(
       {"--allow-root", "--host-ip", "127.0.0.1", "--port", std::to_string(port), "--sensor-ip",
        "127.0.0.1", "--output-dir", out.string()},
       dir / "log.txt", {"NOTIFY_SOCKET=" + (dir / "notify.sock").string(), "WATCHDOG_USEC=400000"});
-  const auto until = [&](const std::function<bool()>& condition, std::chrono::milliseconds limit) {
-    return harness::wait_until(
-        [&] {
-          notify.receive();
-          return condition();
-        },
-        limit);
-  };
   INFO(daemon.log());
-  REQUIRE(until([&] { return notify.count("READY=1") == 1 && health_tail(out).lines >= 1; }, 15s));
+  REQUIRE(notify.wait_for(
+      [&] { return notify.count("READY=1") == 1 && health_tail(out).lines >= 1; }, 15s));
   CHECK(health_tail(out).state == "no_data");  // nothing sent yet
 
   PacedSensor sensor(port);
   // The listener keeps reading meanwhile, as systemd does: a full notify socket would block the
   // daemon's sd_notify (libsystemd sends blocking), and with it the daemon's main thread.
   sensor.send_for(1500ms, [&] { notify.receive(false); });
-  REQUIRE(until([&] { return health_tail(out).state == "ok"; }, 5s));
+  REQUIRE(notify.wait_for([&] { return health_tail(out).state == "ok"; }, 5s));
 
   // The sensor stops (its last packet has just been sent).
   const auto stopped = std::chrono::steady_clock::now();
-  REQUIRE(until([&] { return health_tail(out).state == "no_data"; }, 5s));
+  REQUIRE(notify.wait_for([&] { return health_tail(out).state == "no_data"; }, 5s));
   const auto to_no_data = std::chrono::steady_clock::now() - stopped;
   INFO("no_data after " << std::chrono::duration<double>(to_no_data).count() << " s");
   CHECK(to_no_data <= 1500ms);
@@ -324,7 +310,7 @@ TEST_CASE(
   // Silent, the daemon carries on: a health line every second, a watchdog ping every 200 ms.
   const std::size_t lines = health_tail(out).lines;
   const std::size_t pings = notify.count("WATCHDOG=1");
-  REQUIRE(until([&] { return health_tail(out).lines >= lines + 2; }, 5s));
+  REQUIRE(notify.wait_for([&] { return health_tail(out).lines >= lines + 2; }, 5s));
   CHECK(health_tail(out).state == "no_data");
   CHECK(notify.count("WATCHDOG=1") >= pings + 4);
   CHECK(notify.all().find("STATUS=no_data") != std::string::npos);
@@ -336,16 +322,16 @@ TEST_CASE(
     resume_done = true;
   });
   const auto resumed = std::chrono::steady_clock::now();
-  const bool ok_again = until([&] { return health_tail(out).state == "ok"; }, 5s);
+  const bool ok_again = notify.wait_for([&] { return health_tail(out).state == "ok"; }, 5s);
   const auto to_ok = std::chrono::steady_clock::now() - resumed;
-  until([&] { return resume_done.load(); }, 10s);
+  notify.wait_for([&] { return resume_done.load(); }, 10s);
   resume.join();
   INFO("ok after " << std::chrono::duration<double>(to_ok).count() << " s");
   CHECK(ok_again);
   CHECK(to_ok <= 1000ms);
 
   daemon.signal(SIGTERM);
-  CHECK(until([&] { return notify.count("STOPPING=1") == 1; }, 10s));
+  CHECK(notify.wait_for([&] { return notify.count("STOPPING=1") == 1; }, 10s));
   const auto status = daemon.wait_exit(10s);
   INFO(daemon.log());
   CHECK(status == 0);

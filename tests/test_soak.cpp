@@ -26,23 +26,8 @@ using namespace pandarcap;
 using namespace std::chrono_literals;
 using nlohmann::json;
 namespace fs = std::filesystem;
-
-namespace {
-
-std::size_t open_descriptors(int pid) {
-  std::size_t n = 0;
-  for (const auto& entry : fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd")) {
-    (void)entry;
-    ++n;
-  }
-  return n;
-}
-
-std::uint64_t counter(const json& record, const char* name) {
-  return record["counters"].value(name, std::uint64_t{0});
-}
-
-}  // namespace
+using test::health_counter;
+using test::open_descriptors;
 
 TEST_CASE(
     "soak: 10 x a dual-return sensor, all outputs and rotation: zero loss, flat memory and "
@@ -93,39 +78,31 @@ TEST_CASE(
 
   REQUIRE(harness::wait_until(
       [&] {
-        std::ifstream in(out / "health" / "health.jsonl");
-        std::string line, last;
-        while (std::getline(in, line))
-          if (!line.empty()) last = line;
-        if (last.empty()) return false;
-        const json record = json::parse(last);
-        return counter(record, "datagrams_received") + counter(record, "kernel_drops") >= sent.sent;
+        const auto records = test::health_records(out);
+        return !records.empty() && health_counter(records.back(), "datagrams_received") +
+                                           health_counter(records.back(), "kernel_drops") >=
+                                       sent.sent;
       },
       20s));
   daemon.signal(SIGTERM);
   CHECK(daemon.wait_exit(30s) == 0);
 
-  std::vector<json> records;
-  {
-    std::ifstream in(out / "health" / "health.jsonl");
-    for (std::string line; std::getline(in, line);)
-      if (!line.empty()) records.push_back(json::parse(line));
-  }
+  const std::vector<json> records = test::health_records(out);
   REQUIRE_FALSE(records.empty());
   const json& last = records.back();
   INFO(last.dump());
   // Zero loss, at every stage.
-  CHECK(counter(last, "packets_accepted") == sent.sent);
-  CHECK(counter(last, "kernel_drops") == 0);
-  CHECK(counter(last, "ring_overruns") == 0);
-  CHECK(counter(last, "sequence_lost") == 0);
-  CHECK(counter(last, "packets_rejected") == 0);
-  CHECK(counter(last, "pcap_packets_not_recorded") == 0);
-  CHECK(counter(last, "frames_dropped_no_arena") == 0);
-  CHECK(counter(last, "write_errors") == 0);
-  CHECK(counter(last, "pcap_packets_written") == sent.sent);
-  CHECK(counter(last, "frames_written") ==
-        counter(last, "frames_complete") + counter(last, "frames_partial"));
+  CHECK(health_counter(last, "packets_accepted") == sent.sent);
+  CHECK(health_counter(last, "kernel_drops") == 0);
+  CHECK(health_counter(last, "ring_overruns") == 0);
+  CHECK(health_counter(last, "sequence_lost") == 0);
+  CHECK(health_counter(last, "packets_rejected") == 0);
+  CHECK(health_counter(last, "pcap_packets_not_recorded") == 0);
+  CHECK(health_counter(last, "frames_dropped_no_arena") == 0);
+  CHECK(health_counter(last, "write_errors") == 0);
+  CHECK(health_counter(last, "pcap_packets_written") == sent.sent);
+  CHECK(health_counter(last, "frames_written") ==
+        health_counter(last, "frames_complete") + health_counter(last, "frames_partial"));
   // Flat: memory within 1 % of its warm size, the same descriptors (±2: a frame or a pcap may be
   // mid-open at either count).
   INFO("RSS " << rss_warm << " -> " << rss_end << " bytes, descriptors " << fds_warm << " -> "
@@ -136,13 +113,7 @@ TEST_CASE(
   CHECK(fds_end + 2 >= fds_warm);
   // Every second: one record a second from start to end (the final one may follow sooner).
   CHECK(records.size() + 2 >= static_cast<std::size_t>(seconds));
-  for (std::size_t i = 1; i + 1 < records.size(); ++i) {
-    const double gap = records[i]["gauges"]["uptime_seconds"].get<double>() -
-                       records[i - 1]["gauges"]["uptime_seconds"].get<double>();
-    INFO("records " << i - 1 << " and " << i << " are " << gap << " s apart");
-    CHECK(gap > 0.5);
-    CHECK(gap <= 1.5);
-  }
+  test::check_record_spacing(records, 0.5);
   // Rotation was active.
   std::size_t pcaps = 0;
   for (const auto& entry : fs::directory_iterator(out / "raw"))

@@ -7,6 +7,7 @@
 #include <catch2/catch.hpp>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <random>
 
 namespace pandarcap::test {
@@ -49,6 +50,47 @@ CommandResult run_command(const std::string& command) {
   const int status = ::pclose(pipe);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return result;
+}
+
+std::vector<nlohmann::json> json_lines(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  std::vector<nlohmann::json> lines;
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty()) continue;
+    INFO(file.string() << ": " << line);
+    nlohmann::json parsed = nlohmann::json::parse(line, nullptr, false);
+    CHECK_FALSE(parsed.is_discarded());
+    if (!parsed.is_discarded()) lines.push_back(std::move(parsed));
+  }
+  return lines;
+}
+
+std::vector<nlohmann::json> health_records(const std::filesystem::path& output_dir) {
+  return json_lines(output_dir / "health" / "health.jsonl");
+}
+
+std::uint64_t health_counter(const nlohmann::json& record, std::string_view name) {
+  if (!record.is_object() || !record.contains("counters")) return 0;
+  return record["counters"].value(std::string(name), std::uint64_t{0});
+}
+
+void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s) {
+  for (std::size_t i = 1; i + 1 < records.size(); ++i) {
+    const double gap = records[i]["gauges"]["uptime_seconds"].get<double>() -
+                       records[i - 1]["gauges"]["uptime_seconds"].get<double>();
+    INFO("records " << i - 1 << " and " << i << " are " << gap << " s apart");
+    CHECK(gap > min_gap_s);
+    CHECK(gap <= 1.5);
+  }
+}
+
+std::size_t open_descriptors(int pid) {
+  std::size_t n = 0;
+  std::error_code ec;
+  for (auto it = std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/fd", ec);
+       it != std::filesystem::directory_iterator(); it.increment(ec))
+    ++n;
+  return n;
 }
 
 }  // namespace pandarcap::test

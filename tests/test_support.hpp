@@ -1,9 +1,14 @@
 // Shared helpers for the test suite: locating the real captures and scratch directories.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <string_view>
+#include <vector>
 
 namespace pandarcap::test {
 
@@ -35,5 +40,22 @@ struct CommandResult {
   std::string out;
 };
 CommandResult run_command(const std::string& command);
+
+// Every non-empty line of a JSON-lines file (pandarcapd's health.jsonl), parsed. A line that does
+// not parse fails the test (CHECK) and is left out. No file: no lines.
+std::vector<nlohmann::json> json_lines(const std::filesystem::path& file);
+// The health records of a run with the default health directory: OUTPUT_DIR/health/health.jsonl.
+std::vector<nlohmann::json> health_records(const std::filesystem::path& output_dir);
+
+// A counter of a health record (its "counters" object); 0 when absent or not a record.
+std::uint64_t health_counter(const nlohmann::json& record, std::string_view name);
+
+// Health records come once a second: consecutive ones are more than `min_gap_s` and at most
+// 1.5 s apart by their monotonic uptime. The final record (written at shutdown) may follow the
+// one before it sooner, so its gap is not checked.
+void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s);
+
+// How many file descriptors process `pid` has open (/proc/PID/fd).
+std::size_t open_descriptors(int pid);
 
 }  // namespace pandarcap::test

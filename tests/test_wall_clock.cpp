@@ -20,16 +20,9 @@ using namespace pandarcap;
 using namespace std::chrono_literals;
 using nlohmann::json;
 namespace fs = std::filesystem;
+using test::health_records;
 
 namespace {
-
-std::vector<json> health_records(const fs::path& out) {
-  std::ifstream in(out / "health" / "health.jsonl");
-  std::vector<json> records;
-  for (std::string line; std::getline(in, line);)
-    if (!line.empty()) records.push_back(json::parse(line));
-  return records;
-}
 
 // The daemon's wall clock minus this process's, in seconds, from its newest health record.
 double shift_seen_s(const fs::path& out) {
@@ -83,13 +76,7 @@ TEST_CASE("a wall-clock jump on the host disturbs neither pcap rotation nor per-
   const auto records = health_records(out);
   const double uptime = records.back()["gauges"]["uptime_seconds"].get<double>();
   INFO(records.size() << " records over " << uptime << " s");
-  for (std::size_t i = 1; i + 1 < records.size(); ++i) {
-    const double gap = records[i]["gauges"]["uptime_seconds"].get<double>() -
-                       records[i - 1]["gauges"]["uptime_seconds"].get<double>();
-    INFO("records " << i - 1 << " and " << i << " are " << gap << " s apart");
-    CHECK(gap > 0.5);
-    CHECK(gap <= 1.5);
-  }
+  test::check_record_spacing(records, 0.5);
   CHECK(records.size() + 1 >= static_cast<std::size_t>(uptime));
   CHECK(records.size() <= static_cast<std::size_t>(uptime) + 2);
   // A new pcap every 2 s of monotonic time, whatever the wall clock did (a jump of an hour would
