@@ -1,6 +1,8 @@
 // pandarcap-bench: the benchmark harness. One subcommand per thing measured; each prints a short
 // table, or one JSON object with --json. Performance figures in the README come from here, never
 // from timed unit tests.
+#include <arpa/inet.h>
+
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -31,6 +33,9 @@ Subcommands:
   ring      SPSC packet ring (batches 1, 8, 32) and typed queue against a mutex + condition
             variable queue measured in the same run: items/s, round-trip latency, and the CPU
             an idle consumer uses at the sensor's packet rate.
+  send      the harness's traffic generator on its own: Pandar40P packets over UDP at a paced
+            rate (sendmmsg), to 127.0.0.1 unless told otherwise, e.g. to drive a daemon or a
+            vendor driver by hand; reports the rate actually achieved.
 
 Run 'pandarcap-bench SUBCOMMAND --help' for its options.
 )";
@@ -97,7 +102,56 @@ void print_report(const nlohmann::ordered_json& report, bool json, Print&& print
   }
 }
 
-constexpr std::string_view kZeroLossUsage = R"(Usage: pandarcap-bench zero-loss [OPTIONS]
+// The traffic options of `zero-loss` and `send` (parse_traffic_option), in both usage texts.
+constexpr std::string_view kTrafficOptions =
+    R"(  --capture FILE         send this capture's packets (default: the simulated sensor)
+  --rpm N                the simulated sensor's spin rate: 600 or 1200 (default 600)
+  --return-mode MODE     the simulated sensor's return mode: dual (3600 packets/s), or single
+                         (= strongest) or last (1800 packets/s) (default dual)
+  --burst-factor X       bursts at X times the rate ...
+  --burst-ms M           ... lasting M ms ...
+  --burst-every S        ... every S seconds (default 1)
+  --foreign-fraction F   also send F x the valid packets from 127.0.0.2 (a daemon drops them as
+                         foreign when its config sets sensor_ip); 127.x.x.x destinations only
+  --malformed-fraction F also send F x the valid packets as random-length random bytes
+)";
+
+// The traffic options `zero-loss` and `send` share. Returns false when `arg` is not one of them.
+bool parse_traffic_option(pandarcap::CliArgs& args, std::string_view arg,
+                          pandarcap::bench::GeneratorOptions& traffic,
+                          pandarcap::SyntheticSensorConfig& sensor, std::string& capture) {
+  if (arg == "--capture") {
+    capture = std::string(args.value(arg));
+  } else if (arg == "--rpm") {
+    sensor.rpm = static_cast<int>(args.integer(arg, 600, 1200));
+    if (sensor.rpm != 600 && sensor.rpm != 1200) args.usage_error("--rpm is 600 or 1200");
+  } else if (arg == "--return-mode") {
+    const std::string_view name = args.value(arg);
+    // "single" is what people call the sensor's default single-return setting: strongest.
+    const auto mode = name == "single" ? pandarcap::ReturnMode::kStrongest
+                                       : pandarcap::return_mode_from_string(name);
+    if (!mode) {
+      args.usage_error(fmt::format(
+          "--return-mode is dual, single (= strongest), strongest or last, got '{}'", name));
+    }
+    sensor.return_mode = *mode;
+  } else if (arg == "--burst-factor") {
+    traffic.burst_factor = args.number(arg, 1, 1000);
+  } else if (arg == "--burst-ms") {
+    traffic.burst_ms = args.number(arg, 0, 60'000);
+  } else if (arg == "--burst-every") {
+    traffic.burst_every_s = args.number(arg, 0.001, 3600);
+  } else if (arg == "--foreign-fraction") {
+    traffic.foreign_fraction = args.number(arg, 0, 10);
+  } else if (arg == "--malformed-fraction") {
+    traffic.malformed_fraction = args.number(arg, 0, 10);
+  } else {
+    return false;
+  }
+  return true;
+}
+
+constexpr std::string_view kZeroLossUsageHead = R"(Usage: pandarcap-bench zero-loss [OPTIONS]
 
 Sends Pandar40P packets over loopback (127.0.0.1) with sendmmsg at paced rates and searches for
 the highest rate each receiver takes with zero loss: the real pandarcapd (started per trial with
@@ -114,17 +168,14 @@ Options:
   --sensor-rate PPS      rate of the CPU/latency/RSS trial (default 3600: one dual-return sensor)
   --daemon FILE          pandarcapd to run (default: the one beside pandarcap-bench)
   --config FILE          daemon configuration (the harness sets address, port and output dir)
-  --capture FILE         send this capture's packets (default: the simulated sensor)
   --work-dir DIR         keep daemon logs there (default: a temporary directory, removed)
   --daemon-only          skip the reference receivers
   --from-report FILE     measure nothing: render a saved report.json again (with --report-dir)
-  --burst-factor X       bursts at X times the rate ...
-  --burst-ms M           ... lasting M ms ...
-  --burst-every S        ... every S seconds (default 1); all three apply to every trial
-  --foreign-fraction F   also send F x the valid packets from 127.0.0.2 (dropped as foreign
-                         only when the daemon's config sets sensor_ip)
-  --malformed-fraction F also send F x the valid packets as random-length random bytes
-  -h, --help             this text
+)";
+constexpr std::string_view kZeroLossUsageTail = R"(  -h, --help             this text
+
+Traffic options apply to every trial. Every packet carries a 4-byte UDP sequence that the
+generator writes (0, 1, 2, ...), so loss is exact.
 
 JSON keys: daemon_zero_loss_pps, daemon_loss_at_most_0_5_percent_pps,
 bare_recvmmsg_zero_loss_pps, recvfrom_zero_loss_pps, daemon_vs_bare, daemon_vs_recvfrom,
@@ -135,7 +186,9 @@ Exit status: 0, 1 if the daemon could not be run, 64 for a usage error.
 )";
 
 int run_zero_loss(int argc, char** argv) {
-  pandarcap::CliArgs args(argc, argv, kZeroLossUsage);
+  const std::string usage =
+      fmt::format("{}{}{}", kZeroLossUsageHead, kTrafficOptions, kZeroLossUsageTail);
+  pandarcap::CliArgs args(argc, argv, usage);
   pandarcap::bench::ZeroLossOptions options;
   bool json = false;
   std::string report_dir, from_report;
@@ -159,24 +212,13 @@ int run_zero_loss(int argc, char** argv) {
       options.daemon = std::string(args.value(arg));
     } else if (arg == "--config") {
       options.daemon_config = std::string(args.value(arg));
-    } else if (arg == "--capture") {
-      options.capture = std::string(args.value(arg));
+    } else if (parse_traffic_option(args, arg, options.traffic, options.sensor, options.capture)) {
     } else if (arg == "--work-dir") {
       options.work_dir = std::string(args.value(arg));
     } else if (arg == "--daemon-only") {
       options.skip_references = true;
     } else if (arg == "--from-report") {
       from_report = std::string(args.value(arg));
-    } else if (arg == "--burst-factor") {
-      options.traffic.burst_factor = args.number(arg, 1, 1000);
-    } else if (arg == "--burst-ms") {
-      options.traffic.burst_ms = args.number(arg, 0, 60'000);
-    } else if (arg == "--burst-every") {
-      options.traffic.burst_every_s = args.number(arg, 0.001, 3600);
-    } else if (arg == "--foreign-fraction") {
-      options.traffic.foreign_fraction = args.number(arg, 0, 10);
-    } else if (arg == "--malformed-fraction") {
-      options.traffic.malformed_fraction = args.number(arg, 0, 10);
     } else {
       args.usage_error(fmt::format("unknown option '{}'", arg));
     }
@@ -309,17 +351,125 @@ int run_ring(int argc, char** argv) {
   return report["order_errors"].get<std::uint64_t>() == 0 ? 0 : 1;
 }
 
+constexpr std::string_view kSendUsageHead = R"(Usage: pandarcap-bench send [OPTIONS]
+
+Sends Pandar40P packets over UDP with sendmmsg, paced in batches against CLOCK_MONOTONIC, and
+reports the rate actually achieved. The destination is 127.0.0.1 unless --destination names
+another address; nothing is ever sent anywhere else.
+
+Options:
+  --json                 print one JSON object instead of a line of text
+  --destination IP       IPv4 address to send to (default 127.0.0.1)
+  --port N               UDP port (default 2368, the sensor's)
+  --rate PPS             offered rate of valid packets (default 3600: one dual-return sensor)
+  --seconds S            how long to send (default 10)
+  --batch N              datagrams per sendmmsg call (default 32)
+  --no-sequence          plain 1262-byte packets (default: 1266 bytes with a 4-byte UDP
+                         sequence 0, 1, 2, ... written by the generator, so loss is exact)
+  --first-sequence N     the first packet's sequence (default 0)
+)";
+constexpr std::string_view kSendUsageTail = R"(  -h, --help             this text
+
+JSON keys: destination, port, traffic, packet_bytes, offered_pps, achieved_pps, seconds, sent,
+first_sequence, last_sequence, foreign_sent, malformed_sent, send_errors,
+cpu_fraction_of_one_core.
+Exit status: 0, 1 if the socket could not be used or a send failed (other than a full buffer,
+which is waited out), 64 for a usage error.
+)";
+
+int run_send(int argc, char** argv) {
+  const std::string usage = fmt::format("{}{}{}", kSendUsageHead, kTrafficOptions, kSendUsageTail);
+  pandarcap::CliArgs args(argc, argv, usage);
+  pandarcap::bench::GeneratorOptions options;
+  pandarcap::SyntheticSensorConfig sensor;
+  std::string capture;
+  bool json = false;
+  while (args.more()) {
+    const std::string_view arg = args.next();
+    if (arg == "--json") {
+      json = true;
+    } else if (arg == "--destination") {
+      options.destination_ip = std::string(args.value(arg));
+      in_addr parsed{};
+      if (inet_pton(AF_INET, options.destination_ip.c_str(), &parsed) != 1) {
+        args.usage_error(
+            fmt::format("--destination takes an IPv4 address, got '{}'", options.destination_ip));
+      }
+    } else if (arg == "--port") {
+      options.port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
+    } else if (arg == "--rate") {
+      options.rate_pps = args.number(arg, 1, 1e8);
+    } else if (arg == "--seconds") {
+      options.seconds = args.number(arg, 0.01, 86'400);
+    } else if (arg == "--batch") {
+      options.batch = static_cast<int>(args.integer(arg, 1, 1024));
+    } else if (arg == "--no-sequence") {
+      options.udp_sequence = false;
+    } else if (arg == "--first-sequence") {
+      options.first_sequence = static_cast<std::uint64_t>(args.integer(arg, 0, 0xFFFF'FFFF));
+    } else if (parse_traffic_option(args, arg, options, sensor, capture)) {
+    } else {
+      args.usage_error(fmt::format("unknown option '{}'", arg));
+    }
+  }
+  if (options.foreign_fraction > 0 && options.destination_ip.rfind("127.", 0) != 0) {
+    args.usage_error(
+        "--foreign-fraction sends from 127.0.0.2, so it needs a 127.x.x.x destination");
+  }
+  const auto report = run_reporting_errors("send", [&] {
+    const auto source = capture.empty() ? pandarcap::bench::TrafficSource::synthetic(sensor)
+                                        : pandarcap::bench::TrafficSource::from_capture(capture);
+    const pandarcap::bench::GeneratorResult r = pandarcap::bench::run_generator(source, options);
+    return nlohmann::ordered_json{
+        {"destination", options.destination_ip},
+        {"port", options.port},
+        {"traffic", source.description},
+        {"packet_bytes",
+         options.udp_sequence ? pandarcap::kPacketWithSequenceBytes : pandarcap::kPacketBytes},
+        {"offered_pps", options.rate_pps},
+        {"achieved_pps", r.achieved_pps},
+        {"seconds", r.seconds},
+        {"sent", r.sent},
+        {"first_sequence", options.first_sequence},
+        {"last_sequence", r.sent > 0 ? nlohmann::ordered_json(options.first_sequence + r.sent - 1)
+                                     : nlohmann::ordered_json(nullptr)},
+        {"foreign_sent", r.foreign_sent},
+        {"malformed_sent", r.malformed_sent},
+        {"send_errors", r.send_errors},
+        {"cpu_fraction_of_one_core", r.seconds > 0 ? r.cpu_seconds / r.seconds : 0.0}};
+  });
+  if (!report) return 1;
+  print_report(*report, json, [](const nlohmann::ordered_json& r) {
+    fmt::print(
+        "sent {} packets ({} B, {}) to {}:{} in {:.2f} s: {:.1f} packets/s achieved of {:.1f} "
+        "offered; {} foreign, {} malformed, {} send errors; generator CPU {:.1f} % of one core\n",
+        r["sent"].get<std::uint64_t>(), r["packet_bytes"].get<std::size_t>(),
+        r["traffic"].get<std::string>(), r["destination"].get<std::string>(), r["port"].get<int>(),
+        r["seconds"].get<double>(), r["achieved_pps"].get<double>(), r["offered_pps"].get<double>(),
+        r["foreign_sent"].get<std::uint64_t>(), r["malformed_sent"].get<std::uint64_t>(),
+        r["send_errors"].get<std::uint64_t>(), 100 * r["cpu_fraction_of_one_core"].get<double>());
+  });
+  return (*report)["send_errors"].get<std::uint64_t>() == 0 ? 0 : 1;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kUsage);
-  if (!args.more()) args.usage_error("a subcommand is required (decode, ring, write, zero-loss)");
+  if (!args.more()) {
+    args.usage_error("a subcommand is required (decode, ring, send, write, zero-loss)");
+  }
   const std::string_view subcommand = args.next();
   // The subcommand parses the rest, with "pandarcap-bench SUBCOMMAND" as its program name.
   static char ring_name[] = "pandarcap-bench ring";
   static char decode_name[] = "pandarcap-bench decode";
   static char zero_loss_name[] = "pandarcap-bench zero-loss";
   static char write_name[] = "pandarcap-bench write";
+  static char send_name[] = "pandarcap-bench send";
+  if (subcommand == "send") {
+    argv[1] = send_name;
+    return run_send(argc - 1, argv + 1);
+  }
   if (subcommand == "write") {
     argv[1] = write_name;
     return run_write(argc - 1, argv + 1);

@@ -53,18 +53,19 @@ double due_packets(const GeneratorOptions& o, double elapsed_s) {
 
 }  // namespace
 
-TrafficSource TrafficSource::synthetic(ReturnMode mode, std::size_t count) {
+TrafficSource TrafficSource::synthetic(const SyntheticSensorConfig& sensor_config) {
   TrafficSource source;
-  SyntheticSensorConfig config;
-  config.return_mode = mode;
+  SyntheticSensorConfig config = sensor_config;
+  config.udp_sequence = false;
+  const std::size_t count = config.return_mode == ReturnMode::kDual ? 3600 : 1800;
   SyntheticSensor sensor(config);
   std::array<std::uint8_t, kMaxPacketBytes> buffer{};
   for (std::size_t i = 0; i < count; ++i) {
     const std::size_t size = sensor.next(buffer);
     source.bodies.emplace_back(buffer.begin(), buffer.begin() + static_cast<long>(size));
   }
-  source.description =
-      std::string("simulated Pandar40P, ") + std::string(to_string(mode)) + " return, 600 RPM";
+  source.description = "simulated Pandar40P, " + std::string(to_string(config.return_mode)) +
+                       " return, " + std::to_string(config.rpm) + " RPM";
   return source;
 }
 
@@ -82,8 +83,12 @@ TrafficSource TrafficSource::from_capture(const std::string& path) {
 }
 
 GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& o) {
-  const int fd = udp_socket();
   const sockaddr_in destination = ipv4(o.destination_ip, o.port);
+  if (o.foreign_fraction > 0 && (ntohl(destination.sin_addr.s_addr) >> 24) != 127) {
+    throw std::runtime_error("foreign traffic is sent from 127.0.0.2, which cannot reach " +
+                             o.destination_ip + "; use a 127.x.x.x destination");
+  }
+  const int fd = udp_socket();
   int foreign_fd = -1;
   if (o.foreign_fraction > 0) {
     foreign_fd = udp_socket();
@@ -103,6 +108,8 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
 
   GeneratorResult result;
   double foreign_credit = 0, malformed_credit = 0;
+  timespec cpu_start{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu_start);
   const std::int64_t start = monotonic_ns();
   const auto end = start + static_cast<std::int64_t>(o.seconds * 1e9);
   for (;;) {
@@ -130,7 +137,7 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
       messages[i].msg_hdr.msg_name = const_cast<sockaddr_in*>(&destination);
       messages[i].msg_hdr.msg_namelen = sizeof destination;
       messages[i].msg_hdr.msg_iov = iovecs[i].data();
-      messages[i].msg_hdr.msg_iovlen = 2;
+      messages[i].msg_hdr.msg_iovlen = o.udp_sequence ? 2 : 1;
     }
     const int sent = ::sendmmsg(fd, messages.data(), n, 0);
     if (sent < 0) {
@@ -160,6 +167,10 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
   }
   result.seconds = static_cast<double>(monotonic_ns() - start) / 1e9;
   result.achieved_pps = static_cast<double>(result.sent) / result.seconds;
+  timespec cpu_end{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu_end);
+  result.cpu_seconds = static_cast<double>(cpu_end.tv_sec - cpu_start.tv_sec) +
+                       static_cast<double>(cpu_end.tv_nsec - cpu_start.tv_nsec) / 1e9;
   if (foreign_fd >= 0) ::close(foreign_fd);
   ::close(fd);
   return result;

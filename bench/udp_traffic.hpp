@@ -2,8 +2,9 @@
 // two reference receivers the daemon is compared with (recvmmsg into a buffer, and recvfrom one
 // packet per call, the vendor SDKs' way).
 //
-// Every generated packet is a 1266-byte Pandar40P packet whose 4-byte UDP sequence the generator
-// writes itself (0, 1, 2, ...), so a receiver's loss is exact: sent - received.
+// By default every generated packet is a 1266-byte Pandar40P packet whose 4-byte UDP sequence the
+// generator writes itself (0, 1, 2, ...), so a receiver's loss is exact: sent - received, and a
+// daemon counts any gap. Without it the packets are the sensor's plain 1262 bytes.
 #pragma once
 
 #include <atomic>
@@ -13,6 +14,7 @@
 #include <vector>
 
 #include "core/packet.hpp"
+#include "core/synthetic_sensor.hpp"
 
 namespace pandarcap::bench {
 
@@ -21,8 +23,10 @@ struct TrafficSource {
   std::vector<std::vector<std::uint8_t>> bodies;
   std::string description;
 
-  // `count` packets of the simulated sensor (600 RPM) in `mode`.
-  static TrafficSource synthetic(ReturnMode mode, std::size_t count);
+  // One second of the simulated sensor (`sensor.rpm`, `sensor.return_mode`): 3600 packets in
+  // dual return, 1800 in single, whatever the RPM (the firing rate is fixed; the azimuth step
+  // per block grows with the RPM). Its sequence settings are ignored: the generator writes them.
+  static TrafficSource synthetic(const SyntheticSensorConfig& sensor);
   // Every valid Pandar40P packet of a pcap/pcapng file (its own sequence, if any, is replaced).
   // Throws std::runtime_error when the file has none.
   static TrafficSource from_capture(const std::string& path);
@@ -37,6 +41,7 @@ struct GeneratorOptions {
   // The first packet's UDP sequence (and place in the source's bodies): a second run that
   // continues a first one's stream starts at the first one's `sent`.
   std::uint64_t first_sequence = 0;
+  bool udp_sequence = true;  // false: 1262-byte packets, loss only from the receiver's count
   // Bursts: every `burst_every_s`, `burst_ms` at `burst_factor` x the rate.
   double burst_factor = 1;
   double burst_ms = 0;
@@ -54,10 +59,12 @@ struct GeneratorResult {
   std::uint64_t send_errors = 0;  // sendmmsg failures other than a full socket buffer
   double seconds = 0;
   double achieved_pps = 0;  // valid packets per second actually sent
+  double cpu_seconds = 0;   // the sending thread's CPU time (CLOCK_THREAD_CPUTIME_ID)
 };
 
 // Sends for `options.seconds`, paced in batches against CLOCK_MONOTONIC. Throws
-// std::runtime_error when the socket cannot be set up.
+// std::runtime_error when the socket cannot be set up, or when foreign traffic (sent from
+// 127.0.0.2) is asked for towards a destination outside 127.0.0.0/8, which it could not reach.
 GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& options);
 
 // A reference receiver on 127.0.0.1: a thread that receives and counts, nothing else.

@@ -230,6 +230,7 @@ class Harness {
     ordered_json t = {
         {"offered_pps", rate},
         {"achieved_pps", sent.achieved_pps},
+        {"generator_cpu_fraction_of_one_core", sent.cpu_seconds / sent.seconds},
         {"sent", sent.sent},
         {"received", received},
         {"accepted", accepted},
@@ -262,6 +263,7 @@ class Harness {
     const std::uint64_t lost = sent.sent - received;
     return {{"offered_pps", rate},
             {"achieved_pps", sent.achieved_pps},
+            {"generator_cpu_fraction_of_one_core", sent.cpu_seconds / sent.seconds},
             {"sent", sent.sent},
             {"received", received},
             {"delivered_pps", static_cast<double>(received) / sent.seconds},
@@ -319,7 +321,7 @@ SearchResult search(const std::function<ordered_json(double)>& trial,
 }  // namespace
 
 ordered_json run_zero_loss(const ZeroLossOptions& o) {
-  const TrafficSource source = o.capture.empty() ? TrafficSource::synthetic(ReturnMode::kDual, 3600)
+  const TrafficSource source = o.capture.empty() ? TrafficSource::synthetic(o.sensor)
                                                  : TrafficSource::from_capture(o.capture);
   const bool temporary = o.work_dir.empty();
   const fs::path work =
@@ -342,7 +344,7 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   // under it on this machine: a bare recvmmsg loop woken by the same traffic, doing nothing else.
   const double sensor_seconds = std::max(o.trial_seconds, 3.0);
   ordered_json at_sensor = harness.daemon_trial(o.sensor_rate, sensor_seconds);
-  ordered_json bare_at_sensor;
+  ordered_json bare_at_sensor = ordered_json::object();  // stays empty with --daemon-only
   if (!o.skip_references) {
     bare_at_sensor =
         harness.reference_trial(ReferenceReceiver::Kind::kRecvmmsg, o.sensor_rate, sensor_seconds);

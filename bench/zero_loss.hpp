@@ -21,12 +21,13 @@
 namespace pandarcap::bench {
 
 struct ZeroLossOptions {
-  std::string daemon;         // pandarcapd to start; "" = the one beside pandarcap-bench
-  std::string daemon_config;  // passed as -c; the harness overrides address, port and output
-  std::string capture;        // packets to send; "" = the simulated sensor (dual return)
-  std::string work_dir;       // daemon outputs and logs; "" = a temporary directory, removed
-  double trial_seconds = 10;  // RFC 2544 uses 60
-  double min_rate = 1000;     // packets/s; the search starts by checking this rate
+  std::string daemon;            // pandarcapd to start; "" = the one beside pandarcap-bench
+  std::string daemon_config;     // passed as -c; the harness overrides address, port and output
+  std::string capture;           // packets to send; "" = the simulated sensor below
+  SyntheticSensorConfig sensor;  // the simulated sensor: 600 RPM, dual return by default
+  std::string work_dir;          // daemon outputs and logs; "" = a temporary directory, removed
+  double trial_seconds = 10;     // RFC 2544 uses 60
+  double min_rate = 1000;        // packets/s; the search starts by checking this rate
   double max_rate = 1'000'000;
   int steps = 7;                  // bisections after the two end points (geometric)
   double sensor_rate = 3600;      // one dual-return Pandar40P at 600 RPM

@@ -1,6 +1,10 @@
 // pandarcap-bench as a user runs it. Only the shape and the correctness of the report are checked
 // here (every key the acceptance checks read, no item out of order, consistent ratios); the
 // figures themselves are performance claims and belong to the README, not to a test.
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <fstream>
@@ -9,6 +13,7 @@
 #include <string>
 
 #include "core/decoder_target.hpp"
+#include "core/packet.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;
@@ -163,6 +168,143 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "
   CHECK_THAT(md.str(), Catch::Contains("zero-loss rate"));
   CHECK(svg.str().rfind("<svg ", 0) == 0);
   CHECK_THAT(svg.str(), Catch::Contains("</svg>") && Catch::Contains("<polyline"));
+}
+
+TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-return traffic",
+          "[bench][cli]") {
+  const auto result = test::run_command(
+      bench() + " zero-loss --json --daemon-only --trial-seconds 0.5 --min-rate 1000" +
+      " --max-rate 2000 --steps 0 --sensor-rate 1000 --rpm 1200 --return-mode single 2>&1");
+  INFO(result.out);
+  REQUIRE(result.exit_code == 0);
+  const json report = json::parse(result.out);
+  CHECK(report["trials"]["bare_recvmmsg"].empty());
+  CHECK(report["trials"]["recvfrom"].empty());
+  CHECK(report["bare_recvmmsg_zero_loss_pps"].get<double>() == 0);
+  CHECK(report["daemon_vs_bare"].get<double>() == 0);
+  CHECK(report["daemon_zero_loss_pps"].get<double>() >= 900);
+  CHECK(report["at_sensor_rate"]["bare_recvmmsg_cpu_fraction_of_one_core"].get<double>() == 0);
+  CHECK(report["at_sensor_rate"]["cpu_fraction_of_one_core"].get<double>() > 0);
+  // The traffic options reach the generator, and the daemon takes that stream whole.
+  CHECK(report["settings"]["traffic"] == "simulated Pandar40P, strongest return, 1200 RPM");
+  const json& first = report["trials"]["daemon"][0];
+  CHECK(first["sent"].get<std::uint64_t>() == first["accepted"].get<std::uint64_t>());
+  CHECK(first["generator_cpu_fraction_of_one_core"].get<double>() > 0);
+}
+
+namespace {
+
+// A UDP socket on 127.0.0.1 with room for everything a short `send` run offers, read after the
+// sender has exited.
+class LoopbackSink {
+ public:
+  LoopbackSink() : fd_(::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0)) {
+    REQUIRE(fd_ >= 0);
+    const int buffer = 16 << 20;
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUFFORCE, &buffer, sizeof buffer);
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &buffer, sizeof buffer);
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    REQUIRE(::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0);
+    socklen_t length = sizeof address;
+    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&address), &length);
+    port_ = ntohs(address.sin_port);
+  }
+  ~LoopbackSink() { ::close(fd_); }
+  LoopbackSink(const LoopbackSink&) = delete;
+  LoopbackSink& operator=(const LoopbackSink&) = delete;
+
+  int port() const { return port_; }
+  // Every datagram queued now (the sender has finished, so nothing more is coming).
+  std::vector<std::vector<std::uint8_t>> take_all() const {
+    std::vector<std::vector<std::uint8_t>> datagrams;
+    std::vector<std::uint8_t> buffer(65536);
+    for (;;) {
+      const ssize_t n = ::recv(fd_, buffer.data(), buffer.size(), MSG_DONTWAIT);
+      if (n < 0) break;
+      datagrams.emplace_back(buffer.begin(), buffer.begin() + n);
+    }
+    return datagrams;
+  }
+
+ private:
+  int fd_;
+  int port_ = 0;
+};
+
+}  // namespace
+
+TEST_CASE("pandarcap-bench send: the generator on its own, checked packet by packet",
+          "[bench][cli]") {
+  LoopbackSink sink;
+  SECTION("single return at 1200 RPM, with UDP sequences") {
+    const auto result = test::run_command(
+        bench() + " send --json --rate 2000 --seconds 0.5 --rpm 1200 --return-mode single" +
+        " --first-sequence 7 --port " + std::to_string(sink.port()) + " 2>&1");
+    INFO(result.out);
+    REQUIRE(result.exit_code == 0);
+    const json report = json::parse(result.out);
+    CHECK(report["destination"] == "127.0.0.1");
+    CHECK(report["packet_bytes"] == kPacketWithSequenceBytes);
+    CHECK(report["achieved_pps"].get<double>() == Approx(2000).epsilon(0.1));
+    const auto sent = report["sent"].get<std::uint64_t>();
+    CHECK(report["last_sequence"].get<std::uint64_t>() == 7 + sent - 1);
+
+    const auto datagrams = sink.take_all();
+    REQUIRE(datagrams.size() == sent);
+    int previous_azimuth = -1;
+    for (std::size_t i = 0; i < datagrams.size(); ++i) {
+      INFO("packet " << i);
+      const auto view = PacketView::make(datagrams[i]);
+      REQUIRE(view);
+      const PacketView& packet = *view;
+      REQUIRE(packet.sequence() == std::optional<std::uint32_t>(7 + i));
+      CHECK(packet.return_mode() == ReturnMode::kStrongest);
+      CHECK(packet.motor_rpm() == Approx(1200).margin(5));  // measured, so it wanders a little
+      // 1200 RPM: 1200/60 x 360 deg x 55.56 us = 0.40 deg per block, ten blocks per packet.
+      const int step = (packet.azimuth_cdeg(9) - packet.azimuth_cdeg(0) + 36000) % 36000;
+      CHECK(step == Approx(360).margin(2));
+      if (previous_azimuth >= 0) {
+        CHECK((packet.azimuth_cdeg(0) - previous_azimuth + 36000) % 36000 == Approx(400).margin(2));
+      }
+      previous_azimuth = packet.azimuth_cdeg(0);
+    }
+  }
+  SECTION("dual return at 600 RPM, plain 1262-byte packets") {
+    const auto result =
+        test::run_command(bench() + " send --json --rate 1000 --seconds 0.3" +
+                          " --no-sequence --port " + std::to_string(sink.port()) + " 2>&1");
+    INFO(result.out);
+    REQUIRE(result.exit_code == 0);
+    const json report = json::parse(result.out);
+    CHECK(report["packet_bytes"] == kPacketBytes);
+    const auto datagrams = sink.take_all();
+    REQUIRE(datagrams.size() == report["sent"].get<std::uint64_t>());
+    for (const auto& datagram : datagrams) {
+      const auto view = PacketView::make(datagram);
+      REQUIRE(view);
+      const PacketView& packet = *view;
+      CHECK_FALSE(packet.has_sequence());
+      CHECK(packet.return_mode() == ReturnMode::kDual);
+      CHECK(packet.motor_rpm() == Approx(600).margin(5));
+      // Dual return: blocks 2k and 2k+1 share one firing and so one azimuth.
+      CHECK(packet.azimuth_cdeg(0) == packet.azimuth_cdeg(1));
+    }
+  }
+  SECTION("bad requests are usage errors, and nothing is sent") {
+    for (const std::string& options :
+         {std::string(" send --destination 10.0.0.1 --foreign-fraction 0.5"),
+          std::string(" send --destination sensor.local"), std::string(" send --rpm 900"),
+          std::string(" send --return-mode triple"), std::string(" send --rate 0")}) {
+      INFO(options);
+      const auto result = test::run_command(bench() + options + " --seconds 0.2 --port " +
+                                            std::to_string(sink.port()) + " 2>&1");
+      CHECK(result.exit_code == 64);
+      CHECK_THAT(result.out, Catch::Contains("Try 'pandarcap-bench send --help'"));
+    }
+    CHECK(sink.take_all().empty());
+  }
 }
 
 TEST_CASE("pandarcap-bench write --json: PCD and pcap rates from one run", "[bench][cli]") {

@@ -60,7 +60,7 @@ struct LiveDaemon {
   // packet certainly arrives and the sequence tracker sees every gap (a loss at the very end of a
   // stream is invisible to sequence numbers). `sent` counts the tail's packets too.
   bench::GeneratorResult send(bench::GeneratorOptions traffic) {
-    const auto source = bench::TrafficSource::synthetic(ReturnMode::kDual, 3600);
+    const auto source = bench::TrafficSource::synthetic(SyntheticSensorConfig{});
     traffic.port = port;
     bench::GeneratorResult sent = bench::run_generator(source, traffic);
     REQUIRE(sent.send_errors == 0);

@@ -53,7 +53,7 @@ TEST_CASE(
   REQUIRE(
       harness::wait_until([&] { return daemon.log().find("ready:") != std::string::npos; }, 20s));
 
-  const auto source = bench::TrafficSource::synthetic(ReturnMode::kDual, 3600);
+  const auto source = bench::TrafficSource::synthetic(SyntheticSensorConfig{});
   bench::GeneratorOptions traffic;
   traffic.port = port;
   traffic.rate_pps = 36000;
