@@ -132,6 +132,52 @@ class Panel {
   bool log_y_;
 };
 
+// "0.42 cores", or "-" for a trial from a report that did not measure it.
+std::string cores(double fraction) {
+  return fraction < 0 ? "-" : fmt::format("{:.2f} cores", fraction);
+}
+
+// The stages at which a trial's packets were not fully handled, with their counts ("-": none).
+std::string not_done(const ordered_json& t) {
+  std::string out;
+  if (t.contains("loss_by_stage")) {
+    for (const auto& [stage, n] : t["loss_by_stage"].items()) {
+      if (n.get<std::uint64_t>() > 0)
+        out += fmt::format("{}{} {}", out.empty() ? "" : ", ", stage, n.dump());
+    }
+  } else if (t.value("kernel_drops", std::uint64_t{0}) > 0) {
+    out = "kernel_drops " + t["kernel_drops"].dump();
+  }
+  return out.empty() ? "-" : out;
+}
+
+// Where the daemon's search stopped, in CPU: at the lowest rate it failed, what the generator
+// and the daemon's threads used against the cores there are. On a machine whose cores the sender
+// shares, this is the budget the daemon ran out of.
+std::string cpu_budget(const ordered_json& r) {
+  const ordered_json* lowest_failed = nullptr;
+  for (const auto& t : r["trials"]["daemon"]) {
+    if (t.value("passed", true) || !t.contains("generator_cpu_fraction_of_one_core")) continue;
+    if (!lowest_failed || t["offered_pps"] < (*lowest_failed)["offered_pps"]) lowest_failed = &t;
+  }
+  if (!lowest_failed) return {};
+  const ordered_json& t = *lowest_failed;
+  std::string threads;
+  for (const auto& [name, u] : t["cpu_by_thread"].items()) {
+    const double f = u["cpu_fraction_of_one_core"].get<double>();
+    if (f >= 0.005) threads += fmt::format("{}{} {:.2f}", threads.empty() ? "" : ", ", name, f);
+  }
+  const double generator = t["generator_cpu_fraction_of_one_core"].get<double>();
+  const double daemon = t["cpu_fraction_of_one_core"].get<double>();
+  return fmt::format(
+      "CPU at the lowest rate the daemon failed ({} packets/s; {}): the generator used {:.2f} "
+      "of a core (sending, and the kernel's loopback delivery, which runs in the sender), the "
+      "daemon {:.2f} ({}): {:.2f} of the {} cores, before the kernel's own writeback of the "
+      "files.\n\n",
+      rate(t["offered_pps"].get<double>()), not_done(t), generator, daemon, threads,
+      generator + daemon, r["environment"].value("cores", 0));
+}
+
 }  // namespace
 
 std::string zero_loss_markdown(const ordered_json& r) {
@@ -201,16 +247,19 @@ std::string zero_loss_markdown(const ordered_json& r) {
       "- Heap allocations in the receive, decode and writer loops after warm-up: "
       "**{}** (goal 0: {}).\n\n",
       s["hot_path_allocations"].dump(), yes_no(g["zero_hot_path_allocations"]));
+  md += cpu_budget(r);
   for (const char* who : {"daemon", "bare_recvmmsg", "recvfrom"}) {
     md += fmt::format(
-        "Trials, {}:\n\n| offered | achieved | delivered | lost | passed |\n"
-        "|---:|---:|---:|---:|:---:|\n",
+        "Trials, {}:\n\n| offered | achieved | delivered | lost | not done, by stage | CPU: "
+        "generator | CPU: receiver | passed |\n|---:|---:|---:|---:|---|---:|---:|:---:|\n",
         who);
     for (const auto& t : r["trials"][who]) {
-      md +=
-          fmt::format("| {} | {} | {} | {} | {} |\n", rate(t["offered_pps"].get<double>()),
-                      rate(t["achieved_pps"].get<double>()), rate(t["delivered_pps"].get<double>()),
-                      t["lost"].get<std::uint64_t>(), t.value("passed", false) ? "yes" : "no");
+      md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                        rate(t["offered_pps"].get<double>()), rate(t["achieved_pps"].get<double>()),
+                        rate(t["delivered_pps"].get<double>()), t["lost"].get<std::uint64_t>(),
+                        not_done(t), cores(t.value("generator_cpu_fraction_of_one_core", -1.0)),
+                        cores(t.value("cpu_fraction_of_one_core", -1.0)),
+                        t.value("passed", false) ? "yes" : "no");
     }
     md += "\n";
   }
