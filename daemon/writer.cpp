@@ -413,10 +413,9 @@ void Writer::build_health(std::int64_t now) {
   const auto grew = [&](std::uint64_t now_value, std::uint64_t before, const char* what) {
     if (now_value > before) problem("{} {}", now_value - before, what);
   };
-  if (write_errors_ > write_errors_at_last_tick_) {
-    problem("{} write errors ({} bytes not written): {}",
-            write_errors_ - write_errors_at_last_tick_,
-            bytes_not_written_ - bytes_not_written_at_last_tick_, last_error_);
+  if (c.write_errors > p.write_errors) {
+    problem("{} write errors ({} bytes not written): {}", c.write_errors - p.write_errors,
+            c.bytes_not_written - p.bytes_not_written, last_error_);
   }
   grew(c.kernel_drops, p.kernel_drops, "kernel drops");
   grew(c.ring_overruns, p.ring_overruns, "ring overruns");
@@ -482,8 +481,6 @@ void Writer::write_health(bool final) {
   build_health(now);
   reported_silent_ = silent(now);
   previous_counters_ = health_.counters;
-  write_errors_at_last_tick_ = write_errors_;
-  bytes_not_written_at_last_tick_ = bytes_not_written_;
   decode_prev_ = decode_;
   try {
     if (options_.prometheus) {

@@ -138,7 +138,6 @@ class Writer {
   std::uint64_t pcd_bytes_ = 0, pcap_packets_ = 0, pcap_packets_not_written_ = 0;
   std::uint64_t pcap_bytes_closed_ = 0;  // in finished files; the open one adds its own
   std::uint64_t write_errors_ = 0, bytes_not_written_ = 0;
-  std::uint64_t write_errors_at_last_tick_ = 0, bytes_not_written_at_last_tick_ = 0;
   std::int64_t last_error_log_ns_ = -1;
   std::string last_error_;
   HealthCounters previous_counters_{};
