@@ -40,10 +40,15 @@ int udp_socket() {
   return fd;
 }
 
+// Whether the options ask for bursts at all.
+bool has_bursts(const GeneratorOptions& o) {
+  return o.burst_ms > 0 && o.burst_factor > 1 && o.burst_every_s > 0;
+}
+
 // Valid packets due by `elapsed_s`: the base rate, plus the extra of every burst window so far.
 double due_packets(const GeneratorOptions& o, double elapsed_s) {
   double due = o.rate_pps * elapsed_s;
-  if (o.burst_ms > 0 && o.burst_factor > 1 && o.burst_every_s > 0) {
+  if (has_bursts(o)) {
     const double window = o.burst_ms / 1000.0;
     const double whole = std::floor(elapsed_s / o.burst_every_s);
     const double into = std::min(window, elapsed_s - whole * o.burst_every_s);
@@ -83,12 +88,21 @@ TrafficSource TrafficSource::from_capture(const std::string& path) {
   return source;
 }
 
-GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& o) {
-  const sockaddr_in destination = ipv4(o.destination_ip, o.port);
-  if (o.foreign_fraction > 0 && (ntohl(destination.sin_addr.s_addr) >> 24) != 127) {
-    throw std::runtime_error("foreign traffic is sent from 127.0.0.2, which cannot reach " +
-                             o.destination_ip + "; use a 127.x.x.x destination");
+std::optional<std::string> generator_options_problem(const GeneratorOptions& o) {
+  in_addr address{};
+  if (inet_pton(AF_INET, o.destination_ip.c_str(), &address) != 1) {
+    return "not an IPv4 address: " + o.destination_ip;
   }
+  if (o.foreign_fraction > 0 && (ntohl(address.s_addr) >> 24) != 127) {
+    return "foreign traffic is sent from 127.0.0.2, which cannot reach " + o.destination_ip +
+           "; use a 127.x.x.x destination";
+  }
+  return std::nullopt;
+}
+
+GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& o) {
+  if (const auto problem = generator_options_problem(o)) throw std::runtime_error(*problem);
+  const sockaddr_in destination = ipv4(o.destination_ip, o.port);
   const int fd = udp_socket();
   int foreign_fd = -1;
   if (o.foreign_fraction > 0) {
@@ -109,7 +123,7 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
 
   GeneratorResult result;
   double foreign_credit = 0, malformed_credit = 0;
-  const bool bursting = o.burst_ms > 0 && o.burst_factor > 1 && o.burst_every_s > 0;
+  const bool bursting = has_bursts(o);
   // Sleeps end within a microsecond of their deadline instead of the default 50 µs slack, so a
   // packet leaves when it is due (restored on return: the caller's thread is borrowed).
   const int old_slack = ::prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0);

@@ -9,6 +9,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -62,9 +63,13 @@ struct GeneratorResult {
   double cpu_seconds = 0;   // the sending thread's CPU time (CLOCK_THREAD_CPUTIME_ID)
 };
 
+// Why `options` cannot be sent, or nothing when they can: a destination that is not an IPv4
+// address, or foreign traffic (sent from 127.0.0.2) towards a destination outside 127.0.0.0/8,
+// which it could not reach. Command lines check this first, to report a usage error.
+std::optional<std::string> generator_options_problem(const GeneratorOptions& options);
+
 // Sends for `options.seconds`, paced in batches against CLOCK_MONOTONIC. Throws
-// std::runtime_error when the socket cannot be set up, or when foreign traffic (sent from
-// 127.0.0.2) is asked for towards a destination outside 127.0.0.0/8, which it could not reach.
+// std::runtime_error with generator_options_problem(), or when the socket cannot be set up.
 GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& options);
 
 // A reference receiver on 127.0.0.1: a thread that receives and counts, nothing else.
