@@ -29,6 +29,7 @@ using namespace pandarcap;
 using namespace std::chrono_literals;
 using nlohmann::json;
 namespace fs = std::filesystem;
+using test::files_ending;
 using test::health_counter;
 using test::health_records;
 
@@ -95,16 +96,6 @@ std::size_t pcd_points(const fs::path& file) {
   return 0;
 }
 
-std::vector<fs::path> files_with(const fs::path& dir, const std::string& extension) {
-  std::vector<fs::path> files;
-  if (!fs::exists(dir)) return files;
-  for (const auto& entry : fs::directory_iterator(dir)) {
-    if (entry.path().extension() == extension) files.push_back(entry.path());
-  }
-  std::sort(files.begin(), files.end());
-  return files;
-}
-
 // The daemon as the shell commands below run it. --allow-root: the tests (and CI) may run as
 // root; the refusal itself is tested in test_privileges.cpp.
 std::string pandarcapd() {
@@ -145,7 +136,7 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
   CHECK(fs::exists(out / "health" / "pandarcap.prom"));
 
   // Frames: one PCD per frame; the complete ones hold the points the decoder verified.
-  const auto pcds = files_with(out / "frames", ".pcd");
+  const auto pcds = files_ending(out / "frames", ".pcd");
   CHECK(pcds.size() == health_counter(h, "frames_written"));
   std::multiset<std::size_t> complete_points;
   for (const fs::path& pcd : pcds) {
@@ -156,7 +147,7 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
   CHECK(complete_points == std::multiset<std::size_t>{56723, 56762});
 
   // Raw: the recording holds exactly the capture's payloads, in order, and tcpdump reads it.
-  const auto pcaps = files_with(out / "raw", ".pcap");
+  const auto pcaps = files_ending(out / "raw", ".pcap");
   REQUIRE(pcaps.size() == 1);
   CHECK(recorded(out / "raw") == payloads_of(*capture));
   CHECK(fs::exists(out / "raw" / "calibration.csv"));
@@ -219,7 +210,7 @@ TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all ac
   CHECK(raw.size() == health_counter(h, "packets_accepted"));
   if (health_counter(h, "kernel_drops") == 0) CHECK(raw == payloads);
   // The frame in progress at SIGTERM was finished as partial, and nothing was left half-written.
-  CHECK(files_with(out / "frames", ".pcd").size() == health_counter(h, "frames_written"));
+  CHECK(files_ending(out / "frames", ".pcd").size() == health_counter(h, "frames_written"));
   CHECK(health_counter(h, "frames_written") >= 3);
   check_no_temporary_files(out);
 }
@@ -258,7 +249,7 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
   REQUIRE(daemon.wait_exit(10s) == 0);
   const json h = last_health(out);
   INFO(daemon.log());
-  CHECK(files_with(out / "raw", ".pcap").size() == 2);
+  CHECK(files_ending(out / "raw", ".pcap").size() == 2);
   if (health_counter(h, "kernel_drops") == 0) CHECK(recorded(out / "raw") == payloads);
   check_no_temporary_files(out);
 }
@@ -326,7 +317,7 @@ TEST_CASE("pandarcapd --decoder: every target this CPU runs writes the scalar re
         target == "auto" ? std::string(to_string(best_decoder_target())) : target;
     CHECK(result.out.find("decoder: " + ran) != std::string::npos);
     std::map<std::string, std::size_t> frames;
-    for (const fs::path& pcd : files_with(out / "frames", ".pcd")) {
+    for (const fs::path& pcd : files_ending(out / "frames", ".pcd")) {
       frames[pcd.filename().string()] = pcd_points(pcd);
     }
     return frames;
@@ -360,7 +351,7 @@ TEST_CASE("replay waits for free arenas: two arenas at top speed still write eve
   CHECK(health_counter(h, "frames_dropped_no_arena") == 0);
   CHECK(health_counter(h, "pcap_packets_not_recorded") == 0);
   CHECK(health_counter(h, "frames_written") == 6);
-  CHECK(files_with(out / "frames", ".pcd").size() == 6);
+  CHECK(files_ending(out / "frames", ".pcd").size() == 6);
   CHECK(recorded(out / "raw").size() == 1439);
 }
 
@@ -516,7 +507,7 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   // Every frame that had an arena was written; the dropped ones are exactly the counted ones.
   CHECK(health_counter(h, "frames_written") ==
         health_counter(h, "frames_complete") + health_counter(h, "frames_partial"));
-  CHECK(files_with(out / "frames", ".pcd").size() == health_counter(h, "frames_written"));
+  CHECK(files_ending(out / "frames", ".pcd").size() == health_counter(h, "frames_written"));
   // Fixed memory: the stall grew nothing (the queues and arenas are preallocated).
   CHECK(rss_stalled <= rss_before + (2u << 20));
 }

@@ -35,20 +35,12 @@ using namespace pandarcap;
 using namespace std::chrono_literals;
 using nlohmann::json;
 namespace fs = std::filesystem;
+using test::files_ending;
 using test::health_counter;
 using test::json_lines;
 using test::open_descriptors;
 
 namespace {
-
-std::vector<fs::path> files_ending(const fs::path& dir, const std::string& suffix) {
-  std::vector<fs::path> files;
-  std::error_code ec;
-  for (const auto& entry : fs::directory_iterator(dir, ec)) {
-    if (entry.path().native().ends_with(suffix)) files.push_back(entry.path());
-  }
-  return files;
-}
 
 // Temporary and unfinished files anywhere under `dir`: ".NAME.tmp" and "NAME.pcap.part".
 std::set<fs::path> unfinished_files(const fs::path& dir) {

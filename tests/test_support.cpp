@@ -3,6 +3,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <catch2/catch.hpp>
 #include <cstdio>
@@ -82,6 +83,17 @@ void check_record_spacing(const std::vector<nlohmann::json>& records, double min
     CHECK(gap > min_gap_s);
     CHECK(gap <= 1.5);
   }
+}
+
+std::vector<std::filesystem::path> files_ending(const std::filesystem::path& dir,
+                                                const std::string& suffix) {
+  std::vector<std::filesystem::path> files;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+    if (entry.path().native().ends_with(suffix)) files.push_back(entry.path());
+  }
+  std::sort(files.begin(), files.end());
+  return files;
 }
 
 std::size_t open_descriptors(int pid) {

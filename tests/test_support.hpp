@@ -55,6 +55,11 @@ std::uint64_t health_counter(const nlohmann::json& record, std::string_view name
 // one before it sooner, so its gap is not checked.
 void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s);
 
+// The files directly in `dir` whose names end in `suffix` (".pcd", ".pcap"), sorted. No
+// directory: none.
+std::vector<std::filesystem::path> files_ending(const std::filesystem::path& dir,
+                                                const std::string& suffix);
+
 // How many file descriptors process `pid` has open (/proc/PID/fd).
 std::size_t open_descriptors(int pid);
 
