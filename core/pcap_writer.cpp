@@ -121,28 +121,34 @@ PcapWriter::~PcapWriter() {
   if (file_ != nullptr) std::fclose(file_);
 }
 
-void PcapWriter::write(std::span<const std::uint8_t> udp_payload, std::int64_t timestamp_ns,
+void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
+                       std::size_t original_payload_bytes, std::int64_t timestamp_ns,
                        Endpoint source, Endpoint destination) {
   if (udp_payload.size() > kMaxUdpPayloadBytes) {
     throw std::invalid_argument("UDP payload of " + std::to_string(udp_payload.size()) +
                                 " bytes exceeds the maximum of " +
                                 std::to_string(kMaxUdpPayloadBytes));
   }
+  // A datagram longer than IPv4 can carry was not received as one: the headers say the most
+  // they can, and the record still holds only what was kept.
+  const std::size_t original =
+      std::clamp(original_payload_bytes, udp_payload.size(), kMaxUdpPayloadBytes);
   const std::int64_t seconds = timestamp_ns / kNsPerSecond;
   if (timestamp_ns < 0 || seconds > std::int64_t{UINT32_MAX}) {
     throw std::invalid_argument("timestamp " + std::to_string(timestamp_ns) +
                                 " ns is outside the pcap range (1970 to 2106)");
   }
   const std::int64_t microseconds = timestamp_ns % kNsPerSecond / kNsPerMicrosecond;
-  const auto udp_length = static_cast<std::uint16_t>(kUdpBytes + udp_payload.size());
+  const auto udp_length = static_cast<std::uint16_t>(kUdpBytes + original);
   const auto ip_length = static_cast<std::uint16_t>(kIpv4Bytes + udp_length);
-  const auto frame_bytes = static_cast<std::uint32_t>(kHeadersBytes + udp_payload.size());
+  const auto captured_bytes = static_cast<std::uint32_t>(kHeadersBytes + udp_payload.size());
+  const auto original_bytes = static_cast<std::uint32_t>(kHeadersBytes + original);
 
   ByteWriter<kPcapRecordHeaderBytes + kHeadersBytes> out;
   out.native_u32(static_cast<std::uint32_t>(seconds));
   out.native_u32(static_cast<std::uint32_t>(microseconds));
-  out.native_u32(frame_bytes);  // captured length
-  out.native_u32(frame_bytes);  // original length
+  out.native_u32(captured_bytes);  // bytes in this record
+  out.native_u32(original_bytes);  // bytes the datagram had on the wire
 
   constexpr std::array<std::uint8_t, 6> kDestinationMac{0x02, 0, 0, 0, 0, 0x02};
   constexpr std::array<std::uint8_t, 6> kSourceMac{0x02, 0, 0, 0, 0, 0x01};

@@ -50,11 +50,20 @@ class PcapWriter {
   PcapWriter(const PcapWriter&) = delete;
   PcapWriter& operator=(const PcapWriter&) = delete;
 
-  // Appends one record. `timestamp_ns` is truncated to microseconds. Payloads longer than a UDP
-  // datagram can carry (65507 bytes), and times outside 1970..2106 (classic pcap stores seconds
-  // as an unsigned 32-bit number), throw std::invalid_argument.
+  // Appends one record of a whole datagram. `timestamp_ns` is truncated to microseconds.
+  // Payloads longer than a UDP datagram can carry (65507 bytes), and times outside 1970..2106
+  // (classic pcap stores seconds as an unsigned 32-bit number), throw std::invalid_argument.
   void write(std::span<const std::uint8_t> udp_payload, std::int64_t timestamp_ns, Endpoint source,
-             Endpoint destination);
+             Endpoint destination) {
+    write(udp_payload, udp_payload.size(), timestamp_ns, source, destination);
+  }
+  // Appends one record of a datagram of which only `kept` (its first bytes) is held: a datagram
+  // the socket cut, or a record a capture's snap length cut. The record claims no byte it does
+  // not hold: its captured length covers the headers and `kept`, its original length and the
+  // IPv4 / UDP length fields the whole `original_payload_bytes` (at least kept.size(), at most
+  // 65507), as a capture tool with a short snap length writes it.
+  void write(std::span<const std::uint8_t> kept, std::size_t original_payload_bytes,
+             std::int64_t timestamp_ns, Endpoint source, Endpoint destination);
   void flush();
   void close();
 

@@ -109,6 +109,7 @@ json packet_json(std::uint64_t index, const CaptureRecord& record, RejectReason 
   j["source"] = to_string(record.source);
   j["destination"] = to_string(record.destination);
   j["size"] = record.payload.size();
+  if (record.snapped) j["original_size"] = record.udp_payload_length;  // the file holds a part
   j["status"] = reason == RejectReason::kNone ? "ok" : std::string(to_string(reason));
   // Fields are shown for accepted packets only: a rejected payload's bytes mean nothing.
   if (reason != RejectReason::kNone) return j;
@@ -201,7 +202,10 @@ int run(const Options& options) {
   std::uint64_t snapped = 0;
   while ((status = reader.next(record)) == CaptureStatus::kRecord) {
     if (record.snapped) ++snapped;
-    const RejectReason reason = decoder.process(record.payload);
+    // A record the file holds only part of is not the packet the sensor sent, even when the part
+    // has a valid length: rejected as bad_length (an empty payload), exactly as the daemon does.
+    const RejectReason reason =
+        decoder.process(record.snapped ? std::span<const std::uint8_t>() : record.payload);
     if (per_packet) {
       json p = packet_json(index, record, reason);
       if (options.json_output) {

@@ -110,6 +110,8 @@ ReplayResult ReplaySource::run(ringbuf::PacketRing& ring, const std::atomic<bool
     const std::size_t kept = std::min(record.payload.size(), sizeof slot.payload);
     std::memcpy(slot.payload, record.payload.data(), kept);
     slot.length = static_cast<std::uint32_t>(kept);
+    slot.original_length =
+        std::max(record.udp_payload_length, static_cast<std::uint32_t>(record.payload.size()));
     // A datagram the file holds only part of (snapped: fewer bytes than its UDP length) is not
     // the packet the sensor sent, even when the part happens to have a valid length: it is
     // rejected (bad_length), as the live path rejects a datagram the kernel had to cut.

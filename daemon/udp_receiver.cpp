@@ -209,9 +209,11 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
       header.msg_controllen = batch.control[i].size();
       header.msg_flags = 0;
     }
+    // MSG_TRUNC: msg_len is the datagram's real length even when it was longer than the slot,
+    // so a cut datagram is recorded with what it had, not as a whole one of the slot's size.
     const int received =
         ::recvmmsg(fd_, batch.headers.data(), static_cast<unsigned>(n),
-                   MSG_WAITFORONE | (overrun || draining ? MSG_DONTWAIT : 0), nullptr);
+                   MSG_WAITFORONE | MSG_TRUNC | (overrun || draining ? MSG_DONTWAIT : 0), nullptr);
     if (received <= 0) {
       if (received < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
         ReceiveCounters::add(counters.receive_errors, 1);
@@ -230,8 +232,10 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
       const mmsghdr& message = batch.headers[i];
       bytes += message.msg_len;
       if (overrun) continue;
-      slot.length = message.msg_len;
-      slot.truncated = (message.msg_hdr.msg_flags & MSG_TRUNC) != 0;
+      slot.original_length = message.msg_len;
+      slot.length = std::min<std::uint32_t>(message.msg_len, sizeof slot.payload);
+      slot.truncated =
+          (message.msg_hdr.msg_flags & MSG_TRUNC) != 0 || slot.length < message.msg_len;
       truncated += slot.truncated;
       slot.receive_time_ns = fallback_time;
       for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;

@@ -28,6 +28,9 @@ struct alignas(kCacheLine) PacketSlot {
   std::uint8_t payload[kPayloadCapacity];
   // Bytes kept in `payload` (at most kPayloadCapacity).
   std::uint32_t length;
+  // Bytes the datagram had (MSG_TRUNC's real length; a capture record's UDP length): equal to
+  // `length` unless the datagram was cut. The recording writes it as the record's original length.
+  std::uint32_t original_length;
   // The datagram was longer than what was kept (MSG_TRUNC on the live path; a record a capture
   // file holds only part of, on replay): the decoder rejects it as bad_length.
   bool truncated;

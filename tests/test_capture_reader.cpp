@@ -11,6 +11,7 @@
 #include <limits>
 #include <random>
 #include <system_error>
+#include <tuple>
 #include <vector>
 
 #include "core/capture_reader.hpp"
@@ -445,6 +446,40 @@ TEST_CASE("PcapWriter writes the documented headers", "[capture]") {
   const std::size_t ip2 =
       kGlobalHeaderBytes + (kRecordHeaderBytes + kFrameHeadersBytes + 4) + kRecordHeaderBytes + 14;
   CHECK(get_be16(file, ip2 + 4) == static_cast<std::uint16_t>(get_be16(file, ip + 4) + 1));
+}
+
+TEST_CASE("PcapWriter records a cut datagram as cut: the bytes kept, the length it had",
+          "[capture]") {
+  ScratchDir dir("capture");
+  const fs::path path = dir / "cut.pcap";
+  {
+    PcapWriter writer(path.string());
+    writer.write(pattern(1280, 1), 1281, 1'700'000'000'000'000'000, kLidar, kHost);
+    writer.write(pattern(1280, 2), 100'000, 1'700'000'000'000'001'000, kLidar, kHost);  // > IPv4
+    writer.write(pattern(8, 3), 4, 1'700'000'000'000'002'000, kLidar, kHost);  // never below kept
+  }
+  const Bytes file = read_bytes(path);
+  const auto native32 = [&](std::size_t offset) {
+    std::uint32_t v = 0;
+    std::memcpy(&v, file.data() + offset, sizeof v);
+    return v;
+  };
+  std::size_t at = kGlobalHeaderBytes;
+  CHECK(native32(at + 8) == kFrameHeadersBytes + 1280);                      // captured
+  CHECK(native32(at + 12) == kFrameHeadersBytes + 1281);                     // original
+  CHECK(get_be16(file, at + kRecordHeaderBytes + 14 + 2) == 20 + 8 + 1281);  // IPv4 length
+  CHECK(get_be16(file, at + kRecordHeaderBytes + 14 + 20 + 4) == 8 + 1281);  // UDP length
+  at += kRecordHeaderBytes + kFrameHeadersBytes + 1280;
+  CHECK(native32(at + 12) == kFrameHeadersBytes + 65507);  // the most IPv4 can say
+  CHECK(get_be16(file, at + kRecordHeaderBytes + 14 + 2) == 65535);
+
+  CaptureReader reader(path.string());
+  CaptureRecord record;
+  std::vector<std::tuple<std::size_t, std::uint32_t, bool>> read;
+  while (reader.next(record) == CaptureStatus::kRecord)
+    read.emplace_back(record.payload.size(), record.udp_payload_length, record.snapped);
+  CHECK(read == std::vector<std::tuple<std::size_t, std::uint32_t, bool>>{
+                    {1280, 1281, true}, {1280, 65507, true}, {8, 8, false}});
 }
 
 TEST_CASE("PcapWriter rejects what a pcap record cannot hold", "[capture]") {
