@@ -180,6 +180,7 @@ void for_each_key(Config& c, Visitor&& v) {
   v("output", "directory", o.directory, &non_empty);
   v("output", "frames", o.frames, std::monostate{});
   v("output", "frame_decimation", o.frame_decimation, IntRange{1, kU32});
+  v("output", "frames_min_fraction", o.frames_min_fraction, RealRange{0.0, false, 1.0, false});
   v("output", "frames_max_files", o.frames_max_files, IntRange{0, kI64});
   v("output", "frames_max_bytes", o.frames_max_bytes, IntRange{0, kI64});
   v("output", "pcap", o.pcap, std::monostate{});
@@ -430,9 +431,106 @@ std::string toml_real(double v) {
   return text;
 }
 
+// toml++ parses nesting by recursion: a dotted key or table header some 40 000 levels deep (an
+// 80 KB file) overflows the stack. A pandarcapd configuration nests two levels; anything past
+// kMaxNesting is refused before toml++ sees it, at the character where the limit is crossed.
+// Counted: open arrays and inline tables, plus the dots of the key or table header being read
+// (dots inside strings and comments, and in values such as 1.5, are not keys and do not count).
+constexpr int kMaxNesting = 32;
+
+void reject_deep_nesting(std::string_view text, const std::string& source_name) {
+  std::size_t line = 1, column = 0;
+  int depth = 0;                    // open [ and {
+  std::uint64_t inline_tables = 0;  // bit d: the bracket open at depth d+1 is a '{'
+  bool in_key = true;               // before the '=' of a key, or inside a table header
+  int key_dots = 0;
+  const auto too_deep = [&] {
+    throw ConfigError(fmt::format(
+        "{}:{}:{}: nested more than {} levels deep (tables, dotted keys, arrays): not a "
+        "pandarcapd configuration",
+        source_name, line, column, kMaxNesting));
+  };
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    ++column;
+    if (c == '\n') {
+      ++line;
+      column = 0;
+      if (depth == 0) {
+        in_key = true;
+        key_dots = 0;
+      }
+      continue;
+    }
+    if (c == '#') {  // comment: to the end of the line
+      while (i + 1 < text.size() && text[i + 1] != '\n')
+        ++i;
+      continue;
+    }
+    if (c == '"' || c == '\'') {
+      const bool multi_line = text.substr(i, 3) == std::string_view(c == '"' ? "\"\"\"" : "'''");
+      const std::string_view close = multi_line ? text.substr(i, 3) : text.substr(i, 1);
+      i += close.size() - 1;
+      // To the closing quote(s); a basic string's backslash escapes the next character. An
+      // unterminated string is left to toml++ to report.
+      while (i + 1 < text.size()) {
+        ++i;
+        ++column;
+        if (text[i] == '\n') {
+          ++line;
+          column = 0;
+          if (!multi_line) break;
+        } else if (c == '"' && text[i] == '\\') {
+          ++i;
+          ++column;
+        } else if (text.substr(i, close.size()) == close) {
+          i += close.size() - 1;
+          column += close.size() - 1;
+          break;
+        }
+      }
+      continue;
+    }
+    switch (c) {
+      case '[':
+      case '{':
+        if (depth + key_dots + 1 > kMaxNesting) too_deep();
+        if (c == '{') {
+          inline_tables |= std::uint64_t{1} << depth;
+          in_key = true;  // an inline table's keys follow
+          key_dots = 0;
+        } else {
+          inline_tables &= ~(std::uint64_t{1} << depth);
+        }
+        ++depth;
+        break;
+      case ']':
+      case '}':
+        if (depth > 0) --depth;
+        if (c == '}') in_key = false;
+        break;
+      case ',':
+        if (depth > 0 && (inline_tables >> (depth - 1) & 1) != 0) {
+          in_key = true;
+          key_dots = 0;
+        }
+        break;
+      case '=':
+        in_key = false;
+        break;
+      case '.':
+        if (in_key && depth + ++key_dots + 1 > kMaxNesting) too_deep();
+        break;
+      default:
+        break;
+    }
+  }
+}
+
 }  // namespace
 
 DaemonConfig parse_config(std::string_view toml_text, const std::string& source_name) {
+  reject_deep_nesting(toml_text, source_name);
   toml::table root;
   try {
     root = toml::parse(toml_text, source_name);

@@ -42,6 +42,10 @@ struct OutputSection {
   std::string directory = "pandarcap-output";  // frames/, raw/ and health/ go under it
   bool frames = true;                          // write frames as PCD
   std::uint32_t frame_decimation = 1;          // write every Nth frame; >= 1
+  // A partial frame covering less than this fraction of a revolution (in azimuth and in
+  // single-return packets at rotation_speed) is a fragment: counted (frames_fragment), not
+  // written. 0 = write every frame; 0..1.
+  double frames_min_fraction = 0.25;
   std::uint64_t frames_max_files = 0;          // retention; 0 = unlimited
   std::uint64_t frames_max_bytes = 0;          // retention; 0 = unlimited
   bool pcap = true;                            // record raw packets as pcap

@@ -88,6 +88,10 @@ TEST_CASE("each kind of bad calibration file names its line and column", "[calib
   require_error(with_line(good, 9, "8,91,1.0"), "9:3", "outside -90..90");
   require_error(with_line(good, 9, "8,1.0,-180.5"), "9:7", "outside -180..180");
   require_error(with_line(good, 9, "8,nan,1.0"), "9:3", "not a number");
+  // One '+' at most, and never before a '-' (from_chars would read "-1" after the '+').
+  require_error(with_line(good, 9, "8,+-1,1.0"), "9:3", "elevation is not a number");
+  require_error(with_line(good, 9, "8,1.0,++1"), "9:7", "azimuth offset is not a number");
+  require_error(with_line(good, 9, "8,+,1.0"), "9:3", "elevation is not a number");
   // Missing channels are reported after the last line, with the list of ids.
   std::string short_table = "Laser id,Elevation,Azimuth\n";
   for (int id = 1; id <= 38; ++id)

@@ -238,3 +238,38 @@ TEST_CASE("Files: an unreadable file is named, a readable one is parsed with its
   CHECK_THROWS_WITH(load_config_file("/dev/zero"),
                     "/dev/zero:1:1: larger than 1048576 bytes: not a pandarcapd configuration");
 }
+
+TEST_CASE("Nesting past 32 levels is refused before parsing, where the limit is crossed",
+          "[config]") {
+  const auto repeat = [](const std::string& s, int n) {
+    std::string out;
+    for (int i = 0; i < n; ++i)
+      out += s;
+    return out;
+  };
+  // ~40 000 levels once overflowed the parser's stack (SIGSEGV): each form is refused with its
+  // place, however deep it goes.
+  const std::string dotted_key = "a" + repeat(".a", 40000) + " = 1\n";
+  const std::string header = "[" + repeat("a.", 40000) + "a]\n";
+  const std::string arrays = "x = " + repeat("[", 40000) + repeat("]", 40000) + "\n";
+  const std::string inline_tables = "x = " + repeat("{a = ", 40000) + "1" + repeat("}", 40000);
+  for (const std::string& text : {dotted_key, header, arrays, inline_tables}) {
+    const std::string error = error_of(text);
+    INFO(error);
+    CHECK(error.rfind("t.toml:1:", 0) == 0);
+    CHECK(error.find("nested more than 32 levels deep") != std::string::npos);
+  }
+  CHECK(error_of("[sensor]\nx = " + repeat("[", 33) + repeat("]", 33) + "\n")
+            .rfind("t.toml:2:37: nested more than 32 levels deep", 0) == 0);
+  // Dots that are not keys do not count: in strings, comments, numbers; and 32 levels pass the
+  // guard (toml++ then reports what it finds: an unknown key).
+  const std::string many_dots = repeat(".", 100);
+  CHECK(
+      parse_config("# " + many_dots + "\n[output]\ndirectory = \"a" + many_dots + "\"\n", "t.toml")
+          .output.directory == "a" + many_dots);
+  CHECK(parse_config("[output]\ndirectory = '''x" + repeat("\n.", 50) + "'''\n", "t.toml")
+            .output.directory == "x" + repeat("\n.", 50));
+  CHECK(error_of("[sensor]\nx = [" + repeat("1.5, ", 100) + "1.5]\n") ==
+        "t.toml:2:1: sensor.x: unknown key");
+  CHECK(error_of("a" + repeat(".a", 31) + " = 1\n").find("nested") == std::string::npos);
+}
