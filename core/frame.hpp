@@ -25,6 +25,10 @@ struct FrameInfo {
   bool partial = false;              // did not see its whole revolution (first frame, loss, end)
   bool time_valid = true;            // every contributing packet had a valid absolute time
   std::uint32_t points_dropped = 0;  // points that did not fit (capacity)
+  // How much of a revolution the frame's blocks cover (last minus first block azimuth, 0.01°):
+  // ~36000 for a whole frame, less for a partial one. A partial frame below
+  // output.frames_min_fraction of 36000 is a fragment, counted and not written.
+  std::uint32_t azimuth_span_cdeg = 0;
 };
 
 // Storage for one frame. `points` is fixed-capacity storage owned by whoever provides frames.

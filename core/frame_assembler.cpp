@@ -134,6 +134,8 @@ void FrameAssembler::add_point(Slot& slot, const Point& point, const PacketMeta&
     info.return_mode = meta.return_mode;
     info.time_valid = info.time_valid && meta.time_valid;
   }
+  if (info.points == 0 || position_ < slot.first_position) slot.first_position = position_;
+  if (info.points == 0 || position_ > slot.last_position) slot.last_position = position_;
   frame.points[frame.size++] = point;
   if (info.points == 0 || point.timestamp_ns < info.start_ns) info.start_ns = point.timestamp_ns;
   if (info.points == 0 || point.timestamp_ns > info.end_ns) info.end_ns = point.timestamp_ns;
@@ -151,6 +153,8 @@ void FrameAssembler::close_slot(Slot& slot, bool partial) {
     info.sequence = sequence;
     info.partial = partial || started_late;
     info.rpm = info.packets > 0 ? slot.rpm_sum / info.packets : 0;
+    info.azimuth_span_cdeg = static_cast<std::uint32_t>(
+        std::clamp<std::int64_t>(slot.last_position - slot.first_position, 0, kFullCircle));
     ++(info.partial ? stats_.frames_partial : stats_.frames_complete);
     sink_.frame_done(*slot.frame);
   }

@@ -80,6 +80,8 @@ class FrameAssembler {
     bool in_use = false;
     std::uint64_t last_packet = ~0ULL;
     double rpm_sum = 0;
+    std::int64_t first_position = 0;  // U of the first and last block that added a point
+    std::int64_t last_position = 0;
   };
 
   void start_stream(std::uint16_t azimuth_cdeg);

@@ -61,7 +61,8 @@ struct HealthCounters {
   std::uint64_t frames_dropped_no_arena = 0;     // no free arena when the frame began
   std::uint64_t frames_dropped_writer_busy = 0;  // writer queue full (slow disk): not written
   std::uint64_t frames_decimated = 0;            // skipped on purpose (frame_decimation)
-  std::uint64_t frames_written = 0;              // PCD files completed
+  std::uint64_t frames_fragment = 0;  // partial, under output.frames_min_fraction: not written
+  std::uint64_t frames_written = 0;   // PCD files completed
   // Writer.
   std::uint64_t pcap_packets_written = 0;
   std::uint64_t pcap_packets_not_recorded = 0;  // no free raw batch (writer behind): not in pcap
@@ -70,6 +71,9 @@ struct HealthCounters {
   std::uint64_t pcd_bytes_written = 0;
   std::uint64_t write_errors = 0;
   std::uint64_t bytes_not_written = 0;
+  // A finished file whose name was taken (which the naming rules should make impossible): kept
+  // under a free "_dupN" name, never replacing the other.
+  std::uint64_t output_name_collisions = 0;
 };
 
 struct HealthGauges {

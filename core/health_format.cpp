@@ -84,6 +84,8 @@ constexpr CounterField kCounters[] = {
    &HealthCounters::frames_dropped_writer_busy, "Frames dropped because the writer queue was full"},
   {"frames_decimated", "frames_decimated", &HealthCounters::frames_decimated,
    "Frames skipped on purpose (frame_decimation)"},
+  {"frames_fragment", "frames_fragment", &HealthCounters::frames_fragment,
+   "Partial frames covering less than output.frames_min_fraction of a revolution: not written"},
   {"frames_written", "frames_written", &HealthCounters::frames_written, "PCD files completed"},
   {"pcap_packets_written", "pcap_packets_written", &HealthCounters::pcap_packets_written,
    "Packets recorded in pcap files"},
@@ -101,6 +103,8 @@ constexpr CounterField kCounters[] = {
   {"write_errors", "write_errors", &HealthCounters::write_errors, "Failed writes"},
   {"bytes_not_written", "not_written_bytes", &HealthCounters::bytes_not_written,
    "Bytes lost to failed writes"},
+  {"output_name_collisions", "output_name_collisions", &HealthCounters::output_name_collisions,
+   "Finished files whose name was taken: kept under a _dupN name instead of replacing"},
 };
 // clang-format on
 

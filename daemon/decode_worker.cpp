@@ -14,6 +14,9 @@ namespace pandarcap {
 namespace {
 
 constexpr std::size_t kDecodeBatch = 64;
+constexpr double kFullCircleCdeg = 36000.0;
+// 1800 firing rounds per revolution at 600 RPM, 10 rounds per single-return packet.
+constexpr double kSingleReturnPacketsAt600Rpm = 180.0;
 
 }  // namespace
 
@@ -54,6 +57,14 @@ void DecodeWorker::frame_done(Frame& frame) {
     }
   }
   if (arena == nullptr) return;
+  if (frame.info.partial &&
+      (frame.info.azimuth_span_cdeg < options_.min_frame_fraction * kFullCircleCdeg ||
+       frame.info.packets < options_.min_frame_fraction * kSingleReturnPacketsAt600Rpm * 600.0 /
+                                options_.expected_rpm)) {
+    ++frames_fragment_;
+    free_arenas_.try_push(arena);
+    return;
+  }
   const bool write = options_.write_frames && frames_finished_ % options_.frame_decimation == 0;
   ++frames_finished_;
   if (write) {
@@ -85,6 +96,10 @@ void DecodeWorker::record_raw(const ringbuf::PacketSlot& slot) {
   packet.length =
       static_cast<std::uint16_t>(std::min<std::size_t>(slot.length, sizeof packet.payload));
   std::memcpy(packet.payload, slot.payload, packet.length);
+  // The recording must not claim bytes it does not hold: a cut datagram keeps its real length.
+  packet.original_length = slot.truncated
+                               ? std::max<std::uint32_t>(slot.original_length, packet.length + 1u)
+                               : packet.length;
   if (raw_->size == raw_->capacity) flush_raw();
 }
 
@@ -118,6 +133,7 @@ DecodeSnapshot DecodeWorker::snapshot() const {
   s.sequence = decoder_.sequence();
   s.frames = decoder_.frames();
   s.frames_decimated = frames_decimated_;
+  s.frames_fragment = frames_fragment_;
   s.raw_packets_dropped = raw_dropped_;
   s.monotonic_ns = coarse_monotonic_ns();
   s.latency = latency_;

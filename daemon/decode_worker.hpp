@@ -25,6 +25,15 @@ struct DecodeWorkerOptions {
   StreamDecoderConfig decoder;
   std::uint32_t frame_decimation = 1;  // 1 = every frame
   bool write_frames = true;            // false: every frame is returned at once (not written)
+  // A partial frame covering less than this fraction of a revolution is a fragment: counted
+  // (frames_fragment) and not written, so a stream of discontinuities (a restarting or hostile
+  // sender) cannot turn each packet into a file. Covering means both: its blocks span that much
+  // azimuth, and it holds that fraction of the packets a revolution has at `expected_rpm` in
+  // single-return mode (the fewest a sensor sends: 180 at 600 RPM). Azimuths alone are not
+  // enough: packets that jump back and forth can span any angle in a handful. 0 = write every
+  // frame.
+  double min_frame_fraction = 0.0;
+  int expected_rpm = 600;
   bool record_raw = true;
   // Replay: wait for the writer to return a free arena or raw batch instead of dropping the
   // frame. A file can wait; a socket cannot, so live capture drops (and counts) instead.
@@ -73,6 +82,7 @@ class DecodeWorker final : public FrameSink {
   RawBatch* raw_ = nullptr;
   std::uint64_t frames_finished_ = 0;
   std::uint64_t frames_decimated_ = 0;
+  std::uint64_t frames_fragment_ = 0;
   std::uint64_t raw_dropped_ = 0;
   LatencyHistogram latency_;
 };

@@ -40,7 +40,8 @@ struct FrameArena {
 struct RawPacket {
   std::int64_t receive_time_ns = 0;
   sockaddr_in source{};
-  std::uint16_t length = 0;  // bytes in payload (a truncated datagram keeps what fit)
+  std::uint16_t length = 0;           // bytes in payload (a truncated datagram keeps what fit)
+  std::uint32_t original_length = 0;  // bytes the datagram had (more than length: it was cut)
   std::uint8_t payload[ringbuf::PacketSlot::kPayloadCapacity];
 };
 
@@ -59,6 +60,7 @@ struct DecodeSnapshot {
   SequenceStats sequence;
   AssemblerStats frames;
   std::uint64_t frames_decimated = 0;
+  std::uint64_t frames_fragment = 0;      // partial frames too small to write
   std::uint64_t raw_packets_dropped = 0;  // no empty RawBatch: not recorded to pcap
   std::int64_t monotonic_ns = 0;  // when it was taken (the last packet's time is in LiveClock)
   LatencyHistogram latency;       // kernel receive timestamp -> decoded (live sources only)

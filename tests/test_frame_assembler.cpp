@@ -1082,6 +1082,15 @@ TEST_CASE("end to end: N seconds give about N x frame rate frames, partial at bo
       CHECK(f.info.rpm >= tc.rpm - 2);
       CHECK(f.info.rpm <= tc.rpm + 2);
       points += f.info.points;
+      // Coverage: a whole revolution (clamped at 360°) for a complete frame; for the first,
+      // from where the stream started to the cut (± the channels' azimuth offsets).
+      if (!f.info.partial) CHECK(f.info.azimuth_span_cdeg >= 35900);
+      CHECK(f.info.azimuth_span_cdeg <= 36000);
+      if (i == 0) {
+        const int start_after_cut = (18000 - tc.cut + 36000) % 36000;
+        CHECK(std::abs(static_cast<int>(f.info.azimuth_span_cdeg) - (36000 - start_after_cut)) <=
+              1000);
+      }
       if (!f.info.partial) {
         // One revolution of time, plus at most the ~8.3° seam and a firing round.
         const std::int64_t span = f.info.end_ns - f.info.start_ns;

@@ -55,6 +55,7 @@ HealthSnapshot distinct_snapshot() {
                                &c.frames_dropped_no_arena,
                                &c.frames_dropped_writer_busy,
                                &c.frames_decimated,
+                               &c.frames_fragment,
                                &c.frames_written,
                                &c.pcap_packets_written,
                                &c.pcap_packets_not_recorded,
@@ -62,7 +63,8 @@ HealthSnapshot distinct_snapshot() {
                                &c.pcap_bytes_written,
                                &c.pcd_bytes_written,
                                &c.write_errors,
-                               &c.bytes_not_written}) {
+                               &c.bytes_not_written,
+                               &c.output_name_collisions}) {
     *field = v++;
   }
   for (std::size_t i = 0; i < kRejectReasonCount; ++i)
@@ -250,9 +252,11 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(c.at("rejects").at("bad_return_mode") == 14);
   CHECK(c.at("rejects").size() == kRejectReasonCount - 1);
   CHECK(c.at("filtered_points").at("dual_too_close") == 24);
-  // 31 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
+  CHECK(c.at("frames_fragment") == h.counters.frames_fragment);
+  CHECK(c.at("output_name_collisions") == h.counters.output_name_collisions);
+  // 33 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
   // allocation total and its per-thread map.
-  CHECK(c.size() == 40);
+  CHECK(c.size() == 42);
   const auto& g = j.at("gauges");
   CHECK(g.at("rpm_tail") == 600.0);
   CHECK(g.at("rpm_measured") == 599.5);
