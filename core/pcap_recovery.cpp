@@ -44,7 +44,9 @@ std::uint32_t u32_at(const std::uint8_t* bytes) {
 }  // namespace
 
 PcapRecovery finish_interrupted_pcap(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+  // O_NOFOLLOW: a link in the recording directory never leads the cut to a file elsewhere;
+  // O_NONBLOCK: a FIFO put there does not hang the start.
+  const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) fail("cannot open", path);
   struct Closer {
     int fd;
@@ -52,6 +54,10 @@ PcapRecovery finish_interrupted_pcap(const std::string& path) {
   } closer{fd};
   struct stat info {};
   if (::fstat(fd, &info) != 0) fail("cannot stat", path);
+  if (!S_ISREG(info.st_mode)) {
+    errno = EINVAL;
+    fail("not a regular file:", path);
+  }
   const auto size = static_cast<std::uint64_t>(info.st_size);
 
   // Ours: the file begins with PcapWriter's global header, or, shorter than it (killed between
@@ -71,7 +77,8 @@ PcapRecovery finish_interrupted_pcap(const std::string& path) {
     const std::uint32_t captured = u32_at(record.data() + 8);
     const std::uint32_t original = u32_at(record.data() + 12);
     // A header that cannot be one of ours is where the good part ends.
-    if (captured > kPcapSnaplen || captured != original) break;
+    // (A cut datagram is recorded with fewer captured than original bytes, never more.)
+    if (captured > kPcapSnaplen || captured > original) break;
     const std::uint64_t next = end + kPcapRecordHeaderBytes + captured;
     if (next > size) break;  // the record's bytes never all reached the file
     end = next;

@@ -23,7 +23,8 @@ struct PcapRecovery {
 };
 
 // Scans `path` and truncates it after its last whole record. Throws std::system_error when the
-// file cannot be read or truncated.
+// file cannot be read or truncated, and when `path` is a symbolic link or not a regular file
+// (never followed: the cut must not reach a file elsewhere).
 PcapRecovery finish_interrupted_pcap(const std::string& path);
 
 }  // namespace pandarcap

@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <fmt/format.h>
+#include <stdio.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -58,6 +59,38 @@ void OutputFile::close() {
   const int fd = fd_;
   fd_ = -1;
   if (::close(fd) != 0 && errno != EINTR) fail("cannot close", path_);
+}
+
+bool rename_no_replace(const char* from, const char* to) {
+  if (::renameat2(AT_FDCWD, from, AT_FDCWD, to, RENAME_NOREPLACE) == 0) return true;
+  if (errno == EEXIST) return false;
+  if (errno != EINVAL && errno != ENOSYS) fail("cannot rename to", to);
+  // The file system has no RENAME_NOREPLACE: a hard link fails on an existing name too.
+  if (::link(from, to) != 0) {
+    if (errno == EEXIST) return false;
+    fail("cannot link to", to);
+  }
+  if (::unlink(from) != 0) fail("cannot remove", from);
+  return true;
+}
+
+bool place_without_replacing(const std::string& from, std::string& to) {
+  if (rename_no_replace(from.c_str(), to.c_str())) return false;
+  const std::size_t name_at = to.rfind('/') + 1;
+  std::size_t dot = to.rfind('.');
+  if (dot == std::string::npos || dot < name_at) dot = to.size();
+  const std::string extension = to.substr(dot);  // ".pcap", ".pcd" (a collision is rare)
+  to.resize(dot);
+  const std::size_t stem_size = to.size();
+  for (unsigned n = 1;; ++n) {
+    to.resize(stem_size);
+    fmt::format_to(std::back_inserter(to), "_dup{}{}", n, extension);
+    if (rename_no_replace(from.c_str(), to.c_str())) return true;
+    if (n == 1000) {
+      errno = EEXIST;
+      fail("no free name near", to);
+    }
+  }
 }
 
 std::filesystem::path temporary_name(const std::filesystem::path& path) {

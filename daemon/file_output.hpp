@@ -43,6 +43,19 @@ class OutputFile {
   std::uint64_t size_ = 0;  // for kAppend: the size at open plus what was written
 };
 
+// Gives `from` the name `to` unless a file of that name exists: renameat2(RENAME_NOREPLACE), or,
+// on a file system without it, link + unlink (which refuse an existing name just the same).
+// Returns false, with both files untouched, when `to` exists. Throws std::system_error for any
+// other failure.
+bool rename_no_replace(const char* from, const char* to);
+
+// Puts a finished recording (`from`, a temporary or .part name) in place as `to` without ever
+// replacing a file: when `to` exists, the first free name of "STEM_dupN.EXT" (N = 1, 2, ...) is
+// taken instead. Returns the name used and whether it had to differ from `to` (the caller counts
+// and logs that: it means file names repeated, which they should not). `to` itself is reused as
+// the buffer for the new name (no allocation once it has grown). Throws std::system_error.
+bool place_without_replacing(const std::string& from, std::string& to);
+
 // Writes `text` to `path` through a temporary file in the same directory and a rename.
 void write_file_replacing(const std::filesystem::path& path, std::string_view text);
 // The same with the temporary name and the file object given, for a file rewritten every second:

@@ -11,12 +11,16 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <stdexcept>
+#include <string_view>
 #include <system_error>
+#include <vector>
 
 #include "core/health_format.hpp"
 #include "core/pcap_recovery.hpp"
 #include "core/pcd.hpp"
+#include "core/text_file.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/file_output.hpp"
@@ -26,6 +30,40 @@ namespace {
 
 constexpr std::int64_t kSecondNs = 1'000'000'000;
 constexpr std::size_t kPcdChunkPoints = 4096;
+
+// The number in one of our file names: the `field`-th '_'-separated field after `prefix`
+// ("frame_000123_...pcd": field 0; "pandarcap_20261122T120000Z_0007...pcap": field 1). Nothing
+// when the name is not one of ours.
+std::optional<std::uint64_t> number_in_name(std::string_view name, std::string_view prefix,
+                                            std::string_view suffix, int field) {
+  if (!name.starts_with(prefix) || !name.ends_with(suffix)) return std::nullopt;
+  name.remove_prefix(prefix.size());
+  for (int i = 0; i < field; ++i) {
+    const std::size_t underscore = name.find('_');
+    if (underscore == std::string_view::npos) return std::nullopt;
+    name.remove_prefix(underscore + 1);
+  }
+  std::uint64_t number = 0;
+  std::size_t digits = 0;
+  while (digits < name.size() && name[digits] >= '0' && name[digits] <= '9') {
+    if (digits == 18) return std::nullopt;  // not one of ours, and beyond what a count reaches
+    number = number * 10 + static_cast<std::uint64_t>(name[digits] - '0');
+    ++digits;
+  }
+  if (digits == 0 || (digits < name.size() && name[digits] != '_' && name[digits] != '.')) {
+    return std::nullopt;
+  }
+  return number;
+}
+
+// Proves `dir` takes a new file (permissions, a read-only mount, a full inode table) by creating
+// and removing one: READY=1 promises writable outputs. Throws std::system_error.
+void probe_writable(const std::filesystem::path& dir) {
+  const std::filesystem::path probe = dir / ".pandarcapd-probe.tmp";
+  OutputFile file(probe, OutputFile::Mode::kCreate);
+  file.close();
+  ::unlink(probe.c_str());
+}
 
 }  // namespace
 
@@ -53,17 +91,18 @@ void Writer::prepare() {
   if (options_.prometheus && options_.prometheus_file.has_parent_path()) {
     std::filesystem::create_directories(options_.prometheus_file.parent_path());
   }
-  if (options_.frames) std::filesystem::create_directories(frames_dir_);
-  if (options_.pcap) {
-    std::filesystem::create_directories(raw_dir_);
-    // The angles the recording was decoded with travel with it.
-    write_file_replacing(raw_dir_ / "calibration.csv", options_.calibration_csv);
+  if (options_.frames) {
+    std::filesystem::create_directories(frames_dir_);
+    probe_writable(frames_dir_);
   }
+  if (options_.pcap) std::filesystem::create_directories(raw_dir_);
   prom_path_ = options_.prometheus_file.native();
   assign_temporary_name(prom_temporary_path_, prom_path_);
   jsonl_path_ = (options_.health_dir / "health.jsonl").native();
   jsonl_rotated_path_ = jsonl_path_ + ".1";
   finish_leftovers();
+  adopt_earlier_files();
+  if (options_.pcap) save_calibration();
   prom_text_.reserve(64 * 1024);
   json_text_.reserve(8 * 1024);
   frame_path_.reserve(4096);
@@ -86,6 +125,12 @@ void Writer::finish_leftovers() {
     for (const auto& entry : fs::directory_iterator(raw_dir_, ec)) {
       const std::string part = entry.path().native();
       if (!part.ends_with(".pcap.part")) continue;
+      // Never followed: a link (or a device, a FIFO) here points at a file that is not ours to
+      // cut, wherever it leads.
+      if (entry.is_symlink(ec) || !entry.is_regular_file(ec)) {
+        spdlog::warn("{}: not a regular file; left as it is", part);
+        continue;
+      }
       try {
         const PcapRecovery recovered = finish_interrupted_pcap(part);
         if (!recovered.ours) {
@@ -97,14 +142,12 @@ void Writer::finish_leftovers() {
           spdlog::warn("{}: left by an interrupted run with no whole record; removed", part);
           continue;
         }
-        fs::path finished = part.substr(0, part.size() - 5);  // without ".part"
-        if (fs::exists(finished))
-          finished.replace_filename(finished.stem().string() + "_recovered.pcap");
-        fs::rename(part, finished);
+        std::string finished = part.substr(0, part.size() - 5);  // without ".part"
+        put_in_place(part, finished);
         spdlog::warn(
             "{}: left by an interrupted run; finished as {} ({} whole records, {} bytes of "
             "a cut record removed)",
-            part, finished.filename().string(), recovered.records, recovered.cut_bytes);
+            part, fs::path(finished).filename().string(), recovered.records, recovered.cut_bytes);
       } catch (const std::exception& error) {
         spdlog::error("{}: cannot finish a recording left by an interrupted run: {}", part,
                       error.what());
@@ -151,6 +194,94 @@ void Writer::finish_leftovers() {
   }
 }
 
+void Writer::adopt_earlier_files() {
+  namespace fs = std::filesystem;
+  struct Found {
+    std::uint64_t number;
+    std::string name;
+    fs::path path;
+    std::uint64_t bytes;
+  };
+  // Our files in `dir`, oldest (lowest number) first; a link or anything not a regular file is
+  // not ours.
+  const auto scan = [](const fs::path& dir, std::string_view prefix, std::string_view suffix,
+                       int field) {
+    std::vector<Found> found;
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      const std::string name = entry.path().filename().native();
+      const auto number = number_in_name(name, prefix, suffix, field);
+      if (!number || entry.is_symlink(ec) || !entry.is_regular_file(ec)) continue;
+      const auto bytes = entry.file_size(ec);
+      found.push_back({*number, name, entry.path(), ec ? 0 : bytes});
+    }
+    std::sort(found.begin(), found.end(), [](const Found& a, const Found& b) {
+      return a.number != b.number ? a.number < b.number : a.name < b.name;
+    });
+    return found;
+  };
+  const auto adopt = [&](const std::vector<Found>& found, auto& list, std::uint64_t max_files,
+                         std::uint64_t max_bytes, const char* what, const fs::path& dir) {
+    for (const Found& f : found)
+      list.emplace_back(f.path, f.bytes);
+    const std::size_t before = list.size();
+    enforce_retention(list, max_files, max_bytes);
+    if (!found.empty()) {
+      spdlog::info("{}: {} {} of earlier runs{}", dir.string(), found.size(), what,
+                   before > list.size() && (max_files != 0 || max_bytes != 0)
+                       ? fmt::format("; retention removed the oldest {}", before - list.size())
+                       : std::string());
+    }
+  };
+  if (options_.frames) {
+    const auto found = scan(frames_dir_, "frame_", ".pcd", 0);
+    if (!found.empty()) frame_number_base_ = found.back().number + 1;
+    adopt(found, frame_files_, options_.frames_max_files, options_.frames_max_bytes, "frames",
+          frames_dir_);
+  }
+  if (options_.pcap) {
+    const auto found = scan(raw_dir_, "pandarcap_", ".pcap", 1);
+    if (!found.empty()) pcap_index_ = found.back().number + 1;
+    adopt(found, pcap_files_, options_.pcap_max_files, options_.pcap_max_bytes, "recordings",
+          raw_dir_);
+  }
+}
+
+void Writer::save_calibration() {
+  // The angles the recordings are decoded with travel with them: raw/calibration.csv is this
+  // run's. When an earlier run used other angles, its table is kept, not replaced, as
+  // calibration_before_<N>.csv: recordings numbered below N (since the previous such file) were
+  // made with it.
+  const std::filesystem::path current = raw_dir_ / "calibration.csv";
+  const TextFile earlier = read_text_file(current.string());
+  if (earlier.status == TextFile::Status::kOk && earlier.text != options_.calibration_csv) {
+    std::string kept =
+        (raw_dir_ / fmt::format("calibration_before_{:04}.csv", pcap_index_)).native();
+    put_in_place(current.native(), kept);
+    spdlog::info("{}: the calibration of earlier recordings differs from this run's; kept as {}",
+                 current.string(), std::filesystem::path(kept).filename().string());
+  }
+  write_file_replacing(current, options_.calibration_csv);
+}
+
+void Writer::put_in_place(const std::string& from, std::string& to) {
+  if (!place_without_replacing(from, to)) return;
+  ++name_collisions_;
+  spdlog::warn("{}: a file of that name exists; kept as {} instead of replacing it", from, to);
+}
+
+void Writer::log_fragments(std::int64_t now) {
+  const std::uint64_t fragments = health_.counters.frames_fragment;
+  if (fragments == fragments_logged_) return;
+  if (last_fragment_log_ns_ >= 0 && now - last_fragment_log_ns_ < 10 * kSecondNs) return;
+  spdlog::info(
+      "{} frame fragment{} not written (partial frames under output.frames_min_fraction of a "
+      "revolution; {} since start)",
+      fragments - fragments_logged_, fragments - fragments_logged_ == 1 ? "" : "s", fragments);
+  fragments_logged_ = fragments;
+  last_fragment_log_ns_ = now;
+}
+
 void Writer::write_failed(const std::exception& error, std::uint64_t bytes) {
   ++write_errors_;
   bytes_not_written_ += bytes;
@@ -188,7 +319,8 @@ void Writer::write_frame(FrameArena& arena) {
   const std::uint64_t expected = pcd_header_.size() + points.size() * kPcdPointBytes;
   // frames/frame_000123_20261122T120000.123Z[_partial].pcd, written as frames/.<name>.tmp.
   frame_path_.assign(frames_dir_.native());
-  fmt::format_to(std::back_inserter(frame_path_), "/frame_{:06}_", frame.info.sequence);
+  fmt::format_to(std::back_inserter(frame_path_), "/frame_{:06}_",
+                 frame_number_base_ + frame.info.sequence);
   append_utc_file_stamp(frame_path_, frame.info.start_ns, true);
   frame_path_ += frame.info.partial ? "_partial.pcd" : ".pcd";
   assign_temporary_name(frame_temporary_path_, frame_path_);
@@ -201,10 +333,7 @@ void Writer::write_frame(FrameArena& arena) {
       frame_file_.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
     }
     frame_file_.close();
-    if (::rename(frame_temporary_path_.c_str(), frame_path_.c_str()) != 0) {
-      throw std::system_error(errno, std::generic_category(),
-                              "cannot rename to '" + frame_path_ + "'");
-    }
+    put_in_place(frame_temporary_path_, frame_path_);
     ++frames_written_;
     pcd_bytes_ += expected;
     // Retention keeps a list of names (one allocation per file); without it, no list.
@@ -219,9 +348,10 @@ void Writer::write_frame(FrameArena& arena) {
 }
 
 void Writer::open_pcap(std::int64_t first_packet_ns) {
-  pcap_final_path_ = raw_dir_ / fmt::format("pandarcap_{}_{:04}.pcap",
-                                            utc_file_stamp(first_packet_ns, false), pcap_index_++);
-  const std::filesystem::path part = pcap_final_path_.string() + ".part";
+  pcap_final_path_ = (raw_dir_ / fmt::format("pandarcap_{}_{:04}.pcap",
+                                             utc_file_stamp(first_packet_ns, false), pcap_index_++))
+                         .native();
+  const std::filesystem::path part = pcap_final_path_ + ".part";
   try {
     pcap_ = std::make_unique<PcapWriter>(part.string(), pcap_buffer_);
   } catch (...) {
@@ -264,7 +394,7 @@ void Writer::finish_pcap_file() {
     if (pcap_->flushed_records() == 0) {
       std::filesystem::remove(part);  // not even one record: nothing worth keeping
     } else {
-      std::filesystem::rename(part, pcap_final_path_);
+      put_in_place(part, pcap_final_path_);
       pcap_bytes_closed_ += pcap_->flushed_bytes();
       pcap_files_.emplace_back(pcap_final_path_, pcap_->flushed_bytes());
       enforce_retention(pcap_files_, options_.pcap_max_files, options_.pcap_max_bytes);
@@ -293,7 +423,7 @@ void Writer::write_raw(RawBatch& batch) {
       }
       if (!pcap_) open_pcap(packet.receive_time_ns);
       pcap_->write(std::span<const std::uint8_t>(packet.payload, packet.length),
-                   packet.receive_time_ns,
+                   packet.original_length, packet.receive_time_ns,
                    Endpoint{ntohl(packet.source.sin_addr.s_addr), ntohs(packet.source.sin_port)},
                    options_.pcap_destination);
       ++pcap_packets_;
@@ -326,7 +456,8 @@ void Writer::write_raw(RawBatch& batch) {
 
 void Writer::rotate_outputs() {
   spdlog::info("SIGHUP: closing {} and starting new recordings",
-               pcap_ ? pcap_final_path_.filename().string() : std::string("no open pcap"));
+               pcap_ ? std::filesystem::path(pcap_final_path_).filename().string()
+                     : std::string("no open pcap"));
   close_pcap();
 }
 
@@ -374,6 +505,7 @@ void Writer::build_health(std::int64_t now) {
   c.frames_partial = decode_.frames.frames_partial;
   c.frames_dropped_no_arena = decode_.frames.frames_dropped;
   c.frames_decimated = decode_.frames_decimated;
+  c.frames_fragment = decode_.frames_fragment;
   c.frames_written = frames_written_;
   c.pcap_packets_written = pcap_packets_;
   c.pcap_packets_not_recorded = decode_.raw_packets_dropped;
@@ -382,6 +514,7 @@ void Writer::build_health(std::int64_t now) {
   c.pcd_bytes_written = pcd_bytes_;
   c.write_errors = write_errors_;
   c.bytes_not_written = bytes_not_written_;
+  c.output_name_collisions = name_collisions_;
 
   HealthGauges& g = h.gauges;
   g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;
@@ -479,6 +612,7 @@ void Writer::write_health(bool final) {
     }
   }
   build_health(now);
+  log_fragments(now);
   reported_silent_ = silent(now);
   previous_counters_ = health_.counters;
   decode_prev_ = decode_;

@@ -4,10 +4,17 @@
 // decode worker's queue, and
 //   - writes each frame as a PCD v0.7 binary file in DIR/frames/ (temporary name, then renamed;
 //     partial frames carry "_partial" in the name), keeping at most frames_max_files /
-//     frames_max_bytes of this run's frames;
+//     frames_max_bytes of frames, those of earlier runs included;
 //   - appends raw packets to a classic pcap in DIR/raw/ (".part" while open, renamed when closed),
-//     rotated by size and age and on SIGHUP, with retention, and the calibration CSV in use saved
-//     beside it as DIR/raw/calibration.csv;
+//     rotated by size and age and on SIGHUP, with the same retention, and the calibration CSV in
+//     use saved beside it as DIR/raw/calibration.csv (an earlier run's that differs is kept as
+//     calibration_before_<N>.csv);
+// Nothing is ever replaced. File numbers continue across runs (frame_<N>_..., pandarcap_..._<N>:
+// the next free number is found at start-up), so a restart within the same second or a sensor
+// clock that restarts cannot repeat a name; and a finished file is put in place with a rename
+// that refuses an existing name (a "_dupN" name is taken instead, counted as
+// output_name_collisions). Retention counts every file of ours found at start-up, so restarts
+// and crash loops cannot fill the disk.
 //   - every second writes DIR/health/pandarcap.prom (temporary file + rename) and appends one line
 //     to DIR/health/health.jsonl (rotated to health.jsonl.1 past jsonl_rotate_bytes); and at once,
 //     outside that schedule, when packets stop for longer than the no-data timeout or start
@@ -102,6 +109,14 @@ class Writer {
   void abandon_pcap(const std::exception& error, std::uint64_t failed_bytes);
   void finish_pcap_file();  // rename .part (or remove it if it holds no record)
   void finish_leftovers();  // at start: what an interrupted run left (see prepare())
+  // At start: the frames and recordings of earlier runs, numbered and sized, into the retention
+  // lists (oldest first, then retention applied), and the next free file numbers.
+  void adopt_earlier_files();
+  // Renames a finished file from `from` to `to` without replacing anything (see file_output);
+  // on a collision `to` becomes the name used, counted and logged.
+  void put_in_place(const std::string& from, std::string& to);
+  void log_fragments(std::int64_t now_monotonic_ns);
+  void save_calibration();  // raw/calibration.csv, keeping an earlier one that differs
   void rotate_outputs();
   void write_health(bool final);
   void stall_while_test_file_exists() const;
@@ -125,9 +140,13 @@ class Writer {
   std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
   std::vector<char> pcap_buffer_;         // the pcap's stdio buffer, allocated once
   std::unique_ptr<PcapWriter> pcap_;
-  std::filesystem::path pcap_final_path_;
+  std::string pcap_final_path_;
   std::int64_t pcap_opened_monotonic_ns_ = 0;
-  std::uint32_t pcap_index_ = 0;
+  std::uint64_t pcap_index_ = 0;         // the next recording's number (continues across runs)
+  std::uint64_t frame_number_base_ = 0;  // + the frame's sequence = its file number
+  std::uint64_t name_collisions_ = 0;
+  std::uint64_t fragments_logged_ = 0;
+  std::int64_t last_fragment_log_ns_ = -1;
   std::deque<std::pair<std::filesystem::path, std::uint64_t>> frame_files_, pcap_files_;
 
   DecodeSnapshot decode_;       // the latest counters from the decoder

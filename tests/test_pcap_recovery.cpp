@@ -178,3 +178,35 @@ TEST_CASE("PcapWriter::abandon keeps what the last good flush wrote and counts t
   CHECK(fs::file_size(never) == 24);
   CHECK(read_back(never).status == CaptureStatus::kEnd);
 }
+
+TEST_CASE("a recorded datagram that was cut (captured < original) is a whole record to recovery",
+          "[pcap][recovery]") {
+  test::ScratchDir dir("pcap-recovery-cut-datagram");
+  const fs::path part = dir / "cut.pcap.part";
+  {
+    PcapWriter writer(part.string());
+    writer.write(payload(1262, 1), kTime, kSource, kDestination);
+    writer.write(payload(1280, 2), 65507, kTime + 1000, kSource, kDestination);
+    writer.write(payload(1262, 3), kTime + 2000, kSource, kDestination);
+    writer.close();
+  }
+  const auto size = fs::file_size(part);
+  const PcapRecovery recovered = finish_interrupted_pcap(part.string());
+  CHECK(recovered.ours);
+  CHECK(recovered.records == 3);
+  CHECK(recovered.kept_bytes == size);
+  CHECK(recovered.cut_bytes == 0);
+  CHECK(read_back(part).sizes == std::vector<std::size_t>{1262, 1280, 1262});
+}
+
+TEST_CASE("finish_interrupted_pcap never follows a symbolic link", "[pcap][recovery]") {
+  test::ScratchDir dir("pcap-recovery-link");
+  const fs::path target = dir / "elsewhere.pcap";
+  write_recording(target, 2);
+  std::ofstream(target, std::ios::binary | std::ios::app) << "cut";
+  const auto size = fs::file_size(target);
+  const fs::path link = dir / "x.pcap.part";
+  fs::create_symlink(target, link);
+  CHECK_THROWS_AS(finish_interrupted_pcap(link.string()), std::system_error);
+  CHECK(fs::file_size(target) == size);
+}
