@@ -21,13 +21,12 @@
 
 #include <atomic>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
-#include <fstream>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -45,6 +44,7 @@
 #include "daemon/cli_args.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/decode_worker.hpp"
+#include "daemon/output_directories.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/replay_source.hpp"
 #include "daemon/sd_notify.hpp"
@@ -79,7 +79,10 @@ starts new recording files.
 Configuration:
   -c, --config FILE      TOML configuration (see config/pandarcap.toml); without it the
                          defaults apply, and the options below override either
-  --check-config         validate the configuration, print the result and exit (0 or 78)
+  --check-config         check everything the start checks without network: the configuration,
+                         the calibration file, the decoder, and that every output directory is
+                         (or can be made) writable by this user; print the result and exit
+                         (0, 73 outputs, 78 configuration or calibration)
   --print-config         print the effective configuration as TOML and exit
   --print-calibration    print the angle-correction table in effect (the calibration file, or
                          the nominal Pandar40P table) as CSV and exit
@@ -118,8 +121,8 @@ Overrides (same names as the configuration keys):
   -h, --help             this text
 
 Exit status: 0 done, 1 runtime failure, 64 usage error, 66 capture file unreadable,
-73 output directory not writable, 77 run as root without --allow-root, 78 invalid
-configuration or calibration file.
+73 output directory not writable or in use by another pandarcapd, 77 run as root without
+--allow-root, 78 invalid configuration or calibration file.
 )";
 
 constexpr int kExitUsage = 64;
@@ -284,38 +287,90 @@ struct Pipeline {
   std::atomic<std::uint32_t> rotate_generation{0};
 };
 
-void print_summary(const WriterOptions& wo) {
+// From the writer's final health in memory, not from health.jsonl: when the disk is full the
+// file's last line is an older one, and the summary must say how the run really ended.
+void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
   const std::filesystem::path& dir = wo.output_dir;
-  const std::filesystem::path jsonl = wo.health_dir / "health.jsonl";
-  std::ifstream in(jsonl);
-  std::string line, last;
-  while (std::getline(in, line)) {
-    if (!line.empty()) last = line;
-  }
   fmt::print("outputs in {}:\n  frames  {}\n  raw     {}\n  health  {} and {}\n", dir.string(),
              (dir / "frames").string(), (dir / "raw").string(), wo.prometheus_file.string(),
-             jsonl.string());
-  if (last.empty()) return;
-  try {
-    const auto h = nlohmann::json::parse(last);
-    const auto& c = h.at("counters");
-    fmt::print(
-        "final health ({}): state {}{}; {} datagrams received, {} accepted, {} rejected, {} "
-        "foreign, {} ring overruns, {} kernel drops; frames {} complete, {} partial, {} dropped, "
-        "{} written; {} packets recorded\n",
-        jsonl.filename().string(), h.value("state", "?"),
-        h.value("reason", "").empty() ? "" : " (" + h.value("reason", "") + ")",
-        c.value("datagrams_received", 0), c.value("packets_accepted", 0),
-        c.value("packets_rejected", 0), c.value("foreign_datagrams", 0),
-        c.value("ring_overruns", 0), c.value("kernel_drops", 0), c.value("frames_complete", 0),
-        c.value("frames_partial", 0), c.value("frames_dropped_no_arena", 0),
-        c.value("frames_written", 0), c.value("pcap_packets_written", 0));
-  } catch (const std::exception& error) {
-    spdlog::warn("cannot summarise {}: {}", jsonl.string(), error.what());
+             (wo.health_dir / "health.jsonl").string());
+  const HealthCounters& c = h.counters;
+  fmt::print(
+      "final health: state {}{}; {} datagrams received, {} accepted, {} rejected, {} foreign, "
+      "{} ring overruns, {} kernel drops; frames {} complete, {} partial, {} dropped, {} "
+      "fragments, {} written; {} packets recorded; {} write errors\n",
+      to_string(h.gauges.state), h.gauges.reason.empty() ? "" : " (" + h.gauges.reason + ")",
+      c.datagrams_received, c.packets_accepted, c.packets_rejected, c.foreign_datagrams,
+      c.ring_overruns, c.kernel_drops, c.frames_complete, c.frames_partial,
+      c.frames_dropped_no_arena, c.frames_fragment, c.frames_written, c.pcap_packets_written,
+      c.write_errors);
+}
+
+// The calibration the configuration names, or the nominal table. Throws on a bad file.
+Calibration load_calibration(const DaemonConfig& config) {
+  return config.sensor.calibration_file.empty() ? Calibration::nominal()
+                                                : Calibration::load(config.sensor.calibration_file);
+}
+
+// The writer's options from the configuration. The decoder, the calibration and the recorded
+// destination port are filled in at start, once known.
+WriterOptions writer_options(const DaemonConfig& config) {
+  const std::filesystem::path output_dir = config.output.directory;
+  WriterOptions wo;
+  wo.output_dir = output_dir;
+  wo.health_dir = config.health.directory.empty() ? output_dir / "health"
+                                                  : std::filesystem::path(config.health.directory);
+  wo.prometheus_file = config.health.prometheus_file.empty()
+                           ? wo.health_dir / "pandarcap.prom"
+                           : std::filesystem::path(config.health.prometheus_file);
+  if (const char* stall = std::getenv("PANDARCAP_TEST_STALL_WRITER_FILE")) {
+    wo.test_stall_file = stall;
   }
+  wo.frames = config.output.frames;
+  wo.frames_max_files = config.output.frames_max_files;
+  wo.frames_max_bytes = config.output.frames_max_bytes;
+  wo.pcap = config.output.pcap;
+  wo.pcap_rotate_bytes = config.output.pcap_rotate_bytes;
+  wo.pcap_rotate_seconds = config.output.pcap_rotate_seconds;
+  wo.pcap_max_files = config.output.pcap_max_files;
+  wo.pcap_max_bytes = config.output.pcap_max_bytes;
+  wo.prometheus = config.health.prometheus;
+  wo.jsonl = config.health.jsonl;
+  wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;
+  wo.sensor_name = config.health.sensor_name;
+  wo.version = std::string(kVersion);
+  wo.no_data_timeout_seconds = config.health.no_data_timeout_seconds;
+  wo.expected_return_mode = config.sensor.return_mode;
+  wo.expected_rpm = config.sensor.rotation_speed;
+  return wo;
+}
+
+// --check-config: what the start would refuse, short of opening the socket or the capture.
+int check_config(const DaemonConfig& config, const std::string& source_name) {
+  try {
+    load_calibration(config);
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "pandarcapd: %s\n", error.what());
+    return kExitConfig;
+  }
+  const DecoderChoice decoder = choose_decoder_target(config.decoder);
+  if (!decoder.target) {
+    std::fprintf(stderr, "pandarcapd: %s: decoder: %s\n", source_name.c_str(),
+                 decoder.error.c_str());
+    return kExitConfig;
+  }
+  const std::vector<std::string> problems = output_problems(writer_options(config));
+  for (const std::string& problem : problems)
+    std::fprintf(stderr, "pandarcapd: %s: outputs: %s\n", source_name.c_str(), problem.c_str());
+  if (!problems.empty()) return kExitCantCreate;
+  fmt::print("{}: configuration OK\n", source_name);
+  return 0;
 }
 
 int run(int argc, char** argv) {
+  // A file-size limit (systemd's LimitFSIZE=, ulimit -f) must fail the one write with EFBIG,
+  // counted like a full disk, not kill the daemon with SIGXFSZ.
+  std::signal(SIGXFSZ, SIG_IGN);
   // 1. Options and configuration.
   Options options = parse_options(argc, argv);
   DaemonConfig config;
@@ -329,10 +384,7 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "pandarcapd: %s\n", error.what());
     return kExitConfig;
   }
-  if (options.check_config) {
-    fmt::print("{}: configuration OK\n", source_name);
-    return 0;
-  }
+  if (options.check_config) return check_config(config, source_name);
   if (options.print_config) {
     fmt::print("{}", to_toml(config));
     return 0;
@@ -347,9 +399,7 @@ int run(int argc, char** argv) {
                                   : "live capture");
   Calibration calibration;
   try {
-    calibration = config.sensor.calibration_file.empty()
-                      ? Calibration::nominal()
-                      : Calibration::load(config.sensor.calibration_file);
+    calibration = load_calibration(config);
   } catch (const std::exception& error) {
     spdlog::critical("{}", error.what());
     return kExitConfig;
@@ -439,35 +489,22 @@ int run(int argc, char** argv) {
   }
 
   const std::filesystem::path output_dir = config.output.directory;
-  WriterOptions wo;
-  wo.output_dir = output_dir;
-  wo.health_dir = config.health.directory.empty() ? output_dir / "health"
-                                                  : std::filesystem::path(config.health.directory);
-  wo.prometheus_file = config.health.prometheus_file.empty()
-                           ? wo.health_dir / "pandarcap.prom"
-                           : std::filesystem::path(config.health.prometheus_file);
-  if (const char* stall = std::getenv("PANDARCAP_TEST_STALL_WRITER_FILE")) {
-    wo.test_stall_file = stall;
-  }
-  wo.frames = config.output.frames;
-  wo.frames_max_files = config.output.frames_max_files;
-  wo.frames_max_bytes = config.output.frames_max_bytes;
-  wo.pcap = config.output.pcap;
-  wo.pcap_rotate_bytes = config.output.pcap_rotate_bytes;
-  wo.pcap_rotate_seconds = config.output.pcap_rotate_seconds;
-  wo.pcap_max_files = config.output.pcap_max_files;
-  wo.pcap_max_bytes = config.output.pcap_max_bytes;
-  wo.prometheus = config.health.prometheus;
-  wo.jsonl = config.health.jsonl;
-  wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;
-  wo.sensor_name = config.health.sensor_name;
-  wo.version = std::string(kVersion);
+  WriterOptions wo = writer_options(config);
   wo.decoder = std::string(to_string(*decoder_choice.target));
-  wo.no_data_timeout_seconds = config.health.no_data_timeout_seconds;
-  wo.expected_return_mode = config.sensor.return_mode;
-  wo.expected_rpm = config.sensor.rotation_speed;
   wo.calibration_csv = calibration.to_csv();
   wo.pcap_destination = Endpoint{0, receiver ? receiver->bound_port() : config.sensor.data_port};
+  // One daemon per output directory, claimed before anything in it is touched (crash recovery,
+  // numbering and retention all assume the files are this process's or a finished run's).
+  std::optional<OutputDirectoryLock> lock;
+  try {
+    lock.emplace(output_dir);
+  } catch (const OutputDirectoryBusy& error) {
+    spdlog::critical("{}", error.what());
+    return kExitCantCreate;
+  } catch (const std::exception& error) {
+    spdlog::critical("outputs: {}", error.what());
+    return kExitCantCreate;
+  }
   Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live);
   try {
     writer.prepare();
@@ -495,6 +532,8 @@ int run(int argc, char** argv) {
   dopt.decoder.decoder_target = *decoder_choice.target;
   dopt.frame_decimation = config.output.frame_decimation;
   dopt.write_frames = config.output.frames;
+  dopt.min_frame_fraction = config.output.frames_min_fraction;
+  dopt.expected_rpm = config.sensor.rotation_speed;
   dopt.record_raw = config.output.pcap;
   dopt.lossless = options.replay.has_value();
   dopt.measure_latency = !options.replay.has_value();
@@ -601,7 +640,7 @@ int run(int argc, char** argv) {
       status = 1;
     }
   }
-  print_summary(wo);
+  print_summary(wo, writer.final_health());
   return status;
 }
 

@@ -1,0 +1,107 @@
+#include "daemon/output_directories.hpp"
+
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <system_error>
+
+namespace pandarcap {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Whether this process (its effective ids, as the daemon will run) may create entries in `dir`.
+bool writable_directory(const fs::path& dir) {
+  return ::faccessat(AT_FDCWD, dir.c_str(), W_OK | X_OK, AT_EACCESS) == 0;
+}
+
+// The problem with writing into `dir` (created when missing), or "".
+std::string directory_problem(const fs::path& dir) {
+  // The deepest part of the path that exists decides: a directory we may write into, or not.
+  fs::path existing = fs::absolute(dir).lexically_normal();
+  std::error_code ec;
+  while (!fs::exists(existing, ec) && existing.has_relative_path()) {
+    existing = existing.parent_path();
+  }
+  if (!fs::is_directory(existing, ec)) {
+    return fmt::format("'{}' is not a directory", existing.string());
+  }
+  if (!writable_directory(existing)) {
+    return fmt::format("'{}' is not writable by uid {}", existing.string(), ::geteuid());
+  }
+  return {};
+}
+
+}  // namespace
+
+std::vector<std::string> output_problems(const WriterOptions& o) {
+  std::vector<std::string> problems;
+  std::vector<std::string> seen;  // one line per cause: frames/ and raw/ share the output's
+  const auto check = [&](const char* what, const fs::path& dir) {
+    const std::string problem = directory_problem(dir);
+    if (problem.empty() || std::find(seen.begin(), seen.end(), problem) != seen.end()) return;
+    seen.push_back(problem);
+    problems.push_back(fmt::format("{} '{}': {}", what, dir.string(), problem));
+  };
+  check("output directory", o.output_dir);
+  if (o.frames) check("frames directory", o.output_dir / "frames");
+  if (o.pcap) check("recording directory", o.output_dir / "raw");
+  if (o.jsonl) {
+    check("health directory", o.health_dir);
+    const fs::path jsonl = o.health_dir / "health.jsonl";
+    std::error_code ec;
+    if (fs::exists(jsonl, ec) && ::faccessat(AT_FDCWD, jsonl.c_str(), W_OK, AT_EACCESS) != 0) {
+      problems.push_back(
+          fmt::format("health file '{}': not writable by uid {}", jsonl.string(), ::geteuid()));
+    }
+  }
+  if (o.prometheus) {
+    check("textfile directory",
+          o.prometheus_file.has_parent_path() ? o.prometheus_file.parent_path() : fs::path("."));
+  }
+  return problems;
+}
+
+OutputDirectoryLock::OutputDirectoryLock(const fs::path& directory) {
+  fs::create_directories(directory);
+  const fs::path path = directory / "pandarcapd.lock";
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644);
+  if (fd_ < 0) {
+    throw std::system_error(errno, std::generic_category(), "cannot open '" + path.string() + "'");
+  }
+  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+    const int error = errno;
+    char pid[32] = {};
+    const ssize_t n = ::pread(fd_, pid, sizeof pid - 1, 0);
+    ::close(fd_);
+    fd_ = -1;
+    if (error == EWOULDBLOCK) {
+      std::string holder(pid, n > 0 ? static_cast<std::size_t>(n) : 0);
+      while (!holder.empty() && (holder.back() == '\n' || holder.back() == ' '))
+        holder.pop_back();
+      throw OutputDirectoryBusy(fmt::format(
+          "another pandarcapd{} is writing to '{}' (it holds {}): two daemons must not share an "
+          "output directory; give each its own output.directory",
+          holder.empty() ? "" : " (pid " + holder + ")", directory.string(), path.string()));
+    }
+    throw std::system_error(error, std::generic_category(), "cannot lock '" + path.string() + "'");
+  }
+  // Ours now: the pid is for the message a second daemon prints.
+  const std::string pid = fmt::format("{}\n", ::getpid());
+  if (::ftruncate(fd_, 0) != 0 ||
+      ::pwrite(fd_, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
+    // The lock holds without the pid; only the message would lack it.
+  }
+}
+
+OutputDirectoryLock::~OutputDirectoryLock() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+}  // namespace pandarcap
