@@ -207,6 +207,8 @@ void for_each_key(Config& c, Visitor&& v) {
   v("threads", "decode_priority", t.decode_priority, IntRange{0, 99});
   v("threads", "writer_priority", t.writer_priority, IntRange{0, 99});
   v("threads", "lock_memory", t.lock_memory, std::monostate{});
+
+  v("latency", "budget_ms", c.latency.budget_ms, IntRange{0, 1000});
 }
 
 std::string dotted(std::string_view table, std::string_view key) {

@@ -77,6 +77,14 @@ struct ThreadsSection {
   bool lock_memory = false;  // mlockall once started
 };
 
+// How long a datagram may wait in the socket before the receive thread takes it. The thread
+// then drains the socket in full batches and wakes the decoder once per drain, instead of
+// waking (and waking the decoder) for every datagram. 0 = wake per datagram (lowest latency,
+// most CPU at one sensor's rate).
+struct LatencySection {
+  std::uint32_t budget_ms = 5;  // 0..1000
+};
+
 struct DaemonConfig {
   std::string log_level = "info";  // trace, debug, info, warn, error, critical, off
   // Packet decoder: "auto" (the fastest SIMD target this CPU runs), "scalar" (the reference),
@@ -89,6 +97,7 @@ struct DaemonConfig {
   OutputSection output;
   HealthSection health;
   ThreadsSection threads;
+  LatencySection latency;
 };
 
 }  // namespace pandarcap

@@ -74,6 +74,11 @@ struct HealthCounters {
   // A finished file whose name was taken (which the naming rules should make impossible): kept
   // under a free "_dupN" name, never replacing the other.
   std::uint64_t output_name_collisions = 0;
+  // Returns from each thread's wait (a sleep on the socket, the ring or the timer): what the
+  // latency budget saves, visible in the field.
+  std::uint64_t receive_wakeups = 0;
+  std::uint64_t decode_wakeups = 0;
+  std::uint64_t writer_wakeups = 0;
 };
 
 struct HealthGauges {
@@ -84,6 +89,9 @@ struct HealthGauges {
   bool high_temperature = false;  // the last packet's flag
   double seconds_since_last_packet = -1;  // -1 before the first packet
   double uptime_seconds = 0;
+  double receive_wakeups_per_second = 0;  // over the last second
+  double decode_wakeups_per_second = 0;
+  double writer_wakeups_per_second = 0;
   HealthState state = HealthState::kNoData;
   std::string reason;  // one line saying why the state is not ok ("" when ok)
 };
@@ -102,6 +110,9 @@ struct HealthSnapshot {
   HealthGauges gauges;
   // Kernel receive timestamp -> decoded, since start-up; empty when replaying a file.
   LatencyHistogram latency;
+  // Kernel receive timestamp of the packet that completed a frame -> its PCD renamed into place,
+  // since start-up: what a user waits for a frame. Empty when replaying or not writing frames.
+  LatencyHistogram frame_latency;
   // Heap allocations made by the receive, decode and writer loops after warm-up; absent where
   // they cannot be counted (sanitizer builds).
   std::optional<HotPathAllocations> hot_path_allocations;

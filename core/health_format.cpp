@@ -105,6 +105,12 @@ constexpr CounterField kCounters[] = {
    "Bytes lost to failed writes"},
   {"output_name_collisions", "output_name_collisions", &HealthCounters::output_name_collisions,
    "Finished files whose name was taken: kept under a _dupN name instead of replacing"},
+  {"receive_wakeups", "receive_wakeups", &HealthCounters::receive_wakeups,
+   "Returns of the receive thread from its wait (socket or latency-budget timer)"},
+  {"decode_wakeups", "decode_wakeups", &HealthCounters::decode_wakeups,
+   "Returns of the decode thread from its wait on the ring"},
+  {"writer_wakeups", "writer_wakeups", &HealthCounters::writer_wakeups,
+   "Returns of the writer thread from its wait on the decoder's queue"},
 };
 // clang-format on
 
@@ -127,6 +133,12 @@ constexpr GaugeField kGauges[] = {
      "Seconds since the last accepted packet; -1 before the first"},
     {"uptime_seconds", "uptime_seconds", &HealthGauges::uptime_seconds,
      "Seconds since the daemon started"},
+    {"receive_wakeups_per_second", "receive_wakeups_per_second",
+     &HealthGauges::receive_wakeups_per_second, "Receive thread wake-ups, last second"},
+    {"decode_wakeups_per_second", "decode_wakeups_per_second",
+     &HealthGauges::decode_wakeups_per_second, "Decode thread wake-ups, last second"},
+    {"writer_wakeups_per_second", "writer_wakeups_per_second",
+     &HealthGauges::writer_wakeups_per_second, "Writer thread wake-ups, last second"},
 };
 
 constexpr const char* kReturnModes[] = {"last", "strongest", "dual"};
@@ -224,6 +236,38 @@ void append_json_number(std::string& out, double v) {
   }
 }
 
+// A LatencyHistogram as a Prometheus histogram with buckets at 2^first .. 2^last ns (exact
+// bucket edges of the histogram).
+void histogram(std::string& out, std::string_view sensor, std::string_view name,
+               std::string_view help, const LatencyHistogram& h, int first, int last) {
+  const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
+    fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
+  };
+  family(out, name, "histogram", help, "");
+  for (int p = first; p <= last; ++p) {
+    append("pandarcap_{}_bucket{{{},le=\"{}\"}} {}\n", name, sensor, std::ldexp(1e-9, p),
+           h.count_below_pow2(p));
+  }
+  append("pandarcap_{}_bucket{{{},le=\"+Inf\"}} {}\n", name, sensor, h.count());
+  append("pandarcap_{}_sum{{{}}} {}\n", name, sensor, static_cast<double>(h.sum_ns()) / 1e9);
+  append("pandarcap_{}_count{{{}}} {}\n", name, sensor, h.count());
+}
+
+// Percentiles (bucket upper edges, at most 12.5 % high; max exact) as a JSON object, in `unit`
+// (1e3: microseconds, 1e6: milliseconds).
+void latency_json(std::string& out, std::string_view key, const LatencyHistogram& h,
+                  std::string_view unit, double ns_per_unit) {
+  fmt::format_to(std::back_inserter(out), ",\"{}\":{{\"count\":{}", key, h.count());
+  for (const auto& [name, q] :
+       {std::pair{"p50", 0.5}, std::pair{"p99", 0.99}, std::pair{"p999", 0.999}}) {
+    fmt::format_to(std::back_inserter(out), ",\"{}_{}\":", name, unit);
+    append_json_number(out, static_cast<double>(h.quantile_ns(q)) / ns_per_unit);
+  }
+  fmt::format_to(std::back_inserter(out), ",\"max_{}\":", unit);
+  append_json_number(out, static_cast<double>(h.max_ns()) / ns_per_unit);
+  out += '}';
+}
+
 }  // namespace
 
 std::string escape_label_value(std::string_view value) {
@@ -296,19 +340,15 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
     }
   }
 
-  // Buckets at powers of two (exact edges of the histogram), 8.2 µs .. 1.07 s.
-  family(out, "receive_to_decoded_latency_seconds", "histogram",
-         "Kernel receive timestamp to decoded, per packet (live capture only)");
-  for (int p = 13; p <= 30; ++p) {
-    append("pandarcap_receive_to_decoded_latency_seconds_bucket{{{},le=\"{}\"}} {}\n", sensor,
-           std::ldexp(1e-9, p), h.latency.count_below_pow2(p));
-  }
-  append("pandarcap_receive_to_decoded_latency_seconds_bucket{{{},le=\"+Inf\"}} {}\n", sensor,
-         h.latency.count());
-  append("pandarcap_receive_to_decoded_latency_seconds_sum{{{}}} {}\n", sensor,
-         static_cast<double>(h.latency.sum_ns()) / 1e9);
-  append("pandarcap_receive_to_decoded_latency_seconds_count{{{}}} {}\n", sensor,
-         h.latency.count());
+  // Buckets at powers of two (exact edges of the histogram): 8.2 µs .. 1.07 s per packet,
+  // 1 ms .. 8.6 s per frame.
+  histogram(out, sensor, "receive_to_decoded_latency_seconds",
+            "Kernel receive timestamp to decoded, per packet (live capture only)", h.latency, 13,
+            30);
+  histogram(out, sensor, "frame_latency_seconds",
+            "Kernel receive timestamp of the packet that completed a frame to its PCD file in "
+            "place (live capture only)",
+            h.frame_latency, 20, 33);
 }
 
 void render_json_line(const HealthSnapshot& h, std::string& out) {
@@ -363,17 +403,9 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   append_json_string(out, h.gauges.return_mode);
   append(",\"high_temperature\":{}}}", h.gauges.high_temperature);
 
-  // Percentiles are bucket upper edges (at most 12.5 % high); max is exact.
-  const auto us = [&](double q) { return static_cast<double>(h.latency.quantile_ns(q)) / 1e3; };
-  append(",\"latency\":{{\"count\":{},\"p50_us\":", h.latency.count());
-  append_json_number(out, us(0.5));
-  out += ",\"p99_us\":";
-  append_json_number(out, us(0.99));
-  out += ",\"p999_us\":";
-  append_json_number(out, us(0.999));
-  out += ",\"max_us\":";
-  append_json_number(out, static_cast<double>(h.latency.max_ns()) / 1e3);
-  out += "}}\n";
+  latency_json(out, "latency", h.latency, "us", 1e3);
+  latency_json(out, "frame_latency", h.frame_latency, "ms", 1e6);
+  out += "}\n";
 }
 
 std::string to_prometheus(const HealthSnapshot& h) {

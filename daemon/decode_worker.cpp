@@ -65,6 +65,8 @@ void DecodeWorker::frame_done(Frame& frame) {
     free_arenas_.try_push(arena);
     return;
   }
+  // The packet being decoded is the one whose arrival finished this frame.
+  arena->completed_receive_ns = options_.measure_latency ? current_receive_ns_ : 0;
   const bool write = options_.write_frames && frames_finished_ % options_.frame_decimation == 0;
   ++frames_finished_;
   if (write) {
@@ -120,6 +122,7 @@ void DecodeWorker::flush_raw() {
 
 void DecodeWorker::process(const ringbuf::PacketSlot& slot) {
   if (options_.record_raw) record_raw(slot);
+  current_receive_ns_ = slot.receive_time_ns;
   // A cut datagram (MSG_TRUNC live, snapped in a file) is rejected as bad_length whatever its
   // kept length: an empty payload is exactly that reject. The kept length never exceeds the slot.
   const std::size_t length =
@@ -135,6 +138,7 @@ DecodeSnapshot DecodeWorker::snapshot() const {
   s.frames_decimated = frames_decimated_;
   s.frames_fragment = frames_fragment_;
   s.raw_packets_dropped = raw_dropped_;
+  s.wakeups = wakeups_;
   s.monotonic_ns = coarse_monotonic_ns();
   s.latency = latency_;
   return s;
@@ -170,6 +174,7 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
     if (batch.empty()) {
       if (done) break;
       ring_.wait_for_data(std::chrono::milliseconds(100));
+      ++wakeups_;
     } else {
       for (const ringbuf::PacketSlot& slot : batch)
         process(slot);
@@ -199,6 +204,8 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
     }
   }
   alloc::mark_this_thread_cold();
+  // Frames finished by the shutdown, not by a packet: no frame latency to measure.
+  current_receive_ns_ = 0;
   decoder_.flush();
   flush_raw();
   send_snapshot(WriterMessage::Kind::kEnd);

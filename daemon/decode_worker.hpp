@@ -83,6 +83,8 @@ class DecodeWorker final : public FrameSink {
   std::uint64_t frames_finished_ = 0;
   std::uint64_t frames_decimated_ = 0;
   std::uint64_t frames_fragment_ = 0;
+  std::uint64_t wakeups_ = 0;
+  std::int64_t current_receive_ns_ = 0;  // the packet being decoded (frame latency's start)
   std::uint64_t raw_dropped_ = 0;
   LatencyHistogram latency_;
 };

@@ -113,6 +113,8 @@ Overrides (same names as the configuration keys):
   --return-mode MODE     simulated (and expected) return mode: dual, strongest or last
   --udp-sequence         the simulated sensor appends a UDP sequence number
   --decoder NAME         decoder: auto (default), scalar, sse4, avx2, avx512, neon, sve, sve2
+  --latency-budget-ms N  latency.budget_ms (default 5): how long a datagram may wait before the
+                         receive thread drains the socket; 0 = wake for every datagram
   --log-level LEVEL      trace, debug, info, warn, error, critical, off
   --allow-root           run even as root (refused otherwise: pandarcapd needs no privilege,
                          and a parser of network packets should not hold one; the systemd unit
@@ -222,6 +224,9 @@ Options parse_options(int argc, char** argv) {
     } else if (arg == "--decoder") {
       const std::string name(args.value(arg));
       set([name](DaemonConfig& c) { c.decoder = name; });
+    } else if (arg == "--latency-budget-ms") {
+      const auto ms = static_cast<std::uint32_t>(args.integer(arg, 0, 1000));
+      set([ms](DaemonConfig& c) { c.latency.budget_ms = ms; });
     } else if (arg == "--log-level") {
       const std::string level(args.value(arg));
       set([level](DaemonConfig& c) { c.log_level = level; });
@@ -466,6 +471,7 @@ int run(int argc, char** argv) {
       ro.receive_buffer_bytes = config.sensor.udp_socket_receive_buffer_size_bytes;
       ro.sensor_ip = config.sensor.sensor_ip;
       ro.batch = config.ring.receive_batch;
+      ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
       receiver = std::make_unique<UdpReceiver>(ro);
       if (options.simulate) {
         SyntheticSensorConfig sc;

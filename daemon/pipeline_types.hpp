@@ -35,6 +35,9 @@ struct FrameArena {
   std::unique_ptr<Point[]> storage;
   std::size_t capacity;
   Frame frame;
+  // Kernel receive time (CLOCK_REALTIME ns) of the packet whose arrival finished the frame: the
+  // start of the frame latency the writer measures. 0: not measured (replay).
+  std::int64_t completed_receive_ns = 0;
 };
 
 struct RawPacket {
@@ -62,6 +65,7 @@ struct DecodeSnapshot {
   std::uint64_t frames_decimated = 0;
   std::uint64_t frames_fragment = 0;      // partial frames too small to write
   std::uint64_t raw_packets_dropped = 0;  // no empty RawBatch: not recorded to pcap
+  std::uint64_t wakeups = 0;              // returns from the decoder's wait on the ring
   std::int64_t monotonic_ns = 0;  // when it was taken (the last packet's time is in LiveClock)
   LatencyHistogram latency;       // kernel receive timestamp -> decoded (live sources only)
 };
@@ -103,6 +107,7 @@ struct ReceiveCounters {
   std::atomic<std::uint64_t> kernel_drops{0};
   std::atomic<std::uint64_t> ring_overruns{0};
   std::atomic<std::uint64_t> receive_errors{0};
+  std::atomic<std::uint64_t> wakeups{0};  // returns from the receive thread's wait
 
   // Single writer: a relaxed load + store is enough (no read-modify-write needed).
   static void add(std::atomic<std::uint64_t>& counter, std::uint64_t n) noexcept {

@@ -1,6 +1,7 @@
 #include "daemon/udp_receiver.hpp"
 
 #include <arpa/inet.h>
+#include <fmt/format.h>
 #include <linux/sock_diag.h>
 #include <poll.h>
 #include <spdlog/spdlog.h>
@@ -18,6 +19,7 @@
 
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
+#include "ringbuf/slot_ring.hpp"
 
 namespace pandarcap {
 namespace {
@@ -61,7 +63,9 @@ struct UdpReceiver::Batch {
 };
 
 UdpReceiver::UdpReceiver(const UdpReceiverOptions& options)
-    : batch_(std::clamp<std::size_t>(options.batch, 1, kMaxBatch)), buffers_(new Batch) {
+    : batch_(std::clamp<std::size_t>(options.batch, 1, kMaxBatch)),
+      budget_ns_(std::max<std::int64_t>(options.latency_budget_ns, 0)),
+      buffers_(new Batch) {
   fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
   if (fd_ < 0) fail("cannot create the UDP socket");
   try {
@@ -136,36 +140,135 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
   }
   if (!options.sensor_ip.empty()) sensor_ip_ = parse_ipv4(options.sensor_ip, "sensor_ip").s_addr;
   spdlog::info(
-      "receiving UDP on {}:{}{}", options.host_ip, bound_port_,
-      options.sensor_ip.empty() ? std::string(" from any source") : " from " + options.sensor_ip);
+      "receiving UDP on {}:{}{}; {}", options.host_ip, bound_port_,
+      options.sensor_ip.empty() ? std::string(" from any source") : " from " + options.sensor_ip,
+      budget_ns_ == 0 ? std::string("waking for every datagram (latency budget 0)")
+                      : fmt::format("latency budget {} ms: the socket is drained in batches",
+                                    static_cast<double>(budget_ns_) / 1e6));
 }
 
 UdpReceiver::~UdpReceiver() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-void UdpReceiver::read_kernel_drops(ReceiveCounters& counters) {
+double UdpReceiver::read_socket_memory(ReceiveCounters& counters) {
   // SO_MEMINFO's drop count is cumulative for the socket's life; the cmsg variant only appears
-  // with the next packet after a drop, so this is read on a timer instead.
+  // with the next packet after a drop, so this is read on a timer (or at each coalesced wake)
+  // instead. The same call says how full the receive buffer is.
   std::array<std::uint32_t, SK_MEMINFO_VARS> info{};
   socklen_t length = sizeof info;
-  if (::getsockopt(fd_, SOL_SOCKET, SO_MEMINFO, info.data(), &length) == 0 &&
-      length >= sizeof(std::uint32_t) * (SK_MEMINFO_DROPS + 1)) {
-    counters.kernel_drops.store(info[SK_MEMINFO_DROPS], std::memory_order_relaxed);
+  if (::getsockopt(fd_, SOL_SOCKET, SO_MEMINFO, info.data(), &length) != 0 ||
+      length < sizeof(std::uint32_t) * (SK_MEMINFO_DROPS + 1)) {
+    return 0.0;
   }
+  counters.kernel_drops.store(info[SK_MEMINFO_DROPS], std::memory_order_relaxed);
+  return info[SK_MEMINFO_RCVBUF] == 0 ? 0.0
+                                      : static_cast<double>(info[SK_MEMINFO_RMEM_ALLOC]) /
+                                            static_cast<double>(info[SK_MEMINFO_RCVBUF]);
+}
+
+UdpReceiver::Received UdpReceiver::receive_batch(ringbuf::PacketRing& ring, int flags,
+                                                 ReceiveCounters& counters) {
+  Batch& batch = *buffers_;
+  std::span<ringbuf::PacketSlot> slots = ring.reserve(batch_);
+  const bool overrun = slots.empty();
+  if (overrun) slots = batch.scratch;  // ring full: received and dropped (counted), newest first
+
+  const std::size_t n = slots.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    ringbuf::PacketSlot& slot = slots[i];
+    batch.iov[i] = {slot.payload, sizeof slot.payload};
+    msghdr& header = batch.headers[i].msg_hdr;
+    header.msg_name = &slot.source;
+    header.msg_namelen = sizeof slot.source;
+    header.msg_iov = &batch.iov[i];
+    header.msg_iovlen = 1;
+    header.msg_control = batch.control[i].data();
+    header.msg_controllen = batch.control[i].size();
+    header.msg_flags = 0;
+  }
+  // MSG_TRUNC: msg_len is the datagram's real length even when it was longer than the slot,
+  // so a cut datagram is recorded with what it had, not as a whole one of the slot's size.
+  const int received =
+      ::recvmmsg(fd_, batch.headers.data(), static_cast<unsigned>(n), flags | MSG_TRUNC, nullptr);
+  if (received <= 0) {
+    if (received < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
+      ReceiveCounters::add(counters.receive_errors, 1);
+    }
+    return {0, n, overrun};
+  }
+
+  std::uint64_t bytes = 0;
+  std::uint64_t truncated = 0;
+  std::uint64_t foreign = 0;
+  std::size_t kept = 0;
+  const std::int64_t fallback_time = realtime_ns();
+  for (int i = 0; i < received; ++i) {
+    ringbuf::PacketSlot& slot = slots[i];
+    const mmsghdr& message = batch.headers[i];
+    bytes += message.msg_len;
+    if (overrun) continue;
+    slot.original_length = message.msg_len;
+    slot.length = std::min<std::uint32_t>(message.msg_len, sizeof slot.payload);
+    slot.truncated = (message.msg_hdr.msg_flags & MSG_TRUNC) != 0 || slot.length < message.msg_len;
+    truncated += slot.truncated;
+    slot.receive_time_ns = fallback_time;
+    for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;
+         c = CMSG_NXTHDR(const_cast<msghdr*>(&message.msg_hdr), c)) {
+      // The length is the kernel's to set, but it is checked before the copy all the same.
+      if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS &&
+          c->cmsg_len >= CMSG_LEN(sizeof(timespec))) {
+        timespec ts{};
+        std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
+        slot.receive_time_ns = ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+      }
+    }
+    if (sensor_ip_ && slot.source.sin_addr.s_addr != *sensor_ip_) {
+      ++foreign;
+      continue;
+    }
+    // Keep accepted datagrams contiguous; a copy happens only after a foreign one.
+    if (kept != static_cast<std::size_t>(i)) slots[kept] = slot;
+    ++kept;
+  }
+  ReceiveCounters::add(counters.datagrams, static_cast<std::uint64_t>(received));
+  ReceiveCounters::add(counters.bytes, bytes);
+  if (overrun) {
+    ReceiveCounters::add(counters.ring_overruns, static_cast<std::uint64_t>(received));
+  } else {
+    ReceiveCounters::add(counters.truncated, truncated);
+    ReceiveCounters::add(counters.foreign, foreign);
+    if (kept > 0) ring.publish(kept);
+  }
+  return {static_cast<std::size_t>(received), n, overrun, overrun ? 0 : kept};
 }
 
 void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
                       ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
-  Batch& batch = *buffers_;
+  if (budget_ns_ == 0) {
+    run_per_datagram(ring, stop, counters, heartbeat);
+  } else {
+    run_coalesced(ring, stop, counters, heartbeat);
+  }
+  read_socket_memory(counters);  // the last drops, for the final health
+  alloc::mark_this_thread_cold();
+}
+
+namespace {
+
+// On stop, what the socket already holds is still taken (without waiting, for at most kDrainNs
+// against a sender that does not stop): datagrams the kernel accepted are then either received
+// or counted as dropped, none left uncounted in the buffer.
+constexpr std::int64_t kDrainNs = 200'000'000;
+
+}  // namespace
+
+void UdpReceiver::run_per_datagram(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+                                   ReceiveCounters& counters,
+                                   std::atomic<std::uint64_t>& heartbeat) {
   std::int64_t next_meminfo_ns = 0;
   const std::int64_t warm_ns = coarse_monotonic_ns() + kWarmUpNs;
   bool hot = false;
-
-  // On stop, what the socket already holds is still taken (without waiting, for at most
-  // kDrainNs against a sender that does not stop): datagrams the kernel accepted are then either
-  // received or counted as dropped, none left uncounted in the buffer.
-  constexpr std::int64_t kDrainNs = 200'000'000;
   std::int64_t drain_until = 0;  // 0: not stopping
   for (;;) {
     if (drain_until == 0 && stop.load(std::memory_order_relaxed)) {
@@ -180,97 +283,76 @@ void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
       hot = true;
     }
     if (now >= next_meminfo_ns) {
-      read_kernel_drops(counters);
+      read_socket_memory(counters);
       next_meminfo_ns = now + 1'000'000'000;
     }
-
-    std::span<ringbuf::PacketSlot> slots = ring.reserve(batch_);
-    const bool overrun = slots.empty();
-    if (overrun) {
+    if (ring.size_approx() == ring.capacity()) {
       // Ring full. Wait (briefly) for a datagram, then drop what is waiting and count it.
       pollfd pfd{fd_, POLLIN, 0};
       if (::poll(&pfd, 1, draining ? 0 : 1) <= 0) {
         if (draining) break;
         continue;
       }
-      slots = batch.scratch;
     }
-
-    const std::size_t n = slots.size();
-    for (std::size_t i = 0; i < n; ++i) {
-      ringbuf::PacketSlot& slot = slots[i];
-      batch.iov[i] = {slot.payload, sizeof slot.payload};
-      msghdr& header = batch.headers[i].msg_hdr;
-      header.msg_name = &slot.source;
-      header.msg_namelen = sizeof slot.source;
-      header.msg_iov = &batch.iov[i];
-      header.msg_iovlen = 1;
-      header.msg_control = batch.control[i].data();
-      header.msg_controllen = batch.control[i].size();
-      header.msg_flags = 0;
-    }
-    // MSG_TRUNC: msg_len is the datagram's real length even when it was longer than the slot,
-    // so a cut datagram is recorded with what it had, not as a whole one of the slot's size.
-    const int received =
-        ::recvmmsg(fd_, batch.headers.data(), static_cast<unsigned>(n),
-                   MSG_WAITFORONE | MSG_TRUNC | (overrun || draining ? MSG_DONTWAIT : 0), nullptr);
-    if (received <= 0) {
-      if (received < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
-        ReceiveCounters::add(counters.receive_errors, 1);
-      }
+    // Blocks until a datagram (or the 100 ms SO_RCVTIMEO): each return is a wake-up.
+    const Received r =
+        receive_batch(ring, MSG_WAITFORONE | (draining ? MSG_DONTWAIT : 0), counters);
+    ReceiveCounters::add(counters.wakeups, 1);
+    if (r.received == 0) {
       if (draining) break;  // the socket is empty
       continue;             // timeout: check the stop flag
     }
-
-    std::uint64_t bytes = 0;
-    std::uint64_t truncated = 0;
-    std::uint64_t foreign = 0;
-    std::size_t kept = 0;
-    const std::int64_t fallback_time = realtime_ns();
-    for (int i = 0; i < received; ++i) {
-      ringbuf::PacketSlot& slot = slots[i];
-      const mmsghdr& message = batch.headers[i];
-      bytes += message.msg_len;
-      if (overrun) continue;
-      slot.original_length = message.msg_len;
-      slot.length = std::min<std::uint32_t>(message.msg_len, sizeof slot.payload);
-      slot.truncated =
-          (message.msg_hdr.msg_flags & MSG_TRUNC) != 0 || slot.length < message.msg_len;
-      truncated += slot.truncated;
-      slot.receive_time_ns = fallback_time;
-      for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;
-           c = CMSG_NXTHDR(const_cast<msghdr*>(&message.msg_hdr), c)) {
-        // The length is the kernel's to set, but it is checked before the copy all the same.
-        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS &&
-            c->cmsg_len >= CMSG_LEN(sizeof(timespec))) {
-          timespec ts{};
-          std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
-          slot.receive_time_ns = ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
-        }
-      }
-      if (sensor_ip_ && slot.source.sin_addr.s_addr != *sensor_ip_) {
-        ++foreign;
-        continue;
-      }
-      // Keep accepted datagrams contiguous; a copy happens only after a foreign one.
-      if (kept != static_cast<std::size_t>(i)) slots[kept] = slot;
-      ++kept;
-    }
-    ReceiveCounters::add(counters.datagrams, static_cast<std::uint64_t>(received));
-    ReceiveCounters::add(counters.bytes, bytes);
-    if (overrun) {
-      ReceiveCounters::add(counters.ring_overruns, static_cast<std::uint64_t>(received));
-      continue;
-    }
-    ReceiveCounters::add(counters.truncated, truncated);
-    ReceiveCounters::add(counters.foreign, foreign);
-    if (kept > 0) {
-      ring.publish(kept);
-      ring.notify();
-    }
+    if (r.published > 0) ring.notify();
   }
-  read_kernel_drops(counters);  // the last second's drops, for the final health
-  alloc::mark_this_thread_cold();
+}
+
+void UdpReceiver::run_coalesced(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+                                ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
+  const std::int64_t warm_ns = monotonic_ns() + kWarmUpNs;
+  bool hot = false;
+  std::int64_t drain_until = 0;  // 0: not stopping
+  // From the shortest sleep up (x2 per wake): the first sleeps measure the rate before a long
+  // one could overflow a small buffer.
+  std::int64_t sleep_ns = kMinSleepNs;
+  for (;;) {
+    const std::int64_t wake_ns = monotonic_ns();
+    if (drain_until == 0 && stop.load(std::memory_order_relaxed)) drain_until = wake_ns + kDrainNs;
+    const bool draining = drain_until != 0;
+    ReceiveCounters::add(heartbeat, 1);
+    ReceiveCounters::add(counters.wakeups, 1);
+    if (!hot && wake_ns >= warm_ns) {
+      alloc::mark_this_thread_hot(alloc::HotThread::kReceive);
+      hot = true;
+    }
+    // How full the buffer got while this thread slept (and the kernel's drop count).
+    const double fill = read_socket_memory(counters);
+
+    // Drain: full batches until one comes back short (the socket is empty), then one wake-up
+    // of the decoder for all of it.
+    std::size_t published = 0;
+    for (;;) {
+      const Received r = receive_batch(ring, MSG_DONTWAIT, counters);
+      published += r.published;
+      if (r.received < r.requested) break;
+      if (draining && monotonic_ns() >= drain_until) break;
+    }
+    if (published > 0) ring.notify();
+    if (draining) break;  // drained once after the stop: everything the kernel took is counted
+
+    // The next sleep: as long as the budget allows, but short enough that, at the rate the
+    // buffer filled during the last one, it would be at most kTargetFill full at the next wake
+    // (bursts of several times that rate still fit). Grows back at most 2x per wake.
+    if (fill > kTargetFill) {
+      sleep_ns = static_cast<std::int64_t>(static_cast<double>(sleep_ns) * kTargetFill / fill);
+    } else {
+      sleep_ns *= 2;
+    }
+    sleep_ns = std::clamp(sleep_ns, kMinSleepNs, budget_ns_);
+    const std::int64_t deadline = wake_ns + sleep_ns;
+    const timespec ts{static_cast<time_t>(deadline / 1'000'000'000),
+                      static_cast<long>(deadline % 1'000'000'000)};
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);  // EINTR: wakes early, fine
+  }
 }
 
 }  // namespace pandarcap

@@ -3,15 +3,26 @@
 //
 // Socket: IPv4 UDP bound to host_ip:data_port, optional multicast join, SO_RCVBUF as requested
 // (SO_RCVBUFFORCE first when permitted; the granted size is logged, with the sysctl to raise
-// when net.core.rmem_max capped it), SO_TIMESTAMPNS for kernel receive times, SO_RXQ_OVFL, and
-// a 100 ms receive timeout so the loop notices shutdown.
+// when net.core.rmem_max capped it), SO_TIMESTAMPNS for kernel receive times, and a 100 ms
+// receive timeout so the per-datagram loop notices shutdown.
 //
-// Loop: reserve up to `batch` free slots, recvmmsg(MSG_WAITFORONE) into them, then per datagram:
-// record MSG_TRUNC as truncated, take the kernel time, and drop (count) a datagram whose source
-// is not sensor_ip. Publish the rest with one store and notify the decoder once per batch.
-// Ring full: receive the waiting datagrams into a scratch buffer and count them as overruns
-// (drop newest) — never block on the decoder. Kernel drops are read once a second with
-// SO_MEMINFO. No allocation, no locks in the loop.
+// A batch: reserve up to `batch` free slots, recvmmsg(MSG_TRUNC) into them, then per datagram:
+// record a cut one as truncated with its real length, take the kernel time, and drop (count) a
+// datagram whose source is not sensor_ip. Publish the rest with one store. Ring full: receive
+// the waiting datagrams into a scratch buffer and count them as overruns (drop newest) — never
+// block on the decoder. No allocation, no locks in the loop.
+//
+// Waiting, by the latency budget:
+//   budget 0   recvmmsg(MSG_WAITFORONE) blocks until a datagram: the thread wakes, and wakes the
+//              decoder, for (nearly) every datagram at one sensor's rate. Kernel drops are read
+//              once a second with SO_MEMINFO.
+//   budget > 0 the thread sleeps on an absolute CLOCK_MONOTONIC deadline, then drains the socket
+//              with recvmmsg(MSG_DONTWAIT) in full batches until one comes back short, and
+//              notifies the decoder once. The socket buffer holds what arrives meanwhile (8 MiB
+//              is ~1.7 s of one sensor). At each wake SO_MEMINFO says how full the buffer got;
+//              the next sleep is shortened so that, at that rate, it would be at most 1/8 full
+//              at the next wake, and grows back (x2 per wake) up to the budget. Kernel receive
+//              timestamps keep every datagram's true arrival time.
 #pragma once
 
 #include <netinet/in.h>
@@ -35,6 +46,7 @@ struct UdpReceiverOptions {
   std::uint64_t receive_buffer_bytes = 8u << 20;
   std::string sensor_ip;  // "" = accept every source
   std::size_t batch = 64;
+  std::int64_t latency_budget_ns = 0;  // 0: wake per datagram; see above
 };
 
 class UdpReceiver {
@@ -54,14 +66,32 @@ class UdpReceiver {
 
  private:
   struct Batch;
+  // One recvmmsg into free ring slots (or the scratch slots when the ring is full).
+  struct Received {
+    std::size_t received = 0;   // datagrams the kernel gave (0: none waiting, or the timeout)
+    std::size_t requested = 0;  // slots offered: received < requested means the socket is empty
+    bool overrun = false;       // the ring was full: received into scratch, dropped and counted
+    std::size_t published = 0;  // datagrams published to the ring
+  };
+  // Below 1/8 full at each wake: a burst at several times the rate of the last sleep still fits.
+  static constexpr double kTargetFill = 0.125;
+  static constexpr std::int64_t kMinSleepNs = 100'000;
+
   void configure(const UdpReceiverOptions& options);
-  void read_kernel_drops(ReceiveCounters& counters);
+  // Reads SO_MEMINFO: stores the kernel's drop count, returns the buffer's fill (0..1).
+  double read_socket_memory(ReceiveCounters& counters);
+  Received receive_batch(ringbuf::PacketRing& ring, int flags, ReceiveCounters& counters);
+  void run_per_datagram(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+                        ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
+  void run_coalesced(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+                     ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
 
   int fd_ = -1;
   std::uint16_t bound_port_ = 0;
   std::uint64_t granted_rcvbuf_ = 0;
   std::optional<in_addr_t> sensor_ip_;  // network order
   std::size_t batch_;
+  std::int64_t budget_ns_ = 0;
   std::unique_ptr<Batch> buffers_;
 };
 

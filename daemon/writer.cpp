@@ -336,6 +336,9 @@ void Writer::write_frame(FrameArena& arena) {
     put_in_place(frame_temporary_path_, frame_path_);
     ++frames_written_;
     pcd_bytes_ += expected;
+    if (arena.completed_receive_ns > 0) {
+      frame_latency_.record(realtime_ns() - arena.completed_receive_ns);
+    }
     // Retention keeps a list of names (one allocation per file); without it, no list.
     if (options_.frames_max_files != 0 || options_.frames_max_bytes != 0) {
       frame_files_.emplace_back(frame_path_, expected);
@@ -515,6 +518,10 @@ void Writer::build_health(std::int64_t now) {
   c.write_errors = write_errors_;
   c.bytes_not_written = bytes_not_written_;
   c.output_name_collisions = name_collisions_;
+  c.receive_wakeups = receive_.wakeups.load(std::memory_order_relaxed);
+  c.decode_wakeups = decode_.wakeups;
+  c.writer_wakeups = wakeups_;
+  h.frame_latency = frame_latency_;
 
   HealthGauges& g = h.gauges;
   g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;
@@ -530,8 +537,22 @@ void Writer::build_health(std::int64_t now) {
   // final tick at shutdown can be a fraction of a second long (and sees the flushed partials),
   // so a window under half a second keeps the previous second's rate.
   const auto complete = decode_.frames.frames_complete - decode_prev_.frames.frames_complete;
-  if (span_s >= 0.5) g.frame_rate_hz = static_cast<double>(complete) / span_s;
+  if (span_s >= 0.5) {
+    g.frame_rate_hz = static_cast<double>(complete) / span_s;
+    g.decode_wakeups_per_second =
+        static_cast<double>(decode_.wakeups - decode_prev_.wakeups) / span_s;
+  }
   g.seconds_since_last_packet = seconds_since_last_packet(now);
+  // Per second of the writer's own ticks; the decoder's over the span of its last two snapshots
+  // (they arrive about once a second, not in step with the ticks). A final tick shorter than
+  // half a second keeps the last rates.
+  const double tick_s = static_cast<double>(now - last_tick_ns_) / 1e9;
+  if (tick_s >= 0.5) {
+    const HealthCounters& a = counters_a_second_ago_;
+    g.receive_wakeups_per_second =
+        static_cast<double>(c.receive_wakeups - a.receive_wakeups) / tick_s;
+    g.writer_wakeups_per_second = static_cast<double>(c.writer_wakeups - a.writer_wakeups) / tick_s;
+  }
 
   // State: error > no_data > degraded > ok; the reason names what changed since the last tick.
   // The problems are written straight into the reason (cleared, its capacity kept), and the
@@ -612,6 +633,10 @@ void Writer::write_health(bool final) {
     }
   }
   build_health(now);
+  if (now - last_tick_ns_ >= kSecondNs / 2) {  // the base of the next per-second rates
+    counters_a_second_ago_ = health_.counters;
+    last_tick_ns_ = now;
+  }
   log_fragments(now);
   reported_silent_ = silent(now);
   previous_counters_ = health_.counters;
@@ -699,6 +724,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       const std::int64_t wait =
           std::clamp<std::int64_t>(next_tick - monotonic_ns(), 0, 100'000'000);
       from_decoder_.wait_for_data(std::chrono::nanoseconds(wait));
+      ++wakeups_;
     }
     const std::uint32_t generation = rotate_generation.load(std::memory_order_relaxed);
     if (generation != seen_generation) {

@@ -145,6 +145,9 @@ class Writer {
   std::uint64_t pcap_index_ = 0;         // the next recording's number (continues across runs)
   std::uint64_t frame_number_base_ = 0;  // + the frame's sequence = its file number
   std::uint64_t name_collisions_ = 0;
+  std::uint64_t wakeups_ = 0;
+  LatencyHistogram frame_latency_;
+  HealthCounters counters_a_second_ago_{};  // for the per-second wake-up rates
   std::uint64_t fragments_logged_ = 0;
   std::int64_t last_fragment_log_ns_ = -1;
   std::deque<std::pair<std::filesystem::path, std::uint64_t>> frame_files_, pcap_files_;

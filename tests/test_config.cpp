@@ -273,3 +273,10 @@ TEST_CASE("Nesting past 32 levels is refused before parsing, where the limit is 
         "t.toml:2:1: sensor.x: unknown key");
   CHECK(error_of("a" + repeat(".a", 31) + " = 1\n").find("nested") == std::string::npos);
 }
+
+TEST_CASE("The latency budget is 0..1000 ms", "[config]") {
+  CHECK(parse_config("[latency]\nbudget_ms = 0\n", "t.toml").latency.budget_ms == 0);
+  CHECK(DaemonConfig{}.latency.budget_ms == 5);
+  CHECK(error_of("[latency]\nbudget_ms = 1001\n") ==
+        "t.toml:2:13: latency.budget_ms: 1001 is out of range (0..1000)");
+}

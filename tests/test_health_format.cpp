@@ -64,7 +64,10 @@ HealthSnapshot distinct_snapshot() {
                                &c.pcd_bytes_written,
                                &c.write_errors,
                                &c.bytes_not_written,
-                               &c.output_name_collisions}) {
+                               &c.output_name_collisions,
+                               &c.receive_wakeups,
+                               &c.decode_wakeups,
+                               &c.writer_wakeups}) {
     *field = v++;
   }
   for (std::size_t i = 0; i < kRejectReasonCount; ++i)
@@ -254,9 +257,11 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(c.at("filtered_points").at("dual_too_close") == 24);
   CHECK(c.at("frames_fragment") == h.counters.frames_fragment);
   CHECK(c.at("output_name_collisions") == h.counters.output_name_collisions);
-  // 33 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
+  CHECK(c.at("receive_wakeups") == h.counters.receive_wakeups);
+  CHECK(c.at("writer_wakeups") == h.counters.writer_wakeups);
+  // 36 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
   // allocation total and its per-thread map.
-  CHECK(c.size() == 42);
+  CHECK(c.size() == 45);
   const auto& g = j.at("gauges");
   CHECK(g.at("rpm_tail") == 600.0);
   CHECK(g.at("rpm_measured") == 599.5);
