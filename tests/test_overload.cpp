@@ -21,6 +21,7 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
+#include "live_daemon.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;
@@ -29,6 +30,7 @@ using nlohmann::json;
 namespace fs = std::filesystem;
 using test::health_counter;
 using test::health_records;
+using test::LiveDaemon;
 
 namespace {
 
@@ -37,63 +39,6 @@ const std::vector<std::string> kCounters = {
     "datagrams_received", "kernel_drops",      "ring_overruns",       "packets_accepted",
     "packets_rejected",   "foreign_datagrams", "sequence_lost",       "sequence_gaps",
     "frames_complete",    "frames_written",    "pcap_packets_written"};
-
-// The daemon on 127.0.0.1:port taking packets only from 127.0.0.1, with `extra` TOML.
-struct LiveDaemon {
-  LiveDaemon(const test::ScratchDir& dir, const std::string& extra)
-      : out(dir / "out"), port(harness::free_udp_port()) {
-    const fs::path config = dir / "daemon.toml";
-    std::ofstream(config) << "[sensor]\nhost_ip = \"127.0.0.1\"\nsensor_ip = \"127.0.0.1\"\n"
-                          << "data_port = " << port << "\n"
-                          << extra;
-    process.emplace(test::binary("pandarcapd"),
-                    std::vector<std::string>{"--allow-root", "-c", config.string(), "--output-dir",
-                                             out.string()},
-                    dir / "log.txt");
-  }
-  bool ready() const {
-    return harness::wait_until([&] { return process->log().find("ready:") != std::string::npos; },
-                               20s);
-  }
-  // Sends the simulated sensor's stream (dual return) to the daemon as `traffic` says, then ends
-  // it with 0.2 s more at a gentle 1000 packets/s, continuing its sequence, so that its last
-  // packet certainly arrives and the sequence tracker sees every gap (a loss at the very end of a
-  // stream is invisible to sequence numbers). `sent` counts the tail's packets too.
-  bench::GeneratorResult send(bench::GeneratorOptions traffic) {
-    const auto source = bench::TrafficSource::synthetic(SyntheticSensorConfig{});
-    traffic.port = port;
-    bench::GeneratorResult sent = bench::run_generator(source, traffic);
-    REQUIRE(sent.send_errors == 0);
-    bench::GeneratorOptions tail;
-    tail.port = port;
-    tail.rate_pps = 1000;
-    tail.seconds = 0.2;
-    tail.first_sequence = sent.sent;
-    sent.sent += bench::run_generator(source, tail).sent;
-    return sent;
-  }
-  // Waits until the daemon has seen or counted as dropped `total` datagrams, then stops it and
-  // returns the final health record.
-  json stop_after(std::uint64_t total) {
-    harness::wait_until(
-        [&] {
-          const auto records = health_records(out);
-          return !records.empty() && health_counter(records.back(), "datagrams_received") +
-                                             health_counter(records.back(), "kernel_drops") >=
-                                         total;
-        },
-        15s);
-    process->signal(SIGTERM);
-    exit_status = process->wait_exit(30s);
-    const auto records = health_records(out);
-    return records.empty() ? json() : records.back();
-  }
-
-  fs::path out;
-  std::uint16_t port;
-  std::optional<harness::ChildProcess> process;
-  std::optional<int> exit_status;
-};
 
 // The per-second records: never a counter going down, about a second apart (the final record
 // may follow the last one sooner), and the first record plus each second's increase is the
