@@ -168,6 +168,16 @@ Options:
   --config FILE          daemon configuration (the harness sets address, port and output dir)
   --work-dir DIR         keep daemon logs there (default: a temporary directory, removed)
   --daemon-only          skip the reference receivers
+  --sensor-rate-only     only the trials at the sensor's rate (no rate search)
+  --latency-budget-ms N  the daemon's latency.budget_ms in every trial (default: its own, 5);
+                         the sensor-rate trials also run it with 0, for the comparison
+  --compare-budget-0     run the zero-loss search again with budget 0 (the same run)
+  --receiver-command CMD measure another receiver (e.g. a vendor driver) under the same traffic
+                         at the sensor's rate: started as /bin/sh -c 'exec CMD', its CPU (all
+                         threads) and peak RSS are reported, and, if it prints a line
+                         'received N' (N datagrams; the last such line counts, e.g. on SIGTERM),
+                         its loss
+  --receiver-port N      the UDP port CMD listens on (127.0.0.1; required with the command)
   --from-report FILE     measure nothing: render a saved report.json again (with --report-dir)
 )";
 constexpr std::string_view kZeroLossUsageTail = R"(  -h, --help             this text
@@ -177,9 +187,13 @@ generator writes (0, 1, 2, ...), so loss is exact.
 
 JSON keys: daemon_zero_loss_pps, daemon_loss_at_most_0_5_percent_pps,
 bare_recvmmsg_zero_loss_pps, recvfrom_zero_loss_pps, daemon_vs_bare, daemon_vs_recvfrom,
-at_sensor_rate {cpu_fraction_of_one_core, cpu_by_thread, latency_p50_us, latency_p99_us,
-latency_p999_us, latency_max_us, hot_path_allocations, peak_rss_bytes}, goals, environment,
-settings, trials.
+at_sensor_rate {budget_ms, cpu_fraction_of_one_core, cpu_us_per_packet, cpu_by_thread,
+bare_recvmmsg_cpu_fraction_of_one_core, daemon_vs_bare_cpu, wakeups_per_second {receive, decode,
+writer}, frame_latency_p50_ms, frame_latency_p99_ms, latency_p50_us, latency_p99_us,
+latency_p999_us, latency_max_us, hot_path_allocations, peak_rss_bytes, budget_0 {the same for
+budget 0}, other_receiver {command, cpu_fraction_of_one_core, cpu_us_per_packet,
+peak_rss_bytes, received, lost, vs_daemon_cpu}}, daemon_zero_loss_pps_budget_0 (with
+--compare-budget-0), goals, environment, settings, trials.
 Exit status: 0, 1 if the daemon could not be run, 64 for a usage error.
 )";
 
@@ -215,6 +229,16 @@ int run_zero_loss(int argc, char** argv) {
       options.work_dir = std::string(args.value(arg));
     } else if (arg == "--daemon-only") {
       options.skip_references = true;
+    } else if (arg == "--sensor-rate-only") {
+      options.sensor_rate_only = true;
+    } else if (arg == "--latency-budget-ms") {
+      options.latency_budget_ms = static_cast<std::uint32_t>(args.integer(arg, 0, 1000));
+    } else if (arg == "--compare-budget-0") {
+      options.compare_budget_0 = true;
+    } else if (arg == "--receiver-command") {
+      options.receiver_command = std::string(args.value(arg));
+    } else if (arg == "--receiver-port") {
+      options.receiver_port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
     } else if (arg == "--from-report") {
       from_report = std::string(args.value(arg));
     } else {
@@ -222,6 +246,9 @@ int run_zero_loss(int argc, char** argv) {
     }
   }
   if (options.max_rate < options.min_rate) args.usage_error("--max-rate is below --min-rate");
+  if (options.receiver_command.empty() != (options.receiver_port == 0)) {
+    args.usage_error("--receiver-command and --receiver-port go together");
+  }
   const auto result = run_reporting_errors("zero-loss", [&] {
     if (from_report.empty()) return pandarcap::bench::run_zero_loss(options);
     std::ifstream saved(from_report);

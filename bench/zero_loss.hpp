@@ -1,9 +1,11 @@
 // `pandarcap-bench zero-loss`: the highest packet rate the real pandarcapd takes with zero loss
 // (RFC 2544 style binary search over trials of fixed length), next to two reference receivers
 // searched the same way in the same run: a bare recvmmsg loop (the kernel path's ceiling on this
-// machine) and a recvfrom loop (one packet per call, as the vendor SDKs receive). Plus one trial
-// at a dual-return sensor's rate (3600 packets/s) measuring the daemon's CPU per thread, its
-// receive-to-decoded latency, peak RSS and hot-path allocations.
+// machine) and a recvfrom loop (one packet per call, as the vendor SDKs receive). Plus trials at
+// a dual-return sensor's rate (3600 packets/s) measuring the daemon's CPU per thread and per
+// packet, with its latency budget and with budget 0, against the bare loop's CPU in the same
+// run; its wake-ups per thread, frame and receive-to-decoded latency, peak RSS and hot-path
+// allocations; and, if given, any other receiver's CPU, RSS and loss under the same traffic.
 //
 // Loss in a daemon trial is taken from the daemon's own final health record, per stage (kernel
 // socket drops, ring overruns, rejects, frames dropped for want of an arena or by a busy writer,
@@ -34,6 +36,17 @@ struct ZeroLossOptions {
   double loss_threshold = 0.005;  // the second search: highest rate at <= 0.5 % loss
   std::uint64_t receive_buffer_bytes = 8u << 20;  // reference receivers, as the daemon's default
   bool skip_references = false;                   // only the daemon (quick checks)
+  bool sensor_rate_only = false;  // only the trials at the sensor's rate, no rate search
+  // The daemon's latency.budget_ms in every trial; unset: its configured value (default 5).
+  // The trials at the sensor's rate also run it with budget 0, for the comparison.
+  std::optional<std::uint32_t> latency_budget_ms;
+  // The rate search again with budget 0, for the comparison of zero-loss rates in one run.
+  bool compare_budget_0 = false;
+  // Any other receiver, measured under the same traffic at the sensor's rate: started with
+  // /bin/sh -c 'exec COMMAND', sent to 127.0.0.1:receiver_port; if it prints a line
+  // "received N" (the last one counts), its loss is reported too.
+  std::string receiver_command;
+  std::uint16_t receiver_port = 0;
   // Bursts and extra (foreign, malformed) traffic for every trial; destination, port, rate and
   // length are set per trial.
   GeneratorOptions traffic;

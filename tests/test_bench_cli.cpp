@@ -12,6 +12,7 @@
 #include <sstream>
 #include <string>
 
+#include "bench/child_process.hpp"
 #include "core/decoder_target.hpp"
 #include "core/packet.hpp"
 #include "test_support.hpp"
@@ -155,7 +156,7 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "
   CHECK(s["cpu_fraction_of_one_core"].get<double>() > 0);
   // The floor beside it: a bare receiver under the same traffic, measured in the same run.
   CHECK(s["bare_recvmmsg_cpu_fraction_of_one_core"].get<double>() > 0);
-  CHECK_THAT(md_text(report_dir), Catch::Contains("The floor on this machine"));
+  CHECK_THAT(md_text(report_dir), Catch::Contains("bare recvmmsg loop (wakes per datagram"));
   CHECK(s["latency_p99_us"].get<double>() > 0);
   CHECK(s["peak_rss_bytes"].get<std::uint64_t>() > (1u << 20));
   CHECK(report["environment"]["cores"].get<int>() >= 1);
@@ -190,6 +191,64 @@ TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-
   const json& first = report["trials"]["daemon"][0];
   CHECK(first["sent"].get<std::uint64_t>() == first["accepted"].get<std::uint64_t>());
   CHECK(first["generator_cpu_fraction_of_one_core"].get<double>() > 0);
+}
+
+TEST_CASE(
+    "pandarcap-bench zero-loss at the sensor's rate: both budgets, the bare loop and "
+    "another receiver in one run",
+    "[bench][cli]") {
+  test::ScratchDir dir("zero-loss-budget");
+  // Any receiver a user wants to compare: here a few lines of Python that count datagrams and
+  // print "received N" when stopped, the line the harness reads for loss.
+  const auto receiver = dir / "receiver.py";
+  std::ofstream(receiver) << "import signal, socket, sys\n"
+                             "s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
+                             "s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)\n"
+                             "s.bind(('127.0.0.1', int(sys.argv[1])))\n"
+                             "n = 0\n"
+                             "def stop(*_):\n"
+                             "    print('received', n, flush=True)\n"
+                             "    sys.exit(0)\n"
+                             "signal.signal(signal.SIGTERM, stop)\n"
+                             "while True:\n"
+                             "    s.recv(2048)\n"
+                             "    n += 1\n";
+  const std::string port = std::to_string(harness::free_udp_port());
+  const auto result = test::run_command(
+      bench() + " zero-loss --json --sensor-rate-only --trial-seconds 1 --sensor-rate 1800" +
+      " --latency-budget-ms 10 --receiver-command 'python3 " + receiver.string() + " " + port +
+      "' --receiver-port " + port + " 2>&1");
+  INFO(result.out);
+  REQUIRE(result.exit_code == 0);
+  const json report = json::parse(result.out);
+  CHECK(report["trials"]["daemon"].empty());  // no search
+  const json& s = report["at_sensor_rate"];
+  CHECK(s["budget_ms"] == 10);
+  CHECK(s["budget_0"]["budget_ms"] == 0);
+  for (const json* t : {&s, &s["budget_0"]}) {
+    CHECK((*t)["lost"] == 0);
+    for (const char* thread : {"receive", "decode", "writer"}) {
+      INFO(thread);
+      CHECK((*t)["wakeups_per_second"][thread].get<double>() > 0);
+    }
+    CHECK((*t)["frame_latency_p99_ms"].get<double>() > 0);
+    CHECK((*t)["daemon_vs_bare_cpu"].get<double>() ==
+          Approx((*t)["cpu_fraction_of_one_core"].get<double>() /
+                 s["bare_recvmmsg_cpu_fraction_of_one_core"].get<double>()));
+  }
+  // The budget is why: fewer receive wake-ups than with budget 0 under the same traffic.
+  CHECK(s["wakeups_per_second"]["receive"].get<double>() <
+        s["budget_0"]["wakeups_per_second"]["receive"].get<double>());
+  const json& other = s["other_receiver"];
+  CHECK(other["received"].get<std::uint64_t>() == other["sent"].get<std::uint64_t>());
+  CHECK(other["lost"] == 0);
+  CHECK(other["peak_rss_bytes"].get<std::uint64_t>() > 0);
+  CHECK(other["cpu_fraction_of_one_core"].get<double>() >= 0);
+  // Bad pairs are usage errors.
+  CHECK(test::run_command(bench() + " zero-loss --receiver-command true 2>/dev/null").exit_code ==
+        64);
+  CHECK(test::run_command(bench() + " zero-loss --latency-budget-ms 1001 2>/dev/null").exit_code ==
+        64);
 }
 
 namespace {
