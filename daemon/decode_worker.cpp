@@ -32,7 +32,10 @@ DecodeWorker::DecodeWorker(const Calibration& calibration, const DecodeWorkerOpt
 
 Frame* DecodeWorker::acquire_frame() {
   FrameArena* arena = nullptr;
-  while (!free_arenas_.try_pop(arena)) {
+  // An arena this thread kept back (a fragment, a decimated frame) first: free_arenas_ has one
+  // producer, the writer, so this thread never pushes into it.
+  if (spares_ > 0) arena = spare_[--spares_];
+  while (arena == nullptr && !free_arenas_.try_pop(arena)) {
     if (!options_.lossless) return nullptr;  // the assembler counts the dropped frame
     free_arenas_.wait_for_data(std::chrono::milliseconds(100));
   }
@@ -42,9 +45,14 @@ Frame* DecodeWorker::acquire_frame() {
       return &arena->frame;
     }
   }
-  // Cannot happen (the assembler keeps at most two frames open); give the arena back.
-  free_arenas_.try_push(arena);
+  // Cannot happen (the assembler keeps at most two frames open); keep the arena.
+  keep_spare(arena);
   return nullptr;
+}
+
+void DecodeWorker::keep_spare(FrameArena* arena) noexcept {
+  // Room for every arena there is: an arena is in one place at a time.
+  if (spares_ < spare_.size()) spare_[spares_++] = arena;
 }
 
 void DecodeWorker::frame_done(Frame& frame) {
@@ -62,7 +70,7 @@ void DecodeWorker::frame_done(Frame& frame) {
        frame.info.packets < options_.min_frame_fraction * kSingleReturnPacketsAt600Rpm * 600.0 /
                                 options_.expected_rpm)) {
     ++frames_fragment_;
-    free_arenas_.try_push(arena);
+    keep_spare(arena);
     return;
   }
   // The packet being decoded is the one whose arrival finished this frame.
@@ -81,7 +89,7 @@ void DecodeWorker::frame_done(Frame& frame) {
     }
   }
   ++frames_decimated_;
-  free_arenas_.try_push(arena);
+  keep_spare(arena);
 }
 
 void DecodeWorker::record_raw(const ringbuf::PacketSlot& slot) {
@@ -112,12 +120,11 @@ void DecodeWorker::flush_raw() {
   message.raw = raw_;
   if (to_writer_.try_push(message)) {
     to_writer_.notify();
+    raw_ = nullptr;
   } else {
     raw_dropped_ += raw_->size;  // cannot happen (see frame_done); counted if it does
-    raw_->size = 0;
-    free_raw_.try_push(raw_);
+    raw_->size = 0;              // and the batch is reused here (free_raw_ is the writer's to fill)
   }
-  raw_ = nullptr;
 }
 
 void DecodeWorker::process(const ringbuf::PacketSlot& slot) {

@@ -43,6 +43,9 @@ struct DecodeWorkerOptions {
   bool measure_latency = false;
 };
 
+// The most frame arenas a pool may have (config: arenas.count, 2..64).
+inline constexpr std::size_t kMaxArenas = 64;
+
 class DecodeWorker final : public FrameSink {
  public:
   using ArenaQueue = ringbuf::SpscQueue<FrameArena*>;
@@ -79,6 +82,11 @@ class DecodeWorker final : public FrameSink {
   // Arenas currently being filled by the assembler (at most two frames are open at once), so a
   // Frame& from the assembler can be mapped back to its arena without searching the pool.
   std::array<FrameArena*, 4> open_{};
+  // Arenas finished without going to the writer (fragments, decimated frames), reused first.
+  // free_arenas_ is single-producer (the writer), so they cannot go back there from this thread.
+  void keep_spare(FrameArena* arena) noexcept;
+  std::array<FrameArena*, kMaxArenas> spare_{};
+  std::size_t spares_ = 0;
   RawBatch* raw_ = nullptr;
   std::uint64_t frames_finished_ = 0;
   std::uint64_t frames_decimated_ = 0;
