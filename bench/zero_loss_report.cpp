@@ -193,32 +193,36 @@ std::string zero_loss_markdown(const ordered_json& r) {
       "Traffic: {}; trials of {} s; search {}..{} packets/s.\n\n",
       r["settings"]["traffic"].get<std::string>(), r["settings"]["trial_seconds"].get<double>(),
       rate(r["settings"]["min_rate"].get<double>()), rate(r["settings"]["max_rate"].get<double>()));
-  md += "| receiver | zero-loss rate (packets/s) |\n|---|---:|\n";
-  md += fmt::format("| pandarcapd (config: {}) | {} |\n", env["daemon_config"].get<std::string>(),
-                    rate(r["daemon_zero_loss_pps"].get<double>()));
-  if (r.contains("daemon_zero_loss_pps_budget_0")) {
-    md += fmt::format("| pandarcapd, latency budget 0 | {} |\n",
-                      rate(r["daemon_zero_loss_pps_budget_0"].get<double>()));
+  if (r["settings"].value("sensor_rate_only", false)) {
+    md += "No rate search in this run (`--sensor-rate-only`).\n\n";
+  } else {
+    md += "| receiver | zero-loss rate (packets/s) |\n|---|---:|\n";
+    md += fmt::format("| pandarcapd (config: {}) | {} |\n", env["daemon_config"].get<std::string>(),
+                      rate(r["daemon_zero_loss_pps"].get<double>()));
+    if (r.contains("daemon_zero_loss_pps_budget_0")) {
+      md += fmt::format("| pandarcapd, latency budget 0 | {} |\n",
+                        rate(r["daemon_zero_loss_pps_budget_0"].get<double>()));
+    }
+    md += fmt::format("| pandarcapd at <= 0.5 % loss | {} |\n",
+                      rate(r["daemon_loss_at_most_0_5_percent_pps"].get<double>()));
+    md += fmt::format("| bare recvmmsg loop | {} |\n",
+                      rate(r["bare_recvmmsg_zero_loss_pps"].get<double>()));
+    md += fmt::format("| recvfrom, one packet per call | {} |\n\n",
+                      rate(r["recvfrom_zero_loss_pps"].get<double>()));
+    std::string limited;
+    for (const auto& [who, flag] : r["generator_limited"].items()) {
+      if (flag.get<bool>()) limited += (limited.empty() ? "" : ", ") + who;
+    }
+    if (!limited.empty()) {
+      md += "The generator could not send faster than the best passing trial for: " + limited +
+            ". Those figures are lower bounds (the sender and the receivers share this machine's "
+            "cores).\n\n";
+    }
+    md += fmt::format(
+        "Daemon vs bare recvmmsg: **{:.2f}** (goal >= 0.90: {}); above recvfrom: {}.\n\n",
+        r["daemon_vs_bare"].get<double>(), yes_no(g["daemon_vs_bare_at_least_0_9"]),
+        yes_no(g["daemon_above_recvfrom"]));
   }
-  md += fmt::format("| pandarcapd at <= 0.5 % loss | {} |\n",
-                    rate(r["daemon_loss_at_most_0_5_percent_pps"].get<double>()));
-  md += fmt::format("| bare recvmmsg loop | {} |\n",
-                    rate(r["bare_recvmmsg_zero_loss_pps"].get<double>()));
-  md += fmt::format("| recvfrom, one packet per call | {} |\n\n",
-                    rate(r["recvfrom_zero_loss_pps"].get<double>()));
-  std::string limited;
-  for (const auto& [who, flag] : r["generator_limited"].items()) {
-    if (flag.get<bool>()) limited += (limited.empty() ? "" : ", ") + who;
-  }
-  if (!limited.empty()) {
-    md += "The generator could not send faster than the best passing trial for: " + limited +
-          ". Those figures are lower bounds (the sender and the receivers share this machine's "
-          "cores).\n\n";
-  }
-  md +=
-      fmt::format("Daemon vs bare recvmmsg: **{:.2f}** (goal >= 0.90: {}); above recvfrom: {}.\n\n",
-                  r["daemon_vs_bare"].get<double>(), yes_no(g["daemon_vs_bare_at_least_0_9"]),
-                  yes_no(g["daemon_above_recvfrom"]));
   md += fmt::format("At a dual-return sensor's rate ({} packets/s), in the same run:\n\n",
                     s["offered_pps"].get<double>());
   const double bare = s.value("bare_recvmmsg_cpu_fraction_of_one_core", 0.0);
