@@ -69,8 +69,7 @@ struct LiveDaemon {
         std::chrono::seconds(15));
     process->signal(SIGTERM);
     exit_status = process->wait_exit(std::chrono::seconds(30));
-    const auto records = health_records(out);
-    return records.empty() ? nlohmann::json() : records.back();
+    return last_health_record(out);
   }
 
   std::filesystem::path out;

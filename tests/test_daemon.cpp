@@ -64,8 +64,7 @@ std::vector<std::vector<std::uint8_t>> recorded(const fs::path& dir) {
 }
 
 json last_health(const fs::path& dir) {
-  const auto lines = health_records(dir);
-  return lines.empty() ? json() : lines.back();
+  return test::last_health_record(dir);
 }
 
 // received = accepted + rejected + foreign + overruns, from the JSON line.
@@ -96,10 +95,8 @@ std::size_t pcd_points(const fs::path& file) {
   return 0;
 }
 
-// The daemon as the shell commands below run it. --allow-root: the tests (and CI) may run as
-// root; the refusal itself is tested in test_privileges.cpp.
 std::string pandarcapd() {
-  return test::binary("pandarcapd").string() + " --allow-root";
+  return test::pandarcapd_command();
 }
 
 std::string pandarcapd_path() {

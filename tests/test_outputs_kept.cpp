@@ -39,12 +39,11 @@ using nlohmann::json;
 namespace fs = std::filesystem;
 using test::files_ending;
 using test::health_counter;
-using test::health_records;
 
 namespace {
 
 std::string pandarcapd() {
-  return test::binary("pandarcapd").string() + " --allow-root";
+  return test::pandarcapd_command();
 }
 
 std::string quoted(const fs::path& path) {
@@ -52,8 +51,7 @@ std::string quoted(const fs::path& path) {
 }
 
 json last_health(const fs::path& out) {
-  const auto records = health_records(out);
-  return records.empty() ? json() : records.back();
+  return test::last_health_record(out);
 }
 
 // A pcap of `packets` simulated dual-return packets (with UDP sequence), recorded at the sensor's

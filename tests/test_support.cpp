@@ -70,6 +70,15 @@ std::vector<nlohmann::json> health_records(const std::filesystem::path& output_d
   return json_lines(output_dir / "health" / "health.jsonl");
 }
 
+nlohmann::json last_health_record(const std::filesystem::path& output_dir) {
+  const auto records = health_records(output_dir);
+  return records.empty() ? nlohmann::json() : records.back();
+}
+
+std::string pandarcapd_command() {
+  return binary("pandarcapd").string() + " --allow-root";
+}
+
 std::uint64_t health_counter(const nlohmann::json& record, std::string_view name) {
   if (!record.is_object() || !record.contains("counters")) return 0;
   return record["counters"].value(std::string(name), std::uint64_t{0});

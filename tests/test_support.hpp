@@ -47,6 +47,13 @@ std::vector<nlohmann::json> json_lines(const std::filesystem::path& file);
 // The health records of a run with the default health directory: OUTPUT_DIR/health/health.jsonl.
 std::vector<nlohmann::json> health_records(const std::filesystem::path& output_dir);
 
+// The newest of those records; null when there is none yet.
+nlohmann::json last_health_record(const std::filesystem::path& output_dir);
+
+// The daemon as the shell commands of the tests run it. --allow-root: the tests (and CI) may run
+// as root; the refusal itself is tested in test_privileges.cpp.
+std::string pandarcapd_command();
+
 // A counter of a health record (its "counters" object); 0 when absent or not a record.
 std::uint64_t health_counter(const nlohmann::json& record, std::string_view name);
 
