@@ -11,6 +11,7 @@
 //     run left is finished or removed at the next start, and temporary files and descriptors do
 //     not pile up.
 #include <fcntl.h>
+#include <fmt/format.h>
 #include <signal.h>
 #include <unistd.h>
 
@@ -18,6 +19,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <set>
@@ -105,6 +107,14 @@ bool prometheus_file_parses(const fs::path& file) {
   return text.ends_with("\n");
 }
 
+// How many bytes follow a file's last newline: a line cut short, when nothing is writing it.
+std::uintmax_t bytes_after_last_newline(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  const auto newline = text.rfind('\n');
+  return newline == std::string::npos ? text.size() : text.size() - newline - 1;
+}
+
 bool logged(const harness::ChildProcess& daemon, const std::string& text) {
   return daemon.log().find(text) != std::string::npos;
 }
@@ -128,6 +138,8 @@ TEST_CASE(
   std::uniform_int_distribution<int> kill_after_ms(0, 600);
   std::size_t fewest_fds = SIZE_MAX, most_fds = 0;
   std::size_t leftovers_seen = 0, parts_seen = 0;  // what the kills left, over all runs
+  std::uintmax_t health_cut_bytes = 0;  // a health line the last kill cut short: its length
+  std::size_t health_cuts_seen = 0;
 
   for (int run = 0; run < 50; ++run) {
     INFO("run " << run);
@@ -155,8 +167,14 @@ TEST_CASE(
         CHECK(read_capture(finished).first == CaptureStatus::kEnd);
       }
     }
-    // Every health line of every run so far parses (a line cut by a kill was dropped at start).
+    // Every health line of every run so far parses, and a line the kill cut short was dropped at
+    // start (the log says so, with its length): else the new run's first line would be glued to it.
     json_lines(out / "health" / "health.jsonl");
+    if (health_cut_bytes > 0) {
+      ++health_cuts_seen;
+      CHECK(logged(daemon, fmt::format("a line cut short by an interrupted run removed ({} bytes)",
+                                       health_cut_bytes)));
+    }
     const std::size_t fds = open_descriptors(daemon.pid());
     fewest_fds = std::min(fewest_fds, fds);
     most_fds = std::max(most_fds, fds);
@@ -169,6 +187,7 @@ TEST_CASE(
     // As the kill left it: the health file parses (rename is atomic), every recording reads to
     // its end or to a cut last record, never to an error, and every PCD is whole.
     CHECK(prometheus_file_parses(out / "health" / "pandarcap.prom"));
+    health_cut_bytes = bytes_after_last_newline(out / "health" / "health.jsonl");
     for (const fs::path& pcap : files_ending(out / "raw", ".pcap")) {
       INFO(pcap.string());
       CHECK(read_capture(pcap).first == CaptureStatus::kEnd);
@@ -189,7 +208,8 @@ TEST_CASE(
     CHECK(unfinished_files(out).size() <= 4);
   }
   // The kills did land mid-write: unfinished recordings were there to finish.
-  INFO(leftovers_seen << " unfinished files found at start, " << parts_seen << " of them pcaps");
+  INFO(leftovers_seen << " unfinished files found at start, " << parts_seen << " of them pcaps; "
+                      << health_cuts_seen << " health lines cut");
   CHECK(parts_seen >= 10);
   // The same descriptors in every run (±2: a frame or pcap may be open at the moment of the
   // count).
@@ -208,6 +228,7 @@ TEST_CASE(
     CHECK(tcpdump_reads(pcap));
   }
   CHECK(json_lines(out / "health" / "health.jsonl").size() >= 2);
+  CHECK(bytes_after_last_newline(out / "health" / "health.jsonl") == 0);
 }
 
 TEST_CASE(

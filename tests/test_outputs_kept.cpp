@@ -9,6 +9,7 @@
 // capture's snap length was recorded as whole; two daemons shared one directory; crash recovery
 // followed a symbolic link out of raw/; an unwritable frames/ was found only after READY; and the
 // exit summary repeated a stale health line when the last one could not be written.
+#include <fmt/format.h>
 #include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -18,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -552,6 +554,30 @@ TEST_CASE("the exit summary is the run's real end, even when health.jsonl could 
   const auto records = test::json_lines(out / "health" / "health.jsonl");
   REQUIRE_FALSE(records.empty());
   CHECK(health_counter(records.back(), "datagrams_received") == 0);  // the stale line
+}
+
+TEST_CASE("a health line an interrupted run cut short is removed at start, the lines before kept",
+          "[daemon][outputs]") {
+  test::ScratchDir dir("outputs-health-cut");
+  const fs::path out = dir / "out";
+  fs::create_directories(out / "health");
+  const std::string whole = R"({"earlier":"run","counters":{"datagrams_received":7}})";
+  const std::string cut = R"({"counters":{"datagrams_rec)";  // a kill mid-append
+  std::ofstream(out / "health" / "health.jsonl") << whole << "\n" << cut;
+  const auto r = test::run_command(pandarcapd() + " --simulate --duration 2 --output-dir " +
+                                   quoted(out) + " 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  CHECK(r.out.find(fmt::format("a line cut short by an interrupted run removed ({} bytes)",
+                               cut.size())) != std::string::npos);
+  std::ifstream in(out / "health" / "health.jsonl", std::ios::binary);
+  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  CHECK(text.starts_with(whole + "\n{"));  // the new run's first line right after the kept one
+  CHECK(text.ends_with("\n"));
+  const auto records = test::json_lines(out / "health" / "health.jsonl");
+  REQUIRE(records.size() >= 3);  // the earlier line, a line a second, the final line
+  CHECK(records.front()["earlier"] == "run");
+  CHECK(health_counter(records.back(), "datagrams_received") > 0);
 }
 
 TEST_CASE("a run with another calibration keeps the earlier recordings' table beside them",

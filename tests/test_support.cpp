@@ -57,6 +57,7 @@ std::vector<nlohmann::json> json_lines(const std::filesystem::path& file) {
   std::ifstream in(file);
   std::vector<nlohmann::json> lines;
   for (std::string line; std::getline(in, line);) {
+    if (in.eof()) break;  // no newline after it: still being written
     if (line.empty()) continue;
     INFO(file.string() << ": " << line);
     nlohmann::json parsed = nlohmann::json::parse(line, nullptr, false);

@@ -41,8 +41,11 @@ struct CommandResult {
 };
 CommandResult run_command(const std::string& command);
 
-// Every non-empty line of a JSON-lines file (pandarcapd's health.jsonl), parsed. A line that does
-// not parse fails the test (CHECK) and is left out. No file: no lines.
+// Every complete (newline-ended) non-empty line of a JSON-lines file (pandarcapd's health.jsonl),
+// parsed. A line that does not parse fails the test (CHECK) and is left out. Text after the last
+// newline is not a line yet: a running daemon may be appending it while the test reads (a read
+// racing a write() can see its first part), so it is left out, as a tailing reader would. No
+// file: no lines.
 std::vector<nlohmann::json> json_lines(const std::filesystem::path& file);
 // The health records of a run with the default health directory: OUTPUT_DIR/health/health.jsonl.
 std::vector<nlohmann::json> health_records(const std::filesystem::path& output_dir);
