@@ -9,8 +9,9 @@
 
 #include "core/calibration.hpp"
 #include "core/capture_reader.hpp"
+#include "core/packet_decoder.hpp"
 #include "core/simd_decoder.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "daemon/clocks.hpp"
 
 namespace pandarcap::bench {

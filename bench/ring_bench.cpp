@@ -16,15 +16,13 @@
 #include "core/packet.hpp"
 #include "core/timing.hpp"
 #include "daemon/clocks.hpp"
-#include "ringbuf/packet_slot.hpp"
+#include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap::bench {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-using ringbuf::PacketRing;
-using ringbuf::PacketSlot;
 using ringbuf::SpscQueue;
 using ringbuf::detail::cpu_relax;
 

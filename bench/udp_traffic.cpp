@@ -17,7 +17,7 @@
 #include <stdexcept>
 
 #include "core/capture_reader.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "daemon/clocks.hpp"
 
 namespace pandarcap::bench {

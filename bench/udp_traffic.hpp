@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "core/packet.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 
 namespace pandarcap::bench {
 

@@ -12,7 +12,7 @@
 #include "core/pcap_writer.hpp"
 #include "core/pcd.hpp"
 #include "core/stream_decoder.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/file_output.hpp"
 

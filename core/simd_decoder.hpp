@@ -25,7 +25,6 @@
 
 #include <array>
 #include <cstdint>
-#include <memory>
 #include <span>
 
 #include "calibration.hpp"
@@ -79,34 +78,5 @@ SimdKernel simd_decoder_kernel(DecoderTarget target) noexcept;
 
 // Whether this CPU can run `target`'s kernel (false for scalar, and for targets not compiled in).
 bool simd_target_supported(DecoderTarget target) noexcept;
-
-// Either decoder behind one call, chosen at construction: what the stream decoder and benchmarks
-// hold. The scalar reference is always constructed (the frame assembler asks it for azimuth
-// bounds); the SIMD decoder only when a SIMD target is chosen.
-class PacketDecoder {
- public:
-  // Throws std::invalid_argument when a SIMD `target` is not compiled in or this CPU cannot run
-  // it (supported_decoder_targets() says which can): never a silent fallback.
-  PacketDecoder(const Calibration& calibration, const DecoderConfig& config, DecoderTarget target);
-
-  DecodedPacket decode(const PacketView& packet, std::int64_t t0_ns,
-                       std::span<Point, kMaxPointsPerPacket> out, FilterCounts& filtered) const {
-    if (simd_kernel_ != nullptr) {
-      return simd_kernel_(*simd_tables_, packet, t0_ns, out.data(), filtered);
-    }
-    return scalar_.decode(packet, t0_ns, out, filtered);
-  }
-
-  DecoderTarget target() const noexcept { return target_; }
-  const ScalarDecoder& scalar() const noexcept { return scalar_; }
-
- private:
-  ScalarDecoder scalar_;
-  DecoderTarget target_;
-  SimdKernel simd_kernel_ = nullptr;
-  // Owned on the heap at construction (the tables are ~11 KB and 64-byte aligned), never in the
-  // hot path.
-  std::unique_ptr<SimdDecoderTables> simd_tables_;
-};
 
 }  // namespace pandarcap

@@ -20,7 +20,7 @@
 #include "packet.hpp"
 #include "packet_time.hpp"
 #include "sequence_tracker.hpp"
-#include "simd_decoder.hpp"
+#include "packet_decoder.hpp"
 
 namespace pandarcap {
 

@@ -21,7 +21,7 @@ constexpr double kSingleReturnPacketsAt600Rpm = 180.0;
 }  // namespace
 
 DecodeWorker::DecodeWorker(const Calibration& calibration, const DecodeWorkerOptions& options,
-                           ringbuf::PacketRing& ring, WriterQueue& to_writer,
+                           PacketRing& ring, WriterQueue& to_writer,
                            ArenaQueue& free_arenas, RawQueue& free_raw)
     : options_(options),
       ring_(ring),
@@ -92,7 +92,7 @@ void DecodeWorker::frame_done(Frame& frame) {
   keep_spare(arena);
 }
 
-void DecodeWorker::record_raw(const ringbuf::PacketSlot& slot) {
+void DecodeWorker::record_raw(const PacketSlot& slot) {
   while (raw_ == nullptr && !free_raw_.try_pop(raw_)) {
     if (!options_.lossless) {
       ++raw_dropped_;
@@ -127,7 +127,7 @@ void DecodeWorker::flush_raw() {
   }
 }
 
-void DecodeWorker::process(const ringbuf::PacketSlot& slot) {
+void DecodeWorker::process(const PacketSlot& slot) {
   if (options_.record_raw) record_raw(slot);
   current_receive_ns_ = slot.receive_time_ns;
   // A cut datagram (MSG_TRUNC live, snapped in a file) is rejected as bad_length whatever its
@@ -177,18 +177,18 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
     // Read the flag before looking at the ring: if the producer was done then, an empty ring now
     // means everything has been taken.
     const bool done = producer_done.load(std::memory_order_acquire);
-    std::span<ringbuf::PacketSlot> batch = ring_.peek(kDecodeBatch);
+    std::span<PacketSlot> batch = ring_.peek(kDecodeBatch);
     if (batch.empty()) {
       if (done) break;
       ring_.wait_for_data(std::chrono::milliseconds(100));
       ++wakeups_;
     } else {
-      for (const ringbuf::PacketSlot& slot : batch)
+      for (const PacketSlot& slot : batch)
         process(slot);
       if (options_.measure_latency) {
         // One clock read per batch: "decoded" is when the batch is done.
         const std::int64_t decoded_ns = realtime_ns();
-        for (const ringbuf::PacketSlot& slot : batch) {
+        for (const PacketSlot& slot : batch) {
           if (slot.receive_time_ns > 0) latency_.record(decoded_ns - slot.receive_time_ns);
         }
       }

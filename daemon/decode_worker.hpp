@@ -16,7 +16,7 @@
 #include "core/calibration.hpp"
 #include "core/stream_decoder.hpp"
 #include "daemon/pipeline_types.hpp"
-#include "ringbuf/packet_slot.hpp"
+#include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {
@@ -53,7 +53,7 @@ class DecodeWorker final : public FrameSink {
   using WriterQueue = ringbuf::SpscQueue<WriterMessage>;
 
   DecodeWorker(const Calibration& calibration, const DecodeWorkerOptions& options,
-               ringbuf::PacketRing& ring, WriterQueue& to_writer, ArenaQueue& free_arenas,
+               PacketRing& ring, WriterQueue& to_writer, ArenaQueue& free_arenas,
                RawQueue& free_raw);
 
   // Runs until `producer_done` is set and the ring is empty; then finishes open frames as
@@ -67,14 +67,14 @@ class DecodeWorker final : public FrameSink {
   void frame_done(Frame& frame) override;
 
  private:
-  void process(const ringbuf::PacketSlot& slot);
-  void record_raw(const ringbuf::PacketSlot& slot);
+  void process(const PacketSlot& slot);
+  void record_raw(const PacketSlot& slot);
   void flush_raw();
   DecodeSnapshot snapshot() const;
   void send_snapshot(WriterMessage::Kind kind);
 
   DecodeWorkerOptions options_;
-  ringbuf::PacketRing& ring_;
+  PacketRing& ring_;
   WriterQueue& to_writer_;
   ArenaQueue& free_arenas_;
   RawQueue& free_raw_;

@@ -40,7 +40,7 @@
 #include "core/capture_reader.hpp"
 #include "core/decoder_target.hpp"
 #include "core/packet.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "daemon/cli_args.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/decode_worker.hpp"
@@ -52,7 +52,7 @@
 #include "daemon/thread_tuning.hpp"
 #include "daemon/udp_receiver.hpp"
 #include "daemon/writer.hpp"
-#include "ringbuf/packet_slot.hpp"
+#include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace {
@@ -277,7 +277,7 @@ struct Pipeline {
     return p;
   }
 
-  ringbuf::PacketRing ring;
+  PacketRing ring;
   std::vector<std::unique_ptr<FrameArena>> arenas;
   std::vector<std::unique_ptr<RawBatch>> raw;
   DecodeWorker::ArenaQueue free_arenas;
@@ -446,7 +446,7 @@ int run(int argc, char** argv) {
   spdlog::info(
       "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
       "packets",
-      config.ring.slots, sizeof(ringbuf::PacketSlot), config.arenas.count,
+      config.ring.slots, sizeof(PacketSlot), config.arenas.count,
       config.arenas.points_per_frame, Pipeline::raw_batches(config),
       config.arenas.packets_per_frame);
 

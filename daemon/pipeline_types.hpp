@@ -23,7 +23,7 @@
 #include "core/packet.hpp"
 #include "core/point.hpp"
 #include "core/stream_decoder.hpp"
-#include "ringbuf/packet_slot.hpp"
+#include "daemon/packet_slot.hpp"
 
 namespace pandarcap {
 
@@ -45,7 +45,7 @@ struct RawPacket {
   sockaddr_in source{};
   std::uint16_t length = 0;           // bytes in payload (a truncated datagram keeps what fit)
   std::uint32_t original_length = 0;  // bytes the datagram had (more than length: it was cut)
-  std::uint8_t payload[ringbuf::PacketSlot::kPayloadCapacity];
+  std::uint8_t payload[PacketSlot::kPayloadCapacity];
 };
 
 struct RawBatch {

@@ -45,14 +45,14 @@ ReplaySource::ReplaySource(const ReplayOptions& options)
   }
 }
 
-ReplayResult ReplaySource::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
                                ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
   ReplayResult result;
   CaptureRecord record;
   std::optional<std::int64_t> first_record_ns;
   const std::int64_t start_ns = monotonic_ns();
   std::size_t pending = 0;  // filled but not yet published
-  std::span<ringbuf::PacketSlot> slots;
+  std::span<PacketSlot> slots;
 
   const auto publish = [&] {
     if (pending == 0) return;
@@ -106,7 +106,7 @@ ReplayResult ReplaySource::run(ringbuf::PacketRing& ring, const std::atomic<bool
       std::this_thread::sleep_for(std::chrono::microseconds(50));
     }
     if (slots.empty()) continue;  // stopping
-    ringbuf::PacketSlot& slot = slots[pending++];
+    PacketSlot& slot = slots[pending++];
     const std::size_t kept = std::min(record.payload.size(), sizeof slot.payload);
     std::memcpy(slot.payload, record.payload.data(), kept);
     slot.length = static_cast<std::uint32_t>(kept);

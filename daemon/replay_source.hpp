@@ -14,7 +14,7 @@
 
 #include "core/capture_reader.hpp"
 #include "daemon/pipeline_types.hpp"
-#include "ringbuf/packet_slot.hpp"
+#include "daemon/packet_slot.hpp"
 
 namespace pandarcap {
 
@@ -37,7 +37,7 @@ class ReplaySource {
   // Opens the file; throws CaptureError naming it when it cannot be read as a capture.
   explicit ReplaySource(const ReplayOptions& options);
 
-  ReplayResult run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+  ReplayResult run(PacketRing& ring, const std::atomic<bool>& stop,
                    ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
 
  private:

@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <string>
 
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 
 namespace pandarcap {
 

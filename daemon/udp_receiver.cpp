@@ -59,7 +59,7 @@ struct UdpReceiver::Batch {
   std::array<mmsghdr, kMaxBatch> headers{};
   std::array<iovec, kMaxBatch> iov{};
   std::array<std::array<std::uint8_t, kControlBytes>, kMaxBatch> control{};
-  std::array<ringbuf::PacketSlot, 16> scratch{};
+  std::array<PacketSlot, 16> scratch{};
 };
 
 UdpReceiver::UdpReceiver(const UdpReceiverOptions& options)
@@ -167,16 +167,16 @@ double UdpReceiver::read_socket_memory(ReceiveCounters& counters) {
                                             static_cast<double>(info[SK_MEMINFO_RCVBUF]);
 }
 
-UdpReceiver::Received UdpReceiver::receive_batch(ringbuf::PacketRing& ring, int flags,
+UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
                                                  ReceiveCounters& counters) {
   Batch& batch = *buffers_;
-  std::span<ringbuf::PacketSlot> slots = ring.reserve(batch_);
+  std::span<PacketSlot> slots = ring.reserve(batch_);
   const bool overrun = slots.empty();
   if (overrun) slots = batch.scratch;  // ring full: received and dropped (counted), newest first
 
   const std::size_t n = slots.size();
   for (std::size_t i = 0; i < n; ++i) {
-    ringbuf::PacketSlot& slot = slots[i];
+    PacketSlot& slot = slots[i];
     batch.iov[i] = {slot.payload, sizeof slot.payload};
     msghdr& header = batch.headers[i].msg_hdr;
     header.msg_name = &slot.source;
@@ -204,7 +204,7 @@ UdpReceiver::Received UdpReceiver::receive_batch(ringbuf::PacketRing& ring, int 
   std::size_t kept = 0;
   const std::int64_t fallback_time = realtime_ns();
   for (int i = 0; i < received; ++i) {
-    ringbuf::PacketSlot& slot = slots[i];
+    PacketSlot& slot = slots[i];
     const mmsghdr& message = batch.headers[i];
     bytes += message.msg_len;
     if (overrun) continue;
@@ -243,7 +243,7 @@ UdpReceiver::Received UdpReceiver::receive_batch(ringbuf::PacketRing& ring, int 
   return {static_cast<std::size_t>(received), n, overrun, overrun ? 0 : kept};
 }
 
-void UdpReceiver::run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+void UdpReceiver::run(PacketRing& ring, const std::atomic<bool>& stop,
                       ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
   if (budget_ns_ == 0) {
     run_per_datagram(ring, stop, counters, heartbeat);
@@ -263,7 +263,7 @@ constexpr std::int64_t kDrainNs = 200'000'000;
 
 }  // namespace
 
-void UdpReceiver::run_per_datagram(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+void UdpReceiver::run_per_datagram(PacketRing& ring, const std::atomic<bool>& stop,
                                    ReceiveCounters& counters,
                                    std::atomic<std::uint64_t>& heartbeat) {
   std::int64_t next_meminfo_ns = 0;
@@ -306,7 +306,7 @@ void UdpReceiver::run_per_datagram(ringbuf::PacketRing& ring, const std::atomic<
   }
 }
 
-void UdpReceiver::run_coalesced(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+void UdpReceiver::run_coalesced(PacketRing& ring, const std::atomic<bool>& stop,
                                 ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
   const std::int64_t warm_ns = monotonic_ns() + kWarmUpNs;
   bool hot = false;

@@ -34,7 +34,7 @@
 #include <string>
 
 #include "daemon/pipeline_types.hpp"
-#include "ringbuf/packet_slot.hpp"
+#include "daemon/packet_slot.hpp"
 
 namespace pandarcap {
 
@@ -61,7 +61,7 @@ class UdpReceiver {
   std::uint64_t granted_receive_buffer_bytes() const noexcept { return granted_rcvbuf_; }
 
   // Receives until `stop` is set (checked at least every 100 ms).
-  void run(ringbuf::PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+  void run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
            std::atomic<std::uint64_t>& heartbeat);
 
  private:
@@ -80,10 +80,10 @@ class UdpReceiver {
   void configure(const UdpReceiverOptions& options);
   // Reads SO_MEMINFO: stores the kernel's drop count, returns the buffer's fill (0..1).
   double read_socket_memory(ReceiveCounters& counters);
-  Received receive_batch(ringbuf::PacketRing& ring, int flags, ReceiveCounters& counters);
-  void run_per_datagram(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+  Received receive_batch(PacketRing& ring, int flags, ReceiveCounters& counters);
+  void run_per_datagram(PacketRing& ring, const std::atomic<bool>& stop,
                         ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
-  void run_coalesced(ringbuf::PacketRing& ring, const std::atomic<bool>& stop,
+  void run_coalesced(PacketRing& ring, const std::atomic<bool>& stop,
                      ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
 
   int fd_ = -1;

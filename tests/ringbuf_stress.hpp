@@ -14,7 +14,7 @@
 #include <random>
 #include <thread>
 
-#include "ringbuf/packet_slot.hpp"
+#include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap::test {
@@ -59,7 +59,7 @@ struct StressPlan {
 // sizes and checks every field. A full ring makes the producer yield and retry (the daemon would
 // drop and count instead; here every item must arrive).
 inline StressOutcome stress_packet_ring(const StressPlan& plan) {
-  ringbuf::PacketRing ring(plan.capacity);
+  PacketRing ring(plan.capacity);
   StressOutcome outcome;
   std::thread producer([&] {
     if (plan.pin_cpu) pin_to_cpu(*plan.pin_cpu);
@@ -74,12 +74,12 @@ inline StressOutcome stress_packet_ring(const StressPlan& plan) {
         continue;
       }
       std::size_t n = 0;
-      for (ringbuf::PacketSlot& slot : slots) {
+      for (PacketSlot& slot : slots) {
         if (next == plan.items) break;
         std::memcpy(slot.payload, &next, sizeof next);
         const std::uint64_t inverted = ~next;
-        std::memcpy(slot.payload + ringbuf::PacketSlot::kPayloadCapacity - sizeof inverted,
-                    &inverted, sizeof inverted);
+        std::memcpy(slot.payload + PacketSlot::kPayloadCapacity - sizeof inverted, &inverted,
+                    sizeof inverted);
         slot.length = static_cast<std::uint32_t>(next % 1267);
         slot.truncated = (next & 1) != 0;
         slot.receive_time_ns = static_cast<std::int64_t>(next * 3);
@@ -103,12 +103,11 @@ inline StressOutcome stress_packet_ring(const StressPlan& plan) {
         ring.wait_for_data(std::chrono::milliseconds(10));
         continue;
       }
-      for (const ringbuf::PacketSlot& slot : slots) {
+      for (const PacketSlot& slot : slots) {
         std::uint64_t value = 0;
         std::uint64_t inverted = 0;
         std::memcpy(&value, slot.payload, sizeof value);
-        std::memcpy(&inverted,
-                    slot.payload + ringbuf::PacketSlot::kPayloadCapacity - sizeof inverted,
+        std::memcpy(&inverted, slot.payload + PacketSlot::kPayloadCapacity - sizeof inverted,
                     sizeof inverted);
         const bool intact = value == expected && inverted == ~expected &&
                             slot.length == expected % 1267 &&

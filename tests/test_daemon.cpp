@@ -22,7 +22,7 @@
 #include "core/capture_reader.hpp"
 #include "core/decoder_target.hpp"
 #include "core/pcap_writer.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

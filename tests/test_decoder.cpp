@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "core/decoder.hpp"
-#include "core/packet_builder.hpp"
+#include "core/sim/packet_builder.hpp"
 #include "core/timing.hpp"
 
 using namespace pandarcap;

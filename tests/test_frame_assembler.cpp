@@ -22,7 +22,7 @@
 #include "core/frame_assembler.hpp"
 #include "core/frame_collector.hpp"
 #include "core/stream_decoder.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "core/timing.hpp"
 
 using namespace pandarcap;

@@ -14,7 +14,7 @@
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
 #include "core/capture_reader.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "live_daemon.hpp"
 #include "test_support.hpp"
 

@@ -30,9 +30,9 @@
 
 #include "bench/child_process.hpp"
 #include "core/capture_reader.hpp"
-#include "core/packet_builder.hpp"
+#include "core/sim/packet_builder.hpp"
 #include "core/pcap_writer.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

@@ -4,8 +4,8 @@
 
 #include "core/capture_reader.hpp"
 #include "core/packet.hpp"
-#include "core/packet_builder.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/packet_builder.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

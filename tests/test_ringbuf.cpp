@@ -13,10 +13,13 @@
 #include <thread>
 #include <vector>
 
-#include "ringbuf/packet_slot.hpp"
+#include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 using namespace pandarcap::ringbuf;
+using pandarcap::kMaxAcceptedDatagram;
+using pandarcap::PacketRing;
+using pandarcap::PacketSlot;
 using namespace std::chrono_literals;
 
 namespace {

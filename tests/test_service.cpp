@@ -27,7 +27,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

@@ -12,7 +12,8 @@
 #include "core/capture_reader.hpp"
 #include "core/decoder.hpp"
 #include "core/decoder_target.hpp"
-#include "core/packet_builder.hpp"
+#include "core/sim/packet_builder.hpp"
+#include "core/packet_decoder.hpp"
 #include "core/simd_decoder.hpp"
 #include "test_support.hpp"
 

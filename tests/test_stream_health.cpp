@@ -10,7 +10,7 @@
 #include "core/capture_reader.hpp"
 #include "core/frame_collector.hpp"
 #include "core/stream_decoder.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

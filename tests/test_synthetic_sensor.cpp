@@ -8,7 +8,7 @@
 
 #include "core/decoder.hpp"
 #include "core/packet_time.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "core/timing.hpp"
 
 using namespace pandarcap;

@@ -15,6 +15,7 @@
 #include "core/calibration.hpp"
 #include "core/decoder_target.hpp"
 #include "core/packet.hpp"
+#include "core/packet_decoder.hpp"
 #include "core/simd_decoder.hpp"
 
 using namespace pandarcap;

@@ -13,7 +13,7 @@
 #include "core/frame_collector.hpp"
 #include "core/packet.hpp"
 #include "core/stream_decoder.hpp"
-#include "core/synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 
 using namespace pandarcap;
 

@@ -1,4 +1,4 @@
-#include "packet_builder.hpp"
+#include "core/sim/packet_builder.hpp"
 
 namespace pandarcap {
 

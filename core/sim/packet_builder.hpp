@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <span>
 
-#include "packet.hpp"
+#include "core/packet.hpp"
 
 namespace pandarcap {
 

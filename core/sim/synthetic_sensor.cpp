@@ -1,12 +1,12 @@
-#include "synthetic_sensor.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
 
-#include "packet_time.hpp"
-#include "timing.hpp"
+#include "core/packet_time.hpp"
+#include "core/timing.hpp"
 
 namespace pandarcap {
 

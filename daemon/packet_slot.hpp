@@ -15,12 +15,12 @@
 
 #include "ringbuf/slot_ring.hpp"
 
-namespace pandarcap::ringbuf {
+namespace pandarcap {
 
 // Largest datagram the decoder accepts (spec §1: 1262 bytes, or 1266 with the UDP sequence).
 inline constexpr std::size_t kMaxAcceptedDatagram = 1266;
 
-struct alignas(kCacheLine) PacketSlot {
+struct alignas(ringbuf::kCacheLine) PacketSlot {
   // Room for the largest accepted datagram, rounded up so the slot is whole cache lines.
   static constexpr std::size_t kPayloadCapacity = 1280;
   static_assert(kPayloadCapacity >= kMaxAcceptedDatagram);
@@ -41,8 +41,8 @@ struct alignas(kCacheLine) PacketSlot {
   sockaddr_in source;
 };
 
-static_assert(sizeof(PacketSlot) % kCacheLine == 0);
+static_assert(sizeof(PacketSlot) % ringbuf::kCacheLine == 0);
 
-using PacketRing = SlotRing<PacketSlot>;
+using PacketRing = ringbuf::SlotRing<PacketSlot>;
 
-}  // namespace pandarcap::ringbuf
+}  // namespace pandarcap

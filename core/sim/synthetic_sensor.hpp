@@ -22,9 +22,9 @@
 #include <cstdint>
 #include <span>
 
-#include "calibration.hpp"
-#include "packet.hpp"
-#include "packet_builder.hpp"
+#include "core/calibration.hpp"
+#include "core/packet.hpp"
+#include "core/sim/packet_builder.hpp"
 
 namespace pandarcap {
 
