@@ -14,6 +14,8 @@
 #include <stdexcept>
 #include <thread>
 
+#include "core/ipv4.hpp"
+
 extern char** environ;
 
 namespace pandarcap::harness {
@@ -129,10 +131,8 @@ std::uint16_t free_udp_port() {
 void send_udp(const std::string& source_ip, std::uint16_t port,
               const std::vector<std::vector<std::uint8_t>>& payloads) {
   const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
-  sockaddr_in source{};
-  source.sin_family = AF_INET;
-  inet_pton(AF_INET, source_ip.c_str(), &source.sin_addr);
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&source), sizeof source) != 0) {
+  const sockaddr_in source = ipv4_endpoint(source_ip, 0, "sender");
+  if (::bind(fd, reinterpret_cast<const sockaddr*>(&source), sizeof source) != 0) {
     ::close(fd);
     throw std::runtime_error("cannot bind a sender to " + source_ip);
   }

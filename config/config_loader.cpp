@@ -19,6 +19,7 @@
 #include <variant>
 
 #include "core/decoder_target.hpp"
+#include "core/ipv4.hpp"
 #include "core/text_file.hpp"
 
 namespace pandarcap {
@@ -50,12 +51,6 @@ std::optional<std::string> any_string(const std::string&) {
 std::optional<std::string> non_empty(const std::string& s) {
   if (s.empty()) return "must not be empty";
   return std::nullopt;
-}
-
-std::optional<in_addr> parse_ipv4(const std::string& s) {
-  in_addr a{};
-  if (inet_pton(AF_INET, s.c_str(), &a) != 1) return std::nullopt;
-  return a;
 }
 
 std::optional<std::string> ipv4(const std::string& s) {

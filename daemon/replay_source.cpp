@@ -8,6 +8,7 @@
 #include <cstring>
 #include <thread>
 
+#include "core/ipv4.hpp"
 #include "daemon/clocks.hpp"
 
 namespace pandarcap {
@@ -38,9 +39,10 @@ constexpr double kMaxReplayOffsetNs = 1e15;
 ReplaySource::ReplaySource(const ReplayOptions& options)
     : options_(options), reader_(options.path, CaptureReader::Options{options.destination_port}) {
   if (!options.sensor_ip.empty()) {
-    in_addr address{};
-    if (inet_pton(AF_INET, options.sensor_ip.c_str(), &address) == 1) {
-      sensor_ip_ = ntohl(address.s_addr);
+    // A bad address is refused, never ignored: ignoring it would replay every source.
+    sensor_ip_ = parse_ipv4_host_order(options.sensor_ip);
+    if (!sensor_ip_) {
+      throw std::invalid_argument("sensor_ip '" + options.sensor_ip + "' is not an IPv4 address");
     }
   }
 }
