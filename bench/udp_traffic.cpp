@@ -16,27 +16,19 @@
 #include <random>
 #include <stdexcept>
 
-#include "core/capture_reader.hpp"
+#include "core/ipv4.hpp"
+#include "daemon/io/errors.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap::bench {
 
 namespace {
 
-sockaddr_in ipv4(const std::string& ip, std::uint16_t port) {
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(port);
-  if (inet_pton(AF_INET, ip.c_str(), &a.sin_addr) != 1) {
-    throw std::runtime_error("not an IPv4 address: " + ip);
-  }
-  return a;
-}
-
 int udp_socket() {
   const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) throw std::runtime_error(std::string("socket: ") + std::strerror(errno));
+  if (fd < 0) io::throw_errno("socket");
   return fd;
 }
 
@@ -89,11 +81,9 @@ TrafficSource TrafficSource::from_capture(const std::string& path) {
 }
 
 std::optional<std::string> generator_options_problem(const GeneratorOptions& o) {
-  in_addr address{};
-  if (inet_pton(AF_INET, o.destination_ip.c_str(), &address) != 1) {
-    return "not an IPv4 address: " + o.destination_ip;
-  }
-  if (o.foreign_fraction > 0 && (ntohl(address.s_addr) >> 24) != 127) {
+  const auto address = parse_ipv4_host_order(o.destination_ip);
+  if (!address) return "not an IPv4 address: " + o.destination_ip;
+  if (o.foreign_fraction > 0 && (*address >> 24) != 127) {
     return "foreign traffic is sent from 127.0.0.2, which cannot reach " + o.destination_ip +
            "; use a 127.x.x.x destination";
   }
@@ -102,12 +92,12 @@ std::optional<std::string> generator_options_problem(const GeneratorOptions& o) 
 
 GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& o) {
   if (const auto problem = generator_options_problem(o)) throw std::runtime_error(*problem);
-  const sockaddr_in destination = ipv4(o.destination_ip, o.port);
+  const sockaddr_in destination = ipv4_endpoint(o.destination_ip, o.port, "destination");
   const int fd = udp_socket();
   int foreign_fd = -1;
   if (o.foreign_fraction > 0) {
     foreign_fd = udp_socket();
-    const sockaddr_in from = ipv4("127.0.0.2", 0);
+    const sockaddr_in from = ipv4_endpoint("127.0.0.2", 0, "foreign source");
     if (::bind(foreign_fd, reinterpret_cast<const sockaddr*>(&from), sizeof from) != 0) {
       ::close(foreign_fd);
       ::close(fd);
@@ -217,10 +207,10 @@ ReferenceReceiver::ReferenceReceiver(Kind kind, std::uint64_t receive_buffer_byt
   ::getsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &granted_, &length);
   const timeval timeout{0, 100'000};  // wake up to see the stop flag
   ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
-  sockaddr_in address = ipv4("127.0.0.1", 0);
+  sockaddr_in address = ipv4_endpoint("127.0.0.1", 0, "listener");
   if (::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
     ::close(fd_);
-    throw std::runtime_error(std::string("bind: ") + std::strerror(errno));
+    io::throw_errno("bind");
   }
   length = sizeof address;
   ::getsockname(fd_, reinterpret_cast<sockaddr*>(&address), &length);

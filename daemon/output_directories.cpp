@@ -11,6 +11,8 @@
 #include <cstring>
 #include <system_error>
 
+#include "daemon/io/errors.hpp"
+
 namespace pandarcap {
 namespace {
 
@@ -71,16 +73,13 @@ std::vector<std::string> output_problems(const WriterOptions& o) {
 OutputDirectoryLock::OutputDirectoryLock(const fs::path& directory) {
   fs::create_directories(directory);
   const fs::path path = directory / "pandarcapd.lock";
-  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644);
-  if (fd_ < 0) {
-    throw std::system_error(errno, std::generic_category(), "cannot open '" + path.string() + "'");
-  }
-  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+  fd_.reset(::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644));
+  if (!fd_) io::throw_errno("cannot open", path.native());
+  if (::flock(fd_.get(), LOCK_EX | LOCK_NB) != 0) {
     const int error = errno;
     char pid[32] = {};
-    const ssize_t n = ::pread(fd_, pid, sizeof pid - 1, 0);
-    ::close(fd_);
-    fd_ = -1;
+    const ssize_t n = ::pread(fd_.get(), pid, sizeof pid - 1, 0);
+    fd_.reset();
     if (error == EWOULDBLOCK) {
       std::string holder(pid, n > 0 ? static_cast<std::size_t>(n) : 0);
       while (!holder.empty() && (holder.back() == '\n' || holder.back() == ' '))
@@ -90,18 +89,14 @@ OutputDirectoryLock::OutputDirectoryLock(const fs::path& directory) {
           "output directory; give each its own output.directory",
           holder.empty() ? "" : " (pid " + holder + ")", directory.string(), path.string()));
     }
-    throw std::system_error(error, std::generic_category(), "cannot lock '" + path.string() + "'");
+    io::throw_error(error, "cannot lock", path.native());
   }
   // Ours now: the pid is for the message a second daemon prints.
   const std::string pid = fmt::format("{}\n", ::getpid());
-  if (::ftruncate(fd_, 0) != 0 ||
-      ::pwrite(fd_, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
+  if (::ftruncate(fd_.get(), 0) != 0 ||
+      ::pwrite(fd_.get(), pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
     // The lock holds without the pid; only the message would lack it.
   }
-}
-
-OutputDirectoryLock::~OutputDirectoryLock() {
-  if (fd_ >= 0) ::close(fd_);
 }
 
 }  // namespace pandarcap

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "daemon/io/unique_fd.hpp"
 #include "daemon/writer.hpp"
 
 namespace pandarcap {
@@ -36,12 +37,11 @@ class OutputDirectoryLock {
   // Creates `directory` if needed and takes the lock. Throws OutputDirectoryBusy when another
   // process holds it, std::system_error when the lock file cannot be made.
   explicit OutputDirectoryLock(const std::filesystem::path& directory);
-  ~OutputDirectoryLock();
   OutputDirectoryLock(const OutputDirectoryLock&) = delete;
   OutputDirectoryLock& operator=(const OutputDirectoryLock&) = delete;
 
  private:
-  int fd_ = -1;
+  io::UniqueFd fd_;  // closing it releases the lock
 };
 
 }  // namespace pandarcap

@@ -11,38 +11,30 @@
 #include <cerrno>
 #include <system_error>
 
+#include "core/ipv4.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/io/errors.hpp"
 
 namespace pandarcap {
 namespace {
 
 constexpr std::size_t kMaxBurst = 64;
 
-sockaddr_in ipv4(const std::string& ip, std::uint16_t port) {
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(port);
-  if (inet_pton(AF_INET, ip.c_str(), &address.sin_addr) != 1) {
-    throw std::system_error(EINVAL, std::generic_category(), "not an IPv4 address: " + ip);
-  }
-  return address;
-}
-
 }  // namespace
 
 SimulatedSender::SimulatedSender(const SyntheticSensorConfig& config, const std::string& source_ip,
                                  const std::string& destination_ip, std::uint16_t destination_port)
     : sensor_(config) {
+  const sockaddr_in source = ipv4_endpoint(source_ip, 0, "simulator source");
+  const sockaddr_in destination =
+      ipv4_endpoint(destination_ip, destination_port, "simulator destination");
   fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  if (fd_ < 0) throw std::system_error(errno, std::generic_category(), "simulator socket");
-  const sockaddr_in source = ipv4(source_ip, 0);
-  const sockaddr_in destination = ipv4(destination_ip, destination_port);
+  if (fd_ < 0) io::throw_errno("simulator socket");
   if (::bind(fd_, reinterpret_cast<const sockaddr*>(&source), sizeof source) != 0 ||
       ::connect(fd_, reinterpret_cast<const sockaddr*>(&destination), sizeof destination) != 0) {
     const int error = errno;
     ::close(fd_);
-    throw std::system_error(error, std::generic_category(),
-                            "simulator cannot send from " + source_ip + " to " + destination_ip);
+    io::throw_error(error, "simulator cannot send from " + source_ip + " to " + destination_ip);
   }
 }
 

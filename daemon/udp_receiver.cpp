@@ -17,8 +17,10 @@
 #include <string>
 #include <system_error>
 
+#include "core/ipv4.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/io/errors.hpp"
 #include "ringbuf/slot_ring.hpp"
 
 namespace pandarcap {
@@ -28,19 +30,6 @@ constexpr std::size_t kMaxBatch = 1024;
 // Room for SO_TIMESTAMPNS (a timespec), with header and alignment. (Kernel drops are read with
 // SO_MEMINFO on a timer, not from SO_RXQ_OVFL, whose count only arrives with the next packet.)
 constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec));
-
-[[noreturn]] void fail(const std::string& what) {
-  throw std::system_error(errno, std::generic_category(), what);
-}
-
-in_addr parse_ipv4(const std::string& text, const char* what) {
-  in_addr address{};
-  if (inet_pton(AF_INET, text.c_str(), &address) != 1) {
-    throw std::system_error(EINVAL, std::generic_category(),
-                            std::string(what) + " '" + text + "' is not an IPv4 address");
-  }
-  return address;
-}
 
 // The limit as text for the warning; a sandbox (systemd's ProtectKernelTunables=/ProcSubset=)
 // may hide /proc/sys.
@@ -67,7 +56,7 @@ UdpReceiver::UdpReceiver(const UdpReceiverOptions& options)
       budget_ns_(std::max<std::int64_t>(options.latency_budget_ns, 0)),
       buffers_(new Batch) {
   fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  if (fd_ < 0) fail("cannot create the UDP socket");
+  if (fd_ < 0) io::throw_errno("cannot create the UDP socket");
   try {
     configure(options);
   } catch (...) {
@@ -80,7 +69,8 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
   const int on = 1;
   // Several listeners may share a multicast port; harmless for unicast.
   if (!options.multicast_ip.empty()) {
-    if (::setsockopt(fd_, SOL_SOCKET, SO_REUSEADDR, &on, sizeof on) != 0) fail("SO_REUSEADDR");
+    if (::setsockopt(fd_, SOL_SOCKET, SO_REUSEADDR, &on, sizeof on) != 0)
+      io::throw_errno("SO_REUSEADDR");
   }
 
   // Receive buffer: try the privileged variant that ignores rmem_max, then the normal one.
@@ -88,11 +78,12 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
       static_cast<int>(std::min<std::uint64_t>(options.receive_buffer_bytes, 0x7fffffff));
   if (::setsockopt(fd_, SOL_SOCKET, SO_RCVBUFFORCE, &requested, sizeof requested) != 0 &&
       ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &requested, sizeof requested) != 0) {
-    fail("cannot set SO_RCVBUF");
+    io::throw_errno("cannot set SO_RCVBUF");
   }
   int granted = 0;
   socklen_t length = sizeof granted;
-  if (::getsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &granted, &length) != 0) fail("SO_RCVBUF");
+  if (::getsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &granted, &length) != 0)
+    io::throw_errno("SO_RCVBUF");
   // The kernel doubles the request for its bookkeeping and reports the doubled size.
   granted_rcvbuf_ = static_cast<std::uint64_t>(granted) / 2;
   if (granted_rcvbuf_ < static_cast<std::uint64_t>(requested)) {
@@ -105,40 +96,41 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
     spdlog::info("socket receive buffer: {} bytes", granted_rcvbuf_);
   }
 
-  if (::setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) != 0) fail("SO_TIMESTAMPNS");
+  if (::setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) != 0)
+    io::throw_errno("SO_TIMESTAMPNS");
   const timeval timeout{0, 100'000};
   if (::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout) != 0) {
-    fail("SO_RCVTIMEO");
+    io::throw_errno("SO_RCVTIMEO");
   }
 
   sockaddr_in local{};
   local.sin_family = AF_INET;
   local.sin_port = htons(options.port);
-  local.sin_addr = parse_ipv4(options.host_ip, "host_ip");
+  local.sin_addr = require_ipv4(options.host_ip, "host_ip");
   if (::bind(fd_, reinterpret_cast<const sockaddr*>(&local), sizeof local) != 0) {
-    fail("cannot bind UDP " + options.host_ip + ":" + std::to_string(options.port));
+    io::throw_errno("cannot bind UDP " + options.host_ip + ":" + std::to_string(options.port));
   }
   sockaddr_in bound{};
   socklen_t bound_length = sizeof bound;
   if (::getsockname(fd_, reinterpret_cast<sockaddr*>(&bound), &bound_length) != 0) {
-    fail("getsockname");
+    io::throw_errno("getsockname");
   }
   bound_port_ = ntohs(bound.sin_port);
 
   if (!options.multicast_ip.empty()) {
     ip_mreq membership{};
-    membership.imr_multiaddr = parse_ipv4(options.multicast_ip, "multicast_ip");
+    membership.imr_multiaddr = require_ipv4(options.multicast_ip, "multicast_ip");
     membership.imr_interface.s_addr = htonl(INADDR_ANY);
     if (!options.multicast_interface_ip.empty()) {
       membership.imr_interface =
-          parse_ipv4(options.multicast_interface_ip, "multicast_interface_ip");
+          require_ipv4(options.multicast_interface_ip, "multicast_interface_ip");
     }
     if (::setsockopt(fd_, IPPROTO_IP, IP_ADD_MEMBERSHIP, &membership, sizeof membership) != 0) {
-      fail("cannot join multicast group " + options.multicast_ip);
+      io::throw_errno("cannot join multicast group " + options.multicast_ip);
     }
     spdlog::info("joined multicast group {}", options.multicast_ip);
   }
-  if (!options.sensor_ip.empty()) sensor_ip_ = parse_ipv4(options.sensor_ip, "sensor_ip").s_addr;
+  if (!options.sensor_ip.empty()) sensor_ip_ = require_ipv4(options.sensor_ip, "sensor_ip").s_addr;
   spdlog::info(
       "receiving UDP on {}:{}{}; {}", options.host_ip, bound_port_,
       options.sensor_ip.empty() ? std::string(" from any source") : " from " + options.sensor_ip,
@@ -243,8 +235,8 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
   return {static_cast<std::size_t>(received), n, overrun, overrun ? 0 : kept};
 }
 
-void UdpReceiver::run(PacketRing& ring, const std::atomic<bool>& stop,
-                      ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
+void UdpReceiver::run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+                      std::atomic<std::uint64_t>& heartbeat) {
   if (budget_ns_ == 0) {
     run_per_datagram(ring, stop, counters, heartbeat);
   } else {

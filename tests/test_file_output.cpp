@@ -8,7 +8,7 @@
 #include <string>
 
 #include "bench/child_process.hpp"
-#include "daemon/file_output.hpp"
+#include "daemon/io/file_output.hpp"
 #include "daemon/output_directories.hpp"
 #include "test_support.hpp"
 

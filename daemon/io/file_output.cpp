@@ -1,4 +1,4 @@
-#include "daemon/file_output.hpp"
+#include "daemon/io/file_output.hpp"
 
 #include <fcntl.h>
 #include <fmt/format.h>
@@ -7,19 +7,16 @@
 
 #include <cerrno>
 #include <ctime>
-#include <system_error>
+
+#include "daemon/io/errors.hpp"
+#include "daemon/io/syscalls.hpp"
 
 namespace pandarcap {
-namespace {
 
-[[noreturn]] void fail(const std::string& what, std::string_view path) {
-  throw std::system_error(errno, std::generic_category(), what + " '" + std::string(path) + "'");
-}
-
-}  // namespace
+using io::throw_errno;
 
 void OutputFile::open(std::string_view path, Mode mode) {
-  if (fd_ >= 0) ::close(fd_);
+  if (fd_ >= 0) io::file_syscalls().close(fd_);
   fd_ = -1;
   size_ = 0;
   path_.assign(path);
@@ -27,7 +24,7 @@ void OutputFile::open(std::string_view path, Mode mode) {
   do {
     fd_ = ::open(path_.c_str(), flags, 0644);
   } while (fd_ < 0 && errno == EINTR);
-  if (fd_ < 0) fail("cannot open", path_);
+  if (fd_ < 0) throw_errno("cannot open", path_);
   if (mode == Mode::kAppend) {
     const off_t end = ::lseek(fd_, 0, SEEK_END);
     size_ = end > 0 ? static_cast<std::uint64_t>(end) : 0;
@@ -35,15 +32,15 @@ void OutputFile::open(std::string_view path, Mode mode) {
 }
 
 OutputFile::~OutputFile() {
-  if (fd_ >= 0) ::close(fd_);
+  if (fd_ >= 0) io::file_syscalls().close(fd_);
 }
 
 void OutputFile::write(std::span<const std::uint8_t> bytes) {
   while (!bytes.empty()) {
-    const ssize_t n = ::write(fd_, bytes.data(), bytes.size());
+    const ssize_t n = io::file_syscalls().write(fd_, bytes.data(), bytes.size());
     if (n < 0) {
       if (errno == EINTR) continue;
-      fail("cannot write", path_);
+      throw_errno("cannot write", path_);
     }
     bytes = bytes.subspan(static_cast<std::size_t>(n));
     size_ += static_cast<std::uint64_t>(n);
@@ -51,26 +48,26 @@ void OutputFile::write(std::span<const std::uint8_t> bytes) {
 }
 
 void OutputFile::truncate(std::uint64_t size) noexcept {
-  if (fd_ >= 0 && ::ftruncate(fd_, static_cast<off_t>(size)) == 0) size_ = size;
+  if (fd_ >= 0 && io::file_syscalls().ftruncate(fd_, static_cast<off_t>(size)) == 0) size_ = size;
 }
 
 void OutputFile::close() {
   if (fd_ < 0) return;
   const int fd = fd_;
   fd_ = -1;
-  if (::close(fd) != 0 && errno != EINTR) fail("cannot close", path_);
+  if (io::file_syscalls().close(fd) != 0 && errno != EINTR) throw_errno("cannot close", path_);
 }
 
 bool rename_no_replace(const char* from, const char* to) {
   if (::renameat2(AT_FDCWD, from, AT_FDCWD, to, RENAME_NOREPLACE) == 0) return true;
   if (errno == EEXIST) return false;
-  if (errno != EINVAL && errno != ENOSYS) fail("cannot rename to", to);
+  if (errno != EINVAL && errno != ENOSYS) throw_errno("cannot rename to", to);
   // The file system has no RENAME_NOREPLACE: a hard link fails on an existing name too.
   if (::link(from, to) != 0) {
     if (errno == EEXIST) return false;
-    fail("cannot link to", to);
+    throw_errno("cannot link to", to);
   }
-  if (::unlink(from) != 0) fail("cannot remove", from);
+  if (::unlink(from) != 0) throw_errno("cannot remove", from);
   return true;
 }
 
@@ -88,7 +85,7 @@ bool place_without_replacing(const std::string& from, std::string& to) {
     if (rename_no_replace(from.c_str(), to.c_str())) return true;
     if (n == 1000) {
       errno = EEXIST;
-      fail("no free name near", to);
+      throw_errno("no free name near", to);
     }
   }
 }
@@ -118,7 +115,8 @@ void write_file_replacing(const std::filesystem::path& path, std::string_view te
     std::filesystem::remove(temporary, ignored);
     throw;
   }
-  if (::rename(temporary.c_str(), path.c_str()) != 0) fail("cannot rename to", path.native());
+  if (::rename(temporary.c_str(), path.c_str()) != 0)
+    throw_errno("cannot rename to", path.native());
 }
 
 void write_file_replacing(const std::string& path, const std::string& temporary,
@@ -131,7 +129,7 @@ void write_file_replacing(const std::string& path, const std::string& temporary,
     ::unlink(temporary.c_str());
     throw;
   }
-  if (::rename(temporary.c_str(), path.c_str()) != 0) fail("cannot rename to", path);
+  if (::rename(temporary.c_str(), path.c_str()) != 0) throw_errno("cannot rename to", path);
 }
 
 std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis) {

@@ -1,7 +1,7 @@
-// The writer's thin layer over files: every failing system call becomes one std::system_error
-// carrying errno and the path ("cannot write 'x'"), EINTR and short writes are retried in one
-// place, and finished files appear only under their final name (written under a temporary name
-// in the same directory, then renamed: readers never see half a file).
+// The daemon's thin layer over the files it writes: every failing system call becomes one
+// std::system_error carrying errno and the path ("cannot write 'x'"), EINTR and short writes are
+// retried in one place, and finished files appear only under their final name (written under a
+// temporary name in the same directory, then renamed: readers never see half a file).
 #pragma once
 
 #include <cstdint>

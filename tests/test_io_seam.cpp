@@ -1,0 +1,151 @@
+// daemon/io: the failures a test machine rarely produces (a write interrupted, a write that takes
+// part of its bytes, a full disk), reached through the system-call seam instead of a tmpfs, and
+// what the files written through the layer look like afterwards.
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <cerrno>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include "daemon/io/errors.hpp"
+#include "daemon/io/file_output.hpp"
+#include "daemon/io/syscalls.hpp"
+#include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
+#include "test_support.hpp"
+
+using namespace pandarcap;
+namespace fs = std::filesystem;
+
+namespace {
+
+// The fake kernel's state: plain globals, since the seam holds plain function pointers.
+struct FakeDisk {
+  std::size_t max_per_write = SIZE_MAX;  // a short write past this many bytes
+  bool interrupt_every_other = false;    // EINTR before every second call
+  std::size_t space = SIZE_MAX;          // bytes that fit, then ENOSPC
+  std::size_t calls = 0;
+  std::size_t interrupted = 0;
+};
+FakeDisk disk;
+
+ssize_t fake_write(int fd, const void* data, std::size_t size) {
+  ++disk.calls;
+  if (disk.interrupt_every_other && disk.calls % 2 == 1) {
+    ++disk.interrupted;
+    errno = EINTR;
+    return -1;
+  }
+  if (disk.space == 0) {
+    errno = ENOSPC;
+    return -1;
+  }
+  const std::size_t n = std::min({size, disk.max_per_write, disk.space});
+  const ssize_t written = ::write(fd, data, n);
+  if (written > 0) disk.space -= static_cast<std::size_t>(written);
+  return written;
+}
+
+io::FileSyscalls fake_calls() {
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = fake_write;
+  return calls;
+}
+
+std::string contents(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+}  // namespace
+
+TEST_CASE("OutputFile retries interrupted and short writes until every byte is written", "[io]") {
+  test::ScratchDir dir("io-short");
+  disk = FakeDisk{.max_per_write = 7, .interrupt_every_other = true};
+  const io::ScopedFileSyscalls seam(fake_calls());
+  std::string text;
+  for (int i = 0; i < 100; ++i)
+    text += "line " + std::to_string(i) + "\n";
+  OutputFile file(dir / "out.txt", OutputFile::Mode::kCreate);
+  file.write(text);
+  file.close();
+  CHECK(contents(dir / "out.txt") == text);
+  CHECK(file.size() == text.size());
+  CHECK(disk.interrupted >= text.size() / 7);  // the interruptions did happen, and were retried
+}
+
+TEST_CASE("a full disk is a system_error with ENOSPC and the file's name", "[io]") {
+  test::ScratchDir dir("io-full");
+  disk = FakeDisk{.space = 10};
+  const io::ScopedFileSyscalls seam(fake_calls());
+  OutputFile file(dir / "full.txt", OutputFile::Mode::kCreate);
+  try {
+    file.write(std::string(64, 'x'));
+    FAIL("the write past the free space did not throw");
+  } catch (const std::system_error& error) {
+    CHECK(error.code() == std::errc::no_space_on_device);
+    CHECK(std::string(error.what()).find("cannot write '" + (dir / "full.txt").string() + "'") !=
+          std::string::npos);
+  }
+  CHECK(file.size() == 10);  // what did reach the file is accounted for
+}
+
+TEST_CASE("a recording the disk filled mid-flush is cut back to its last whole flush",
+          "[io][pcap]") {
+  test::ScratchDir dir("io-pcap");
+  const fs::path path = dir / "r.pcap";
+  std::vector<char> buffer(4096);
+  const std::vector<std::uint8_t> payload(1262, 0xAB);
+  constexpr std::int64_t kTime = 1'795'348'800'000'000'000;
+  disk = FakeDisk{};
+  const io::ScopedFileSyscalls seam(fake_calls());
+  PcapWriter writer(path.string(), buffer);
+  for (int i = 0; i < 2; ++i)
+    writer.write(payload, kTime + i, Endpoint{0x7F000001, 10000}, Endpoint{0x7F000001, 2368});
+  writer.flush();
+  REQUIRE(writer.flushed_records() == 2);
+  // Two more records buffered; the disk then takes only part of them.
+  for (int i = 2; i < 4; ++i)
+    writer.write(payload, kTime + i, Endpoint{0x7F000001, 10000}, Endpoint{0x7F000001, 2368});
+  disk.space = 700;
+  CHECK_THROWS_AS(writer.flush(), std::system_error);
+  CHECK(fs::file_size(path) > writer.flushed_bytes());  // a cut record reached the file
+  const PcapWriter::Dropped dropped = writer.abandon();
+  CHECK(dropped.records == 2);
+  CHECK(fs::file_size(path) == writer.flushed_bytes());
+  // Readable to its end, with exactly the flushed records.
+  CaptureReader reader(path.string());
+  CaptureRecord record;
+  std::size_t records = 0;
+  CaptureStatus status;
+  while ((status = reader.next(record)) == CaptureStatus::kRecord)
+    ++records;
+  CHECK(status == CaptureStatus::kEnd);
+  CHECK(records == 2);
+}
+
+TEST_CASE("the seam is put back when the test's scope ends", "[io]") {
+  {
+    const io::ScopedFileSyscalls seam(fake_calls());
+    CHECK(io::file_syscalls().write == &fake_write);
+  }
+  CHECK(io::file_syscalls().write == io::real_file_syscalls().write);
+}
+
+TEST_CASE("throw_errno names what failed, and never reports errno 0 as success", "[io]") {
+  errno = 0;
+  try {
+    io::throw_errno("cannot flush", "x.pcap");
+  } catch (const std::system_error& error) {
+    CHECK(error.code().value() == EIO);
+    CHECK(std::string(error.what()).starts_with("cannot flush 'x.pcap'"));
+  }
+  errno = EACCES;
+  CHECK_THROWS_WITH(io::throw_errno("cannot open"), Catch::Contains("cannot open"));
+}
