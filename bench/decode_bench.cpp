@@ -8,7 +8,7 @@
 #include <stdexcept>
 
 #include "core/calibration.hpp"
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/packet_decoder.hpp"
 #include "core/simd_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"

@@ -14,8 +14,8 @@
 #include <tuple>
 #include <vector>
 
-#include "core/capture_reader.hpp"
-#include "core/pcap_writer.hpp"
+#include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 #include "test_support.hpp"
 
 using pandarcap::CaptureReader;
@@ -493,7 +493,7 @@ TEST_CASE("PcapWriter rejects what a pcap record cannot hold", "[capture]") {
   CHECK(writer.bytes() == kGlobalHeaderBytes);
 }
 
-TEST_CASE("PcapWriter reports failing writes as system_error with errno and path", "[capture]") {
+TEST_CASE("PcapWriter reports a file it cannot open as system_error with errno and path", "[capture]") {
   ScratchDir dir("capture");
   const std::string missing_dir = (dir / "no_such_dir" / "x.pcap").string();
   try {
@@ -501,7 +501,7 @@ TEST_CASE("PcapWriter reports failing writes as system_error with errno and path
     FAIL("opening a file in a missing directory did not throw");
   } catch (const std::system_error& e) {
     CHECK(e.code() == std::error_code(ENOENT, std::generic_category()));
-    CHECK_THAT(e.what(), Catch::Contains("cannot write '" + missing_dir + "'"));
+    CHECK_THAT(e.what(), Catch::Contains("cannot open '" + missing_dir + "'"));
   }
 
   SECTION("a full disk surfaces at creation: the header is written at once") {

@@ -29,7 +29,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/pcd.hpp"
 #include "test_support.hpp"
 

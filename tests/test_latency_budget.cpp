@@ -13,7 +13,7 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "live_daemon.hpp"
 #include "test_support.hpp"

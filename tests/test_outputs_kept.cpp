@@ -29,9 +29,9 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/sim/packet_builder.hpp"
-#include "core/pcap_writer.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "test_support.hpp"
 

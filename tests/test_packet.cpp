@@ -2,7 +2,7 @@
 #include <catch2/catch.hpp>
 #include <vector>
 
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/packet.hpp"
 #include "core/sim/packet_builder.hpp"
 #include "core/sim/synthetic_sensor.hpp"

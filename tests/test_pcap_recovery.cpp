@@ -8,9 +8,9 @@
 #include <string>
 #include <vector>
 
-#include "core/capture_reader.hpp"
-#include "core/pcap_recovery.hpp"
-#include "core/pcap_writer.hpp"
+#include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/pcap_recovery.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

@@ -7,7 +7,7 @@
 #include <map>
 #include <vector>
 
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/decoder.hpp"
 #include "core/frame_collector.hpp"
 #include "core/packet_time.hpp"

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/decoder.hpp"
 #include "core/decoder_target.hpp"
 #include "core/sim/packet_builder.hpp"

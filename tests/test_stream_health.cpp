@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "core/calibration.hpp"
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/frame_collector.hpp"
 #include "core/stream_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"

@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "core/calibration.hpp"
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "core/frame_collector.hpp"
 #include "core/packet.hpp"
 #include "core/stream_decoder.hpp"

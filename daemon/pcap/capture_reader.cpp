@@ -1,4 +1,4 @@
-#include "capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 
 #include <pcap/pcap.h>
 

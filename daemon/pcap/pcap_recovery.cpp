@@ -1,4 +1,4 @@
-#include "pcap_recovery.hpp"
+#include "daemon/pcap/pcap_recovery.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -10,14 +10,12 @@
 #include <cstring>
 #include <system_error>
 
-#include "pcap_writer.hpp"
+#include "daemon/io/errors.hpp"
+#include "daemon/io/unique_fd.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 
 namespace pandarcap {
 namespace {
-
-[[noreturn]] void fail(const char* what, const std::string& path) {
-  throw std::system_error(errno, std::generic_category(), std::string(what) + " '" + path + "'");
-}
 
 // Reads exactly `n` bytes at `offset`; false at (or past) the end of the file.
 bool read_at(int fd, std::uint64_t offset, void* out, std::size_t n, const std::string& path) {
@@ -27,7 +25,7 @@ bool read_at(int fd, std::uint64_t offset, void* out, std::size_t n, const std::
         ::pread(fd, static_cast<char*>(out) + done, n - done, static_cast<off_t>(offset + done));
     if (got < 0) {
       if (errno == EINTR) continue;
-      fail("cannot read", path);
+      io::throw_errno("cannot read", path);
     }
     if (got == 0) return false;
     done += static_cast<std::size_t>(got);
@@ -46,17 +44,14 @@ std::uint32_t u32_at(const std::uint8_t* bytes) {
 PcapRecovery finish_interrupted_pcap(const std::string& path) {
   // O_NOFOLLOW: a link in the recording directory never leads the cut to a file elsewhere;
   // O_NONBLOCK: a FIFO put there does not hang the start.
-  const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
-  if (fd < 0) fail("cannot open", path);
-  struct Closer {
-    int fd;
-    ~Closer() { ::close(fd); }
-  } closer{fd};
+  const io::UniqueFd file(::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK));
+  if (!file) io::throw_errno("cannot open", path);
+  const int fd = file.get();
   struct stat info {};
-  if (::fstat(fd, &info) != 0) fail("cannot stat", path);
+  if (::fstat(fd, &info) != 0) io::throw_errno("cannot stat", path);
   if (!S_ISREG(info.st_mode)) {
     errno = EINVAL;
-    fail("not a regular file:", path);
+    io::throw_errno("not a regular file:", path);
   }
   const auto size = static_cast<std::uint64_t>(info.st_size);
 
@@ -85,7 +80,7 @@ PcapRecovery finish_interrupted_pcap(const std::string& path) {
     ++result.records;
   }
   if (end < size) {
-    if (::ftruncate(fd, static_cast<off_t>(end)) != 0) fail("cannot truncate", path);
+    if (::ftruncate(fd, static_cast<off_t>(end)) != 0) io::throw_errno("cannot truncate", path);
   }
   result.kept_bytes = end;
   result.cut_bytes = size - end;

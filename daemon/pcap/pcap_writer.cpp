@@ -1,7 +1,4 @@
-#include "pcap_writer.hpp"
-
-#include <stdio_ext.h>
-#include <unistd.h>
+#include "daemon/pcap/pcap_writer.hpp"
 
 #include <algorithm>
 #include <array>
@@ -10,6 +7,8 @@
 #include <stdexcept>
 #include <system_error>
 #include <utility>
+
+#include "daemon/io/errors.hpp"
 
 namespace pandarcap {
 namespace {
@@ -66,22 +65,6 @@ std::uint16_t ipv4_checksum(std::span<const std::uint8_t> header) {
   return static_cast<std::uint16_t>(~sum);
 }
 
-[[noreturn]] void throw_write_error(const std::string& path, int error) {
-  // The C library is not obliged to set errno on every stdio failure.
-  throw std::system_error(error != 0 ? error : EIO, std::generic_category(),
-                          "cannot write '" + path + "'");
-}
-
-// The one place bytes reach the file; `file` is null after close().
-void write_all(std::FILE* file, std::span<const std::uint8_t> data, const std::string& path) {
-  if (file == nullptr) throw_write_error(path, EBADF);
-  if (data.empty()) return;  // an empty span may have a null data(), which fwrite must not get
-  errno = 0;
-  if (std::fwrite(data.data(), 1, data.size(), file) != data.size()) {
-    throw_write_error(path, errno);
-  }
-}
-
 }  // namespace
 
 std::array<std::uint8_t, kPcapGlobalHeaderBytes> pcap_global_header() noexcept {
@@ -98,27 +81,42 @@ std::array<std::uint8_t, kPcapGlobalHeaderBytes> pcap_global_header() noexcept {
   return bytes;
 }
 
-PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer) : path_(path) {
-  errno = 0;
-  file_ = std::fopen(path.c_str(), "wb");
-  if (file_ == nullptr) throw_write_error(path, errno);
-  if (!buffer.empty()) std::setvbuf(file_, buffer.data(), _IOFBF, buffer.size());
-  const auto header = pcap_global_header();
-  try {
-    write_all(file_, header, path_);
-    bytes_ = kPcapGlobalHeaderBytes;
-    // At once, so that the file is a valid (empty) capture from here on even if the process
-    // dies before its first flush. One write per file.
-    flush();
-  } catch (...) {
-    std::fclose(file_);  // the destructor does not run for a throwing constructor
-    throw;
-  }
+PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer)
+    : path_(path), buffer_(buffer) {
+  file_.open(path_, OutputFile::Mode::kCreate);
+  append(pcap_global_header());
+  bytes_ = kPcapGlobalHeaderBytes;
+  // At once, so that the file is a valid (empty) capture from here on even if the process dies
+  // before its first flush. One write per file.
+  flush();
 }
 
 PcapWriter::~PcapWriter() {
   // A destructor cannot report a failure; callers that need to know call close() first.
-  if (file_ != nullptr) std::fclose(file_);
+  if (!file_.is_open()) return;
+  try {
+    flush_buffer();
+  } catch (const std::exception&) {
+    // Reported by nobody: see above.
+  }
+}
+
+void PcapWriter::append(std::span<const std::uint8_t> bytes) {
+  if (!file_.is_open()) io::throw_error(EBADF, "cannot write", path_);
+  if (buffered_ + bytes.size() > buffer_.size()) {
+    flush_buffer();
+    if (bytes.size() > buffer_.size()) {
+      file_.write(bytes);
+      return;
+    }
+  }
+  std::memcpy(buffer_.data() + buffered_, bytes.data(), bytes.size());
+  buffered_ += bytes.size();
+}
+
+void PcapWriter::flush_buffer() {
+  const std::size_t n = std::exchange(buffered_, 0);
+  file_.write(std::span(reinterpret_cast<const std::uint8_t*>(buffer_.data()), n));
 }
 
 void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
@@ -174,39 +172,38 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
   out.be_u16(udp_length);
   out.be_u16(0);  // checksum 0: "not computed", legal for UDP over IPv4
 
-  write_all(file_, out.written(), path_);
-  write_all(file_, udp_payload, path_);
+  append(out.written());
+  append(udp_payload);
   bytes_ += out.written().size() + udp_payload.size();
   ++records_;
 }
 
 void PcapWriter::flush() {
-  if (file_ == nullptr) throw_write_error(path_, EBADF);
-  errno = 0;
-  if (std::fflush(file_) != 0) throw_write_error(path_, errno);
+  if (!file_.is_open()) io::throw_error(EBADF, "cannot write", path_);
+  flush_buffer();
   flushed_records_ = records_;
   flushed_bytes_ = bytes_;
 }
 
 void PcapWriter::close() {
-  if (file_ == nullptr) return;
-  errno = 0;
-  // fclose releases the stream even when its final flush fails, so the handle is dropped first.
-  if (std::fclose(std::exchange(file_, nullptr)) != 0) throw_write_error(path_, errno);
-  flushed_records_ = records_;
-  flushed_bytes_ = bytes_;
+  if (!file_.is_open()) return;
+  // A failing flush leaves the file open, for abandon() to cut back to whole records.
+  flush();
+  file_.close();
 }
 
 PcapWriter::Dropped PcapWriter::abandon() noexcept {
   const Dropped dropped{records_ - flushed_records_, bytes_ - flushed_bytes_};
-  if (file_ != nullptr) {
-    // Buffered bytes would otherwise be written (in part) by fclose, after the cut.
-    __fpurge(file_);
-    // What reached the file past the last good flush is a prefix of a record at best.
-    if (::ftruncate(::fileno(file_), static_cast<off_t>(flushed_bytes_)) != 0) {
-      // Nothing more can be done here; the reader stops at the cut record (kTruncated).
+  buffered_ = 0;  // never written
+  if (file_.is_open()) {
+    // What reached the file past the last good flush is a prefix of a record at best. If the
+    // cut fails too, the reader stops at the cut record (kTruncated).
+    file_.truncate(flushed_bytes_);
+    try {
+      file_.close();
+    } catch (const std::exception&) {
+      // Nothing more can be done here: the count above already says what was lost.
     }
-    std::fclose(std::exchange(file_, nullptr));
   }
   records_ = flushed_records_;
   bytes_ = flushed_bytes_;

@@ -6,20 +6,22 @@
 // a correct header checksum, TTL 64, DF set, incrementing identification; UDP checksum 0 ("not
 // computed", legal for IPv4).
 //
-// Errors: every failing write throws std::system_error carrying errno and the file name. Nothing
-// is buffered past flush(); close() (or the destructor) flushes. After a failure (a full disk),
-// abandon() cuts the file back to what the last successful flush() wrote, which always ends on
-// a record boundary, so the file stays readable to its end. Not thread-safe.
+// Errors: every failing write throws std::system_error carrying errno and the file name (the
+// bytes go through daemon/io's OutputFile, so the tests' system-call seam reaches them). Nothing
+// is buffered past flush(); close() (or the destructor, which cannot report a failure) flushes.
+// After a failure (a full disk), abandon() cuts the file back to what the last successful flush()
+// wrote, which always ends on a record boundary, so the file stays readable to its end. Not
+// thread-safe.
 #pragma once
 
 #include <array>
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
 #include <span>
 #include <string>
 
-#include "capture_reader.hpp"
+#include "daemon/io/file_output.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap {
 
@@ -34,7 +36,7 @@ inline constexpr std::uint32_t kPcapSnaplen = 262144;
 // times, LINKTYPE_ETHERNET, snaplen kPcapSnaplen).
 std::array<std::uint8_t, kPcapGlobalHeaderBytes> pcap_global_header() noexcept;
 
-// The stdio buffer the daemon gives its recordings: the decoder hands over raw packets at
+// The buffer the daemon gives its recordings: the decoder hands over raw packets at
 // least every 100 ms, and 1 MiB holds that much of one sensor (~0.5 MB) twice over.
 inline constexpr std::size_t kPcapStdioBufferBytes = 1 << 20;
 
@@ -42,9 +44,9 @@ class PcapWriter {
  public:
   // Creates (truncates) `path` and writes the pcap global header, flushed at once: from then on
   // the file is a valid (empty) capture, and a full disk shows here. Throws std::system_error.
-  // `buffer`, if given, is the stdio buffer (it must outlive the writer): with stdio's default
-  // 4 KiB a recording at one sensor's rate costs a write(2) every three packets; a buffer that
-  // holds what arrives between two flush() calls makes it one per flush.
+  // `buffer`, if given, holds records until flush() (it must outlive the writer): unbuffered, a
+  // recording at one sensor's rate costs two write(2) a packet; a buffer that holds what arrives
+  // between two flush() calls makes it one per flush.
   explicit PcapWriter(const std::string& path, std::span<char> buffer = {});
   ~PcapWriter();
   PcapWriter(const PcapWriter&) = delete;
@@ -84,8 +86,14 @@ class PcapWriter {
   const std::string& path() const noexcept { return path_; }
 
  private:
+  // Appends to the buffer, or straight to the file when there is none (or `bytes` is larger).
+  void append(std::span<const std::uint8_t> bytes);
+  void flush_buffer();  // the buffered bytes to the file
+
   std::string path_;
-  std::FILE* file_ = nullptr;
+  OutputFile file_;
+  std::span<char> buffer_;  // the caller's; bytes [0, buffered_) await the next flush()
+  std::size_t buffered_ = 0;
   std::uint16_t ip_id_ = 0;
   std::uint64_t records_ = 0;
   std::uint64_t bytes_ = 0;

@@ -9,7 +9,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "core/capture_reader.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 
 using namespace pandarcap;
 
