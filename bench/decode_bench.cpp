@@ -8,11 +8,11 @@
 #include <stdexcept>
 
 #include "core/calibration.hpp"
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/packet_decoder.hpp"
-#include "core/simd_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "core/simd_decoder.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap::bench {
 

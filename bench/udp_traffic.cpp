@@ -17,9 +17,9 @@
 #include <stdexcept>
 
 #include "core/ipv4.hpp"
-#include "daemon/io/errors.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/io/errors.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap::bench {

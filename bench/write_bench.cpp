@@ -9,12 +9,12 @@
 #include <vector>
 
 #include "core/frame_collector.hpp"
-#include "daemon/pcap/pcap_writer.hpp"
 #include "core/pcd.hpp"
-#include "core/stream_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "core/stream_decoder.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 
 namespace pandarcap::bench {
 

@@ -18,9 +18,9 @@
 #include "decoder_target.hpp"
 #include "frame_assembler.hpp"
 #include "packet.hpp"
+#include "packet_decoder.hpp"
 #include "packet_time.hpp"
 #include "sequence_tracker.hpp"
-#include "packet_decoder.hpp"
 
 namespace pandarcap {
 

@@ -21,8 +21,8 @@ constexpr double kSingleReturnPacketsAt600Rpm = 180.0;
 }  // namespace
 
 DecodeWorker::DecodeWorker(const Calibration& calibration, const DecodeWorkerOptions& options,
-                           PacketRing& ring, WriterQueue& to_writer,
-                           ArenaQueue& free_arenas, RawQueue& free_raw)
+                           PacketRing& ring, WriterQueue& to_writer, ArenaQueue& free_arenas,
+                           RawQueue& free_raw)
     : options_(options),
       ring_(ring),
       to_writer_(to_writer),

@@ -15,8 +15,8 @@
 
 #include "core/calibration.hpp"
 #include "core/stream_decoder.hpp"
-#include "daemon/pipeline_types.hpp"
 #include "daemon/packet_slot.hpp"
+#include "daemon/pipeline_types.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {
@@ -52,9 +52,8 @@ class DecodeWorker final : public FrameSink {
   using RawQueue = ringbuf::SpscQueue<RawBatch*>;
   using WriterQueue = ringbuf::SpscQueue<WriterMessage>;
 
-  DecodeWorker(const Calibration& calibration, const DecodeWorkerOptions& options,
-               PacketRing& ring, WriterQueue& to_writer, ArenaQueue& free_arenas,
-               RawQueue& free_raw);
+  DecodeWorker(const Calibration& calibration, const DecodeWorkerOptions& options, PacketRing& ring,
+               WriterQueue& to_writer, ArenaQueue& free_arenas, RawQueue& free_raw);
 
   // Runs until `producer_done` is set and the ring is empty; then finishes open frames as
   // partial, flushes the raw batch and sends the writer a final snapshot and kEnd.

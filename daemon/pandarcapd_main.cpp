@@ -37,7 +37,6 @@
 #include "config/config_loader.hpp"
 #include "config/daemon_config.hpp"
 #include "core/calibration.hpp"
-#include "core/capture_reader.hpp"
 #include "core/decoder_target.hpp"
 #include "core/packet.hpp"
 #include "core/sim/synthetic_sensor.hpp"
@@ -45,6 +44,8 @@
 #include "daemon/clocks.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/output_directories.hpp"
+#include "daemon/packet_slot.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/replay_source.hpp"
 #include "daemon/sd_notify.hpp"
@@ -52,7 +53,6 @@
 #include "daemon/thread_tuning.hpp"
 #include "daemon/udp_receiver.hpp"
 #include "daemon/writer.hpp"
-#include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace {
@@ -446,9 +446,8 @@ int run(int argc, char** argv) {
   spdlog::info(
       "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
       "packets",
-      config.ring.slots, sizeof(PacketSlot), config.arenas.count,
-      config.arenas.points_per_frame, Pipeline::raw_batches(config),
-      config.arenas.packets_per_frame);
+      config.ring.slots, sizeof(PacketSlot), config.arenas.count, config.arenas.points_per_frame,
+      Pipeline::raw_batches(config), config.arenas.packets_per_frame);
 
   // 4. Source and outputs.
   std::unique_ptr<UdpReceiver> receiver;

@@ -12,9 +12,9 @@
 #include <optional>
 #include <string>
 
-#include "core/capture_reader.hpp"
-#include "daemon/pipeline_types.hpp"
 #include "daemon/packet_slot.hpp"
+#include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pipeline_types.hpp"
 
 namespace pandarcap {
 
@@ -37,8 +37,8 @@ class ReplaySource {
   // Opens the file; throws CaptureError naming it when it cannot be read as a capture.
   explicit ReplaySource(const ReplayOptions& options);
 
-  ReplayResult run(PacketRing& ring, const std::atomic<bool>& stop,
-                   ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
+  ReplayResult run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+                   std::atomic<std::uint64_t>& heartbeat);
 
  private:
   ReplayOptions options_;

@@ -33,8 +33,8 @@
 #include <optional>
 #include <string>
 
-#include "daemon/pipeline_types.hpp"
 #include "daemon/packet_slot.hpp"
+#include "daemon/pipeline_types.hpp"
 
 namespace pandarcap {
 
@@ -81,10 +81,10 @@ class UdpReceiver {
   // Reads SO_MEMINFO: stores the kernel's drop count, returns the buffer's fill (0..1).
   double read_socket_memory(ReceiveCounters& counters);
   Received receive_batch(PacketRing& ring, int flags, ReceiveCounters& counters);
-  void run_per_datagram(PacketRing& ring, const std::atomic<bool>& stop,
-                        ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
-  void run_coalesced(PacketRing& ring, const std::atomic<bool>& stop,
-                     ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat);
+  void run_per_datagram(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+                        std::atomic<std::uint64_t>& heartbeat);
+  void run_coalesced(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+                     std::atomic<std::uint64_t>& heartbeat);
 
   int fd_ = -1;
   std::uint16_t bound_port_ = 0;

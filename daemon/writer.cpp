@@ -18,12 +18,12 @@
 #include <vector>
 
 #include "core/health_format.hpp"
-#include "daemon/pcap/pcap_recovery.hpp"
 #include "core/pcd.hpp"
 #include "core/text_file.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/pcap/pcap_recovery.hpp"
 
 namespace pandarcap {
 namespace {

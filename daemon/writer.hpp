@@ -37,11 +37,11 @@
 #include <string>
 #include <vector>
 
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/health.hpp"
-#include "daemon/pcap/pcap_writer.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 #include "daemon/pipeline_types.hpp"
 
 namespace pandarcap {

@@ -493,7 +493,8 @@ TEST_CASE("PcapWriter rejects what a pcap record cannot hold", "[capture]") {
   CHECK(writer.bytes() == kGlobalHeaderBytes);
 }
 
-TEST_CASE("PcapWriter reports a file it cannot open as system_error with errno and path", "[capture]") {
+TEST_CASE("PcapWriter reports a file it cannot open as system_error with errno and path",
+          "[capture]") {
   ScratchDir dir("capture");
   const std::string missing_dir = (dir / "no_such_dir" / "x.pcap").string();
   try {

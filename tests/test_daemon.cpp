@@ -19,10 +19,10 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/decoder_target.hpp"
-#include "daemon/pcap/pcap_writer.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

@@ -29,8 +29,8 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/pcd.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

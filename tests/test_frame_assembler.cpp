@@ -21,8 +21,8 @@
 #include "core/frame.hpp"
 #include "core/frame_assembler.hpp"
 #include "core/frame_collector.hpp"
-#include "core/stream_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "core/stream_decoder.hpp"
 #include "core/timing.hpp"
 
 using namespace pandarcap;

@@ -6,8 +6,8 @@
 #include <vector>
 
 #include "core/frame_collector.hpp"
-#include "core/stream_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "core/stream_decoder.hpp"
 
 using namespace pandarcap;
 

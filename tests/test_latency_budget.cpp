@@ -13,8 +13,8 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "live_daemon.hpp"
 #include "test_support.hpp"
 

@@ -11,8 +11,8 @@
 #include "core/decoder_target.hpp"
 #include "core/frame_collector.hpp"
 #include "core/packet.hpp"
-#include "core/stream_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "core/stream_decoder.hpp"
 
 using namespace pandarcap;
 

@@ -2,10 +2,10 @@
 #include <catch2/catch.hpp>
 #include <vector>
 
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/packet.hpp"
 #include "core/sim/packet_builder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

@@ -7,11 +7,11 @@
 #include <map>
 #include <vector>
 
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/decoder.hpp"
 #include "core/frame_collector.hpp"
 #include "core/packet_time.hpp"
 #include "core/stream_decoder.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

@@ -9,12 +9,12 @@
 #include <string>
 #include <vector>
 
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/decoder.hpp"
 #include "core/decoder_target.hpp"
-#include "core/sim/packet_builder.hpp"
 #include "core/packet_decoder.hpp"
+#include "core/sim/packet_builder.hpp"
 #include "core/simd_decoder.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

@@ -7,10 +7,10 @@
 #include <vector>
 
 #include "core/calibration.hpp"
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/frame_collector.hpp"
-#include "core/stream_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "core/stream_decoder.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 #include "test_support.hpp"
 
 using namespace pandarcap;

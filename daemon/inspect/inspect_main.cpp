@@ -15,11 +15,11 @@
 #include <vector>
 
 #include "core/calibration.hpp"
-#include "daemon/pcap/capture_reader.hpp"
 #include "core/frame_collector.hpp"
 #include "core/packet.hpp"
 #include "core/stream_decoder.hpp"
 #include "daemon/cli_args.hpp"
+#include "daemon/pcap/capture_reader.hpp"
 
 namespace {
 
