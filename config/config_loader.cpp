@@ -10,7 +10,9 @@
 #include <toml++/toml.h>
 
 #include <cerrno>
+#include <charconv>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <map>
@@ -559,6 +561,74 @@ DaemonConfig load_config_file(const std::filesystem::path& path) {
                                     path.string(), kMaxOperatorFileBytes));
   }
   return parse_config(file.text, path.string());
+}
+
+namespace {
+
+// Sets the one key named `key` from command-line text, with the type and range check the file's
+// reader and checker apply to it.
+struct TextSetter {
+  std::string_view key;
+  std::string_view text;
+  const Reporter& report;
+  bool found = false;
+
+  bool matches(std::string_view table, std::string_view name) {
+    if (found || dotted(table, name) != key) return false;
+    found = true;
+    return true;
+  }
+  [[noreturn]] void not_a(std::string_view what) const {
+    report.fail(key, fmt::format("expected {}, found \"{}\"", what, text));
+  }
+
+  void operator()(std::string_view table, std::string_view name, std::string& out,
+                  StringCheck check) {
+    if (!matches(table, name)) return;
+    std::string value(text);
+    if (auto problem = check(value)) report.fail(key, *problem);
+    out = std::move(value);
+  }
+  void operator()(std::string_view table, std::string_view name, bool& out, std::monostate) {
+    if (!matches(table, name)) return;
+    if (text != "true" && text != "false") not_a("true or false");
+    out = text == "true";
+  }
+  template <typename Int>
+  void operator()(std::string_view table, std::string_view name, Int& out, IntRange r) {
+    if (!matches(table, name)) return;
+    std::int64_t v = 0;
+    const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), v);
+    if (text.empty() || error != std::errc() || end != text.data() + text.size()) {
+      not_a("an integer");
+    }
+    if (v < r.lo || v > r.hi) {
+      report.fail(key, fmt::format("{} is out of range ({}..{})", v, r.lo, r.hi));
+    }
+    out = static_cast<Int>(v);
+  }
+  void operator()(std::string_view table, std::string_view name, double& out, const RealRange& r) {
+    if (!matches(table, name)) return;
+    const std::string value(text);
+    char* end = nullptr;
+    errno = 0;
+    const double v = std::strtod(value.c_str(), &end);
+    if (value.empty() || end != value.c_str() + value.size() || errno == ERANGE) {
+      not_a("a number");
+    }
+    ValueChecker{report}(table, name, v, r);
+    out = v;
+  }
+};
+
+}  // namespace
+
+void set_config_value(DaemonConfig& config, std::string_view key, std::string_view text,
+                      const std::string& source_name) {
+  const Reporter report(source_name, nullptr);
+  TextSetter setter{key, text, report};
+  for_each_key(config, setter);
+  if (!setter.found) report.fail(key, "not a configuration key");
 }
 
 void validate_config(const DaemonConfig& config, const std::string& source_name) {

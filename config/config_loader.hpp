@@ -33,6 +33,15 @@ DaemonConfig load_config_file(const std::filesystem::path& path);
 // the message starts with `source_name: `.
 void validate_config(const DaemonConfig& config, const std::string& source_name);
 
+// Sets one key ("sensor.max_range", "decoder") from its text on a command line ("150", "avx2",
+// "true"), with exactly the type and range check a configuration file gets for it: the one
+// statement of each key's name, type and range serves the file and every binary's options.
+// Throws ConfigError("SOURCE: KEY: problem") for an unknown key, text that is not of the key's
+// type, or a value out of range. Checks across keys (max_range > min_range) stay with
+// validate_config.
+void set_config_value(DaemonConfig& config, std::string_view key, std::string_view text,
+                      const std::string& source_name);
+
 // The configuration as a complete TOML document that parse_config reads back to the same values
 // (`pandarcapd --print-config`).
 std::string to_toml(const DaemonConfig& config);

@@ -5,6 +5,8 @@
 // calibration file cannot be used, 64 bad command line.
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -14,6 +16,8 @@
 #include <string_view>
 #include <vector>
 
+#include "config/command_line.hpp"
+#include "config/config_loader.hpp"
 #include "core/calibration.hpp"
 #include "core/frame_collector.hpp"
 #include "core/packet.hpp"
@@ -59,29 +63,33 @@ struct Options {
   StreamDecoderConfig decode;
 };
 
+// The options pandarcapd shares, which set the same configuration keys there: their types and
+// ranges are the configuration's (config/command_line.hpp), so both decode a capture alike.
+constexpr std::array<std::string_view, 6> kDecodeOptions{"--calibration",
+                                                         "--cut-angle",
+                                                         "--min-range",
+                                                         "--max-range",
+                                                         "--dual-return-distance-threshold",
+                                                         "--firing-time-correction"};
+
 Options parse_options(int argc, char** argv) {
   Options options;
   CliArgs args(argc, argv, kUsage);
+  DaemonConfig config;  // the defaults, then the decode options given
   while (args.more()) {
     const std::string_view arg = args.next();
     if (arg == "--json") {
       options.json_output = true;
     } else if (arg == "--summary") {
       options.summary_only = true;
-    } else if (arg == "--calibration") {
-      options.calibration = std::string(args.value(arg));
     } else if (arg == "--port") {
       options.port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
-    } else if (arg == "--cut-angle") {
-      options.decode.cut_angle_deg = args.number(arg, 0.0, 360.0);
-    } else if (arg == "--min-range") {
-      options.decode.decoder.min_range_m = args.number(arg, 0.0, 262.14);
-    } else if (arg == "--max-range") {
-      options.decode.decoder.max_range_m = args.number(arg, 0.0, 262.14);
-    } else if (arg == "--dual-return-distance-threshold") {
-      options.decode.decoder.dual_return_distance_threshold_m = args.number(arg, 0.0, 262.14);
-    } else if (arg == "--firing-time-correction") {
-      options.decode.decoder.firing_time_correction = true;
+    } else if (std::find(kDecodeOptions.begin(), kDecodeOptions.end(), arg) !=
+               kDecodeOptions.end()) {
+      const KeyOption& key = *find_key_option(arg);
+      const std::string text(key.flag ? "true" : args.value(arg));
+      if (const auto problem = key_option_problem(key, text)) args.usage_error(*problem);
+      set_config_value(config, key.key, text, "command line");
     } else if (!arg.empty() && arg[0] == '-') {
       args.usage_error(fmt::format("unknown option '{}'", arg));
     } else if (options.file.empty()) {
@@ -91,9 +99,13 @@ Options parse_options(int argc, char** argv) {
     }
   }
   if (options.file.empty()) args.usage_error("no capture file given");
-  if (options.decode.decoder.min_range_m > options.decode.decoder.max_range_m) {
-    args.usage_error("--min-range is larger than --max-range");
+  try {
+    validate_config(config, "command line");  // --min-range below --max-range
+  } catch (const ConfigError& error) {
+    args.usage_error(error.what());
   }
+  options.decode = stream_decoder_config(config);
+  if (!config.sensor.calibration_file.empty()) options.calibration = config.sensor.calibration_file;
   return options;
 }
 
