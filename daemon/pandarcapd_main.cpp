@@ -34,6 +34,7 @@
 #include <thread>
 #include <vector>
 
+#include "config/command_line.hpp"
 #include "config/config_loader.hpp"
 #include "config/daemon_config.hpp"
 #include "core/calibration.hpp"
@@ -42,10 +43,13 @@
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/cli_args.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/daemon_options.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/output_directories.hpp"
 #include "daemon/packet_slot.hpp"
+#include "daemon/packet_source.hpp"
 #include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pipeline.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/replay_source.hpp"
 #include "daemon/sd_notify.hpp"
@@ -56,11 +60,6 @@
 #include "ringbuf/spsc_queue.hpp"
 
 namespace {
-
-// Linux thread names are at most 15 characters.
-void name_this_thread(const char* name) {
-  pthread_setname_np(pthread_self(), name);
-}
 
 using namespace pandarcap;
 
@@ -138,23 +137,18 @@ struct Options {
   bool check_config = false;
   bool print_config = false;
   bool print_calibration = false;
-  bool simulate = false;
   bool allow_root = false;
-  std::optional<std::string> replay;
-  std::optional<double> rate;
+  RunSource source;
   std::optional<double> duration_s;
-  bool port_given = false;
-  bool udp_sequence = false;
-  ReturnMode simulated_mode = ReturnMode::kDual;
-  int simulated_rpm = 600;
-  // Overrides, applied to the configuration in the order given.
-  std::vector<std::function<void(DaemonConfig&)>> overrides;
+  // Keys set on the command line, applied to the configuration in the order given.
+  std::vector<std::pair<std::string_view, std::string>> overrides;
 };
 
 Options parse_options(int argc, char** argv) {
   CliArgs args(argc, argv, kUsage);
   Options o;
-  const auto set = [&](auto apply) { o.overrides.emplace_back(apply); };
+  bool simulate = false;
+  std::optional<std::string> replay;
   while (args.more()) {
     const std::string_view arg = args.next();
     if (arg == "-c" || arg == "--config") {
@@ -166,76 +160,49 @@ Options parse_options(int argc, char** argv) {
     } else if (arg == "--print-calibration") {
       o.print_calibration = true;
     } else if (arg == "--simulate") {
-      o.simulate = true;
+      simulate = true;
     } else if (arg == "--allow-root") {
       o.allow_root = true;
     } else if (arg == "--replay") {
-      o.replay = std::string(args.value(arg));
+      replay = std::string(args.value(arg));
     } else if (arg == "--top-speed") {
-      o.rate.reset();
+      o.source.rate.reset();
     } else if (arg == "--rate") {
-      o.rate = args.number(arg, 0.001, 1000);
+      o.source.rate = args.number(arg, 0.001, 1000);
     } else if (arg == "--duration") {
       o.duration_s = args.number(arg, 0.1, 1e7);
-    } else if (arg == "--output-dir") {
-      const std::string dir(args.value(arg));
-      set([dir](DaemonConfig& c) { c.output.directory = dir; });
-    } else if (arg == "--calibration") {
-      const std::string file(args.value(arg));
-      set([file](DaemonConfig& c) { c.sensor.calibration_file = file; });
-    } else if (arg == "--host-ip") {
-      const std::string ip(args.value(arg));
-      set([ip](DaemonConfig& c) { c.sensor.host_ip = ip; });
-    } else if (arg == "--port") {
-      const auto port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
-      o.port_given = true;
-      set([port](DaemonConfig& c) { c.sensor.data_port = port; });
-    } else if (arg == "--sensor-ip") {
-      const std::string ip(args.value(arg));
-      set([ip](DaemonConfig& c) { c.sensor.sensor_ip = ip; });
-    } else if (arg == "--cut-angle") {
-      const double v = args.number(arg, 0, 359.99);
-      set([v](DaemonConfig& c) { c.sensor.cut_angle = v; });
-    } else if (arg == "--min-range") {
-      const double v = args.number(arg, 0, 1000);
-      set([v](DaemonConfig& c) { c.sensor.min_range = v; });
-    } else if (arg == "--max-range") {
-      const double v = args.number(arg, 0, 1000);
-      set([v](DaemonConfig& c) { c.sensor.max_range = v; });
-    } else if (arg == "--dual-return-distance-threshold") {
-      const double v = args.number(arg, 0, 10);
-      set([v](DaemonConfig& c) { c.sensor.dual_return_distance_threshold = v; });
-    } else if (arg == "--firing-time-correction") {
-      set([](DaemonConfig& c) { c.sensor.firing_time_correction = true; });
-    } else if (arg == "--rpm") {
-      const auto rpm = static_cast<int>(args.integer(arg, 600, 1200));
-      if (rpm != 600 && rpm != 1200) args.usage_error("--rpm takes 600 or 1200");
-      o.simulated_rpm = rpm;
-      set([rpm](DaemonConfig& c) { c.sensor.rotation_speed = rpm; });
-    } else if (arg == "--return-mode") {
-      const std::string_view name = args.value(arg);
-      const auto mode = return_mode_from_string(name);
-      if (!mode) args.usage_error("--return-mode takes dual, strongest or last");
-      o.simulated_mode = *mode;
-      const std::string text(name);
-      set([text](DaemonConfig& c) { c.sensor.return_mode = text; });
     } else if (arg == "--udp-sequence") {
-      o.udp_sequence = true;
-    } else if (arg == "--decoder") {
-      const std::string name(args.value(arg));
-      set([name](DaemonConfig& c) { c.decoder = name; });
-    } else if (arg == "--latency-budget-ms") {
-      const auto ms = static_cast<std::uint32_t>(args.integer(arg, 0, 1000));
-      set([ms](DaemonConfig& c) { c.latency.budget_ms = ms; });
-    } else if (arg == "--log-level") {
-      const std::string level(args.value(arg));
-      set([level](DaemonConfig& c) { c.log_level = level; });
+      o.source.simulated_udp_sequence = true;
+    } else if (const KeyOption* key = find_key_option(arg)) {
+      // A configuration key: its type and range are the file's (config/command_line.hpp).
+      const std::string text(key->flag ? "true" : args.value(arg));
+      if (const auto problem = key_option_problem(*key, text)) args.usage_error(*problem);
+      if (arg == "--port") o.source.port_given = true;
+      if (arg == "--rpm") {
+        // Also the simulated sensor's speed; a Pandar40P turns at one of two.
+        o.source.simulated_rpm = std::stoi(text);
+        if (o.source.simulated_rpm != 600 && o.source.simulated_rpm != 1200) {
+          args.usage_error("--rpm takes 600 or 1200");
+        }
+      }
+      if (arg == "--return-mode") {
+        // Also the simulated sensor's mode, which must be one a sensor sends ("any" is not).
+        const auto mode = return_mode_from_string(text);
+        if (!mode) args.usage_error("--return-mode takes dual, strongest or last");
+        o.source.simulated_mode = *mode;
+      }
+      o.overrides.emplace_back(key->key, text);
     } else {
       args.usage_error(fmt::format("unknown option '{}'", arg));
     }
   }
-  if (o.simulate && o.replay) args.usage_error("--simulate and --replay exclude each other");
-  if (o.rate && !o.replay) args.usage_error("--rate applies to --replay only");
+  if (simulate && replay) args.usage_error("--simulate and --replay exclude each other");
+  if (o.source.rate && !replay) args.usage_error("--rate applies to --replay only");
+  if (simulate) o.source.kind = RunSource::Kind::kSimulated;
+  if (replay) {
+    o.source.kind = RunSource::Kind::kReplay;
+    o.source.replay_path = *replay;
+  }
   return o;
 }
 
@@ -250,47 +217,6 @@ void setup_logging(const std::string& level) {
   logger->set_level(spdlog::level::from_str(level));
   spdlog::set_default_logger(logger);
 }
-
-// The fixed memory of the pipeline, allocated before any thread starts.
-struct Pipeline {
-  explicit Pipeline(const DaemonConfig& c)
-      : ring(c.ring.slots),
-        free_arenas(round_up(c.arenas.count)),
-        free_raw(round_up(raw_batches(c))),
-        to_writer(round_up(c.arenas.count + raw_batches(c) + 16)),
-        status(4) {
-    for (std::uint32_t i = 0; i < c.arenas.count; ++i) {
-      arenas.push_back(std::make_unique<FrameArena>(c.arenas.points_per_frame));
-      free_arenas.try_push(arenas.back().get());
-    }
-    for (std::uint32_t i = 0; i < raw_batches(c); ++i) {
-      raw.push_back(std::make_unique<RawBatch>(c.arenas.packets_per_frame));
-      free_raw.try_push(raw.back().get());
-    }
-  }
-  // As many raw batches as arenas: the recording may fall behind as far as the frames can.
-  static std::uint32_t raw_batches(const DaemonConfig& c) { return c.arenas.count; }
-  static std::size_t round_up(std::size_t n) {
-    std::size_t p = 1;
-    while (p < n)
-      p <<= 1;
-    return p;
-  }
-
-  PacketRing ring;
-  std::vector<std::unique_ptr<FrameArena>> arenas;
-  std::vector<std::unique_ptr<RawBatch>> raw;
-  DecodeWorker::ArenaQueue free_arenas;
-  DecodeWorker::RawQueue free_raw;
-  DecodeWorker::WriterQueue to_writer;
-  ringbuf::SpscQueue<StatusLine> status;
-  ReceiveCounters receive;
-  LiveClock live;
-  Heartbeats heartbeats;
-  std::atomic<bool> stop_source{false};
-  std::atomic<bool> source_done{false};
-  std::atomic<std::uint32_t> rotate_generation{0};
-};
 
 // From the writer's final health in memory, not from health.jsonl: when the disk is full the
 // file's last line is an older one, and the summary must say how the run really ended.
@@ -317,39 +243,6 @@ Calibration load_calibration(const DaemonConfig& config) {
                                                 : Calibration::load(config.sensor.calibration_file);
 }
 
-// The writer's options from the configuration. The decoder, the calibration and the recorded
-// destination port are filled in at start, once known.
-WriterOptions writer_options(const DaemonConfig& config) {
-  const std::filesystem::path output_dir = config.output.directory;
-  WriterOptions wo;
-  wo.output_dir = output_dir;
-  wo.health_dir = config.health.directory.empty() ? output_dir / "health"
-                                                  : std::filesystem::path(config.health.directory);
-  wo.prometheus_file = config.health.prometheus_file.empty()
-                           ? wo.health_dir / "pandarcap.prom"
-                           : std::filesystem::path(config.health.prometheus_file);
-  if (const char* stall = std::getenv("PANDARCAP_TEST_STALL_WRITER_FILE")) {
-    wo.test_stall_file = stall;
-  }
-  wo.frames = config.output.frames;
-  wo.frames_max_files = config.output.frames_max_files;
-  wo.frames_max_bytes = config.output.frames_max_bytes;
-  wo.pcap = config.output.pcap;
-  wo.pcap_rotate_bytes = config.output.pcap_rotate_bytes;
-  wo.pcap_rotate_seconds = config.output.pcap_rotate_seconds;
-  wo.pcap_max_files = config.output.pcap_max_files;
-  wo.pcap_max_bytes = config.output.pcap_max_bytes;
-  wo.prometheus = config.health.prometheus;
-  wo.jsonl = config.health.jsonl;
-  wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;
-  wo.sensor_name = config.health.sensor_name;
-  wo.version = std::string(kVersion);
-  wo.no_data_timeout_seconds = config.health.no_data_timeout_seconds;
-  wo.expected_return_mode = config.sensor.return_mode;
-  wo.expected_rpm = config.sensor.rotation_speed;
-  return wo;
-}
-
 // --check-config: what the start would refuse, short of opening the socket or the capture.
 int check_config(const DaemonConfig& config, const std::string& source_name) {
   try {
@@ -372,57 +265,42 @@ int check_config(const DaemonConfig& config, const std::string& source_name) {
   return 0;
 }
 
-int run(int argc, char** argv) {
-  // A file-size limit (systemd's LimitFSIZE=, ulimit -f) must fail the one write with EFBIG,
-  // counted like a full disk, not kill the daemon with SIGXFSZ.
-  std::signal(SIGXFSZ, SIG_IGN);
-  // 1. Options and configuration.
-  Options options = parse_options(argc, argv);
-  DaemonConfig config;
-  const std::string source_name = options.config_path.value_or("command line");
-  try {
-    if (options.config_path) config = load_config_file(*options.config_path);
-    for (const auto& apply : options.overrides)
-      apply(config);
-    validate_config(config, source_name);
-  } catch (const ConfigError& error) {
-    std::fprintf(stderr, "pandarcapd: %s\n", error.what());
-    return kExitConfig;
-  }
-  if (options.check_config) return check_config(config, source_name);
-  if (options.print_config) {
-    fmt::print("{}", to_toml(config));
-    return 0;
-  }
+// A start-up step that cannot go on: the exit status and what to say. Thrown by the steps below,
+// reported once by run().
+struct StartupError {
+  int exit_status;
+  std::string message;
+};
 
-  // 2. Logging and calibration.
-  setup_logging(config.log_level);
-  if (!options.print_calibration)
-    spdlog::info("pandarcapd {} starting ({})", kVersion,
-                 options.simulate ? "simulated sensor"
-                 : options.replay ? "replay of " + *options.replay
-                                  : "live capture");
-  Calibration calibration;
+// 1. The configuration: the file, then the command line's keys, checked as a whole.
+DaemonConfig load_configuration(const Options& options, const std::string& source_name) {
   try {
-    calibration = load_calibration(config);
-  } catch (const std::exception& error) {
-    spdlog::critical("{}", error.what());
-    return kExitConfig;
+    DaemonConfig config;
+    if (options.config_path) config = load_config_file(*options.config_path);
+    for (const auto& [key, text] : options.overrides)
+      set_config_value(config, key, text, source_name);
+    validate_config(config, source_name);
+    return config;
+  } catch (const ConfigError& error) {
+    throw StartupError{kExitConfig, error.what()};
   }
-  if (options.print_calibration) {
-    fmt::print("{}", calibration.to_csv());
-    return 0;
-  }
-  // Checked before any socket or output file is opened. Reading the configuration and printing
-  // tables above is harmless as root; parsing what arrives from the network is not.
-  if (::geteuid() == 0 && !options.allow_root) {
-    spdlog::critical(
+}
+
+// 2. Checked before any socket or output file is opened. Reading the configuration and printing
+// tables is harmless as root; parsing what arrives from the network is not.
+void refuse_root_unless_allowed(const Options& options) {
+  if (::geteuid() != 0) return;
+  if (!options.allow_root) {
+    throw StartupError{
+        kExitNoPermission,
         "refusing to run as root: pandarcapd needs no privilege (UDP on any port it is given, "
         "files it owns). Run it as an unprivileged user (the systemd unit uses 'pandarcap'), or "
-        "pass --allow-root to accept the risk (containers, CI)");
-    return kExitNoPermission;
+        "pass --allow-root to accept the risk (containers, CI)"};
   }
-  if (::geteuid() == 0) spdlog::warn("running as root (--allow-root)");
+  spdlog::warn("running as root (--allow-root)");
+}
+
+void log_calibration(const Calibration& calibration) {
   if (calibration.is_nominal()) {
     spdlog::warn(
         "calibration: nominal Pandar40P table in use (no calibration_file); per-unit "
@@ -430,160 +308,55 @@ int run(int argc, char** argv) {
   } else {
     spdlog::info("calibration: {}", calibration.source);
   }
+}
 
-  // The decoder is chosen once, here; a named target this CPU cannot run is a configuration
-  // error, not a reason to quietly run another.
-  const DecoderChoice decoder_choice = choose_decoder_target(config.decoder);
-  if (!decoder_choice.target) {
-    spdlog::critical("{}", decoder_choice.error);
-    return kExitConfig;
-  }
-  spdlog::info("decoder: {}{}", to_string(*decoder_choice.target),
+// The decoder is chosen once, here; a named target this CPU cannot run is a configuration
+// error, not a reason to quietly run another.
+DecoderTarget choose_decoder(const DaemonConfig& config) {
+  const DecoderChoice choice = choose_decoder_target(config.decoder);
+  if (!choice.target) throw StartupError{kExitConfig, choice.error};
+  spdlog::info("decoder: {}{}", to_string(*choice.target),
                config.decoder == "auto" ? " (auto)" : "");
+  return *choice.target;
+}
 
-  // 3. Memory, all of it now.
-  Pipeline pipe(config);
-  spdlog::info(
-      "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
-      "packets",
-      config.ring.slots, sizeof(PacketSlot), config.arenas.count, config.arenas.points_per_frame,
-      Pipeline::raw_batches(config), config.arenas.packets_per_frame);
-
-  // 4. Source and outputs.
-  std::unique_ptr<UdpReceiver> receiver;
-  std::unique_ptr<ReplaySource> replay;
-  std::unique_ptr<SimulatedSender> simulator;
+std::unique_ptr<PacketSource> open_source(const DaemonConfig& config, const RunSource& source) {
   try {
-    if (options.replay) {
-      ReplayOptions ro;
-      ro.path = *options.replay;
-      ro.rate = options.rate;
-      if (options.port_given) ro.destination_port = config.sensor.data_port;
-      ro.sensor_ip = config.sensor.sensor_ip;
-      replay = std::make_unique<ReplaySource>(ro);
-    } else {
-      UdpReceiverOptions ro;
-      ro.host_ip = options.simulate ? "127.0.0.1" : config.sensor.host_ip;
-      ro.port = options.simulate && !options.port_given ? 0 : config.sensor.data_port;
-      ro.multicast_ip = options.simulate ? "" : config.sensor.multicast_ip;
-      ro.multicast_interface_ip = config.sensor.multicast_interface_ip;
-      ro.receive_buffer_bytes = config.sensor.udp_socket_receive_buffer_size_bytes;
-      ro.sensor_ip = config.sensor.sensor_ip;
-      ro.batch = config.ring.receive_batch;
-      ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
-      receiver = std::make_unique<UdpReceiver>(ro);
-      if (options.simulate) {
-        SyntheticSensorConfig sc;
-        sc.rpm = options.simulated_rpm;
-        sc.return_mode = options.simulated_mode;
-        sc.udp_sequence = options.udp_sequence;
-        sc.start_unix_ns = realtime_ns();
-        simulator =
-            std::make_unique<SimulatedSender>(sc, "127.0.0.1", "127.0.0.1", receiver->bound_port());
-        spdlog::info("simulated sensor: {} RPM, {} return{}, sending to 127.0.0.1:{}", sc.rpm,
-                     to_string(sc.return_mode), sc.udp_sequence ? ", UDP sequence" : "",
-                     receiver->bound_port());
-      }
-    }
+    return std::make_unique<PacketSource>(config, source);
   } catch (const CaptureError& error) {
-    spdlog::critical("{}", error.what());
-    return kExitNoInput;
+    throw StartupError{kExitNoInput, error.what()};
   } catch (const std::exception& error) {
-    spdlog::critical("{}", error.what());
-    return 1;
+    throw StartupError{1, error.what()};
   }
+}
 
-  const std::filesystem::path output_dir = config.output.directory;
-  WriterOptions wo = writer_options(config);
-  wo.decoder = std::string(to_string(*decoder_choice.target));
-  wo.calibration_csv = calibration.to_csv();
-  wo.pcap_destination = Endpoint{0, receiver ? receiver->bound_port() : config.sensor.data_port};
-  // One daemon per output directory, claimed before anything in it is touched (crash recovery,
-  // numbering and retention all assume the files are this process's or a finished run's).
-  std::optional<OutputDirectoryLock> lock;
+// One daemon per output directory, claimed before anything in it is touched (crash recovery,
+// numbering and retention all assume the files are this process's or a finished run's).
+std::unique_ptr<OutputDirectoryLock> claim_outputs(const std::filesystem::path& directory) {
   try {
-    lock.emplace(output_dir);
+    return std::make_unique<OutputDirectoryLock>(directory);
   } catch (const OutputDirectoryBusy& error) {
-    spdlog::critical("{}", error.what());
-    return kExitCantCreate;
+    throw StartupError{kExitCantCreate, error.what()};
   } catch (const std::exception& error) {
-    spdlog::critical("outputs: {}", error.what());
-    return kExitCantCreate;
+    throw StartupError{kExitCantCreate, fmt::format("outputs: {}", error.what())};
   }
-  Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live);
-  try {
-    writer.prepare();
-  } catch (const std::exception& error) {
-    spdlog::critical("outputs: {}", error.what());
-    return kExitCantCreate;
-  }
+}
 
-  // 5. Threads. Signals are blocked first so every thread inherits the mask and only the main
-  // thread takes them, synchronously, with sigtimedwait.
+// Signals are blocked before the threads start, so every thread inherits the mask and only the
+// main thread takes them, synchronously, with sigtimedwait.
+sigset_t block_signals() {
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGTERM);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  return signals;
+}
 
-  DecodeWorkerOptions dopt;
-  dopt.decoder.decoder.min_range_m = config.sensor.min_range;
-  dopt.decoder.decoder.max_range_m = config.sensor.max_range;
-  dopt.decoder.decoder.dual_return_distance_threshold_m =
-      config.sensor.dual_return_distance_threshold;
-  dopt.decoder.decoder.firing_time_correction = config.sensor.firing_time_correction;
-  dopt.decoder.cut_angle_deg = config.sensor.cut_angle;
-  dopt.decoder.decoder_target = *decoder_choice.target;
-  dopt.frame_decimation = config.output.frame_decimation;
-  dopt.write_frames = config.output.frames;
-  dopt.min_frame_fraction = config.output.frames_min_fraction;
-  dopt.expected_rpm = config.sensor.rotation_speed;
-  dopt.record_raw = config.output.pcap;
-  dopt.lossless = options.replay.has_value();
-  dopt.measure_latency = !options.replay.has_value();
-  DecodeWorker worker(calibration, dopt, pipe.ring, pipe.to_writer, pipe.free_arenas,
-                      pipe.free_raw);
-
-  ReplayResult replay_result;
-  // Named threads (`top -H`, /proc/PID/task/*/comm) so each stage's CPU can be measured.
-  const ThreadsSection& placement = config.threads;
-  std::thread writer_thread([&] {
-    name_this_thread("pc-writer");
-    place_this_thread("writer", {placement.writer_cpu, placement.writer_priority});
-    writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status);
-  });
-  std::thread decode_thread([&] {
-    name_this_thread("pc-decode");
-    place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
-    worker.run(pipe.source_done, pipe.heartbeats.decode, pipe.live);
-  });
-  std::thread source_thread([&] {
-    name_this_thread(replay ? "pc-replay" : "pc-receive");
-    place_this_thread("receive", {placement.receive_cpu, placement.receive_priority});
-    if (replay) {
-      replay_result =
-          replay->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive);
-    } else {
-      receiver->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive);
-    }
-    // release: everything the source published happens before the decoder sees "done".
-    pipe.source_done.store(true, std::memory_order_release);
-  });
-  std::atomic<bool> stop_simulator{false};
-  std::thread simulator_thread;
-  if (simulator) {
-    simulator_thread = std::thread([&] {
-      name_this_thread("pc-simsensor");
-      simulator->run(stop_simulator);
-    });
-  }
-
-  if (config.threads.lock_memory) lock_all_memory();
-  systemd::ready();
-  spdlog::info("ready: writing to {}", output_dir.string());
-
-  // Supervision: signals, --duration, end of replay, STATUS and WATCHDOG.
+// The main thread while the pipeline runs: signals, --duration, the end of a replay, STATUS and
+// WATCHDOG. Returns when the daemon should stop.
+void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> duration_s) {
   const auto start = std::chrono::steady_clock::now();
   const auto watchdog = systemd::watchdog_interval();
   const auto tick = std::chrono::milliseconds(100);
@@ -594,15 +367,15 @@ int run(int argc, char** argv) {
     const int signal = sigtimedwait(&signals, nullptr, &timeout);
     if (signal == SIGTERM || signal == SIGINT) {
       spdlog::info("{}: stopping", signal == SIGTERM ? "SIGTERM" : "SIGINT");
-      break;
+      return;
     }
     if (signal == SIGHUP) pipe.rotate_generation.fetch_add(1, std::memory_order_relaxed);
-    if (options.duration_s && std::chrono::steady_clock::now() - start >=
-                                  std::chrono::duration<double>(*options.duration_s)) {
-      spdlog::info("{} s elapsed: stopping", *options.duration_s);
-      break;
+    if (duration_s &&
+        std::chrono::steady_clock::now() - start >= std::chrono::duration<double>(*duration_s)) {
+      spdlog::info("{} s elapsed: stopping", *duration_s);
+      return;
     }
-    if (pipe.source_done.load(std::memory_order_acquire)) break;  // replay finished
+    if (pipe.source_done.load(std::memory_order_acquire)) return;  // replay finished
     StatusLine status;
     while (pipe.status.try_pop(status))
       systemd::status(status.text);
@@ -618,33 +391,126 @@ int run(int argc, char** argv) {
       next_watchdog = now + *watchdog / 2;
     }
   }
+}
 
-  // Shutdown, in reverse: the simulator, the source, then the decoder drains the ring and the
-  // writer finishes (partial frame renamed, pcap closed, final health).
-  systemd::stopping();
-  stop_simulator.store(true, std::memory_order_relaxed);
-  if (simulator_thread.joinable()) simulator_thread.join();
-  pipe.stop_source.store(true, std::memory_order_relaxed);
-  source_thread.join();
-  decode_thread.join();
-  writer_thread.join();
-
-  int status = 0;
-  if (replay) {
-    const auto& capture = replay_result.capture;
-    spdlog::info(
-        "replay: {} records, {} UDP datagrams ({} other ports, {} non-IPv4, {} non-UDP, "
-        "{} fragments, {} malformed)",
-        capture.records, capture.udp_datagrams, capture.port_filtered, capture.non_ipv4,
-        capture.non_udp, capture.ip_fragments, capture.malformed);
-    if (replay_result.status == CaptureStatus::kTruncated) {
-      spdlog::warn("{}: the file ends in the middle of a record (cut off while recording)",
-                   *options.replay);
-    } else if (replay_result.status == CaptureStatus::kError) {
-      spdlog::error("{}: {}", *options.replay, replay_result.error);
-      status = 1;
-    }
+// How a replay ended: 1 when the file turned out corrupt part-way, else 0.
+int report_replay(const PacketSource& source, const RunSource& run_source) {
+  if (!source.replayed()) return 0;
+  const ReplayResult& result = source.replay_result();
+  const auto& capture = result.capture;
+  spdlog::info(
+      "replay: {} records, {} UDP datagrams ({} other ports, {} non-IPv4, {} non-UDP, "
+      "{} fragments, {} malformed)",
+      capture.records, capture.udp_datagrams, capture.port_filtered, capture.non_ipv4,
+      capture.non_udp, capture.ip_fragments, capture.malformed);
+  if (result.status == CaptureStatus::kTruncated) {
+    spdlog::warn("{}: the file ends in the middle of a record (cut off while recording)",
+                 run_source.replay_path);
+  } else if (result.status == CaptureStatus::kError) {
+    spdlog::error("{}: {}", run_source.replay_path, result.error);
+    return 1;
   }
+  return 0;
+}
+
+std::string describe(const RunSource& source) {
+  switch (source.kind) {
+    case RunSource::Kind::kSimulated:
+      return "simulated sensor";
+    case RunSource::Kind::kReplay:
+      return "replay of " + source.replay_path;
+    case RunSource::Kind::kLive:
+      break;
+  }
+  return "live capture";
+}
+
+// The daemon's life, in order; shutdown is the reverse (PipelineThreads).
+int run(const Options& options) {
+  const std::string source_name = options.config_path.value_or("command line");
+  const DaemonConfig config = load_configuration(options, source_name);
+  if (options.check_config) return check_config(config, source_name);
+  if (options.print_config) {
+    fmt::print("{}", to_toml(config));
+    return 0;
+  }
+
+  setup_logging(config.log_level);
+  if (!options.print_calibration) {
+    spdlog::info("pandarcapd {} starting ({})", kVersion, describe(options.source));
+  }
+  Calibration calibration;
+  try {
+    calibration = load_calibration(config);
+  } catch (const std::exception& error) {
+    throw StartupError{kExitConfig, error.what()};
+  }
+  if (options.print_calibration) {
+    fmt::print("{}", calibration.to_csv());
+    return 0;
+  }
+  refuse_root_unless_allowed(options);
+  log_calibration(calibration);
+  const DecoderTarget decoder = choose_decoder(config);
+
+  Pipeline pipe(config);  // all the memory, now
+  spdlog::info(
+      "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
+      "packets",
+      config.ring.slots, sizeof(PacketSlot), config.arenas.count, config.arenas.points_per_frame,
+      Pipeline::raw_batches(config), config.arenas.packets_per_frame);
+
+  const std::unique_ptr<PacketSource> source = open_source(config, options.source);
+  WriterOptions wo = writer_options(config);
+  wo.decoder = std::string(to_string(decoder));
+  wo.calibration_csv = calibration.to_csv();
+  wo.pcap_destination = Endpoint{0, source->recorded_port(config)};
+  const auto lock = claim_outputs(config.output.directory);
+  Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live);
+  try {
+    writer.prepare();
+  } catch (const std::exception& error) {
+    throw StartupError{kExitCantCreate, fmt::format("outputs: {}", error.what())};
+  }
+  DecodeWorker worker(calibration, decode_worker_options(config, decoder, options.source),
+                      pipe.ring, pipe.to_writer, pipe.free_arenas, pipe.free_raw);
+
+  const sigset_t signals = block_signals();
+  const ThreadsSection& placement = config.threads;
+  std::atomic<bool> stop_simulator{false};
+  PipelineThreads threads;
+  threads.start(
+      "pc-writer",
+      [&] {
+        place_this_thread("writer", {placement.writer_cpu, placement.writer_priority});
+      },
+      [&] { writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status); });
+  threads.start(
+      "pc-decode",
+      [&] {
+        place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
+      },
+      [&] { worker.run(pipe.source_done, pipe.heartbeats.decode, pipe.live); });
+  threads.start(
+      source->thread_name(),
+      [&] {
+        place_this_thread("receive", {placement.receive_cpu, placement.receive_priority});
+      },
+      [&] { source->run(pipe); }, [&] { pipe.stop_source.store(true, std::memory_order_relaxed); });
+  if (source->simulated()) {
+    threads.start(
+        "pc-simsensor", {}, [&] { source->run_simulator(stop_simulator); },
+        [&] { stop_simulator.store(true, std::memory_order_relaxed); });
+  }
+  if (config.threads.lock_memory) lock_all_memory();
+  systemd::ready();
+  spdlog::info("ready: writing to {}", config.output.directory);
+
+  supervise(pipe, signals, options.duration_s);
+
+  systemd::stopping();
+  threads.stop_all();  // the decoder drains the ring, the writer finishes every file
+  const int status = report_replay(*source, options.source);
   print_summary(wo, writer.final_health());
   return status;
 }
@@ -652,8 +518,20 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // A file-size limit (systemd's LimitFSIZE=, ulimit -f) must fail the one write with EFBIG,
+  // counted like a full disk, not kill the daemon with SIGXFSZ.
+  std::signal(SIGXFSZ, SIG_IGN);
+  const Options options = parse_options(argc, argv);
   try {
-    return run(argc, argv);
+    return run(options);
+  } catch (const StartupError& error) {
+    // Before logging is set up (the configuration), plain stderr; after it, the log.
+    if (spdlog::get("pandarcapd") != nullptr) {
+      spdlog::critical("{}", error.message);
+    } else {
+      std::fprintf(stderr, "pandarcapd: %s\n", error.message.c_str());
+    }
+    return error.exit_status;
   } catch (const std::exception& error) {
     std::fprintf(stderr, "pandarcapd: %s\n", error.what());
     return 1;

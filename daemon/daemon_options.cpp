@@ -1,0 +1,91 @@
+#include "daemon/daemon_options.hpp"
+
+#include <cstdlib>
+#include <filesystem>
+
+#include "config/command_line.hpp"
+
+namespace pandarcap {
+
+WriterOptions writer_options(const DaemonConfig& config) {
+  const std::filesystem::path output_dir = config.output.directory;
+  WriterOptions wo;
+  wo.output_dir = output_dir;
+  wo.health_dir = config.health.directory.empty() ? output_dir / "health"
+                                                  : std::filesystem::path(config.health.directory);
+  wo.prometheus_file = config.health.prometheus_file.empty()
+                           ? wo.health_dir / "pandarcap.prom"
+                           : std::filesystem::path(config.health.prometheus_file);
+#ifdef PANDARCAP_TEST_HOOKS
+  if (const char* stall = std::getenv("PANDARCAP_TEST_STALL_WRITER_FILE")) {
+    wo.test_stall_file = stall;
+  }
+#endif
+  wo.frames = config.output.frames;
+  wo.frames_max_files = config.output.frames_max_files;
+  wo.frames_max_bytes = config.output.frames_max_bytes;
+  wo.pcap = config.output.pcap;
+  wo.pcap_rotate_bytes = config.output.pcap_rotate_bytes;
+  wo.pcap_rotate_seconds = config.output.pcap_rotate_seconds;
+  wo.pcap_max_files = config.output.pcap_max_files;
+  wo.pcap_max_bytes = config.output.pcap_max_bytes;
+  wo.prometheus = config.health.prometheus;
+  wo.jsonl = config.health.jsonl;
+  wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;
+  wo.sensor_name = config.health.sensor_name;
+  wo.version = PANDARCAP_VERSION;
+  wo.no_data_timeout_seconds = config.health.no_data_timeout_seconds;
+  wo.expected_return_mode = config.sensor.return_mode;
+  wo.expected_rpm = config.sensor.rotation_speed;
+  return wo;
+}
+
+DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTarget target,
+                                          const RunSource& source) {
+  const bool replay = source.kind == RunSource::Kind::kReplay;
+  DecodeWorkerOptions dopt;
+  dopt.decoder = stream_decoder_config(config);
+  dopt.decoder.decoder_target = target;
+  dopt.frame_decimation = config.output.frame_decimation;
+  dopt.write_frames = config.output.frames;
+  dopt.min_frame_fraction = config.output.frames_min_fraction;
+  dopt.expected_rpm = config.sensor.rotation_speed;
+  dopt.record_raw = config.output.pcap;
+  dopt.lossless = replay;
+  dopt.measure_latency = !replay;
+  return dopt;
+}
+
+UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource& source) {
+  const bool simulate = source.kind == RunSource::Kind::kSimulated;
+  UdpReceiverOptions ro;
+  ro.host_ip = simulate ? "127.0.0.1" : config.sensor.host_ip;
+  ro.port = simulate && !source.port_given ? 0 : config.sensor.data_port;
+  ro.multicast_ip = simulate ? "" : config.sensor.multicast_ip;
+  ro.multicast_interface_ip = config.sensor.multicast_interface_ip;
+  ro.receive_buffer_bytes = config.sensor.udp_socket_receive_buffer_size_bytes;
+  ro.sensor_ip = config.sensor.sensor_ip;
+  ro.batch = config.ring.receive_batch;
+  ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
+  return ro;
+}
+
+ReplayOptions replay_options(const DaemonConfig& config, const RunSource& source) {
+  ReplayOptions ro;
+  ro.path = source.replay_path;
+  ro.rate = source.rate;
+  if (source.port_given) ro.destination_port = config.sensor.data_port;
+  ro.sensor_ip = config.sensor.sensor_ip;
+  return ro;
+}
+
+SyntheticSensorConfig simulated_sensor_config(const RunSource& source, std::int64_t start_unix_ns) {
+  SyntheticSensorConfig sc;
+  sc.rpm = source.simulated_rpm;
+  sc.return_mode = source.simulated_mode;
+  sc.udp_sequence = source.simulated_udp_sequence;
+  sc.start_unix_ns = start_unix_ns;
+  return sc;
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,56 @@
+// What the configuration means for each of the daemon's parts: pure functions from the checked
+// DaemonConfig (and the few choices only the command line makes: the source, the replay's pace,
+// the simulated sensor) to each thread's options. run() in pandarcapd_main.cpp calls them in its
+// start-up order; the tests call them directly (tests/test_daemon_options.cpp).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "config/daemon_config.hpp"
+#include "core/decoder_target.hpp"
+#include "core/packet.hpp"
+#include "core/sim/synthetic_sensor.hpp"
+#include "daemon/decode_worker.hpp"
+#include "daemon/replay_source.hpp"
+#include "daemon/udp_receiver.hpp"
+#include "daemon/writer.hpp"
+
+namespace pandarcap {
+
+// Where the packets come from, and what only the command line says about it.
+struct RunSource {
+  enum class Kind { kLive, kSimulated, kReplay };
+  Kind kind = Kind::kLive;
+  std::string replay_path;     // kReplay
+  std::optional<double> rate;  // kReplay: times real time; empty = top speed
+  // --port was given: a replay keeps only datagrams to that port; the simulator sends to it
+  // (else to a free port the daemon's socket picked).
+  bool port_given = false;
+  // kSimulated: the sensor the simulator plays.
+  int simulated_rpm = 600;
+  ReturnMode simulated_mode = ReturnMode::kDual;
+  bool simulated_udp_sequence = false;
+};
+
+// The writer's options. The decoder's name, the calibration and the recorded destination port
+// are known only at start (the caller fills them in); the test hook only in builds with
+// PANDARCAP_TEST_HOOKS (the test builds; never the package).
+WriterOptions writer_options(const DaemonConfig& config);
+
+// The decode worker's options for the chosen decoder target and source.
+DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTarget target,
+                                          const RunSource& source);
+
+// The live socket's options; the simulator's socket is on 127.0.0.1 (a free port unless
+// --port), never a multicast group.
+UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource& source);
+
+// The replay's options (source kReplay).
+ReplayOptions replay_options(const DaemonConfig& config, const RunSource& source);
+
+// The simulated sensor's settings, starting now (`start_unix_ns`).
+SyntheticSensorConfig simulated_sensor_config(const RunSource& source, std::int64_t start_unix_ns);
+
+}  // namespace pandarcap

@@ -1,0 +1,74 @@
+// The daemon's pipeline: its fixed memory, and its threads, stopped in the reverse of their start.
+//
+//   receive/replay --ring--> decode worker --queue--> writer        (see pipeline_types.hpp)
+//
+// Pipeline holds every buffer the threads share, all allocated before the first thread starts
+// (config: ring.slots, arenas.count, arenas.points_per_frame, arenas.packets_per_frame).
+// PipelineThreads starts them and, whatever way run() leaves (a return, a throw between two
+// starts), asks each to stop and joins it, last started first: the simulator, the source, then
+// the decoder drains the ring and the writer finishes the files.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include "config/daemon_config.hpp"
+#include "daemon/decode_worker.hpp"
+#include "daemon/packet_slot.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "daemon/writer.hpp"
+#include "ringbuf/spsc_queue.hpp"
+
+namespace pandarcap {
+
+struct Pipeline {
+  explicit Pipeline(const DaemonConfig& config);
+
+  // As many raw batches as arenas: the recording may fall behind as far as the frames can.
+  static std::uint32_t raw_batches(const DaemonConfig& config) { return config.arenas.count; }
+
+  PacketRing ring;
+  std::vector<std::unique_ptr<FrameArena>> arenas;
+  std::vector<std::unique_ptr<RawBatch>> raw;
+  DecodeWorker::ArenaQueue free_arenas;
+  DecodeWorker::RawQueue free_raw;
+  DecodeWorker::WriterQueue to_writer;
+  ringbuf::SpscQueue<StatusLine> status;  // the writer's STATUS= lines for the main thread
+  ReceiveCounters receive;
+  LiveClock live;
+  Heartbeats heartbeats;
+  std::atomic<bool> stop_source{false};
+  std::atomic<bool> source_done{false};             // set by the source thread as it ends
+  std::atomic<std::uint32_t> rotate_generation{0};  // SIGHUP
+};
+
+class PipelineThreads {
+ public:
+  PipelineThreads() = default;
+  ~PipelineThreads() { stop_all(); }
+  PipelineThreads(const PipelineThreads&) = delete;
+  PipelineThreads& operator=(const PipelineThreads&) = delete;
+
+  // Starts a thread named `name` (at most 15 characters: `top -H`, /proc/PID/task) that runs
+  // `setup` (pinning, priority), then `body`; returns once `setup` is done, so that READY=1
+  // after the last start means every thread is named and placed. `stop` is what asks the body to
+  // end (nothing for a thread that ends when its input does).
+  void start(const char* name, std::function<void()> setup, std::function<void()> body,
+             std::function<void()> stop = {});
+
+  // Stops and joins every thread, the last started first. Idempotent.
+  void stop_all() noexcept;
+
+ private:
+  struct Started {
+    std::function<void()> stop;
+    std::jthread thread;
+  };
+  std::vector<Started> started_;
+};
+
+}  // namespace pandarcap

@@ -1,0 +1,190 @@
+// The daemon's start-up in pieces: what the configuration means for each thread
+// (daemon/daemon_options.hpp), command-line keys checked as the file checks them
+// (set_config_value), and the threads stopped in the reverse of their start (PipelineThreads).
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <cstdlib>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "config/command_line.hpp"
+#include "config/config_loader.hpp"
+#include "daemon/daemon_options.hpp"
+#include "daemon/pipeline.hpp"
+
+using namespace pandarcap;
+
+TEST_CASE("command-line keys get the file's type and range checks, with the file's words",
+          "[config][cli]") {
+  DaemonConfig config;
+  set_config_value(config, "sensor.max_range", "150.5", "cli");
+  CHECK(config.sensor.max_range == 150.5);
+  set_config_value(config, "sensor.data_port", "2369", "cli");
+  CHECK(config.sensor.data_port == 2369);
+  set_config_value(config, "sensor.firing_time_correction", "true", "cli");
+  CHECK(config.sensor.firing_time_correction);
+  set_config_value(config, "decoder", "scalar", "cli");
+  CHECK(config.decoder == "scalar");
+
+  CHECK_THROWS_WITH(set_config_value(config, "sensor.data_port", "70000", "cli"),
+                    "cli: sensor.data_port: 70000 is out of range (1..65535)");
+  CHECK_THROWS_WITH(set_config_value(config, "sensor.data_port", "23a", "cli"),
+                    "cli: sensor.data_port: expected an integer, found \"23a\"");
+  CHECK_THROWS_WITH(set_config_value(config, "sensor.max_range", "far", "cli"),
+                    "cli: sensor.max_range: expected a number, found \"far\"");
+  CHECK_THROWS_WITH(set_config_value(config, "sensor.cut_angle", "360", "cli"),
+                    Catch::Contains("360 is out of range"));
+  CHECK_THROWS_WITH(set_config_value(config, "sensor.host_ip", "1.2.3", "cli"),
+                    Catch::Contains("is not an IPv4 address"));
+  CHECK_THROWS_WITH(set_config_value(config, "sensor.nope", "1", "cli"),
+                    "cli: sensor.nope: not a configuration key");
+  // Refused values leave the configuration as it was.
+  CHECK(config.sensor.data_port == 2369);
+
+  // The same value in a file is refused with the same problem.
+  CHECK_THROWS_WITH(parse_config("[sensor]\ndata_port = 70000\n", "f.toml"),
+                    Catch::EndsWith("sensor.data_port: 70000 is out of range (1..65535)"));
+}
+
+TEST_CASE("every command-line key option names a key the configuration has", "[config][cli]") {
+  for (const KeyOption& option : kKeyOptions) {
+    INFO(option.option);
+    REQUIRE(find_key_option(option.option) == &option);
+    DaemonConfig config;
+    // The key's own default, printed and set back: accepted (a flag takes "true").
+    const auto problem = key_option_problem(option, option.flag ? "true" : "__not_a_value__");
+    if (option.flag) {
+      CHECK_FALSE(problem);
+    } else if (problem) {
+      CHECK_THAT(*problem, !Catch::Contains("not a configuration key"));
+    }
+  }
+  CHECK(find_key_option("--replay") == nullptr);
+}
+
+TEST_CASE("the writer's options follow the configuration's directories", "[daemon][options]") {
+  DaemonConfig config;
+  config.output.directory = "/data/run";
+  WriterOptions wo = writer_options(config);
+  CHECK(wo.output_dir == "/data/run");
+  CHECK(wo.health_dir == "/data/run/health");
+  CHECK(wo.prometheus_file == "/data/run/health/pandarcap.prom");
+  config.health.directory = "/var/lib/node_exporter";
+  config.health.prometheus_file = "/var/lib/textfile/pandarcap.prom";
+  config.output.pcap_max_files = 7;
+  config.sensor.rotation_speed = 1200;
+  wo = writer_options(config);
+  CHECK(wo.health_dir == "/var/lib/node_exporter");
+  CHECK(wo.prometheus_file == "/var/lib/textfile/pandarcap.prom");
+  CHECK(wo.pcap_max_files == 7);
+  CHECK(wo.expected_rpm == 1200);
+}
+
+TEST_CASE("the decoder's options: a replay waits for the writer, live capture measures latency",
+          "[daemon][options]") {
+  DaemonConfig config;
+  config.sensor.min_range = 1.5;
+  config.sensor.cut_angle = 90;
+  config.output.frame_decimation = 3;
+  RunSource live;
+  RunSource replay;
+  replay.kind = RunSource::Kind::kReplay;
+  replay.replay_path = "x.pcap";
+  const DecodeWorkerOptions a = decode_worker_options(config, DecoderTarget::kScalar, live);
+  CHECK_FALSE(a.lossless);
+  CHECK(a.measure_latency);
+  CHECK(a.decoder.decoder.min_range_m == 1.5);
+  CHECK(a.decoder.cut_angle_deg == 90);
+  CHECK(a.frame_decimation == 3);
+  const DecodeWorkerOptions b = decode_worker_options(config, DecoderTarget::kScalar, replay);
+  CHECK(b.lossless);
+  CHECK_FALSE(b.measure_latency);
+}
+
+TEST_CASE("the simulated sensor's socket is loopback on a free port unless --port",
+          "[daemon][options]") {
+  DaemonConfig config;
+  config.sensor.host_ip = "10.0.0.5";
+  config.sensor.multicast_ip = "239.1.1.1";
+  config.sensor.data_port = 2370;
+  config.latency.budget_ms = 7;
+  const UdpReceiverOptions live = receiver_options(config, RunSource{});
+  CHECK(live.host_ip == "10.0.0.5");
+  CHECK(live.multicast_ip == "239.1.1.1");
+  CHECK(live.port == 2370);
+  CHECK(live.latency_budget_ns == 7'000'000);
+  RunSource simulated;
+  simulated.kind = RunSource::Kind::kSimulated;
+  UdpReceiverOptions sim = receiver_options(config, simulated);
+  CHECK(sim.host_ip == "127.0.0.1");
+  CHECK(sim.multicast_ip.empty());
+  CHECK(sim.port == 0);
+  simulated.port_given = true;
+  CHECK(receiver_options(config, simulated).port == 2370);
+  // A replay filters by port only when one was given.
+  RunSource replay;
+  replay.kind = RunSource::Kind::kReplay;
+  replay.replay_path = "x.pcap";
+  CHECK_FALSE(replay_options(config, replay).destination_port);
+  replay.port_given = true;
+  CHECK(replay_options(config, replay).destination_port == 2370);
+}
+
+TEST_CASE("pipeline threads stop and join in the reverse of their start, also on a throw",
+          "[daemon][threads]") {
+  std::mutex mutex;
+  std::vector<std::string> events;
+  const auto note = [&](std::string event) {
+    const std::lock_guard lock(mutex);
+    events.push_back(std::move(event));
+  };
+  std::atomic<bool> stop_a{false}, stop_b{false};
+  try {
+    PipelineThreads threads;
+    threads.start(
+        "t-a", {},
+        [&] {
+          while (!stop_a.load())
+            std::this_thread::yield();
+          note("a ended");
+        },
+        [&] {
+          note("stop a");
+          stop_a = true;
+        });
+    threads.start(
+        "t-b", {},
+        [&] {
+          while (!stop_b.load())
+            std::this_thread::yield();
+          note("b ended");
+        },
+        [&] {
+          note("stop b");
+          stop_b = true;
+        });
+    throw std::runtime_error("a start-up step failed");  // between start and the planned stop
+  } catch (const std::runtime_error&) {
+    // Every thread was joined before the catch: nothing more will be noted.
+    const std::lock_guard lock(mutex);
+    CHECK(events == std::vector<std::string>{"stop b", "b ended", "stop a", "a ended"});
+  }
+}
+
+TEST_CASE("a pipeline thread is named and placed before its start returns", "[daemon][threads]") {
+  std::atomic<bool> placed{false}, stop{false};
+  PipelineThreads threads;
+  threads.start(
+      "t-placed", [&] { placed = true; },
+      [&] {
+        while (!stop.load())
+          std::this_thread::yield();
+      },
+      [&] { stop = true; });
+  CHECK(placed.load());  // no wait here: start() itself waited for the setup
+  threads.stop_all();
+  threads.stop_all();  // idempotent
+}
