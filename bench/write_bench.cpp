@@ -87,7 +87,7 @@ nlohmann::ordered_json run_write_bench(const WriteBenchOptions& o) {
   std::array<std::uint8_t, kMaxPacketBytes> packet{};
   const std::size_t size = sensor.next(packet);
   std::uint64_t pcap_bytes = 0;
-  std::vector<char> pcap_buffer(kPcapStdioBufferBytes);  // as the daemon's writer has
+  std::vector<char> pcap_buffer(kPcapBufferBytes);  // as the daemon's writer has
   const auto [pcap_wall, pcap_cpu] = timed([&] {
     PcapWriter pcap((dir / "bench.pcap").string(), pcap_buffer);
     for (int k = 0; k < o.packets; ++k) {

@@ -260,8 +260,7 @@ class Harness {
     ordered_json stages = {{"kernel_drops", counter(h, "kernel_drops")},
                            {"ring_overruns", counter(h, "ring_overruns")},
                            {"rejected", counter(h, "packets_rejected")},
-                           {"frames_dropped", counter(h, "frames_dropped_no_arena") +
-                                                  counter(h, "frames_dropped_writer_busy")},
+                           {"frames_dropped", counter(h, "frames_dropped_no_arena")},
                            {"pcap_packets_not_recorded", counter(h, "pcap_packets_not_recorded")},
                            {"write_errors", counter(h, "write_errors")},
                            {"unaccounted", sent.sent > received + counter(h, "kernel_drops")

@@ -27,59 +27,94 @@ enum class HealthState : std::uint8_t {
 inline constexpr std::size_t kHealthStateCount = 4;
 std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "degraded", "error"
 
+// Every scalar counter, once: X(field, prometheus_name, help). The HealthCounters fields, the
+// Prometheus families (pandarcap_<prometheus_name>_total, HELP = help) and the JSON line's
+// "counters" keys (= field) are all generated from this list, in this order, so a counter is
+// added in exactly one place. The help text is the field's documentation. Counters that feed the
+// health state: receive_errors makes it "error"; kernel_drops, ring_overruns,
+// frames_dropped_no_arena, pcap_packets_not_recorded, sequence_lost, azimuth_gaps,
+// packets_rejected, the timestamp counters and write_errors make it "degraded" while they grow
+// (core/health_policy.hpp).
+// clang-format off
+#define PANDARCAP_HEALTH_COUNTERS(X)                                                               \
+  X(datagrams_received, "datagrams_received",                                                      \
+    "UDP datagrams delivered by the socket or the replay, from any source")                        \
+  X(bytes_received, "received_bytes", "UDP payload bytes received, before truncation")             \
+  X(foreign_datagrams, "foreign_datagrams",                                                        \
+    "Datagrams from a source other than sensor_ip, dropped")                                       \
+  X(truncated_datagrams, "truncated_datagrams",                                                    \
+    "Datagrams larger than a ring slot (also rejected as bad_length)")                             \
+  X(kernel_drops, "kernel_drops",                                                                  \
+    "Datagrams the kernel dropped because the socket buffer was full")                             \
+  X(ring_overruns, "ring_overruns",                                                                \
+    "Datagrams dropped by the receive thread because the ring was full")                           \
+  X(packets_accepted, "packets_accepted", "Packets that passed validation and were decoded")       \
+  X(sequence_gaps, "sequence_gaps", "Jumps forward in the UDP sequence number")                    \
+  X(sequence_lost, "sequence_lost_packets",                                                        \
+    "Packets missing from the UDP sequence (late arrivals forgiven)")                              \
+  X(sequence_duplicates, "sequence_duplicate_packets",                                             \
+    "Packets whose UDP sequence number had already arrived")                                       \
+  X(sequence_reordered, "sequence_reordered_packets",                                              \
+    "Packets that arrived after a later sequence number")                                          \
+  X(sequence_resets, "sequence_resets",                                                            \
+    "Large jumps in the UDP sequence taken as a sensor restart")                                   \
+  X(azimuth_gaps, "azimuth_gaps",                                                                  \
+    "Azimuth jumps larger than one packet's worth (packets without a UDP sequence)")               \
+  X(static_timestamp_packets, "static_timestamp_packets", "Packets whose time did not advance")    \
+  X(backward_timestamp_packets, "backward_timestamp_packets", "Packets whose time went back")      \
+  X(timestamp_jump_packets, "timestamp_jump_packets",                                              \
+    "Packets whose time leapt more than a second forward")                                         \
+  X(invalid_time_packets, "invalid_time_packets",                                                  \
+    "Packets with an impossible tail date or microsecond field")                                   \
+  X(high_temperature_packets, "high_temperature_packets",                                          \
+    "Packets with the high-temperature flag set")                                                  \
+  X(return_mode_changes, "return_mode_changes", "Changes of the return mode between packets")      \
+  X(points, "points", "Points decoded and kept")                                                   \
+  X(points_dropped_frame_full, "points_dropped_frame_full",                                        \
+    "Points dropped because the frame arena was full")                                             \
+  X(frames_complete, "frames_complete", "Frames cut with a full revolution")                       \
+  X(frames_partial, "frames_partial", "Frames cut short (stream start, gap, shutdown)")            \
+  X(frames_dropped_no_arena, "frames_dropped_no_arena",                                            \
+    "Frames dropped because no arena was free")                                                    \
+  X(frames_decimated, "frames_decimated", "Frames skipped on purpose (frame_decimation)")          \
+  X(frames_fragment, "frames_fragment",                                                            \
+    "Partial frames covering less than output.frames_min_fraction of a revolution: not written")   \
+  X(frames_written, "frames_written", "PCD files completed")                                       \
+  X(pcap_packets_written, "pcap_packets_written", "Packets recorded in pcap files")                \
+  X(pcap_packets_not_recorded, "pcap_packets_not_recorded",                                        \
+    "Packets left out of the pcap because the writer was behind")                                  \
+  X(pcap_packets_not_written, "pcap_packets_not_written",                                          \
+    "Packets lost from the pcap to failed writes")                                                 \
+  X(pcap_bytes_written, "pcap_written_bytes", "Bytes written to pcap files")                       \
+  X(pcd_bytes_written, "pcd_written_bytes", "Bytes written to PCD files")                          \
+  X(receive_errors, "receive_errors", "Failed receive calls on the socket")                        \
+  X(write_errors, "write_errors", "Failed writes")                                                 \
+  X(bytes_not_written, "not_written_bytes", "Bytes lost to failed writes")                         \
+  X(output_name_collisions, "output_name_collisions",                                              \
+    "Finished files whose name was taken: kept under a _dupN name instead of replacing")           \
+  X(receive_wakeups, "receive_wakeups",                                                            \
+    "Returns of the receive thread from its wait (socket or latency-budget timer)")                \
+  X(decode_wakeups, "decode_wakeups", "Returns of the decode thread from its wait on the ring")    \
+  X(writer_wakeups, "writer_wakeups",                                                              \
+    "Returns of the writer thread from its wait on the decoder's queue")
+// clang-format on
+
 struct HealthCounters {
-  // Receive side.
-  std::uint64_t datagrams_received = 0;   // every datagram the socket (or replay) delivered
-  std::uint64_t bytes_received = 0;       // their UDP payload bytes (before truncation)
-  std::uint64_t foreign_datagrams = 0;    // from a source other than sensor_ip: dropped
-  std::uint64_t truncated_datagrams = 0;  // larger than a ring slot (MSG_TRUNC)
-  std::uint64_t kernel_drops = 0;         // socket buffer overflows reported by the kernel
-  std::uint64_t ring_overruns = 0;        // ring full: datagram dropped by the receive thread
-  std::uint64_t receive_errors = 0;       // recvmmsg failures (not timeouts): state "error"
-  // Decode side.
-  std::uint64_t packets_accepted = 0;
-  std::uint64_t packets_rejected = 0;                       // = sum(rejects)
-  std::array<std::uint64_t, kRejectReasonCount> rejects{};  // indexed by RejectReason
-  std::uint64_t sequence_gaps = 0;
-  std::uint64_t sequence_lost = 0;
-  std::uint64_t sequence_duplicates = 0;
-  std::uint64_t sequence_reordered = 0;
-  std::uint64_t sequence_resets = 0;
-  std::uint64_t azimuth_gaps = 0;  // without a UDP sequence: azimuth jumped more than expected
-  std::uint64_t static_timestamp_packets = 0;    // packet time did not advance
-  std::uint64_t backward_timestamp_packets = 0;  // packet time went back
-  std::uint64_t timestamp_jump_packets = 0;      // packet time leapt forward by more than 1 s
-  std::uint64_t invalid_time_packets = 0;        // bad tail date or microseconds
-  std::uint64_t high_temperature_packets = 0;
-  std::uint64_t return_mode_changes = 0;
-  std::uint64_t points = 0;
+#define PANDARCAP_HEALTH_COUNTER_FIELD(field, prometheus_name, help) std::uint64_t field = 0;
+  PANDARCAP_HEALTH_COUNTERS(PANDARCAP_HEALTH_COUNTER_FIELD)
+#undef PANDARCAP_HEALTH_COUNTER_FIELD
+  // Rendered by hand beside the list: by reason (a Prometheus label, a JSON object), with
+  // packets_rejected as the rejects' total.
+  std::uint64_t packets_rejected = 0;                               // = sum(rejects)
+  std::array<std::uint64_t, kRejectReasonCount> rejects{};          // indexed by RejectReason
   std::array<std::uint64_t, kFilterReasonCount> filtered_points{};  // indexed by FilterReason
-  std::uint64_t points_dropped_frame_full = 0;
-  // Frames.
-  std::uint64_t frames_complete = 0;
-  std::uint64_t frames_partial = 0;
-  std::uint64_t frames_dropped_no_arena = 0;     // no free arena when the frame began
-  std::uint64_t frames_dropped_writer_busy = 0;  // writer queue full (slow disk): not written
-  std::uint64_t frames_decimated = 0;            // skipped on purpose (frame_decimation)
-  std::uint64_t frames_fragment = 0;  // partial, under output.frames_min_fraction: not written
-  std::uint64_t frames_written = 0;   // PCD files completed
-  // Writer.
-  std::uint64_t pcap_packets_written = 0;
-  std::uint64_t pcap_packets_not_recorded = 0;  // no free raw batch (writer behind): not in pcap
-  std::uint64_t pcap_packets_not_written = 0;   // lost to failed writes (a full disk)
-  std::uint64_t pcap_bytes_written = 0;
-  std::uint64_t pcd_bytes_written = 0;
-  std::uint64_t write_errors = 0;
-  std::uint64_t bytes_not_written = 0;
-  // A finished file whose name was taken (which the naming rules should make impossible): kept
-  // under a free "_dupN" name, never replacing the other.
-  std::uint64_t output_name_collisions = 0;
-  // Returns from each thread's wait (a sleep on the socket, the ring or the timer): what the
-  // latency budget saves, visible in the field.
-  std::uint64_t receive_wakeups = 0;
-  std::uint64_t decode_wakeups = 0;
-  std::uint64_t writer_wakeups = 0;
 };
+
+#define PANDARCAP_HEALTH_COUNTER_ONE(field, prometheus_name, help) +1
+// The number of scalar counters in PANDARCAP_HEALTH_COUNTERS.
+inline constexpr std::size_t kHealthCounterCount =
+    0 PANDARCAP_HEALTH_COUNTERS(PANDARCAP_HEALTH_COUNTER_ONE);
+#undef PANDARCAP_HEALTH_COUNTER_ONE
 
 struct HealthGauges {
   double rpm_tail = 0;            // mean motor speed reported in the tails over the last second

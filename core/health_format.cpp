@@ -23,7 +23,8 @@ std::string_view to_string(HealthState state) noexcept {
 
 namespace {
 
-// One table drives both outputs, so a counter cannot appear in one and be forgotten in the other.
+// One table drives both outputs, so a counter cannot appear in one and be forgotten in the other;
+// it is generated from PANDARCAP_HEALTH_COUNTERS (core/health.hpp), as the fields are.
 struct CounterField {
   const char* json;        // HealthCounters field name
   const char* prometheus;  // metric name without the pandarcap_ prefix and _total suffix
@@ -31,88 +32,10 @@ struct CounterField {
   const char* help;
 };
 
-// clang-format off
-constexpr CounterField kCounters[] = {
-  {"datagrams_received", "datagrams_received", &HealthCounters::datagrams_received,
-   "UDP datagrams delivered by the socket or the replay, from any source"},
-  {"bytes_received", "received_bytes", &HealthCounters::bytes_received,
-   "UDP payload bytes received, before truncation"},
-  {"foreign_datagrams", "foreign_datagrams", &HealthCounters::foreign_datagrams,
-   "Datagrams from a source other than sensor_ip, dropped"},
-  {"truncated_datagrams", "truncated_datagrams", &HealthCounters::truncated_datagrams,
-   "Datagrams larger than a ring slot (also rejected as bad_length)"},
-  {"kernel_drops", "kernel_drops", &HealthCounters::kernel_drops,
-   "Datagrams the kernel dropped because the socket buffer was full"},
-  {"ring_overruns", "ring_overruns", &HealthCounters::ring_overruns,
-   "Datagrams dropped by the receive thread because the ring was full"},
-  {"packets_accepted", "packets_accepted", &HealthCounters::packets_accepted,
-   "Packets that passed validation and were decoded"},
-  {"sequence_gaps", "sequence_gaps", &HealthCounters::sequence_gaps,
-   "Jumps forward in the UDP sequence number"},
-  {"sequence_lost", "sequence_lost_packets", &HealthCounters::sequence_lost,
-   "Packets missing from the UDP sequence (late arrivals forgiven)"},
-  {"sequence_duplicates", "sequence_duplicate_packets", &HealthCounters::sequence_duplicates,
-   "Packets whose UDP sequence number had already arrived"},
-  {"sequence_reordered", "sequence_reordered_packets", &HealthCounters::sequence_reordered,
-   "Packets that arrived after a later sequence number"},
-  {"sequence_resets", "sequence_resets", &HealthCounters::sequence_resets,
-   "Large jumps in the UDP sequence taken as a sensor restart"},
-  {"azimuth_gaps", "azimuth_gaps", &HealthCounters::azimuth_gaps,
-   "Azimuth jumps larger than one packet's worth (packets without a UDP sequence)"},
-  {"static_timestamp_packets", "static_timestamp_packets",
-   &HealthCounters::static_timestamp_packets, "Packets whose time did not advance"},
-  {"backward_timestamp_packets", "backward_timestamp_packets",
-   &HealthCounters::backward_timestamp_packets, "Packets whose time went back"},
-  {"timestamp_jump_packets", "timestamp_jump_packets", &HealthCounters::timestamp_jump_packets,
-   "Packets whose time leapt more than a second forward"},
-  {"invalid_time_packets", "invalid_time_packets", &HealthCounters::invalid_time_packets,
-   "Packets with an impossible tail date or microsecond field"},
-  {"high_temperature_packets", "high_temperature_packets",
-   &HealthCounters::high_temperature_packets, "Packets with the high-temperature flag set"},
-  {"return_mode_changes", "return_mode_changes", &HealthCounters::return_mode_changes,
-   "Changes of the return mode between packets"},
-  {"points", "points", &HealthCounters::points, "Points decoded and kept"},
-  {"points_dropped_frame_full", "points_dropped_frame_full",
-   &HealthCounters::points_dropped_frame_full, "Points dropped because the frame arena was full"},
-  {"frames_complete", "frames_complete", &HealthCounters::frames_complete,
-   "Frames cut with a full revolution"},
-  {"frames_partial", "frames_partial", &HealthCounters::frames_partial,
-   "Frames cut short (stream start, gap, shutdown)"},
-  {"frames_dropped_no_arena", "frames_dropped_no_arena",
-   &HealthCounters::frames_dropped_no_arena, "Frames dropped because no arena was free"},
-  {"frames_dropped_writer_busy", "frames_dropped_writer_busy",
-   &HealthCounters::frames_dropped_writer_busy, "Frames dropped because the writer queue was full"},
-  {"frames_decimated", "frames_decimated", &HealthCounters::frames_decimated,
-   "Frames skipped on purpose (frame_decimation)"},
-  {"frames_fragment", "frames_fragment", &HealthCounters::frames_fragment,
-   "Partial frames covering less than output.frames_min_fraction of a revolution: not written"},
-  {"frames_written", "frames_written", &HealthCounters::frames_written, "PCD files completed"},
-  {"pcap_packets_written", "pcap_packets_written", &HealthCounters::pcap_packets_written,
-   "Packets recorded in pcap files"},
-  {"pcap_packets_not_recorded", "pcap_packets_not_recorded",
-   &HealthCounters::pcap_packets_not_recorded,
-   "Packets left out of the pcap because the writer was behind"},
-  {"pcap_packets_not_written", "pcap_packets_not_written",
-   &HealthCounters::pcap_packets_not_written, "Packets lost from the pcap to failed writes"},
-  {"pcap_bytes_written", "pcap_written_bytes", &HealthCounters::pcap_bytes_written,
-   "Bytes written to pcap files"},
-  {"pcd_bytes_written", "pcd_written_bytes", &HealthCounters::pcd_bytes_written,
-   "Bytes written to PCD files"},
-  {"receive_errors", "receive_errors", &HealthCounters::receive_errors,
-   "Failed receive calls on the socket"},
-  {"write_errors", "write_errors", &HealthCounters::write_errors, "Failed writes"},
-  {"bytes_not_written", "not_written_bytes", &HealthCounters::bytes_not_written,
-   "Bytes lost to failed writes"},
-  {"output_name_collisions", "output_name_collisions", &HealthCounters::output_name_collisions,
-   "Finished files whose name was taken: kept under a _dupN name instead of replacing"},
-  {"receive_wakeups", "receive_wakeups", &HealthCounters::receive_wakeups,
-   "Returns of the receive thread from its wait (socket or latency-budget timer)"},
-  {"decode_wakeups", "decode_wakeups", &HealthCounters::decode_wakeups,
-   "Returns of the decode thread from its wait on the ring"},
-  {"writer_wakeups", "writer_wakeups", &HealthCounters::writer_wakeups,
-   "Returns of the writer thread from its wait on the decoder's queue"},
-};
-// clang-format on
+#define PANDARCAP_COUNTER_FIELD(field, prometheus_name, help) \
+  {#field, prometheus_name, &HealthCounters::field, help},
+constexpr CounterField kCounters[] = {PANDARCAP_HEALTH_COUNTERS(PANDARCAP_COUNTER_FIELD)};
+#undef PANDARCAP_COUNTER_FIELD
 
 struct GaugeField {
   const char* json;

@@ -28,46 +28,9 @@ HealthSnapshot distinct_snapshot() {
   h.hot_path_allocations = HotPathAllocations{0, 0, 7};
   HealthCounters& c = h.counters;
   std::uint64_t v = 1000;
-  for (std::uint64_t* field : {&c.datagrams_received,
-                               &c.bytes_received,
-                               &c.foreign_datagrams,
-                               &c.truncated_datagrams,
-                               &c.kernel_drops,
-                               &c.ring_overruns,
-                               &c.receive_errors,
-                               &c.packets_accepted,
-                               &c.sequence_gaps,
-                               &c.sequence_lost,
-                               &c.sequence_duplicates,
-                               &c.sequence_reordered,
-                               &c.sequence_resets,
-                               &c.azimuth_gaps,
-                               &c.static_timestamp_packets,
-                               &c.backward_timestamp_packets,
-                               &c.timestamp_jump_packets,
-                               &c.invalid_time_packets,
-                               &c.high_temperature_packets,
-                               &c.return_mode_changes,
-                               &c.points,
-                               &c.points_dropped_frame_full,
-                               &c.frames_complete,
-                               &c.frames_partial,
-                               &c.frames_dropped_no_arena,
-                               &c.frames_dropped_writer_busy,
-                               &c.frames_decimated,
-                               &c.frames_fragment,
-                               &c.frames_written,
-                               &c.pcap_packets_written,
-                               &c.pcap_packets_not_recorded,
-                               &c.pcap_packets_not_written,
-                               &c.pcap_bytes_written,
-                               &c.pcd_bytes_written,
-                               &c.write_errors,
-                               &c.bytes_not_written,
-                               &c.output_name_collisions,
-                               &c.receive_wakeups,
-                               &c.decode_wakeups,
-                               &c.writer_wakeups}) {
+#define PANDARCAP_FIELD_ADDRESS(field, prometheus_name, help) &c.field,
+  for (std::uint64_t* field : {PANDARCAP_HEALTH_COUNTERS(PANDARCAP_FIELD_ADDRESS)}) {
+#undef PANDARCAP_FIELD_ADDRESS
     *field = v++;
   }
   for (std::size_t i = 0; i < kRejectReasonCount; ++i)
@@ -259,9 +222,9 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(c.at("output_name_collisions") == h.counters.output_name_collisions);
   CHECK(c.at("receive_wakeups") == h.counters.receive_wakeups);
   CHECK(c.at("writer_wakeups") == h.counters.writer_wakeups);
-  // 36 scalar counters in the table + packets_rejected + the two reason maps + the hot-path
-  // allocation total and its per-thread map.
-  CHECK(c.size() == 45);
+  // The scalar counters + packets_rejected + the two reason maps + the hot-path allocation total
+  // and its per-thread map.
+  CHECK(c.size() == kHealthCounterCount + 5);
   const auto& g = j.at("gauges");
   CHECK(g.at("rpm_tail") == 600.0);
   CHECK(g.at("rpm_measured") == 599.5);

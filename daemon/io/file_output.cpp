@@ -71,6 +71,10 @@ bool rename_no_replace(const char* from, const char* to) {
   return true;
 }
 
+void rename_replacing(const std::string& from, const std::string& to) {
+  if (::rename(from.c_str(), to.c_str()) != 0) throw_errno("cannot rename to", to);
+}
+
 bool place_without_replacing(const std::string& from, std::string& to) {
   if (rename_no_replace(from.c_str(), to.c_str())) return false;
   const std::size_t name_at = to.rfind('/') + 1;
@@ -115,8 +119,7 @@ void write_file_replacing(const std::filesystem::path& path, std::string_view te
     std::filesystem::remove(temporary, ignored);
     throw;
   }
-  if (::rename(temporary.c_str(), path.c_str()) != 0)
-    throw_errno("cannot rename to", path.native());
+  rename_replacing(temporary.native(), path.native());
 }
 
 void write_file_replacing(const std::string& path, const std::string& temporary,
@@ -129,7 +132,7 @@ void write_file_replacing(const std::string& path, const std::string& temporary,
     ::unlink(temporary.c_str());
     throw;
   }
-  if (::rename(temporary.c_str(), path.c_str()) != 0) throw_errno("cannot rename to", path);
+  rename_replacing(temporary, path);
 }
 
 std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis) {

@@ -49,6 +49,10 @@ class OutputFile {
 // other failure.
 bool rename_no_replace(const char* from, const char* to);
 
+// Renames `from` to `to`, replacing a file of that name (health files: the newest replaces the
+// last, health.jsonl rotates to health.jsonl.1). Throws std::system_error.
+void rename_replacing(const std::string& from, const std::string& to);
+
 // Puts a finished recording (`from`, a temporary or .part name) in place as `to` without ever
 // replacing a file: when `to` exists, the first free name of "STEM_dupN.EXT" (N = 1, 2, ...) is
 // taken instead. Returns the name used and whether it had to differ from `to` (the caller counts

@@ -38,7 +38,7 @@ std::array<std::uint8_t, kPcapGlobalHeaderBytes> pcap_global_header() noexcept;
 
 // The buffer the daemon gives its recordings: the decoder hands over raw packets at
 // least every 100 ms, and 1 MiB holds that much of one sensor (~0.5 MB) twice over.
-inline constexpr std::size_t kPcapStdioBufferBytes = 1 << 20;
+inline constexpr std::size_t kPcapBufferBytes = 1 << 20;
 
 class PcapWriter {
  public:

@@ -1,0 +1,71 @@
+#include "health_policy.hpp"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <iterator>
+#include <utility>
+
+namespace pandarcap {
+
+void classify_health(const HealthCounters& c, const HealthCounters& p,
+                     const HealthExpectations& expected, bool silent,
+                     std::string_view last_write_error, HealthGauges& g) {
+  // The problems are written straight into the reason (cleared, its capacity kept), and the
+  // reason is cut back to what the winning state says.
+  std::string& problems = g.reason;
+  problems.clear();
+  const auto problem = [&]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
+    if (!problems.empty()) problems += "; ";
+    fmt::format_to(std::back_inserter(problems), format, std::forward<Args>(args)...);
+  };
+  const auto grew = [&](std::uint64_t now_value, std::uint64_t before, const char* what) {
+    if (now_value > before) problem("{} {}", now_value - before, what);
+  };
+  if (c.write_errors > p.write_errors) {
+    problem("{} write errors ({} bytes not written): {}", c.write_errors - p.write_errors,
+            c.bytes_not_written - p.bytes_not_written, last_write_error);
+  }
+  grew(c.kernel_drops, p.kernel_drops, "kernel drops");
+  grew(c.ring_overruns, p.ring_overruns, "ring overruns");
+  grew(c.frames_dropped_no_arena, p.frames_dropped_no_arena, "frames dropped (no free arena)");
+  grew(c.pcap_packets_not_recorded, p.pcap_packets_not_recorded, "packets not recorded");
+  grew(c.sequence_lost, p.sequence_lost, "packets lost (sequence)");
+  grew(c.azimuth_gaps, p.azimuth_gaps, "azimuth gaps");
+  grew(c.packets_rejected, p.packets_rejected, "packets rejected");
+  grew(c.static_timestamp_packets, p.static_timestamp_packets, "static timestamps");
+  grew(c.backward_timestamp_packets, p.backward_timestamp_packets, "timestamps going back");
+  grew(c.timestamp_jump_packets, p.timestamp_jump_packets, "timestamp jumps");
+  if (g.high_temperature) problem("sensor high-temperature flag set");
+  if (expected.return_mode != "any" && !g.return_mode.empty() &&
+      g.return_mode != expected.return_mode) {
+    problem("return mode {} (expected {})", g.return_mode, expected.return_mode);
+  }
+  if (g.seconds_since_last_packet >= 0 && g.rpm_tail > 0 &&
+      std::abs(g.rpm_tail - expected.rpm) > 0.1 * expected.rpm) {
+    problem("motor at {:.0f} RPM (expected {})", g.rpm_tail, expected.rpm);
+  }
+  // Failing writes degrade (capture goes on, and every byte not written is counted; they lead
+  // the reason). A failing socket is an error: the daemon is not capturing.
+  if (c.receive_errors > p.receive_errors) {
+    g.state = HealthState::kError;
+    g.reason.clear();
+    fmt::format_to(std::back_inserter(g.reason), "{} receive errors: the socket is failing",
+                   c.receive_errors - p.receive_errors);
+  } else if (silent) {
+    g.state = HealthState::kNoData;
+    g.reason.clear();
+    if (g.seconds_since_last_packet < 0) {
+      g.reason += "no packet received yet";
+    } else {
+      fmt::format_to(std::back_inserter(g.reason), "no packet for {:.1f} s",
+                     g.seconds_since_last_packet);
+    }
+  } else if (!problems.empty()) {
+    g.state = HealthState::kDegraded;
+  } else {
+    g.state = HealthState::kOk;
+  }
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,38 @@
+// The health state and its reason, decided from what changed in the last second. Pure: the
+// writer thread hands it the counters of now and of the previous health record, the gauges and
+// what the operator expects; nothing here reads a clock or a file.
+//
+// Precedence: error > no_data > degraded > ok.
+//   - error:    receive_errors grew ("3 receive errors: the socket is failing"): not capturing.
+//   - no_data:  no packet yet, or none for longer than the no-data timeout (`silent`):
+//               "no packet received yet" / "no packet for 2.5 s".
+//   - degraded: data flows but something grew or looks wrong; every problem is named, joined by
+//               "; " in a fixed order: write errors first (with the last error's text), then
+//               kernel drops, ring overruns, frames dropped, packets not recorded, packets lost,
+//               azimuth gaps, rejects, timestamp troubles, the high-temperature flag, a return
+//               mode other than expected, a motor speed more than 10 % off.
+//   - ok:       none of these; the reason is "".
+// Example: "2 kernel drops; return mode dual (expected last)".
+#pragma once
+
+#include <string_view>
+
+#include "health.hpp"
+
+namespace pandarcap {
+
+struct HealthExpectations {
+  std::string_view return_mode = "any";  // "any", or the mode the sensor must send
+  int rpm = 600;                         // motor speed; a tail more than 10 % off is a problem
+};
+
+// Sets gauges.state and gauges.reason from `now` against `before` (the counters of the previous
+// health record) and the gauges' return_mode, high_temperature, rpm_tail and
+// seconds_since_last_packet (-1: no packet yet). `silent`: no packet yet or none for longer than
+// the no-data timeout. `last_write_error` is quoted when write_errors grew. The reason is
+// rewritten in place: once its capacity has grown to the longest reason, nothing is allocated.
+void classify_health(const HealthCounters& now, const HealthCounters& before,
+                     const HealthExpectations& expected, bool silent,
+                     std::string_view last_write_error, HealthGauges& gauges);
+
+}  // namespace pandarcap

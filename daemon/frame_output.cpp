@@ -1,0 +1,71 @@
+#include "daemon/frame_output.hpp"
+
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <iterator>
+#include <span>
+
+#include "core/pcd.hpp"
+#include "daemon/clocks.hpp"
+#include "daemon/output_leftovers.hpp"
+
+namespace pandarcap {
+namespace {
+
+constexpr std::size_t kPcdChunkPoints = 4096;
+
+}  // namespace
+
+FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& accounting)
+    : accounting_(accounting),
+      dir_(options.output_dir / "frames"),
+      retention_(options.frames_max_files, options.frames_max_bytes),
+      pcd_buffer_(kPcdChunkPoints * kPcdPointBytes) {}
+
+void FrameOutput::adopt_earlier_files() {
+  number_base_ = adopt_earlier_frames(dir_, retention_);
+}
+
+void FrameOutput::reserve() {
+  path_.reserve(4096);
+  temporary_path_.reserve(4096);
+  pcd_header_.reserve(1024);
+}
+
+void FrameOutput::write(const FrameArena& arena) {
+  const Frame& frame = arena.frame;
+  const std::span<const Point> points = frame.used();
+  pcd_header_.clear();
+  append_pcd_header(pcd_header_, points.size());
+  const std::uint64_t expected = pcd_header_.size() + points.size() * kPcdPointBytes;
+  // frames/frame_000123_20261122T120000.123Z[_partial].pcd, written as frames/.<name>.tmp.
+  path_.assign(dir_.native());
+  fmt::format_to(std::back_inserter(path_), "/frame_{:06}_", number_base_ + frame.info.sequence);
+  append_utc_file_stamp(path_, frame.info.start_ns, true);
+  path_ += frame.info.partial ? "_partial.pcd" : ".pcd";
+  assign_temporary_name(temporary_path_, path_);
+  try {
+    file_.open(temporary_path_, OutputFile::Mode::kCreate);
+    file_.write(pcd_header_);
+    for (std::size_t i = 0; i < points.size(); i += kPcdChunkPoints) {
+      const auto chunk = points.subspan(i, std::min(kPcdChunkPoints, points.size() - i));
+      const std::size_t n = encode_pcd_points(chunk, pcd_buffer_);
+      file_.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
+    }
+    file_.close();
+    accounting_.put_in_place(temporary_path_, path_);
+    ++frames_written_;
+    bytes_written_ += expected;
+    if (arena.completed_receive_ns > 0) {
+      latency_.record(realtime_ns() - arena.completed_receive_ns);
+    }
+    retention_.add(path_, expected);
+  } catch (const std::exception& error) {
+    ::unlink(temporary_path_.c_str());
+    accounting_.write_failed(error, expected);
+  }
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,58 @@
+// Frames as PCD files: DIR/frames/frame_<N>_<UTC start>[_partial].pcd.
+//
+// Each frame is written as frames/.<name>.tmp and renamed into place without replacing anything
+// (a taken name becomes "_dupN", counted), so a reader never sees half a frame; a failed write
+// removes the temporary file and is counted (OutputAccounting). N continues across runs: it
+// starts after the highest number found at start-up (adopt_earlier_files), and is that base plus
+// the frame's sequence number. Retention (frames_max_files / frames_max_bytes) counts earlier
+// runs' frames too.
+//
+// Once warm, writing a frame allocates nothing: the names, header and encode buffer are reused
+// (retention, when on, lists one name per file). Owned by the writer thread.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/latency_histogram.hpp"
+#include "daemon/io/file_output.hpp"
+#include "daemon/output_accounting.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "daemon/retention.hpp"
+#include "daemon/writer_options.hpp"
+
+namespace pandarcap {
+
+class FrameOutput {
+ public:
+  FrameOutput(const WriterOptions& options, OutputAccounting& accounting);
+
+  const std::filesystem::path& directory() const noexcept { return dir_; }
+  // At start-up, after the leftovers are cleaned: earlier runs' frames numbered and listed for
+  // retention. Then the buffers are sized, so the first frames do not allocate either.
+  void adopt_earlier_files();
+  void reserve();
+
+  // Writes the arena's frame; a failure is counted, never thrown.
+  void write(const FrameArena& arena);
+
+  std::uint64_t frames_written() const noexcept { return frames_written_; }
+  std::uint64_t bytes_written() const noexcept { return bytes_written_; }
+  // Kernel receive time of the packet that completed a frame -> its file in place.
+  const LatencyHistogram& latency() const noexcept { return latency_; }
+
+ private:
+  OutputAccounting& accounting_;
+  std::filesystem::path dir_;
+  Retention retention_;
+  std::uint64_t number_base_ = 0;  // + the frame's sequence = its file number
+  std::uint64_t frames_written_ = 0, bytes_written_ = 0;
+  LatencyHistogram latency_;
+  std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
+  std::string path_, temporary_path_, pcd_header_;
+  OutputFile file_;
+};
+
+}  // namespace pandarcap

@@ -1,0 +1,181 @@
+#include "daemon/health_publisher.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <system_error>
+
+#include "core/health_format.hpp"
+#include "core/health_policy.hpp"
+#include "daemon/allocation_counter.hpp"
+#include "daemon/clocks.hpp"
+
+namespace pandarcap {
+namespace {
+
+constexpr std::int64_t kSecondNs = 1'000'000'000;
+
+}  // namespace
+
+HealthPublisher::HealthPublisher(const WriterOptions& options, OutputAccounting& accounting)
+    : options_(options), accounting_(accounting) {}
+
+void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
+  start_monotonic_ns_ = start_monotonic_ns;
+  last_tick_ns_ = start_monotonic_ns;
+  decode_prev_.monotonic_ns = start_monotonic_ns;
+  prom_path_ = options_.prometheus_file.native();
+  assign_temporary_name(prom_temporary_path_, prom_path_);
+  jsonl_path_ = (options_.health_dir / "health.jsonl").native();
+  jsonl_rotated_path_ = jsonl_path_ + ".1";
+  prom_text_.reserve(64 * 1024);
+  json_text_.reserve(8 * 1024);
+}
+
+void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
+  // Filled in place: its strings keep their capacity from one second to the next.
+  HealthSnapshot& h = health_;
+  const ReceiveCounters& receive = sources.receive;
+  const DecodeSnapshot& decode = sources.decode;
+  h.unix_time_ns = realtime_ns();
+  h.sensor = options_.sensor_name;
+  h.version = options_.version;
+  h.decoder = options_.decoder;
+  HealthCounters& c = h.counters;
+  h.latency = decode.latency;
+  if (alloc::counting_available()) {
+    h.hot_path_allocations = HotPathAllocations{alloc::hot_allocations(alloc::HotThread::kReceive),
+                                                alloc::hot_allocations(alloc::HotThread::kDecode),
+                                                alloc::hot_allocations(alloc::HotThread::kWriter)};
+  }
+  c.datagrams_received = receive.datagrams.load(std::memory_order_relaxed);
+  c.bytes_received = receive.bytes.load(std::memory_order_relaxed);
+  c.foreign_datagrams = receive.foreign.load(std::memory_order_relaxed);
+  c.truncated_datagrams = receive.truncated.load(std::memory_order_relaxed);
+  c.kernel_drops = receive.kernel_drops.load(std::memory_order_relaxed);
+  c.ring_overruns = receive.ring_overruns.load(std::memory_order_relaxed);
+  c.receive_errors = receive.receive_errors.load(std::memory_order_relaxed);
+  const StreamStats& s = decode.stream;
+  c.packets_accepted = s.accepted;
+  c.rejects = s.rejects;
+  c.packets_rejected = s.rejected();
+  c.sequence_gaps = decode.sequence.gaps;
+  c.sequence_lost = decode.sequence.lost;
+  c.sequence_duplicates = decode.sequence.duplicates;
+  c.sequence_reordered = decode.sequence.reordered;
+  c.sequence_resets = decode.sequence.resets;
+  c.azimuth_gaps = s.azimuth_gaps;
+  c.static_timestamp_packets = s.static_timestamps;
+  c.backward_timestamp_packets = s.backward_timestamps;
+  c.timestamp_jump_packets = s.timestamp_jumps;
+  c.invalid_time_packets = s.bad_date + s.bad_microseconds;
+  c.high_temperature_packets = s.high_temperature;
+  c.return_mode_changes = s.return_mode_changes;
+  c.points = s.points;
+  c.filtered_points = s.filtered.by_reason;
+  c.points_dropped_frame_full = decode.frames.points_dropped_full;
+  c.frames_complete = decode.frames.frames_complete;
+  c.frames_partial = decode.frames.frames_partial;
+  c.frames_dropped_no_arena = decode.frames.frames_dropped;
+  c.frames_decimated = decode.frames_decimated;
+  c.frames_fragment = decode.frames_fragment;
+  c.frames_written = sources.frames.frames_written();
+  c.pcap_packets_written = sources.pcap.packets_written();
+  c.pcap_packets_not_recorded = decode.raw_packets_dropped;
+  c.pcap_packets_not_written = sources.pcap.packets_not_written();
+  c.pcap_bytes_written = sources.pcap.bytes_written();
+  c.pcd_bytes_written = sources.frames.bytes_written();
+  c.write_errors = sources.accounting.write_errors();
+  c.bytes_not_written = sources.accounting.bytes_not_written();
+  c.output_name_collisions = sources.accounting.name_collisions();
+  c.receive_wakeups = receive.wakeups.load(std::memory_order_relaxed);
+  c.decode_wakeups = decode.wakeups;
+  c.writer_wakeups = sources.writer_wakeups;
+  h.frame_latency = sources.frames.latency();
+
+  HealthGauges& g = h.gauges;
+  g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;
+  g.return_mode.assign(s.return_mode ? to_string(*s.return_mode) : std::string_view());
+  g.high_temperature = s.last_high_temperature;
+  g.rpm_tail = s.last_rpm;
+  const double span_s = static_cast<double>(decode.monotonic_ns - decode_prev_.monotonic_ns) / 1e9;
+  const auto d_az = s.measured_azimuth_cdeg - decode_prev_.stream.measured_azimuth_cdeg;
+  const auto d_t = s.measured_time_ns - decode_prev_.stream.measured_time_ns;
+  g.rpm_measured =
+      d_t > 0 ? (static_cast<double>(d_az) / 36000.0) / (static_cast<double>(d_t) / 60e9) : 0.0;
+  // Complete frames only: partial ones are cut by start, gaps and shutdown, not by rotation. The
+  // final tick at shutdown can be a fraction of a second long (and sees the flushed partials),
+  // so a window under half a second keeps the previous second's rate.
+  const auto complete = decode.frames.frames_complete - decode_prev_.frames.frames_complete;
+  if (span_s >= 0.5) {
+    g.frame_rate_hz = static_cast<double>(complete) / span_s;
+    g.decode_wakeups_per_second =
+        static_cast<double>(decode.wakeups - decode_prev_.wakeups) / span_s;
+  }
+  g.seconds_since_last_packet = sources.seconds_since_last_packet;
+  // Per second of the writer's own ticks; the decoder's over the span of its last two snapshots
+  // (they arrive about once a second, not in step with the ticks). A final tick shorter than
+  // half a second keeps the last rates.
+  const double tick_s = static_cast<double>(now - last_tick_ns_) / 1e9;
+  if (tick_s >= 0.5) {
+    const HealthCounters& a = counters_a_second_ago_;
+    g.receive_wakeups_per_second =
+        static_cast<double>(c.receive_wakeups - a.receive_wakeups) / tick_s;
+    g.writer_wakeups_per_second = static_cast<double>(c.writer_wakeups - a.writer_wakeups) / tick_s;
+  }
+
+  classify_health(c, previous_counters_,
+                  HealthExpectations{options_.expected_return_mode, options_.expected_rpm},
+                  sources.silent, sources.accounting.last_error(), g);
+}
+
+void HealthPublisher::remember(const DecodeSnapshot& decode, std::int64_t now) {
+  if (now - last_tick_ns_ >= kSecondNs / 2) {  // the base of the next per-second rates
+    counters_a_second_ago_ = health_.counters;
+    last_tick_ns_ = now;
+  }
+  previous_counters_ = health_.counters;
+  decode_prev_ = decode;
+}
+
+void HealthPublisher::write_first() {
+  if (options_.prometheus) {
+    render_prometheus(health_, prom_text_);
+    write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, prom_file_);
+  }
+  if (options_.jsonl) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
+}
+
+void HealthPublisher::write() {
+  try {
+    if (options_.prometheus) {
+      render_prometheus(health_, prom_text_);
+      write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, prom_file_);
+    }
+    if (options_.jsonl) write_jsonl_line();
+  } catch (const std::exception& error) {
+    accounting_.write_failed(error, 0);
+  }
+}
+
+void HealthPublisher::write_jsonl_line() {
+  render_json_line(health_, json_text_);
+  // Kept open between ticks (appending); reopened after rotation or a failed write.
+  if (!jsonl_file_.is_open()) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
+  if (options_.jsonl_rotate_bytes != 0 &&
+      jsonl_file_.size() + json_text_.size() > options_.jsonl_rotate_bytes) {
+    jsonl_file_.close();
+    rename_replacing(jsonl_path_, jsonl_rotated_path_);
+    jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
+  }
+  const std::uint64_t before = jsonl_file_.size();
+  try {
+    jsonl_file_.write(json_text_);
+  } catch (...) {
+    // A line cut short (a full disk) would glue itself to the next one: take it back.
+    jsonl_file_.truncate(before);
+    jsonl_file_.close();  // reopen next time (the file may have been removed)
+    throw;
+  }
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,81 @@
+// The writer's health record: built from every thread's counters once a second, and published as
+// the Prometheus textfile and a line of health.jsonl.
+//
+//   - build(): the HealthSnapshot from the receive thread's atomics, the decoder's latest
+//     snapshot and the writer's own parts (frames, recordings, failed writes), with the per-second
+//     rates and the state and reason decided by core/health_policy.hpp against the previous
+//     record. Filled in place: once warm its strings keep their capacity.
+//   - write(): DIR/pandarcap.prom replaced whole (temporary file + rename: node_exporter never
+//     reads half a file), one line appended to health.jsonl (kept open; rotated to
+//     health.jsonl.1 past jsonl_rotate_bytes; a line cut short by a failed write is taken back so
+//     it cannot glue itself to the next). A failure is counted (OutputAccounting), not thrown.
+//
+// Once warm nothing here allocates (names and rendered text are built in place; see README
+// "Latency and allocations"). Owned by the writer thread.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "core/health.hpp"
+#include "daemon/frame_output.hpp"
+#include "daemon/io/file_output.hpp"
+#include "daemon/output_accounting.hpp"
+#include "daemon/pcap_recorder.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "daemon/writer_options.hpp"
+
+namespace pandarcap {
+
+// What one health record is built from, gathered by the writer thread at the moment of building.
+struct HealthSources {
+  const ReceiveCounters& receive;
+  const DecodeSnapshot& decode;  // the decoder's latest
+  const FrameOutput& frames;
+  const PcapRecorder& pcap;
+  const OutputAccounting& accounting;
+  std::uint64_t writer_wakeups;
+  double seconds_since_last_packet;  // -1: none yet
+  bool silent;                       // no packet yet, or none for the no-data timeout
+};
+
+class HealthPublisher {
+ public:
+  // `options` must outlive the publisher.
+  HealthPublisher(const WriterOptions& options, OutputAccounting& accounting);
+
+  // At start-up: the file names, the clock the uptime and rates count from, and the buffers.
+  void prepare(std::int64_t start_monotonic_ns);
+  const std::string& prometheus_temporary_path() const noexcept { return prom_temporary_path_; }
+  const std::string& jsonl_path() const noexcept { return jsonl_path_; }
+
+  // The record as of `now_monotonic_ns`, into snapshot().
+  void build(const HealthSources& sources, std::int64_t now_monotonic_ns);
+  // After a record is published: it becomes the base of the next one's "what grew" and rates.
+  void remember(const DecodeSnapshot& decode, std::int64_t now_monotonic_ns);
+
+  // The first record, before READY=1: proves the health outputs are writable. Throws
+  // std::system_error.
+  void write_first();
+  // Every later record; a failure is counted, never thrown.
+  void write();
+
+  const HealthSnapshot& snapshot() const noexcept { return health_; }
+
+ private:
+  void write_jsonl_line();  // throws
+
+  const WriterOptions& options_;
+  OutputAccounting& accounting_;
+  HealthSnapshot health_;
+  std::int64_t start_monotonic_ns_ = 0;
+  std::int64_t last_tick_ns_ = 0;
+  HealthCounters counters_a_second_ago_{};  // for the per-second wake-up rates
+  HealthCounters previous_counters_{};      // the last record's: what grew since
+  DecodeSnapshot decode_prev_;              // the decoder's counters of the last record, for rates
+  std::string prom_path_, prom_temporary_path_, jsonl_path_, jsonl_rotated_path_;
+  std::string prom_text_, json_text_;
+  OutputFile prom_file_, jsonl_file_;
+};
+
+}  // namespace pandarcap

@@ -1,0 +1,27 @@
+#include "daemon/output_accounting.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include "daemon/clocks.hpp"
+#include "daemon/io/file_output.hpp"
+
+namespace pandarcap {
+
+void OutputAccounting::write_failed(const std::exception& error, std::uint64_t bytes) {
+  ++write_errors_;
+  bytes_not_written_ += bytes;
+  last_error_ = error.what();
+  const std::int64_t now = monotonic_ns();
+  if (last_error_log_ns_ < 0 || now - last_error_log_ns_ >= 10'000'000'000) {
+    spdlog::error("write failed: {} ({} write errors so far)", last_error_, write_errors_);
+    last_error_log_ns_ = now;
+  }
+}
+
+void OutputAccounting::put_in_place(const std::string& from, std::string& to) {
+  if (!place_without_replacing(from, to)) return;
+  ++name_collisions_;
+  spdlog::warn("{}: a file of that name exists; kept as {} instead of replacing it", from, to);
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,178 @@
+#include "daemon/output_leftovers.hpp"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <fstream>
+#include <optional>
+#include <string_view>
+#include <system_error>
+#include <vector>
+
+#include "daemon/pcap/pcap_recovery.hpp"
+
+namespace pandarcap {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The number in one of our file names: the `field`-th '_'-separated field after `prefix`
+// ("frame_000123_...pcd": field 0; "pandarcap_20261122T120000Z_0007...pcap": field 1). Nothing
+// when the name is not one of ours.
+std::optional<std::uint64_t> number_in_name(std::string_view name, std::string_view prefix,
+                                            std::string_view suffix, int field) {
+  if (!name.starts_with(prefix) || !name.ends_with(suffix)) return std::nullopt;
+  name.remove_prefix(prefix.size());
+  for (int i = 0; i < field; ++i) {
+    const std::size_t underscore = name.find('_');
+    if (underscore == std::string_view::npos) return std::nullopt;
+    name.remove_prefix(underscore + 1);
+  }
+  std::uint64_t number = 0;
+  std::size_t digits = 0;
+  while (digits < name.size() && name[digits] >= '0' && name[digits] <= '9') {
+    if (digits == 18) return std::nullopt;  // not one of ours, and beyond what a count reaches
+    number = number * 10 + static_cast<std::uint64_t>(name[digits] - '0');
+    ++digits;
+  }
+  if (digits == 0 || (digits < name.size() && name[digits] != '_' && name[digits] != '.')) {
+    return std::nullopt;
+  }
+  return number;
+}
+
+// Recordings left open: cut back to their last whole record and given their final name.
+void finish_interrupted_recordings(const fs::path& raw_dir, OutputAccounting& accounting) {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(raw_dir, ec)) {
+    const std::string part = entry.path().native();
+    if (!part.ends_with(".pcap.part")) continue;
+    // Never followed: a link (or a device, a FIFO) here points at a file that is not ours to
+    // cut, wherever it leads.
+    if (entry.is_symlink(ec) || !entry.is_regular_file(ec)) {
+      spdlog::warn("{}: not a regular file; left as it is", part);
+      continue;
+    }
+    try {
+      const PcapRecovery recovered = finish_interrupted_pcap(part);
+      if (!recovered.ours) {
+        spdlog::warn("{}: not a recording of ours; left as it is", part);
+        continue;
+      }
+      if (recovered.records == 0) {
+        fs::remove(part);
+        spdlog::warn("{}: left by an interrupted run with no whole record; removed", part);
+        continue;
+      }
+      std::string finished = part.substr(0, part.size() - 5);  // without ".part"
+      accounting.put_in_place(part, finished);
+      spdlog::warn(
+          "{}: left by an interrupted run; finished as {} ({} whole records, {} bytes of "
+          "a cut record removed)",
+          part, fs::path(finished).filename().string(), recovered.records, recovered.cut_bytes);
+    } catch (const std::exception& error) {
+      spdlog::error("{}: cannot finish a recording left by an interrupted run: {}", part,
+                    error.what());
+    }
+  }
+}
+
+// Temporary files (".NAME.tmp") hold nothing that was ever complete: removed.
+void remove_temporaries(const fs::path& dir) {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().native();
+    if (name.size() > 5 && name.front() == '.' && name.ends_with(".tmp") &&
+        entry.is_regular_file(ec)) {
+      fs::remove(entry.path(), ec);
+      spdlog::info("{}: temporary file of an interrupted run removed", entry.path().string());
+    }
+  }
+}
+
+// A health line cut short (a crash mid-append, a full disk) is dropped: readers then never see
+// two lines glued together.
+void drop_cut_health_line(const std::string& jsonl_path) {
+  std::ifstream in(jsonl_path, std::ios::binary | std::ios::ate);
+  const std::streamoff size = in ? static_cast<std::streamoff>(in.tellg()) : 0;
+  if (size <= 0) return;
+  std::streamoff keep = size;
+  char c = 0;
+  while (keep > 0) {
+    in.seekg(keep - 1);
+    in.get(c);
+    if (c == '\n') break;
+    --keep;
+  }
+  if (keep < size) {
+    std::error_code ec;
+    fs::resize_file(jsonl_path, static_cast<std::uintmax_t>(keep), ec);
+    spdlog::warn("{}: a line cut short by an interrupted run removed ({} bytes)", jsonl_path,
+                 size - keep);
+  }
+}
+
+struct Found {
+  std::uint64_t number;
+  std::string name;
+  fs::path path;
+  std::uint64_t bytes;
+};
+
+// Our files in `dir`, oldest (lowest number) first; a link or anything not a regular file is not
+// ours.
+std::vector<Found> scan(const fs::path& dir, std::string_view prefix, std::string_view suffix,
+                        int field) {
+  std::vector<Found> found;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().native();
+    const auto number = number_in_name(name, prefix, suffix, field);
+    if (!number || entry.is_symlink(ec) || !entry.is_regular_file(ec)) continue;
+    const auto bytes = entry.file_size(ec);
+    found.push_back({*number, name, entry.path(), ec ? 0 : bytes});
+  }
+  std::sort(found.begin(), found.end(), [](const Found& a, const Found& b) {
+    return a.number != b.number ? a.number < b.number : a.name < b.name;
+  });
+  return found;
+}
+
+std::uint64_t adopt(const fs::path& dir, std::string_view prefix, std::string_view suffix,
+                    int field, Retention& retention, const char* what) {
+  const std::vector<Found> found = scan(dir, prefix, suffix, field);
+  if (found.empty()) return 0;
+  for (const Found& f : found)
+    retention.adopt(f.path.native(), f.bytes);
+  const std::size_t removed = retention.enforce();
+  spdlog::info(
+      "{}: {} {} of earlier runs{}", dir.string(), found.size(), what,
+      removed != 0 ? fmt::format("; retention removed the oldest {}", removed) : std::string());
+  return found.back().number + 1;
+}
+
+}  // namespace
+
+void finish_leftovers(const OutputLeftovers& where, OutputAccounting& accounting) {
+  if (!where.raw_dir.empty()) finish_interrupted_recordings(where.raw_dir, accounting);
+  if (!where.frames_dir.empty()) remove_temporaries(where.frames_dir);
+  if (!where.raw_dir.empty()) remove_temporaries(where.raw_dir);
+  // The health directory may be shared (node_exporter's): only our own temporary name.
+  std::error_code ec;
+  if (!where.prometheus_temporary_path.empty() && fs::remove(where.prometheus_temporary_path, ec)) {
+    spdlog::info("{}: temporary file of an interrupted run removed",
+                 where.prometheus_temporary_path);
+  }
+  if (!where.jsonl_path.empty()) drop_cut_health_line(where.jsonl_path);
+}
+
+std::uint64_t adopt_earlier_frames(const fs::path& dir, Retention& retention) {
+  return adopt(dir, "frame_", ".pcd", 0, retention, "frames");
+}
+
+std::uint64_t adopt_earlier_recordings(const fs::path& dir, Retention& retention) {
+  return adopt(dir, "pandarcap_", ".pcap", 1, retention, "recordings");
+}
+
+}  // namespace pandarcap

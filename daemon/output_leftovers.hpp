@@ -1,0 +1,43 @@
+// What earlier runs left in the output directories, dealt with once at start-up, before the
+// daemon writes anything.
+//
+// An interrupted run (a crash, a kill, a power cut) can leave:
+//   - raw/*.pcap.part, a recording still open: cut back to its last whole record and renamed to
+//     its final name (removed if it holds no whole record; a file that is not a pcap of ours, a
+//     link or a device is left alone, with a warning);
+//   - .NAME.tmp in frames/ and raw/, a file not yet renamed into place: it was never complete,
+//     so it is removed (in the health directory, which may be node_exporter's, only the .prom
+//     file's own temporary name is);
+//   - a last health.jsonl line cut short: dropped, so readers never see two lines glued.
+// Then the finished files of earlier runs are adopted: numbered (the next file continues after
+// the highest number found, so names never repeat across restarts) and put on the retention
+// lists oldest first, so restarts and crash loops cannot fill the disk.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+#include "daemon/output_accounting.hpp"
+#include "daemon/retention.hpp"
+
+namespace pandarcap {
+
+// Where to look; an empty path: that output is off, nothing of it is touched.
+struct OutputLeftovers {
+  std::filesystem::path frames_dir, raw_dir;
+  std::string prometheus_temporary_path, jsonl_path;
+};
+
+// Finishes recordings, removes temporaries and drops a cut health line, logging each. Never
+// throws for a file it cannot fix (logged, left); a finished recording whose name is taken is
+// kept under a "_dupN" name (counted in `accounting`).
+void finish_leftovers(const OutputLeftovers& where, OutputAccounting& accounting);
+
+// Earlier runs' frames (frame_<N>_...pcd) / recordings (pandarcap_<UTC>_<N>...pcap) in `dir`:
+// adopted into `retention` oldest first, which is then applied; logged. Returns the next free
+// number (0 when there are none).
+std::uint64_t adopt_earlier_frames(const std::filesystem::path& dir, Retention& retention);
+std::uint64_t adopt_earlier_recordings(const std::filesystem::path& dir, Retention& retention);
+
+}  // namespace pandarcap

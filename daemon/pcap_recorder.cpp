@@ -1,0 +1,169 @@
+#include "daemon/pcap_recorder.hpp"
+
+#include <arpa/inet.h>
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <span>
+#include <stdexcept>
+#include <system_error>
+
+#include "core/text_file.hpp"
+#include "daemon/clocks.hpp"
+#include "daemon/io/file_output.hpp"
+#include "daemon/output_leftovers.hpp"
+
+namespace pandarcap {
+namespace {
+
+constexpr std::int64_t kSecondNs = 1'000'000'000;
+
+}  // namespace
+
+PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting)
+    : options_(options),
+      accounting_(accounting),
+      dir_(options.output_dir / "raw"),
+      retention_(options.pcap_max_files, options.pcap_max_bytes),
+      record_buffer_(kPcapBufferBytes) {}
+
+PcapRecorder::~PcapRecorder() = default;
+
+void PcapRecorder::adopt_earlier_files() {
+  next_index_ = adopt_earlier_recordings(dir_, retention_);
+}
+
+void PcapRecorder::save_calibration(std::string_view csv) {
+  // The angles the recordings are decoded with travel with them.
+  const std::filesystem::path current = dir_ / "calibration.csv";
+  const TextFile earlier = read_text_file(current.string());
+  if (earlier.status == TextFile::Status::kOk && earlier.text != csv) {
+    std::string kept = (dir_ / fmt::format("calibration_before_{:04}.csv", next_index_)).native();
+    accounting_.put_in_place(current.native(), kept);
+    spdlog::info("{}: the calibration of earlier recordings differs from this run's; kept as {}",
+                 current.string(), std::filesystem::path(kept).filename().string());
+  }
+  write_file_replacing(current, csv);
+}
+
+std::uint64_t PcapRecorder::bytes_written() const noexcept {
+  return bytes_closed_ + (pcap_ ? pcap_->bytes() : 0);
+}
+
+void PcapRecorder::open(std::int64_t first_packet_ns) {
+  final_path_ = (dir_ / fmt::format("pandarcap_{}_{:04}.pcap",
+                                    utc_file_stamp(first_packet_ns, false), next_index_++))
+                    .native();
+  const std::filesystem::path part = final_path_ + ".part";
+  try {
+    pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_);
+  } catch (...) {
+    // Created but not even its header written (a full disk): not left behind, one per attempt.
+    std::error_code ignored;
+    std::filesystem::remove(part, ignored);
+    throw;
+  }
+  opened_monotonic_ns_ = monotonic_ns();
+}
+
+void PcapRecorder::close() {
+  if (!pcap_) return;
+  try {
+    // Flushed first: a failing flush leaves the file to be cut back to whole records; once it
+    // succeeded, fclose has nothing left to write.
+    pcap_->flush();
+    pcap_->close();
+  } catch (const std::exception& error) {
+    abandon(error, 0);
+    return;
+  }
+  finish_file();
+}
+
+void PcapRecorder::rotate() {
+  spdlog::info(
+      "SIGHUP: closing {} and starting new recordings",
+      pcap_ ? std::filesystem::path(final_path_).filename().string() : std::string("no open pcap"));
+  close();
+}
+
+void PcapRecorder::flush() {
+  if (!pcap_) return;
+  try {
+    pcap_->flush();
+  } catch (const std::exception& error) {
+    abandon(error, 0);
+  }
+}
+
+void PcapRecorder::abandon(const std::exception& error, std::uint64_t failed_bytes) {
+  // The records buffered since the last good flush never reached the file whole: they are taken
+  // back from the recorded count (which no health record has reported yet: every tick flushes
+  // first) and counted as not written, with the record being written when it failed.
+  const PcapWriter::Dropped dropped = pcap_->abandon();
+  packets_written_ -= dropped.records;
+  packets_not_written_ += dropped.records;
+  accounting_.write_failed(error, dropped.bytes + failed_bytes);
+  finish_file();
+}
+
+void PcapRecorder::finish_file() {
+  const std::string part = pcap_->path();
+  try {
+    if (pcap_->flushed_records() == 0) {
+      std::filesystem::remove(part);  // not even one record: nothing worth keeping
+    } else {
+      accounting_.put_in_place(part, final_path_);
+      bytes_closed_ += pcap_->flushed_bytes();
+      retention_.add(final_path_, pcap_->flushed_bytes());
+    }
+  } catch (const std::exception& error) {
+    accounting_.write_failed(error, 0);
+  }
+  pcap_.reset();
+}
+
+void PcapRecorder::write(const RawBatch& batch) {
+  bool failed = false;  // the disk failed on this batch: the rest is not tried (counted)
+  for (std::size_t i = 0; i < batch.size; ++i) {
+    const RawPacket& packet = batch.packets[i];
+    if (failed) {
+      ++packets_not_written_;
+      accounting_.not_written(packet.length);
+      continue;
+    }
+    try {
+      if (pcap_ &&
+          ((options_.pcap_rotate_bytes != 0 && pcap_->bytes() >= options_.pcap_rotate_bytes) ||
+           (options_.pcap_rotate_seconds != 0 &&
+            monotonic_ns() - opened_monotonic_ns_ >= options_.pcap_rotate_seconds * kSecondNs))) {
+        close();
+      }
+      if (!pcap_) open(packet.receive_time_ns);
+      pcap_->write(std::span<const std::uint8_t>(packet.payload, packet.length),
+                   packet.original_length, packet.receive_time_ns,
+                   Endpoint{ntohl(packet.source.sin_addr.s_addr), ntohs(packet.source.sin_port)},
+                   options_.pcap_destination);
+      ++packets_written_;
+    } catch (const std::invalid_argument& error) {
+      // This packet cannot be recorded (a time outside what pcap can hold); the file is fine.
+      ++packets_not_written_;
+      accounting_.write_failed(error, packet.length);
+    } catch (const std::exception& error) {
+      // A failing file is cut back to its whole records and closed. The next batch starts a new
+      // one (and fails again, counted, while the disk stays full): at most one attempt per
+      // batch, not one per packet.
+      ++packets_not_written_;
+      if (pcap_) {
+        abandon(error, packet.length);
+      } else {
+        accounting_.write_failed(error, packet.length);  // the file could not even be created
+      }
+      failed = true;
+    }
+  }
+  // Each batch reaches the file whole: a crash loses at most the batch being written.
+  flush();
+}
+
+}  // namespace pandarcap

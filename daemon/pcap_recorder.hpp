@@ -1,0 +1,84 @@
+// Raw packets recorded as classic pcap files: DIR/raw/pandarcap_<UTC first packet>_<N>.pcap.
+//
+// A recording is written as NAME.pcap.part and renamed to NAME.pcap when closed (without
+// replacing anything: a taken name becomes "_dupN", counted). It is closed and a new one begun
+// when it reaches pcap_rotate_bytes or pcap_rotate_seconds, on SIGHUP (rotate()) and at the end;
+// one that holds no record is removed instead. N continues across runs, and retention
+// (pcap_max_files / pcap_max_bytes) counts earlier runs' recordings too.
+//
+// Failures: a packet pcap cannot hold (a time outside its range) is counted and skipped. A failed
+// write (a full disk) cuts the file back to the last flush, which ends on a whole record, and
+// closes it (readers never choke on a cut record); the records taken back and the rest of the
+// batch are counted as not written, and the next batch tries a new file. Each batch is flushed
+// whole, so a crash loses at most the batch being written.
+//
+// The calibration the recordings are decoded with is saved beside them (save_calibration).
+// Owned by the writer thread; once warm, recording a batch allocates nothing but a new file's
+// name when one is opened.
+#pragma once
+
+#include <cstdint>
+#include <exception>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "daemon/output_accounting.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "daemon/retention.hpp"
+#include "daemon/writer_options.hpp"
+
+namespace pandarcap {
+
+class PcapRecorder {
+ public:
+  // `options` must outlive the recorder.
+  PcapRecorder(const WriterOptions& options, OutputAccounting& accounting);
+  ~PcapRecorder();
+
+  const std::filesystem::path& directory() const noexcept { return dir_; }
+  // At start-up, after the leftovers are finished: earlier runs' recordings numbered and listed
+  // for retention.
+  void adopt_earlier_files();
+  // raw/calibration.csv := `csv`. When an earlier run used other angles, its table is kept (never
+  // replaced) as calibration_before_<N>.csv: recordings numbered below N were made with it.
+  // Throws std::system_error.
+  void save_calibration(std::string_view csv);
+
+  // Records the batch's packets, then flushes; failures are counted, never thrown.
+  void write(const RawBatch& batch);
+  // Pushes what is buffered to the file (the recording on disk at most a second behind).
+  void flush();
+  // Finishes the open recording (if any); the next packet starts a new one.
+  void close();
+  // SIGHUP: logged, and the open recording finished.
+  void rotate();
+
+  std::uint64_t packets_written() const noexcept { return packets_written_; }
+  std::uint64_t packets_not_written() const noexcept { return packets_not_written_; }
+  // In finished recordings and in the open one.
+  std::uint64_t bytes_written() const noexcept;
+
+ private:
+  void open(std::int64_t first_packet_ns);
+  // After a failed write: cut the file back to whole records, count what was lost, close it.
+  void abandon(const std::exception& error, std::uint64_t failed_bytes);
+  void finish_file();  // rename .part (or remove it if it holds no record)
+
+  const WriterOptions& options_;
+  OutputAccounting& accounting_;
+  std::filesystem::path dir_;
+  Retention retention_;
+  std::vector<char> record_buffer_;  // the open recording's buffer, allocated once
+  std::unique_ptr<PcapWriter> pcap_;
+  std::string final_path_;
+  std::int64_t opened_monotonic_ns_ = 0;
+  std::uint64_t next_index_ = 0;  // the next recording's number (continues across runs)
+  std::uint64_t packets_written_ = 0, packets_not_written_ = 0;
+  std::uint64_t bytes_closed_ = 0;  // in finished files; the open one adds its own
+};
+
+}  // namespace pandarcap

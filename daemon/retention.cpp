@@ -1,0 +1,22 @@
+#include "daemon/retention.hpp"
+
+#include <system_error>
+
+namespace pandarcap {
+
+std::size_t Retention::enforce() {
+  const std::size_t before = files_.size();
+  std::uint64_t total = 0;
+  for (const auto& file : files_)
+    total += file.second;
+  while (!files_.empty() && ((max_files_ != 0 && files_.size() > max_files_) ||
+                             (max_bytes_ != 0 && total > max_bytes_))) {
+    std::error_code ignored;
+    std::filesystem::remove(files_.front().first, ignored);
+    total -= files_.front().second;
+    files_.pop_front();
+  }
+  return before - files_.size();
+}
+
+}  // namespace pandarcap

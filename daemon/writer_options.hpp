@@ -1,0 +1,42 @@
+// The writer thread's configuration (from the config file's output and health sections), shared
+// by its parts: frame output, pcap recording, health publishing. Plain data.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+#include "daemon/pcap/capture_reader.hpp"
+
+namespace pandarcap {
+
+struct WriterOptions {
+  std::filesystem::path output_dir;       // frames/ and raw/ go under it
+  std::filesystem::path health_dir;       // health.jsonl
+  std::filesystem::path prometheus_file;  // the .prom textfile
+  bool frames = true;
+  std::uint64_t frames_max_files = 0;
+  std::uint64_t frames_max_bytes = 0;
+  bool pcap = true;
+  std::uint64_t pcap_rotate_bytes = 0;
+  std::uint32_t pcap_rotate_seconds = 0;
+  std::uint64_t pcap_max_files = 0;
+  std::uint64_t pcap_max_bytes = 0;
+  bool prometheus = true;
+  bool jsonl = true;
+  std::uint64_t jsonl_rotate_bytes = 0;
+  std::string sensor_name;
+  std::string version;
+  std::string decoder;  // decoder target in use, reported in the health output
+  double no_data_timeout_seconds = 1.0;
+  std::string expected_return_mode = "any";
+  int expected_rpm = 600;
+  Endpoint pcap_destination;  // the synthesised destination of recorded packets
+  std::string calibration_csv;
+  // Test hook (PANDARCAP_TEST_STALL_WRITER_FILE): while this file exists, the writer stops at its
+  // next once-a-second tick, without a heartbeat, as a writer stuck on a dead disk would. Lets
+  // the tests see the watchdog stop and frames drop (counted) behind a stalled writer. "" = off.
+  std::string test_stall_file;
+};
+
+}  // namespace pandarcap

@@ -1,0 +1,179 @@
+// The health state and reason (core/health_policy.hpp), decided from two counter snapshots
+// without a daemon: each problem's text, their order, and error > no_data > degraded > ok.
+#include <catch2/catch.hpp>
+#include <string>
+
+#include "core/health_policy.hpp"
+
+using namespace pandarcap;
+
+namespace {
+
+// A sensor streaming as expected: packets arriving, 600 RPM, last return.
+HealthGauges streaming() {
+  HealthGauges g;
+  g.return_mode = "last";
+  g.rpm_tail = 600;
+  g.seconds_since_last_packet = 0.01;
+  g.state = HealthState::kNoData;  // whatever it was before: classify_health overwrites it
+  g.reason = "stale reason";
+  return g;
+}
+
+const HealthExpectations kLast{"last", 600};
+
+}  // namespace
+
+TEST_CASE("Health: nothing grew, nothing wrong is ok with an empty reason", "[health][policy]") {
+  HealthCounters before, now;
+  now.datagrams_received = before.datagrams_received + 10'000;  // traffic alone is no problem
+  now.packets_accepted = before.packets_accepted + 10'000;
+  HealthGauges g = streaming();
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+  CHECK(g.reason.empty());
+}
+
+TEST_CASE("Health: each counter that grew is a named problem", "[health][policy]") {
+  struct Case {
+    std::uint64_t HealthCounters::*counter;
+    const char* reason;
+  };
+  const Case cases[] = {
+      {&HealthCounters::kernel_drops, "3 kernel drops"},
+      {&HealthCounters::ring_overruns, "3 ring overruns"},
+      {&HealthCounters::frames_dropped_no_arena, "3 frames dropped (no free arena)"},
+      {&HealthCounters::pcap_packets_not_recorded, "3 packets not recorded"},
+      {&HealthCounters::sequence_lost, "3 packets lost (sequence)"},
+      {&HealthCounters::azimuth_gaps, "3 azimuth gaps"},
+      {&HealthCounters::packets_rejected, "3 packets rejected"},
+      {&HealthCounters::static_timestamp_packets, "3 static timestamps"},
+      {&HealthCounters::backward_timestamp_packets, "3 timestamps going back"},
+      {&HealthCounters::timestamp_jump_packets, "3 timestamp jumps"},
+  };
+  for (const Case& c : cases) {
+    INFO(c.reason);
+    HealthCounters before, now;
+    before.*c.counter = 5;  // what grew counts, not the total
+    now.*c.counter = 8;
+    HealthGauges g = streaming();
+    classify_health(now, before, kLast, false, "", g);
+    CHECK(g.state == HealthState::kDegraded);
+    CHECK(g.reason == c.reason);
+    // Not growing any more: back to ok.
+    classify_health(now, now, kLast, false, "", g);
+    CHECK(g.state == HealthState::kOk);
+  }
+}
+
+TEST_CASE("Health: write errors quote the last error and lead the reason", "[health][policy]") {
+  HealthCounters before, now;
+  now.write_errors = 2;
+  now.bytes_not_written = 4096;
+  now.kernel_drops = 1;
+  HealthGauges g = streaming();
+  classify_health(now, before, kLast, false, "cannot write 'x': No space left on device", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason ==
+        "2 write errors (4096 bytes not written): cannot write 'x': No space left on device; "
+        "1 kernel drops");
+}
+
+TEST_CASE("Health: the sensor's high-temperature flag degrades", "[health][policy]") {
+  HealthCounters counters;
+  HealthGauges g = streaming();
+  g.high_temperature = true;
+  classify_health(counters, counters, kLast, false, "", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason == "sensor high-temperature flag set");
+}
+
+TEST_CASE("Health: a return mode other than expected degrades, unless any is expected",
+          "[health][policy]") {
+  HealthCounters counters;
+  HealthGauges g = streaming();
+  g.return_mode = "dual";
+  classify_health(counters, counters, kLast, false, "", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason == "return mode dual (expected last)");
+  classify_health(counters, counters, HealthExpectations{"any", 600}, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+  g.return_mode = "";  // before the first packet: nothing to compare
+  classify_health(counters, counters, kLast, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+}
+
+TEST_CASE("Health: a motor more than 10 % off the expected speed degrades", "[health][policy]") {
+  HealthCounters counters;
+  HealthGauges g = streaming();
+  g.rpm_tail = 659;  // within 10 % of 600
+  classify_health(counters, counters, kLast, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+  g.rpm_tail = 661;
+  classify_health(counters, counters, kLast, false, "", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason == "motor at 661 RPM (expected 600)");
+  g.rpm_tail = 539.6;
+  classify_health(counters, counters, kLast, false, "", g);
+  CHECK(g.reason == "motor at 540 RPM (expected 600)");
+  g.rpm_tail = 1200;
+  classify_health(counters, counters, HealthExpectations{"last", 1200}, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+}
+
+TEST_CASE("Health: receive errors are an error, whatever else is wrong", "[health][policy]") {
+  HealthCounters before, now;
+  now.receive_errors = 4;
+  now.kernel_drops = 7;
+  now.write_errors = 1;
+  HealthGauges g = streaming();
+  g.high_temperature = true;
+  classify_health(now, before, kLast, true, "disk full", g);  // silent too: error still wins
+  CHECK(g.state == HealthState::kError);
+  CHECK(g.reason == "4 receive errors: the socket is failing");
+}
+
+TEST_CASE("Health: silence is no_data, before and after the first packet", "[health][policy]") {
+  HealthCounters before, now;
+  now.kernel_drops = 2;  // a problem too, but silence wins over degraded
+  HealthGauges g = streaming();
+  g.seconds_since_last_packet = -1;
+  classify_health(now, before, kLast, true, "", g);
+  CHECK(g.state == HealthState::kNoData);
+  CHECK(g.reason == "no packet received yet");
+  g.seconds_since_last_packet = 2.54;
+  classify_health(now, before, kLast, true, "", g);
+  CHECK(g.state == HealthState::kNoData);
+  CHECK(g.reason == "no packet for 2.5 s");
+}
+
+TEST_CASE("Health: several problems are joined by semicolons, in a fixed order",
+          "[health][policy]") {
+  HealthCounters before, now;
+  now.timestamp_jump_packets = 1;
+  now.kernel_drops = 2;
+  now.packets_rejected = 3;
+  HealthGauges g = streaming();
+  g.return_mode = "strongest";
+  g.rpm_tail = 300;
+  g.high_temperature = true;
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason ==
+        "2 kernel drops; 3 packets rejected; 1 timestamp jumps; sensor high-temperature flag set; "
+        "return mode strongest (expected last); motor at 300 RPM (expected 600)");
+}
+
+TEST_CASE("Health: the reason is rewritten in place, keeping its capacity", "[health][policy]") {
+  HealthCounters before, now;
+  now.kernel_drops = 1;
+  HealthGauges g = streaming();
+  g.reason.reserve(256);
+  const char* const storage = g.reason.data();
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.reason == "1 kernel drops");
+  CHECK(g.reason.data() == storage);
+  classify_health(now, before, kLast, true, "", g);
+  CHECK(g.reason == "no packet for 0.0 s");
+  CHECK(g.reason.data() == storage);
+}
