@@ -6,15 +6,12 @@
 
 #include "core/health_format.hpp"
 #include "core/health_policy.hpp"
+#include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 
 namespace pandarcap {
-namespace {
-
-constexpr std::int64_t kSecondNs = 1'000'000'000;
-
-}  // namespace
+namespace {}  // namespace
 
 HealthPublisher::HealthPublisher(const WriterOptions& options, OutputAccounting& accounting)
     : options_(options), accounting_(accounting) {}
@@ -129,7 +126,7 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
 }
 
 void HealthPublisher::remember(const DecodeSnapshot& decode, std::int64_t now) {
-  if (now - last_tick_ns_ >= kSecondNs / 2) {  // the base of the next per-second rates
+  if (now - last_tick_ns_ >= kNsPerSecond / 2) {  // the base of the next per-second rates
     counters_a_second_ago_ = health_.counters;
     last_tick_ns_ = now;
   }

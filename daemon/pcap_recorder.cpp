@@ -9,16 +9,13 @@
 #include <system_error>
 
 #include "core/text_file.hpp"
+#include "core/units.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/output_leftovers.hpp"
 
 namespace pandarcap {
-namespace {
-
-constexpr std::int64_t kSecondNs = 1'000'000'000;
-
-}  // namespace
+namespace {}  // namespace
 
 PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting)
     : options_(options),
@@ -136,7 +133,8 @@ void PcapRecorder::write(const RawBatch& batch) {
       if (pcap_ &&
           ((options_.pcap_rotate_bytes != 0 && pcap_->bytes() >= options_.pcap_rotate_bytes) ||
            (options_.pcap_rotate_seconds != 0 &&
-            monotonic_ns() - opened_monotonic_ns_ >= options_.pcap_rotate_seconds * kSecondNs))) {
+            monotonic_ns() - opened_monotonic_ns_ >=
+                options_.pcap_rotate_seconds * kNsPerSecond))) {
         close();
       }
       if (!pcap_) open(packet.receive_time_ns);

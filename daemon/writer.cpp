@@ -9,6 +9,7 @@
 #include <chrono>
 #include <filesystem>
 
+#include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
@@ -16,8 +17,6 @@
 
 namespace pandarcap {
 namespace {
-
-constexpr std::int64_t kSecondNs = 1'000'000'000;
 
 // Proves `dir` takes a new file (permissions, a read-only mount, a full inode table) by creating
 // and removing one: READY=1 promises writable outputs. Throws std::system_error.
@@ -100,7 +99,7 @@ void Writer::write_health() {
 void Writer::log_fragments(std::int64_t now) {
   const std::uint64_t fragments = health_.snapshot().counters.frames_fragment;
   if (fragments == fragments_logged_) return;
-  if (last_fragment_log_ns_ >= 0 && now - last_fragment_log_ns_ < 10 * kSecondNs) return;
+  if (last_fragment_log_ns_ >= 0 && now - last_fragment_log_ns_ < 10 * kNsPerSecond) return;
   spdlog::info(
       "{} frame fragment{} not written (partial frames under output.frames_min_fraction of a "
       "revolution; {} since start)",
@@ -131,7 +130,7 @@ void Writer::stall_while_test_file_exists() const {
 void Writer::run(std::atomic<std::uint64_t>& heartbeat,
                  const std::atomic<std::uint32_t>& rotate_generation,
                  ringbuf::SpscQueue<StatusLine>& status_out) {
-  std::int64_t next_tick = monotonic_ns() + kSecondNs;
+  std::int64_t next_tick = monotonic_ns() + kNsPerSecond;
   std::uint32_t seen_generation = rotate_generation.load(std::memory_order_relaxed);
   const std::int64_t warm_ns = monotonic_ns() + kWarmUpNs;
   bool hot = false;
@@ -191,7 +190,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
                        c.kernel_drops + c.ring_overruns + c.frames_dropped_no_arena,
                        h.gauges.reason.empty() ? "" : " - ", h.gauges.reason);
       status_out.try_push(status);
-      next_tick = silence_changed ? now + kSecondNs : std::max(next_tick + kSecondNs, now);
+      next_tick = silence_changed ? now + kNsPerSecond : std::max(next_tick + kNsPerSecond, now);
     }
   }
   alloc::mark_this_thread_cold();

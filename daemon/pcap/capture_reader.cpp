@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <limits>
 
+#include "core/units.hpp"
+
 namespace pandarcap {
 namespace {
 
@@ -19,8 +21,6 @@ constexpr std::uint8_t kIpProtocolUdp = 17;
 constexpr std::uint16_t kIpMoreFragments = 0x2000;
 constexpr std::uint16_t kIpFragmentOffsetMask = 0x1FFF;
 constexpr std::size_t kUdpHeaderBytes = 8;
-
-constexpr std::int64_t kNsPerSecond = 1'000'000'000;
 
 std::uint16_t load_u16_be(const std::uint8_t* p) noexcept {
   return static_cast<std::uint16_t>((p[0] << 8) | p[1]);

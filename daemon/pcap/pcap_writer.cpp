@@ -8,6 +8,7 @@
 #include <system_error>
 #include <utility>
 
+#include "core/units.hpp"
 #include "daemon/io/errors.hpp"
 
 namespace pandarcap {
@@ -23,9 +24,6 @@ constexpr std::size_t kIpv4Bytes = 20;
 constexpr std::size_t kUdpBytes = 8;
 constexpr std::size_t kHeadersBytes = kEthernetBytes + kIpv4Bytes + kUdpBytes;  // 42
 constexpr std::size_t kMaxUdpPayloadBytes = 65535 - kIpv4Bytes - kUdpBytes;     // 65507
-
-constexpr std::int64_t kNsPerSecond = 1'000'000'000;
-constexpr std::int64_t kNsPerMicrosecond = 1'000;
 
 // Appends integers to a fixed buffer, in native order (pcap headers) or big-endian (wire headers).
 template <std::size_t N>
