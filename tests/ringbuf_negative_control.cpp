@@ -7,7 +7,7 @@
 #include <cstdio>
 #include <cstring>
 
-#include "tests/ringbuf_stress.hpp"
+#include "support/ringbuf_stress.hpp"
 
 static_assert(pandarcap::ringbuf::detail::kNegativeControl,
               "this program must be built with PANDARCAP_RINGBUF_NEGATIVE_CONTROL_RELAXED");

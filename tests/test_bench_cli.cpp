@@ -15,7 +15,7 @@
 #include "bench/child_process.hpp"
 #include "core/decoder_target.hpp"
 #include "core/packet.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using nlohmann::json;

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "core/calibration.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 

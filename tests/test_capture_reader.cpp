@@ -16,7 +16,7 @@
 
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using pandarcap::CaptureReader;
 using pandarcap::CaptureRecord;

@@ -23,7 +23,7 @@
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace std::chrono_literals;

@@ -31,7 +31,7 @@
 #include "bench/child_process.hpp"
 #include "core/pcd.hpp"
 #include "daemon/pcap/capture_reader.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace std::chrono_literals;
@@ -72,17 +72,6 @@ bool pcd_is_whole(const fs::path& file) {
   if (!data) return false;
   const auto header = static_cast<std::uint64_t>(in.tellg());
   return fs::file_size(file) == header + points * kPcdPointBytes;
-}
-
-// Reads a capture to its end: how it ended and how many records it held.
-std::pair<CaptureStatus, std::size_t> read_capture(const fs::path& file) {
-  CaptureReader reader(file.string());
-  CaptureRecord record;
-  std::size_t records = 0;
-  CaptureStatus status;
-  while ((status = reader.next(record)) == CaptureStatus::kRecord)
-    ++records;
-  return {status, records};
 }
 
 bool tcpdump_reads(const fs::path& file) {
@@ -164,7 +153,7 @@ TEST_CASE(
     for (const fs::path& part : parts_before) {
       const fs::path finished = part.native().substr(0, part.native().size() - 5);
       if (fs::exists(finished)) {
-        CHECK(read_capture(finished).first == CaptureStatus::kEnd);
+        CHECK(test::read_capture(finished).first == CaptureStatus::kEnd);
       }
     }
     // Every health line of every run so far parses, and a line the kill cut short was dropped at
@@ -190,14 +179,14 @@ TEST_CASE(
     health_cut_bytes = bytes_after_last_newline(out / "health" / "health.jsonl");
     for (const fs::path& pcap : files_ending(out / "raw", ".pcap")) {
       INFO(pcap.string());
-      CHECK(read_capture(pcap).first == CaptureStatus::kEnd);
+      CHECK(test::read_capture(pcap).first == CaptureStatus::kEnd);
     }
     for (const fs::path& part : files_ending(out / "raw", ".pcap.part")) {
       INFO(part.string());
       // Killed between creating the file and writing its 24-byte header: nothing to read yet
       // (the next start removes it).
       if (fs::file_size(part) < 24) continue;
-      const auto [status, records] = read_capture(part);
+      const auto [status, records] = test::read_capture(part);
       CHECK((status == CaptureStatus::kEnd || status == CaptureStatus::kTruncated));
     }
     for (const fs::path& pcd : files_ending(out / "frames", ".pcd")) {
@@ -309,7 +298,7 @@ TEST_CASE(
     for (const fs::path& pcap : pcaps) {
       INFO(pcap.string());
       CHECK(tcpdump_reads(pcap));
-      CHECK(read_capture(pcap).first == CaptureStatus::kEnd);
+      CHECK(test::read_capture(pcap).first == CaptureStatus::kEnd);
     }
     for (const fs::path& pcd : files_ending(view / "frames", ".pcd")) {
       INFO(pcd.string());

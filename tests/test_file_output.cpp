@@ -10,7 +10,7 @@
 #include "bench/child_process.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/output_directories.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 namespace fs = std::filesystem;

@@ -8,7 +8,7 @@
 #include <sstream>
 
 #include "core/health_format.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 

@@ -18,7 +18,7 @@
 #include "daemon/io/syscalls.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 namespace fs = std::filesystem;
@@ -120,12 +120,7 @@ TEST_CASE("a recording the disk filled mid-flush is cut back to its last whole f
   CHECK(dropped.records == 2);
   CHECK(fs::file_size(path) == writer.flushed_bytes());
   // Readable to its end, with exactly the flushed records.
-  CaptureReader reader(path.string());
-  CaptureRecord record;
-  std::size_t records = 0;
-  CaptureStatus status;
-  while ((status = reader.next(record)) == CaptureStatus::kRecord)
-    ++records;
+  const auto [status, records] = test::read_capture(path);
   CHECK(status == CaptureStatus::kEnd);
   CHECK(records == 2);
 }

@@ -15,8 +15,8 @@
 #include "bench/udp_traffic.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/pcap/capture_reader.hpp"
-#include "live_daemon.hpp"
-#include "test_support.hpp"
+#include "support/live_daemon.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace std::chrono_literals;

@@ -21,8 +21,8 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
-#include "live_daemon.hpp"
-#include "test_support.hpp"
+#include "support/live_daemon.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace std::chrono_literals;

@@ -6,7 +6,7 @@
 #include "core/sim/packet_builder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/pcap/capture_reader.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 

@@ -11,7 +11,7 @@
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 namespace fs = std::filesystem;

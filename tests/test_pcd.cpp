@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "core/pcd.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 

@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace std::chrono_literals;

@@ -12,7 +12,7 @@
 #include "core/packet_time.hpp"
 #include "core/stream_decoder.hpp"
 #include "daemon/pcap/capture_reader.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 

@@ -10,7 +10,7 @@
 #include <random>
 #include <string>
 
-#include "tests/ringbuf_stress.hpp"
+#include "support/ringbuf_stress.hpp"
 
 using namespace pandarcap;
 using namespace pandarcap::test;

@@ -28,7 +28,7 @@
 
 #include "bench/child_process.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace std::chrono_literals;

@@ -15,7 +15,7 @@
 #include "core/sim/packet_builder.hpp"
 #include "core/simd_decoder.hpp"
 #include "daemon/pcap/capture_reader.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 

@@ -20,7 +20,7 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace std::chrono_literals;

@@ -11,7 +11,7 @@
 #include "core/sim/synthetic_sensor.hpp"
 #include "core/stream_decoder.hpp"
 #include "daemon/pcap/capture_reader.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 

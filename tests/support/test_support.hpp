@@ -8,9 +8,23 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
+#include "daemon/pcap/capture_reader.hpp"
+
 namespace pandarcap::test {
+
+// 360° in the sensor's 0.01° units.
+inline constexpr std::int64_t kCircle = 36000;
+
+// Division and remainder rounded toward minus infinity (azimuths before the cut are negative).
+inline std::int64_t floor_div(std::int64_t a, std::int64_t b) {
+  return a >= 0 ? a / b : -((-a + b - 1) / b);
+}
+inline std::int64_t floor_mod(std::int64_t a, std::int64_t b) {
+  return a - floor_div(a, b) * b;
+}
 
 // Path of a real capture in ../shared/captures. When the file is missing the test must not pass
 // silently in CI: under CI=true this FAILs the test; elsewhere it WARNs and returns nullopt so
@@ -72,5 +86,8 @@ std::vector<std::filesystem::path> files_ending(const std::filesystem::path& dir
 
 // How many file descriptors process `pid` has open (/proc/PID/fd).
 std::size_t open_descriptors(int pid);
+
+// Reads a capture to its end: how the read ended and how many records it held.
+std::pair<CaptureStatus, std::size_t> read_capture(const std::filesystem::path& file);
 
 }  // namespace pandarcap::test

@@ -16,7 +16,7 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 namespace pandarcap::test {
 

@@ -1,4 +1,4 @@
-#include "test_support.hpp"
+#include "support/test_support.hpp"
 
 #include <sys/wait.h>
 #include <unistd.h>
@@ -113,6 +113,16 @@ std::size_t open_descriptors(int pid) {
        it != std::filesystem::directory_iterator(); it.increment(ec))
     ++n;
   return n;
+}
+
+std::pair<CaptureStatus, std::size_t> read_capture(const std::filesystem::path& file) {
+  CaptureReader reader(file.string());
+  CaptureRecord record;
+  std::size_t records = 0;
+  CaptureStatus status;
+  while ((status = reader.next(record)) == CaptureStatus::kRecord)
+    ++records;
+  return {status, records};
 }
 
 }  // namespace pandarcap::test
