@@ -101,6 +101,9 @@ PcapWriter::~PcapWriter() {
 
 void PcapWriter::append(std::span<const std::uint8_t> bytes) {
   if (!file_.is_open()) io::throw_error(EBADF, "cannot write", path_);
+  // An empty payload (a zero-length datagram) may come with a null data(), which memcpy must not
+  // get even for 0 bytes; there is nothing to append anyway.
+  if (bytes.empty()) return;
   if (buffered_ + bytes.size() > buffer_.size()) {
     flush_buffer();
     if (bytes.size() > buffer_.size()) {
