@@ -11,8 +11,6 @@
 #include "daemon/clocks.hpp"
 
 namespace pandarcap {
-namespace {}  // namespace
-
 HealthPublisher::HealthPublisher(const WriterOptions& options, OutputAccounting& accounting)
     : options_(options), accounting_(accounting) {}
 
@@ -135,23 +133,22 @@ void HealthPublisher::remember(const DecodeSnapshot& decode, std::int64_t now) {
 }
 
 void HealthPublisher::write_first() {
-  if (options_.prometheus) {
-    render_prometheus(health_, prom_text_);
-    write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, prom_file_);
-  }
+  if (options_.prometheus) write_prometheus();
   if (options_.jsonl) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
 }
 
 void HealthPublisher::write() {
   try {
-    if (options_.prometheus) {
-      render_prometheus(health_, prom_text_);
-      write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, prom_file_);
-    }
+    if (options_.prometheus) write_prometheus();
     if (options_.jsonl) write_jsonl_line();
   } catch (const std::exception& error) {
     accounting_.write_failed(error, 0);
   }
+}
+
+void HealthPublisher::write_prometheus() {
+  render_prometheus(health_, prom_text_);
+  write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, prom_file_);
 }
 
 void HealthPublisher::write_jsonl_line() {

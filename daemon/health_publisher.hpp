@@ -63,6 +63,7 @@ class HealthPublisher {
   const HealthSnapshot& snapshot() const noexcept { return health_; }
 
  private:
+  void write_prometheus();  // throws
   void write_jsonl_line();  // throws
 
   const WriterOptions& options_;

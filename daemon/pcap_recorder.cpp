@@ -15,8 +15,6 @@
 #include "daemon/output_leftovers.hpp"
 
 namespace pandarcap {
-namespace {}  // namespace
-
 PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting)
     : options_(options),
       accounting_(accounting),
@@ -66,9 +64,8 @@ void PcapRecorder::open(std::int64_t first_packet_ns) {
 void PcapRecorder::close() {
   if (!pcap_) return;
   try {
-    // Flushed first: a failing flush leaves the file to be cut back to whole records; once it
-    // succeeded, fclose has nothing left to write.
-    pcap_->flush();
+    // close() flushes first; a failing flush leaves the file open, to be cut back to whole
+    // records by abandon().
     pcap_->close();
   } catch (const std::exception& error) {
     abandon(error, 0);
