@@ -35,6 +35,7 @@ inline constexpr std::array kKeyOptions{
     KeyOption{"--firing-time-correction", "sensor.firing_time_correction", true},
     KeyOption{"--rpm", "sensor.rotation_speed"},
     KeyOption{"--return-mode", "sensor.return_mode"},
+    KeyOption{"--mcap", "output.mcap", true},
     KeyOption{"--decoder", "decoder"},
     KeyOption{"--latency-budget-ms", "latency.budget_ms"},
     KeyOption{"--log-level", "log_level"},

@@ -11,6 +11,7 @@
 
 #include <cerrno>
 #include <charconv>
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -101,6 +102,27 @@ std::optional<std::string> return_mode(const std::string& s) {
   return one_of(s, {"any", "last", "strongest", "dual"});
 }
 
+std::optional<std::string> mcap_compression(const std::string& s) {
+  return one_of(s, {"zstd", "none"});
+}
+
+// ROS 2 names: a topic is absolute ("/pandar/points"), a frame id is not; both are made of
+// letters, digits, '_' and '/' separators, so ros2 bag play and tf accept them.
+std::optional<std::string> ros_name(const std::string& s, bool absolute) {
+  if (s.empty()) return "must not be empty";
+  if (absolute && s.front() != '/') return "must start with '/' (a ROS 2 topic)";
+  if (!absolute && s.front() == '/') return "must not start with '/' (a ROS 2 frame id)";
+  if (s.back() == '/' || s.find("//") != std::string::npos) return "must not have empty parts";
+  for (const char c : s) {
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '/') {
+      return "may hold only letters, digits, '_' and '/'";
+    }
+  }
+  return std::nullopt;
+}
+std::optional<std::string> topic(const std::string& s) { return ros_name(s, true); }
+std::optional<std::string> frame_id(const std::string& s) { return ros_name(s, false); }
+
 std::optional<std::string> log_level(const std::string& s) {
   return one_of(s, {"trace", "debug", "info", "warn", "error", "critical", "off"});
 }
@@ -185,6 +207,18 @@ void for_each_key(Config& c, Visitor&& v) {
   v("output", "pcap_rotate_seconds", o.pcap_rotate_seconds, IntRange{0, kU32});
   v("output", "pcap_max_files", o.pcap_max_files, IntRange{0, kI64});
   v("output", "pcap_max_bytes", o.pcap_max_bytes, IntRange{0, kI64});
+  v("output", "mcap", o.mcap, std::monostate{});
+  v("output", "mcap_packets", o.mcap_packets, std::monostate{});
+  v("output", "mcap_compression", o.mcap_compression, &mcap_compression);
+  v("output", "mcap_chunk_bytes", o.mcap_chunk_bytes, IntRange{64 * 1024, 256 << 20});
+  v("output", "mcap_rotate_bytes", o.mcap_rotate_bytes, IntRange{0, kI64});
+  v("output", "mcap_rotate_seconds", o.mcap_rotate_seconds, IntRange{0, kU32});
+  v("output", "mcap_max_files", o.mcap_max_files, IntRange{0, kI64});
+  v("output", "mcap_max_bytes", o.mcap_max_bytes, IntRange{0, kI64});
+  v("output", "mcap_frame_id", o.mcap_frame_id, &frame_id);
+  v("output", "mcap_points_topic", o.mcap_points_topic, &topic);
+  v("output", "mcap_health_topic", o.mcap_health_topic, &topic);
+  v("output", "mcap_packets_topic", o.mcap_packets_topic, &topic);
 
   auto& h = c.health;
   v("health", "sensor_name", h.sensor_name, &label);

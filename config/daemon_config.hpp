@@ -39,7 +39,7 @@ struct ArenaSection {
 };
 
 struct OutputSection {
-  std::string directory = "pandarcap-output";  // frames/, raw/ and health/ go under it
+  std::string directory = "pandarcap-output";  // frames/, raw/, mcap/, health/ go under it
   bool frames = true;                          // write frames as PCD
   std::uint32_t frame_decimation = 1;          // write every Nth frame; >= 1
   // A partial frame covering less than this fraction of a revolution (in azimuth and in
@@ -53,6 +53,20 @@ struct OutputSection {
   std::uint32_t pcap_rotate_seconds = 0;       // start a new file after this long; 0 = never
   std::uint64_t pcap_max_files = 0;            // retention; 0 = unlimited
   std::uint64_t pcap_max_bytes = 0;            // retention; 0 = unlimited
+  // MCAP (Foxglove, ros2 bag): frames as sensor_msgs/msg/PointCloud2, health as JSON, the
+  // calibration attached; optionally the raw packets. In mcap/ under the directory.
+  bool mcap = false;
+  bool mcap_packets = false;                   // also each datagram (pandar_msgs/msg/PandarPacket)
+  std::string mcap_compression = "zstd";       // chunk compression: "zstd" or "none"
+  std::uint64_t mcap_chunk_bytes = 4u << 20;   // uncompressed messages per chunk, about
+  std::uint64_t mcap_rotate_bytes = 1u << 30;  // start a new file after this many; 0 = never
+  std::uint32_t mcap_rotate_seconds = 0;       // start a new file after this long; 0 = never
+  std::uint64_t mcap_max_files = 0;            // retention; 0 = unlimited
+  std::uint64_t mcap_max_bytes = 0;            // retention; 0 = unlimited
+  std::string mcap_frame_id = "pandar";        // header.frame_id of every PointCloud2
+  std::string mcap_points_topic = "/pandar/points";
+  std::string mcap_health_topic = "/pandar/health";
+  std::string mcap_packets_topic = "/pandar/packets";
 };
 
 struct HealthSection {

@@ -87,6 +87,10 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
     "Packets lost from the pcap to failed writes")                                                 \
   X(pcap_bytes_written, "pcap_written_bytes", "Bytes written to pcap files")                       \
   X(pcd_bytes_written, "pcd_written_bytes", "Bytes written to PCD files")                          \
+  X(mcap_messages_written, "mcap_messages_written", "Messages written to MCAP files")             \
+  X(mcap_messages_not_written, "mcap_messages_not_written",                                        \
+    "Messages lost from MCAP files to failed writes")                                              \
+  X(mcap_bytes_written, "mcap_written_bytes", "Bytes written to MCAP files")                       \
   X(receive_errors, "receive_errors", "Failed receive calls on the socket")                        \
   X(write_errors, "write_errors", "Failed writes")                                                 \
   X(bytes_not_written, "not_written_bytes", "Bytes lost to failed writes")                         \

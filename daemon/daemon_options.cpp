@@ -29,6 +29,20 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.pcap_rotate_seconds = config.output.pcap_rotate_seconds;
   wo.pcap_max_files = config.output.pcap_max_files;
   wo.pcap_max_bytes = config.output.pcap_max_bytes;
+  const OutputSection& o = config.output;
+  wo.mcap = o.mcap;
+  wo.mcap_rotate_bytes = o.mcap_rotate_bytes;
+  wo.mcap_rotate_seconds = o.mcap_rotate_seconds;
+  wo.mcap_max_files = o.mcap_max_files;
+  wo.mcap_max_bytes = o.mcap_max_bytes;
+  wo.mcap_file.compress = o.mcap_compression == "zstd";
+  wo.mcap_file.chunk_bytes = o.mcap_chunk_bytes;
+  wo.mcap_file.max_frame_points = config.arenas.points_per_frame;
+  wo.mcap_file.packets = o.mcap_packets;
+  wo.mcap_file.points_topic = o.mcap_points_topic;
+  wo.mcap_file.health_topic = o.mcap_health_topic;
+  wo.mcap_file.packets_topic = o.mcap_packets_topic;
+  wo.mcap_file.frame_id = o.mcap_frame_id;
   wo.prometheus = config.health.prometheus;
   wo.jsonl = config.health.jsonl;
   wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;
@@ -47,10 +61,11 @@ DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTar
   dopt.decoder = stream_decoder_config(config);
   dopt.decoder.decoder_target = target;
   dopt.frame_decimation = config.output.frame_decimation;
-  dopt.write_frames = config.output.frames;
+  // MCAP takes the same frames (and packets) as the PCD files (and the pcap).
+  dopt.write_frames = config.output.frames || config.output.mcap;
   dopt.min_frame_fraction = config.output.frames_min_fraction;
   dopt.expected_rpm = config.sensor.rotation_speed;
-  dopt.record_raw = config.output.pcap;
+  dopt.record_raw = config.output.pcap || (config.output.mcap && config.output.mcap_packets);
   dopt.lossless = replay;
   dopt.measure_latency = !replay;
   return dopt;

@@ -75,6 +75,7 @@ void DecodeWorker::frame_done(Frame& frame) {
   }
   // The packet being decoded is the one whose arrival finished this frame.
   arena->completed_receive_ns = options_.measure_latency ? current_receive_ns_ : 0;
+  arena->completed_log_ns = last_receive_ns_;
   const bool write = options_.write_frames && frames_finished_ % options_.frame_decimation == 0;
   ++frames_finished_;
   if (write) {
@@ -130,6 +131,7 @@ void DecodeWorker::flush_raw() {
 void DecodeWorker::process(const PacketSlot& slot) {
   if (options_.record_raw) record_raw(slot);
   current_receive_ns_ = slot.receive_time_ns;
+  last_receive_ns_ = slot.receive_time_ns;
   // A cut datagram (MSG_TRUNC live, snapped in a file) is rejected as bad_length whatever its
   // kept length: an empty payload is exactly that reject. The kept length never exceeds the slot.
   const std::size_t length =

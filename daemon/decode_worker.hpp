@@ -92,6 +92,7 @@ class DecodeWorker final : public FrameSink {
   std::uint64_t frames_fragment_ = 0;
   std::uint64_t wakeups_ = 0;
   std::int64_t current_receive_ns_ = 0;  // the packet being decoded (frame latency's start)
+  std::int64_t last_receive_ns_ = 0;     // the latest packet's, kept through the shutdown
   std::uint64_t raw_dropped_ = 0;
   LatencyHistogram latency_;
 };

@@ -78,6 +78,7 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.pcap_packets_not_recorded = decode.raw_packets_dropped;
   c.pcap_packets_not_written = sources.pcap.packets_not_written();
   c.pcap_bytes_written = sources.pcap.bytes_written();
+  count_mcap(sources.mcap);
   c.pcd_bytes_written = sources.frames.bytes_written();
   c.write_errors = sources.accounting.write_errors();
   c.bytes_not_written = sources.accounting.bytes_not_written();
@@ -170,6 +171,13 @@ void HealthPublisher::write_jsonl_line() {
     jsonl_file_.close();  // reopen next time (the file may have been removed)
     throw;
   }
+}
+
+void HealthPublisher::count_mcap(const McapRecorder& mcap) noexcept {
+  HealthCounters& c = health_.counters;
+  c.mcap_messages_written = mcap.messages_written();
+  c.mcap_messages_not_written = mcap.messages_not_written();
+  c.mcap_bytes_written = mcap.bytes_written();
 }
 
 }  // namespace pandarcap

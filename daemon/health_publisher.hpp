@@ -21,6 +21,7 @@
 #include "daemon/frame_output.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/output_accounting.hpp"
+#include "daemon/mcap_recorder.hpp"
 #include "daemon/pcap_recorder.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/writer_options.hpp"
@@ -33,6 +34,7 @@ struct HealthSources {
   const DecodeSnapshot& decode;  // the decoder's latest
   const FrameOutput& frames;
   const PcapRecorder& pcap;
+  const McapRecorder& mcap;
   const OutputAccounting& accounting;
   std::uint64_t writer_wakeups;
   double seconds_since_last_packet;  // -1: none yet
@@ -61,6 +63,9 @@ class HealthPublisher {
   void write();
 
   const HealthSnapshot& snapshot() const noexcept { return health_; }
+  // The MCAP counters of snapshot() brought up to date, nothing else: after the last MCAP file
+  // is closed with the final record in it, for the exit summary.
+  void count_mcap(const McapRecorder& mcap) noexcept;
 
  private:
   void write_prometheus();  // throws

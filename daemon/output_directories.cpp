@@ -54,6 +54,7 @@ std::vector<std::string> output_problems(const WriterOptions& o) {
   check("output directory", o.output_dir);
   if (o.frames) check("frames directory", o.output_dir / "frames");
   if (o.pcap) check("recording directory", o.output_dir / "raw");
+  if (o.mcap) check("MCAP directory", o.output_dir / "mcap");
   if (o.jsonl) {
     check("health directory", o.health_dir);
     const fs::path jsonl = o.health_dir / "health.jsonl";

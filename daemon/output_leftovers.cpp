@@ -10,6 +10,7 @@
 #include <system_error>
 #include <vector>
 
+#include "daemon/mcap/mcap_recovery.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
 
 namespace pandarcap {
@@ -42,12 +43,33 @@ std::optional<std::uint64_t> number_in_name(std::string_view name, std::string_v
   return number;
 }
 
-// Recordings left open: cut back to their last whole record and given their final name.
-void finish_interrupted_recordings(const fs::path& raw_dir, OutputAccounting& accounting) {
+// What finishing one kind of recording found: whether it is ours, how many whole records
+// (packets, messages) it keeps, and how many bytes were cut.
+struct Finished {
+  bool ours = false;
+  std::uint64_t records = 0, cut_bytes = 0;
+};
+
+Finished finish_pcap(const std::string& part) {
+  const PcapRecovery r = finish_interrupted_pcap(part);
+  return {r.ours, r.records, r.cut_bytes};
+}
+
+Finished finish_mcap(const std::string& part) {
+  const McapRecovery r = finish_interrupted_mcap(part);
+  return {r.ours, r.messages, r.cut_bytes};
+}
+
+// Recordings left open (NAME`suffix`.part): cut back to their last whole part, finished and
+// given their final name.
+void finish_interrupted_recordings(const fs::path& dir, std::string_view suffix,
+                                   Finished (*finish)(const std::string&),
+                                   OutputAccounting& accounting) {
+  const std::string part_suffix = std::string(suffix) + ".part";
   std::error_code ec;
-  for (const auto& entry : fs::directory_iterator(raw_dir, ec)) {
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
     const std::string part = entry.path().native();
-    if (!part.ends_with(".pcap.part")) continue;
+    if (!part.ends_with(part_suffix)) continue;
     // Never followed: a link (or a device, a FIFO) here points at a file that is not ours to
     // cut, wherever it leads.
     if (entry.is_symlink(ec) || !entry.is_regular_file(ec)) {
@@ -55,7 +77,7 @@ void finish_interrupted_recordings(const fs::path& raw_dir, OutputAccounting& ac
       continue;
     }
     try {
-      const PcapRecovery recovered = finish_interrupted_pcap(part);
+      const Finished recovered = finish(part);
       if (!recovered.ours) {
         spdlog::warn("{}: not a recording of ours; left as it is", part);
         continue;
@@ -155,7 +177,12 @@ std::uint64_t adopt(const fs::path& dir, std::string_view prefix, std::string_vi
 }  // namespace
 
 void finish_leftovers(const OutputLeftovers& where, OutputAccounting& accounting) {
-  if (!where.raw_dir.empty()) finish_interrupted_recordings(where.raw_dir, accounting);
+  if (!where.raw_dir.empty()) {
+    finish_interrupted_recordings(where.raw_dir, ".pcap", &finish_pcap, accounting);
+  }
+  if (!where.mcap_dir.empty()) {
+    finish_interrupted_recordings(where.mcap_dir, ".mcap", &finish_mcap, accounting);
+  }
   if (!where.frames_dir.empty()) remove_temporaries(where.frames_dir);
   if (!where.raw_dir.empty()) remove_temporaries(where.raw_dir);
   // The health directory may be shared (node_exporter's): only our own temporary name.
@@ -173,6 +200,10 @@ std::uint64_t adopt_earlier_frames(const fs::path& dir, Retention& retention) {
 
 std::uint64_t adopt_earlier_recordings(const fs::path& dir, Retention& retention) {
   return adopt(dir, "pandarcap_", ".pcap", 1, retention, "recordings");
+}
+
+std::uint64_t adopt_earlier_mcap_files(const fs::path& dir, Retention& retention) {
+  return adopt(dir, "pandarcap_", ".mcap", 1, retention, "MCAP files");
 }
 
 }  // namespace pandarcap

@@ -5,6 +5,8 @@
 //   - raw/*.pcap.part, a recording still open: cut back to its last whole record and renamed to
 //     its final name (removed if it holds no whole record; a file that is not a pcap of ours, a
 //     link or a device is left alone, with a warning);
+//   - mcap/*.mcap.part, an MCAP file still open: cut back to its last whole chunk and finished
+//     with a summary and footer (daemon/mcap/mcap_recovery.hpp), then renamed the same way;
 //   - .NAME.tmp in frames/ and raw/, a file not yet renamed into place: it was never complete,
 //     so it is removed (in the health directory, which may be node_exporter's, only the .prom
 //     file's own temporary name is);
@@ -25,7 +27,7 @@ namespace pandarcap {
 
 // Where to look; an empty path: that output is off, nothing of it is touched.
 struct OutputLeftovers {
-  std::filesystem::path frames_dir, raw_dir;
+  std::filesystem::path frames_dir, raw_dir, mcap_dir;
   std::string prometheus_temporary_path, jsonl_path;
 };
 
@@ -39,5 +41,7 @@ void finish_leftovers(const OutputLeftovers& where, OutputAccounting& accounting
 // number (0 when there are none).
 std::uint64_t adopt_earlier_frames(const std::filesystem::path& dir, Retention& retention);
 std::uint64_t adopt_earlier_recordings(const std::filesystem::path& dir, Retention& retention);
+// The same for MCAP files (pandarcap_<UTC>_<N>...mcap).
+std::uint64_t adopt_earlier_mcap_files(const std::filesystem::path& dir, Retention& retention);
 
 }  // namespace pandarcap

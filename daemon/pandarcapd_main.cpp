@@ -71,7 +71,8 @@ constexpr std::string_view kUsage =
        pandarcapd --replay FILE [options]    process a pcap/pcapng recording
 
 Captures a Hesai Pandar40P: receives its UDP packets, decodes them into frames, and writes
-OUTPUT-DIR/frames/*.pcd, OUTPUT-DIR/raw/*.pcap (+ calibration.csv) and, every second,
+OUTPUT-DIR/frames/*.pcd, OUTPUT-DIR/raw/*.pcap (+ calibration.csv), with --mcap
+OUTPUT-DIR/mcap/*.mcap (Foxglove, ros2 bag) and, every second,
 OUTPUT-DIR/health/pandarcap.prom and health.jsonl. SIGTERM/SIGINT stop it cleanly, SIGHUP
 starts new recording files.
 
@@ -112,6 +113,9 @@ Overrides (same names as the configuration keys):
   --return-mode MODE     simulated (and expected) return mode: dual, strongest or last
   --udp-sequence         the simulated sensor appends a UDP sequence number
   --decoder NAME         decoder: auto (default), scalar, sse4, avx2, avx512, neon, sve, sve2
+  --mcap                 output.mcap = true: also write MCAP files (PointCloud2 frames, health)
+  --mcap-only            output.mcap = true, output.frames = false, output.pcap = false; with
+                         --replay FILE this converts a capture to MCAP
   --latency-budget-ms N  latency.budget_ms (default 5): how long a datagram may wait before the
                          receive thread drains the socket; 0 = wake for every datagram
   --log-level LEVEL      trace, debug, info, warn, error, critical, off
@@ -173,6 +177,11 @@ Options parse_options(int argc, char** argv) {
       o.duration_s = args.number(arg, 0.1, 1e7);
     } else if (arg == "--udp-sequence") {
       o.source.simulated_udp_sequence = true;
+    } else if (arg == "--mcap-only") {
+      // Conversion: the frames (and packets, with output.mcap_packets) go to MCAP only.
+      o.overrides.emplace_back("output.mcap", "true");
+      o.overrides.emplace_back("output.frames", "false");
+      o.overrides.emplace_back("output.pcap", "false");
     } else if (const KeyOption* key = find_key_option(arg)) {
       // A configuration key: its type and range are the file's (config/command_line.hpp).
       const std::string text(key->flag ? "true" : args.value(arg));
@@ -222,8 +231,11 @@ void setup_logging(const std::string& level) {
 // file's last line is an older one, and the summary must say how the run really ended.
 void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
   const std::filesystem::path& dir = wo.output_dir;
-  fmt::print("outputs in {}:\n  frames  {}\n  raw     {}\n  health  {} and {}\n", dir.string(),
-             (dir / "frames").string(), (dir / "raw").string(), wo.prometheus_file.string(),
+  fmt::print("outputs in {}:\n", dir.string());
+  if (wo.frames) fmt::print("  frames  {}\n", (dir / "frames").string());
+  if (wo.pcap) fmt::print("  raw     {}\n", (dir / "raw").string());
+  if (wo.mcap) fmt::print("  mcap    {}\n", (dir / "mcap").string());
+  fmt::print("  health  {} and {}\n", wo.prometheus_file.string(),
              (wo.health_dir / "health.jsonl").string());
   const HealthCounters& c = h.counters;
   fmt::print(
@@ -235,6 +247,10 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
       c.ring_overruns, c.kernel_drops, c.frames_complete, c.frames_partial,
       c.frames_dropped_no_arena, c.frames_fragment, c.frames_written, c.pcap_packets_written,
       c.write_errors);
+  if (wo.mcap) {
+    fmt::print("mcap: {} messages written, {} not written, {} bytes\n", c.mcap_messages_written,
+               c.mcap_messages_not_written, c.mcap_bytes_written);
+  }
 }
 
 // The calibration the configuration names, or the nominal table. Throws on a bad file.
@@ -465,6 +481,7 @@ int run(const Options& options) {
   wo.decoder = std::string(to_string(decoder));
   wo.calibration_csv = calibration.to_csv();
   wo.pcap_destination = Endpoint{0, source->recorded_port(config)};
+  wo.mcap_replay_time = options.source.kind == RunSource::Kind::kReplay;
   const auto lock = claim_outputs(config.output.directory);
   Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live);
   try {

@@ -38,6 +38,10 @@ struct FrameArena {
   // Kernel receive time (CLOCK_REALTIME ns) of the packet whose arrival finished the frame: the
   // start of the frame latency the writer measures. 0: not measured (replay).
   std::int64_t completed_receive_ns = 0;
+  // The same packet's receive time by the source's clock, in every run: the host's (live) or
+  // the capture's record time (replay); for a frame the shutdown finished, the last packet's.
+  // MCAP messages are logged at it, so a converted capture plays back at its recorded pace.
+  std::int64_t completed_log_ns = 0;
 };
 
 struct RawPacket {

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <filesystem>
 
+#include "core/health_format.hpp"
 #include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
@@ -40,6 +41,7 @@ Writer::Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_dec
       live_(live),
       frames_(options_, accounting_),
       pcap_(options_, accounting_),
+      mcap_(options_, accounting_),
       health_(options_, accounting_) {}
 
 Writer::~Writer() = default;
@@ -57,9 +59,11 @@ void Writer::prepare() {
     probe_writable(frames_.directory());
   }
   if (options_.pcap) std::filesystem::create_directories(pcap_.directory());
+  if (options_.mcap) std::filesystem::create_directories(mcap_.directory());
   OutputLeftovers leftovers;
   if (options_.frames) leftovers.frames_dir = frames_.directory();
   if (options_.pcap) leftovers.raw_dir = pcap_.directory();
+  if (options_.mcap) leftovers.mcap_dir = mcap_.directory();
   if (options_.prometheus)
     leftovers.prometheus_temporary_path = health_.prometheus_temporary_path();
   if (options_.jsonl) leftovers.jsonl_path = health_.jsonl_path();
@@ -68,6 +72,11 @@ void Writer::prepare() {
   if (options_.pcap) {
     pcap_.adopt_earlier_files();
     pcap_.save_calibration(options_.calibration_csv);
+  }
+  if (options_.mcap) {
+    mcap_.adopt_earlier_files();
+    mcap_.prepare();
+    mcap_health_json_.reserve(8192);
   }
   frames_.reserve();
   // Proves the health directories are writable before the daemon reports ready.
@@ -80,6 +89,7 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
                        .decode = decode_,
                        .frames = frames_,
                        .pcap = pcap_,
+                       .mcap = mcap_,
                        .accounting = accounting_,
                        .writer_wakeups = wakeups_,
                        .seconds_since_last_packet = seconds_since_last_packet(now),
@@ -88,12 +98,17 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
 
 void Writer::write_health() {
   const std::int64_t now = monotonic_ns();
-  pcap_.flush();  // the recording on disk is at most a second behind
+  pcap_.flush();  // the recordings on disk are at most a second behind
+  if (options_.mcap) mcap_.flush();
   health_.build(sources(now), now);
   health_.remember(decode_, now);
   log_fragments(now);
   reported_silent_ = silent(now);
   health_.write();
+  if (options_.mcap) {
+    render_json_line(health_.snapshot(), mcap_health_json_);
+    mcap_.write_health(mcap_health_json_, realtime_ns());
+  }
 }
 
 void Writer::log_fragments(std::int64_t now) {
@@ -144,12 +159,14 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
     if (WriterMessage* message = from_decoder_.front()) {
       switch (message->kind) {
         case WriterMessage::Kind::kFrame:
-          frames_.write(*message->arena);
+          if (options_.frames) frames_.write(*message->arena);
+          if (options_.mcap) mcap_.write_frame(*message->arena);
           arenas_back_.try_push(message->arena);  // room for every arena: cannot fail
           arenas_back_.notify();                  // a replaying decoder may be waiting for it
           break;
         case WriterMessage::Kind::kRaw:
           if (options_.pcap) pcap_.write(*message->raw);
+          if (options_.mcap && options_.mcap_file.packets) mcap_.write_packets(*message->raw);
           message->raw->size = 0;
           raw_back_.try_push(message->raw);
           raw_back_.notify();
@@ -173,6 +190,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
     if (generation != seen_generation) {
       seen_generation = generation;
       pcap_.rotate();
+      mcap_.rotate();
     }
     const std::int64_t now = monotonic_ns();
     // Packets stopped or started again since the last health: say so now, not at the next tick.
@@ -195,7 +213,11 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
   }
   alloc::mark_this_thread_cold();
   pcap_.close();
-  write_health();
+  write_health();  // the final record goes into the MCAP file too, before it is closed
+  mcap_.close();
+  // The exit summary (final_health) counts that last message too; health.jsonl's last line,
+  // written before it, cannot.
+  health_.count_mcap(mcap_);
 }
 
 }  // namespace pandarcap

@@ -5,6 +5,8 @@
 //   - frames as PCD files in DIR/frames/ (daemon/frame_output.hpp);
 //   - raw packets as pcap recordings in DIR/raw/, with the calibration in use beside them
 //     (daemon/pcap_recorder.hpp);
+//   - with output.mcap, frames, health and (output.mcap_packets) raw packets as MCAP files in
+//     DIR/mcap/ (daemon/mcap_recorder.hpp);
 //   - every second the health record, as DIR/health/pandarcap.prom and a line of
 //     DIR/health/health.jsonl (daemon/health_publisher.hpp); and at once, outside that schedule,
 //     when packets stop for longer than the no-data timeout or start again (checked at every
@@ -22,11 +24,13 @@
 
 #include <atomic>
 #include <cstdint>
+#include <string>
 
 #include "core/health.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/frame_output.hpp"
 #include "daemon/health_publisher.hpp"
+#include "daemon/mcap_recorder.hpp"
 #include "daemon/output_accounting.hpp"
 #include "daemon/pcap_recorder.hpp"
 #include "daemon/pipeline_types.hpp"
@@ -79,7 +83,9 @@ class Writer {
   OutputAccounting accounting_;
   FrameOutput frames_;
   PcapRecorder pcap_;
+  McapRecorder mcap_;
   HealthPublisher health_;
+  std::string mcap_health_json_;  // the health record as the MCAP's health message
 
   DecodeSnapshot decode_;        // the latest counters from the decoder
   bool reported_silent_ = true;  // the last health written said "no data"

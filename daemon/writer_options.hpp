@@ -6,12 +6,13 @@
 #include <filesystem>
 #include <string>
 
+#include "daemon/mcap/mcap_file_options.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap {
 
 struct WriterOptions {
-  std::filesystem::path output_dir;       // frames/ and raw/ go under it
+  std::filesystem::path output_dir;       // frames/, raw/ and mcap/ go under it
   std::filesystem::path health_dir;       // health.jsonl
   std::filesystem::path prometheus_file;  // the .prom textfile
   bool frames = true;
@@ -22,6 +23,14 @@ struct WriterOptions {
   std::uint32_t pcap_rotate_seconds = 0;
   std::uint64_t pcap_max_files = 0;
   std::uint64_t pcap_max_bytes = 0;
+  bool mcap = false;
+  std::uint64_t mcap_rotate_bytes = 0;
+  std::uint32_t mcap_rotate_seconds = 0;
+  std::uint64_t mcap_max_files = 0;
+  std::uint64_t mcap_max_bytes = 0;
+  // Health messages take the latest frame's or packet's time (a replay), not the host's clock.
+  bool mcap_replay_time = false;
+  McapFileOptions mcap_file;
   bool prometheus = true;
   bool jsonl = true;
   std::uint64_t jsonl_rotate_bytes = 0;

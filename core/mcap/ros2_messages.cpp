@@ -1,0 +1,177 @@
+#include "core/mcap/ros2_messages.hpp"
+
+#include <array>
+
+#include "core/pcd.hpp"
+
+namespace pandarcap::mcap {
+
+const std::string_view kPointCloud2Schema =
+    R"(std_msgs/Header header
+uint32 height
+uint32 width
+PointField[] fields
+bool is_bigendian
+uint32 point_step
+uint32 row_step
+uint8[] data
+bool is_dense
+
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+
+================================================================================
+MSG: sensor_msgs/PointField
+uint8 INT8    = 1
+uint8 UINT8   = 2
+uint8 INT16   = 3
+uint8 UINT16  = 4
+uint8 INT32   = 5
+uint8 UINT32  = 6
+uint8 FLOAT32 = 7
+uint8 FLOAT64 = 8
+string name
+uint32 offset
+uint8  datatype
+uint32 count
+)";
+
+const std::string_view kPandarPacketSchema =
+    R"(builtin_interfaces/Time stamp
+uint8[] data
+uint32 size
+
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+)";
+
+namespace {
+
+constexpr std::uint8_t kUint8 = 2, kFloat32 = 7, kFloat64 = 8;
+
+struct Field {
+  std::string_view name;
+  std::uint32_t offset;
+  std::uint8_t datatype;
+};
+// The PCD layout (core/pcd.hpp), field for field.
+constexpr std::array<Field, 7> kFields{{{"x", 0, kFloat32},
+                                        {"y", 4, kFloat32},
+                                        {"z", 8, kFloat32},
+                                        {"intensity", 12, kUint8},
+                                        {"channel", 13, kUint8},
+                                        {"return_type", 14, kUint8},
+                                        {"timestamp", 15, kFloat64}}};
+
+constexpr std::size_t kEncapsulation = 4;
+
+// CDR aligns to the field's size, counted from after the encapsulation header.
+std::size_t aligned(std::size_t at, std::size_t size) noexcept {
+  const std::size_t body = at - kEncapsulation;
+  return at + (size - body % size) % size;
+}
+
+// Writes the padding that aligns the next `size`-byte field; `start` is the message's first
+// byte in the writer.
+void align(ByteWriter& w, std::size_t start, std::size_t size) {
+  const std::size_t at = w.size() - start;
+  for (std::size_t i = at; i < aligned(at, size); ++i)
+    w.u8(0);
+}
+
+void cdr_string(ByteWriter& w, std::string_view s) {
+  w.u32(static_cast<std::uint32_t>(s.size() + 1));  // CDR strings count their NUL
+  w.bytes(s);
+  w.u8(0);
+}
+
+void encapsulation(ByteWriter& w) {
+  w.u8(0);
+  w.u8(1);  // CDR_LE
+  w.u8(0);
+  w.u8(0);
+}
+
+}  // namespace
+
+RosTime ros_time(std::int64_t unix_ns) noexcept {
+  std::int64_t sec = unix_ns / 1'000'000'000;
+  std::int64_t ns = unix_ns % 1'000'000'000;
+  if (ns < 0) {
+    ns += 1'000'000'000;
+    --sec;
+  }
+  return RosTime{static_cast<std::int32_t>(sec), static_cast<std::uint32_t>(ns)};
+}
+
+std::size_t pointcloud2_prefix_bytes(std::size_t frame_id_bytes) noexcept {
+  std::size_t at = kEncapsulation + 8;  // stamp
+  at += 4 + frame_id_bytes + 1;         // frame_id
+  at = aligned(at, 4) + 4 + 4 + 4;      // height, width, fields' count
+  for (const Field& f : kFields) {
+    at = aligned(at, 4) + 4 + f.name.size() + 1;  // name
+    at = aligned(at, 4) + 4 + 1;                  // offset, datatype
+    at = aligned(at, 4) + 4;                      // count
+  }
+  at += 1;                          // is_bigendian
+  at = aligned(at, 4) + 4 + 4 + 4;  // point_step, row_step, data's length
+  return at;
+}
+
+void write_pointcloud2_prefix(ByteWriter& w, RosTime stamp, std::string_view frame_id,
+                              std::uint32_t points) {
+  const std::size_t start = w.size();
+  encapsulation(w);
+  w.u32(static_cast<std::uint32_t>(stamp.sec));
+  w.u32(stamp.nanosec);
+  cdr_string(w, frame_id);
+  align(w, start, 4);
+  w.u32(1);       // height: an unordered cloud
+  w.u32(points);  // width
+  w.u32(static_cast<std::uint32_t>(kFields.size()));
+  for (const Field& f : kFields) {
+    align(w, start, 4);
+    cdr_string(w, f.name);
+    align(w, start, 4);
+    w.u32(f.offset);
+    w.u8(f.datatype);
+    align(w, start, 4);
+    w.u32(1);  // count
+  }
+  w.u8(0);  // is_bigendian
+  align(w, start, 4);
+  w.u32(static_cast<std::uint32_t>(kPcdPointBytes));           // point_step
+  w.u32(static_cast<std::uint32_t>(kPcdPointBytes * points));  // row_step
+  w.u32(static_cast<std::uint32_t>(kPcdPointBytes * points));  // data: length, then the bytes
+}
+
+void write_pointcloud2_suffix(ByteWriter& w) {
+  w.u8(1);  // is_dense: the decoder keeps only returns with a range, never NaN points
+}
+
+std::size_t pandar_packet_bytes(std::size_t payload_bytes) noexcept {
+  const std::size_t at = kEncapsulation + 8 + 4 + payload_bytes;
+  return aligned(at, 4) + 4;
+}
+
+void write_pandar_packet(ByteWriter& w, RosTime stamp, std::span<const std::uint8_t> payload) {
+  const std::size_t start = w.size();
+  encapsulation(w);
+  w.u32(static_cast<std::uint32_t>(stamp.sec));
+  w.u32(stamp.nanosec);
+  w.u32(static_cast<std::uint32_t>(payload.size()));
+  w.bytes(payload);
+  align(w, start, 4);
+  w.u32(static_cast<std::uint32_t>(payload.size()));
+}
+
+}  // namespace pandarcap::mcap

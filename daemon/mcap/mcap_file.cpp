@@ -1,0 +1,228 @@
+#include "daemon/mcap/mcap_file.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "core/mcap/ros2_messages.hpp"
+#include "core/pcd.hpp"
+
+namespace pandarcap {
+namespace {
+
+// The health record's shape for readers that show a schema (Foxglove): an object with the
+// state, its reason and the counters; the record itself documents every key (README).
+constexpr std::string_view kHealthSchema =
+    R"({"type":"object","title":"pandarcap health record","properties":{)"
+    R"("state":{"type":"string","enum":["starting","ok","no_data","degraded","error"]},)"
+    R"("reason":{"type":"string"},"counters":{"type":"object"},"gauges":{"type":"object"}},)"
+    R"("required":["state","counters"]})";
+
+// Generous room for the records around a chunk, its indexes and a file's tail per chunk.
+constexpr std::size_t kRecordSlack = 64 * 1024;
+constexpr std::size_t kTailBytesPerChunk = 160;
+
+}  // namespace
+
+McapFile::McapFile(const McapFileOptions& options)
+    : options_(options),
+      compressor_(options.chunk_bytes + (mcap::kMessagePrefixBytes +
+                                         mcap::pointcloud2_prefix_bytes(options.frame_id.size()) +
+                                         options.max_frame_points * kPcdPointBytes + 1)),
+      max_message_bytes_(mcap::pointcloud2_prefix_bytes(options.frame_id.size()) +
+                         options.max_frame_points * kPcdPointBytes + 1),
+      // A chunk holds chunk_bytes; its smallest messages (packets) are over 1 KB.
+      max_index_entries_(options.chunk_bytes / 1024 + 64) {
+  const std::size_t chunk_capacity =
+      options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_;
+  chunk_.reserve(chunk_capacity);
+  compressed_.resize(compressor_.bound());
+  out_.reserve(compressor_.bound() + kRecordSlack + options.max_chunks * kTailBytesPerChunk +
+               options.calibration_csv.size());
+  for (auto& index : index_)
+    index.reserve(max_index_entries_);
+  summary_.chunks.reserve(options.max_chunks);
+  summary_.schemas.push_back(
+      {1, std::string(mcap::kPointCloud2Name), "ros2msg", std::string(mcap::kPointCloud2Schema)});
+  summary_.schemas.push_back({2, "pandarcap.Health", "jsonschema", std::string(kHealthSchema)});
+  summary_.channels.push_back({kPointsChannel, 1, options.points_topic, "cdr"});
+  summary_.channels.push_back({kHealthChannel, 2, options.health_topic, "json"});
+  if (options.packets) {
+    summary_.schemas.push_back({3, std::string(mcap::kPandarPacketName), "ros2msg",
+                                std::string(mcap::kPandarPacketSchema)});
+    summary_.channels.push_back({kPacketsChannel, 3, options.packets_topic, "cdr"});
+  }
+}
+
+void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
+  file_.open(path, OutputFile::Mode::kCreate);
+  summary_.chunks.clear();
+  summary_.attachments.clear();
+  summary_.metadata.clear();
+  summary_.message_count = 0;
+  summary_.channel_message_count.fill(0);
+  summary_.message_start_time = summary_.message_end_time = 0;
+  chunk_.clear();
+  chunk_messages_ = 0;
+  for (auto& index : index_)
+    index.clear();
+  for (auto& s : sequence_)
+    s = 0;
+  out_.clear();
+  mcap::ByteWriter w(out_);
+  w.bytes(mcap::kMagic);
+  mcap::write_header(w, "ros2", options_.library);
+  for (const auto& schema : summary_.schemas)
+    mcap::write_schema(w, schema);
+  for (const auto& channel : summary_.channels)
+    mcap::write_channel(w, channel);
+  {
+    std::vector<std::pair<std::string_view, std::string_view>> entries;
+    for (const auto& [key, value] : options_.metadata)
+      entries.emplace_back(key, value);
+    const std::size_t at = w.size();
+    mcap::write_metadata(w, "pandarcap", entries);
+    summary_.metadata.push_back({at, w.size() - at, "pandarcap"});
+  }
+  {
+    const std::size_t at = w.size();
+    const auto csv =
+        std::span(reinterpret_cast<const std::uint8_t*>(options_.calibration_csv.data()),
+                  options_.calibration_csv.size());
+    mcap::write_attachment(w, create_time_ns, create_time_ns, "calibration.csv", "text/csv", csv);
+    summary_.attachments.push_back({at, w.size() - at, create_time_ns, create_time_ns, csv.size(),
+                                    "calibration.csv", "text/csv"});
+  }
+  whole_bytes_ = 0;
+  write_out();
+}
+
+void McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
+  if (data_bytes > max_message_bytes_) {
+    throw std::length_error("MCAP message larger than the configured frame capacity");
+  }
+  const bool too_big = chunk_.size() + mcap::kMessagePrefixBytes + data_bytes > chunk_.capacity();
+  const bool over = chunk_.size() >= options_.chunk_bytes;
+  if (chunk_messages_ != 0 &&
+      (too_big || over || index_[channel - 1].size() >= max_index_entries_)) {
+    write_chunk();
+  }
+}
+
+void McapFile::begin_message(std::uint16_t channel, std::uint64_t log_time,
+                             std::size_t data_bytes) {
+  make_room(data_bytes, channel);
+  if (chunk_messages_ == 0 || log_time < chunk_start_time_) chunk_start_time_ = log_time;
+  if (chunk_messages_ == 0 || log_time > chunk_end_time_) chunk_end_time_ = log_time;
+  ++chunk_messages_;
+  index_[channel - 1].push_back({log_time, chunk_.size()});
+  mcap::ByteWriter w(chunk_);
+  mcap::write_message_prefix(w, channel, sequence_[channel]++, log_time, log_time, data_bytes);
+}
+
+void McapFile::add_frame(const Frame& frame, std::uint64_t log_time) {
+  const std::span<const Point> points = frame.used();
+  const std::size_t prefix = mcap::pointcloud2_prefix_bytes(options_.frame_id.size());
+  const std::size_t data = points.size() * kPcdPointBytes;
+  begin_message(kPointsChannel, log_time, prefix + data + mcap::kPointCloud2SuffixBytes);
+  mcap::ByteWriter w(chunk_);
+  mcap::write_pointcloud2_prefix(w, mcap::ros_time(frame.info.start_ns), options_.frame_id,
+                                 static_cast<std::uint32_t>(points.size()));
+  const std::size_t at = chunk_.size();
+  chunk_.resize(at + data);  // within the reserved capacity: no allocation
+  encode_pcd_points(points, std::span(chunk_.data() + at, data));
+  mcap::write_pointcloud2_suffix(w);
+}
+
+void McapFile::add_packet(std::span<const std::uint8_t> payload, std::int64_t receive_time_ns,
+                          std::uint64_t log_time) {
+  begin_message(kPacketsChannel, log_time, mcap::pandar_packet_bytes(payload.size()));
+  mcap::ByteWriter w(chunk_);
+  mcap::write_pandar_packet(w, mcap::ros_time(receive_time_ns), payload);
+}
+
+void McapFile::add_health(std::string_view json, std::uint64_t log_time) {
+  while (!json.empty() && json.back() == '\n')
+    json.remove_suffix(1);
+  begin_message(kHealthChannel, log_time, json.size());
+  mcap::ByteWriter(chunk_).bytes(json);
+}
+
+void McapFile::write_chunk() {
+  if (chunk_messages_ == 0) return;
+  const std::uint64_t chunk_start = file_.size();
+  const std::span<const std::uint8_t> records(chunk_);
+  std::span<const std::uint8_t> stored = records;
+  if (options_.compress) {
+    stored = std::span<const std::uint8_t>(compressed_.data(),
+                                           compressor_.compress(records, compressed_));
+  }
+  out_.clear();
+  mcap::ByteWriter w(out_);
+  mcap::write_chunk(w, chunk_start_time_, chunk_end_time_, records, options_.compress ? "zstd" : "",
+                    stored);
+  mcap::ChunkInfo info;
+  info.message_start_time = chunk_start_time_;
+  info.message_end_time = chunk_end_time_;
+  info.chunk_start_offset = chunk_start;
+  info.chunk_length = w.size();
+  info.compression = options_.compress ? "zstd" : "";
+  info.compressed_size = stored.size();
+  info.uncompressed_size = records.size();
+  const std::size_t indexes_at = w.size();
+  for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
+    if (index_[c].empty()) continue;
+    info.message_index_offset[c] = chunk_start + w.size();
+    mcap::write_message_index(w, static_cast<std::uint16_t>(c + 1), index_[c]);
+  }
+  info.message_index_length = w.size() - indexes_at;
+  write_out();  // throws: the chunk stays unwritten and uncounted
+  summary_.chunks.push_back(info);
+  for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
+    for (const auto& entry : index_[c])
+      summary_.count_message(static_cast<std::uint16_t>(c + 1), entry.log_time);
+    index_[c].clear();
+  }
+  chunk_.clear();
+  chunk_messages_ = 0;
+}
+
+void McapFile::write_out() {
+  try {
+    file_.write(std::span<const std::uint8_t>(out_));
+  } catch (...) {
+    file_.truncate(whole_bytes_);
+    throw;
+  }
+  whole_bytes_ = file_.size();
+}
+
+void McapFile::flush() {
+  if (file_.is_open()) write_chunk();
+}
+
+void McapFile::close() {
+  if (!file_.is_open()) return;
+  write_chunk();
+  out_.clear();
+  mcap::ByteWriter w(out_);
+  mcap::write_tail(w, file_.size(), summary_);
+  write_out();
+  file_.close();
+}
+
+std::uint64_t McapFile::abandon() noexcept {
+  const std::uint64_t lost = chunk_messages_;
+  chunk_.clear();
+  chunk_messages_ = 0;
+  for (auto& index : index_)
+    index.clear();
+  file_.truncate(whole_bytes_);
+  try {
+    file_.close();
+  } catch (...) {
+    // Closing a file that failed already: nothing more to report.
+  }
+  return lost;
+}
+
+}  // namespace pandarcap

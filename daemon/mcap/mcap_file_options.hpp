@@ -1,0 +1,27 @@
+// What shapes an MCAP file: chunking, compression, topics, frame id and what goes in its header
+// records. Plain data, from the [output] section (daemon_options.cpp) and the recorder.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace pandarcap {
+
+struct McapFileOptions {
+  bool compress = true;                    // zstd chunks; false: stored as they are
+  std::size_t chunk_bytes = 4u << 20;      // uncompressed messages per chunk, about
+  std::size_t max_frame_points = 180'000;  // the largest frame (the arenas' capacity)
+  std::size_t max_chunks = 16'384;         // per file
+  bool packets = false;                    // a /pandar/packets channel
+  std::string points_topic = "/pandar/points";
+  std::string health_topic = "/pandar/health";
+  std::string packets_topic = "/pandar/packets";
+  std::string frame_id = "pandar";
+  std::string library;                                        // the Header's, "pandarcap <version>"
+  std::vector<std::pair<std::string, std::string>> metadata;  // the "pandarcap" record
+  std::string calibration_csv;  // attached to every file as calibration.csv
+};
+
+}  // namespace pandarcap

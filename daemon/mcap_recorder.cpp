@@ -1,0 +1,202 @@
+#include "daemon/mcap_recorder.hpp"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <span>
+#include <system_error>
+
+#include "core/units.hpp"
+#include "daemon/clocks.hpp"
+#include "daemon/io/file_output.hpp"
+#include "daemon/mcap/mcap_recovery.hpp"
+#include "daemon/output_leftovers.hpp"
+
+namespace pandarcap {
+
+McapRecorder::McapRecorder(const WriterOptions& options, OutputAccounting& accounting)
+    : options_(options),
+      accounting_(accounting),
+      dir_(options.output_dir / "mcap"),
+      retention_(options.mcap_max_files, options.mcap_max_bytes) {}
+
+McapRecorder::~McapRecorder() = default;
+
+void McapRecorder::adopt_earlier_files() {
+  next_index_ = adopt_earlier_mcap_files(dir_, retention_);
+}
+
+void McapRecorder::prepare() {
+  McapFileOptions o = options_.mcap_file;
+  o.library = fmt::format("pandarcap {}", options_.version);
+  o.metadata = {{"version", options_.version},
+                {"sensor_name", options_.sensor_name},
+                {"decoder", options_.decoder}};
+  o.calibration_csv = options_.calibration_csv;
+  file_ = std::make_unique<McapFile>(o);
+  final_path_.reserve(4096);
+  part_path_.reserve(4096);
+}
+
+std::uint64_t McapRecorder::messages_written() const noexcept {
+  return messages_closed_ + (file_ && file_->is_open() ? file_->messages() : 0);
+}
+
+std::uint64_t McapRecorder::bytes_written() const noexcept {
+  return bytes_closed_ + (file_ ? file_->bytes() : 0);
+}
+
+bool McapRecorder::ready(std::uint64_t log_time) {
+  if (file_->is_open() &&
+      (file_->full() ||
+       (options_.mcap_rotate_bytes != 0 && file_->bytes() >= options_.mcap_rotate_bytes) ||
+       (options_.mcap_rotate_seconds != 0 &&
+        monotonic_ns() - opened_monotonic_ns_ >= options_.mcap_rotate_seconds * kNsPerSecond))) {
+    close();
+  }
+  if (file_->is_open()) return true;
+  final_path_.assign(dir_.native());
+  fmt::format_to(std::back_inserter(final_path_), "/pandarcap_{}_{:04}.mcap",
+                 utc_file_stamp(static_cast<std::int64_t>(log_time), false), next_index_++);
+  part_path_.assign(final_path_);
+  part_path_ += ".part";
+  try {
+    file_->open(part_path_, static_cast<std::uint64_t>(realtime_ns()));
+  } catch (const std::exception& error) {
+    // Created but not even its header written (a full disk): not left behind.
+    file_->abandon();
+    ::unlink(part_path_.c_str());
+    accounting_.write_failed(error, 0);
+    return false;
+  }
+  opened_monotonic_ns_ = monotonic_ns();
+  return true;
+}
+
+void McapRecorder::failed(const std::exception& error) {
+  // The messages of the chunk being written are lost (counted); what the file holds up to its
+  // last whole chunk is finished as a file readers accept, as a killed run's would be.
+  const std::uint64_t lost = file_->abandon();
+  messages_not_written_ += lost;
+  accounting_.write_failed(error, 0);
+  try {
+    const McapRecovery recovered = finish_interrupted_mcap(part_path_);
+    if (recovered.messages == 0) {
+      ::unlink(part_path_.c_str());
+    } else {
+      accounting_.put_in_place(part_path_, final_path_);
+      messages_closed_ += recovered.messages;
+      const std::uint64_t bytes = std::filesystem::file_size(final_path_);
+      bytes_closed_ += bytes;
+      retention_.add(final_path_, bytes);
+    }
+  } catch (const std::exception& again) {
+    // The disk is still full: the .part stays, and the next start finishes it.
+    spdlog::warn("{}: left unfinished after a failed write ({}); the next start finishes it",
+                 part_path_, again.what());
+  }
+}
+
+void McapRecorder::write_frame(const FrameArena& arena) {
+  const FrameInfo& info = arena.frame.info;
+  const auto log_time = static_cast<std::uint64_t>(
+      arena.completed_log_ns > 0 ? arena.completed_log_ns : info.start_ns);
+  last_log_time_ = log_time;
+  if (!ready(log_time)) {
+    ++messages_not_written_;
+    return;
+  }
+  try {
+    file_->add_frame(arena.frame, log_time);
+  } catch (const std::length_error& error) {
+    ++messages_not_written_;  // cannot happen with arenas of the configured size
+    accounting_.write_failed(error, 0);
+  } catch (const std::exception& error) {
+    ++messages_not_written_;
+    failed(error);
+  }
+}
+
+void McapRecorder::write_packets(const RawBatch& batch) {
+  for (std::size_t i = 0; i < batch.size; ++i) {
+    const RawPacket& packet = batch.packets[i];
+    const auto log_time = static_cast<std::uint64_t>(packet.receive_time_ns);
+    last_log_time_ = log_time;
+    if (!ready(log_time)) {
+      messages_not_written_ += batch.size - i;  // the disk is failing: not tried per packet
+      return;
+    }
+    try {
+      file_->add_packet(std::span<const std::uint8_t>(packet.payload, packet.length),
+                        packet.receive_time_ns, log_time);
+    } catch (const std::exception& error) {
+      messages_not_written_ += batch.size - i;
+      failed(error);
+      return;
+    }
+  }
+}
+
+void McapRecorder::write_health(std::string_view json_line, std::int64_t realtime) {
+  // Replays stamp health with the recording's time, so the file stays one timeline; a record
+  // from before the first packet has no place on it and describes nothing yet: not written.
+  if (options_.mcap_replay_time && last_log_time_ == 0) return;
+  const std::uint64_t log_time =
+      options_.mcap_replay_time ? last_log_time_ : static_cast<std::uint64_t>(realtime);
+  if (!ready(log_time)) {
+    ++messages_not_written_;
+    return;
+  }
+  try {
+    file_->add_health(json_line, log_time);
+  } catch (const std::exception& error) {
+    ++messages_not_written_;
+    failed(error);
+  }
+}
+
+void McapRecorder::flush() {
+  if (!file_ || !file_->is_open()) return;
+  try {
+    file_->flush();
+  } catch (const std::exception& error) {
+    failed(error);
+  }
+}
+
+void McapRecorder::close() {
+  if (!file_ || !file_->is_open()) return;
+  try {
+    file_->close();
+  } catch (const std::exception& error) {
+    failed(error);
+    return;
+  }
+  finish_file();
+}
+
+void McapRecorder::finish_file() {
+  try {
+    if (file_->messages() == 0) {
+      ::unlink(part_path_.c_str());
+      return;
+    }
+    const std::uint64_t bytes = std::filesystem::file_size(part_path_);
+    accounting_.put_in_place(part_path_, final_path_);
+    messages_closed_ += file_->messages();
+    bytes_closed_ += bytes;
+    retention_.add(final_path_, bytes);
+  } catch (const std::exception& error) {
+    accounting_.write_failed(error, 0);
+  }
+}
+
+void McapRecorder::rotate() {
+  if (file_ && file_->is_open()) {
+    spdlog::info("SIGHUP: closing {}", std::filesystem::path(final_path_).filename().string());
+  }
+  close();
+}
+
+}  // namespace pandarcap
