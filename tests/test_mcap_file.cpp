@@ -1,0 +1,259 @@
+// daemon/mcap: one MCAP file written by McapFile, and finish_interrupted_mcap() for a ".part" a
+// killed run left, cut anywhere. Every finished or recovered file is read back by the MCAP
+// project's own reader (support/mcap_reader.hpp), which must accept it whole.
+#include <catch2/catch.hpp>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "bench/child_process.hpp"
+#include "core/mcap/mcap_parse.hpp"
+#include "core/pcd.hpp"
+#include "daemon/mcap/mcap_file.hpp"
+#include "daemon/mcap/mcap_recovery.hpp"
+#include "support/mcap_reader.hpp"
+#include "support/test_support.hpp"
+
+using namespace pandarcap;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr std::uint64_t kT0 = 1'795'348'800'000'000'000;  // 2026-11-20, ns
+
+// A frame of `n` points whose fields tell them apart.
+struct TestFrame {
+  std::vector<Point> storage;
+  Frame frame;
+  TestFrame(std::size_t n, std::int64_t start_ns) : storage(n) {
+    for (std::size_t i = 0; i < n; ++i) {
+      Point& p = storage[i];
+      p.x = static_cast<float>(i) * 0.25f;
+      p.y = -static_cast<float>(i);
+      p.z = 1.5f;
+      p.intensity = static_cast<std::uint8_t>(i);
+      p.channel = static_cast<std::uint8_t>(i % 40);
+      p.return_type = ReturnType::kLastStrongest;
+      p.timestamp_ns = start_ns + static_cast<std::int64_t>(i) * 1000;
+    }
+    frame.points = storage;
+    frame.size = n;
+    frame.info.start_ns = start_ns;
+  }
+};
+
+McapFileOptions small_options() {
+  McapFileOptions o;
+  o.chunk_bytes = 64 * 1024;  // several chunks per file
+  o.max_frame_points = 4000;
+  o.max_chunks = 64;
+  o.packets = true;
+  o.library = "pandarcap test";
+  o.metadata = {{"version", "test"}};
+  o.calibration_csv = "Channel,Elevation,Azimuth\n1,15,0\n";
+  return o;
+}
+
+// Frames of 3000 points (69 kB each: a chunk apiece), packets and health, flushed now and then
+// as the writer's tick does. Returns the messages written.
+std::uint64_t write_file(const fs::path& path, const McapFileOptions& options, int seconds) {
+  McapFile file(options);
+  file.open(path.string(), kT0);
+  std::vector<std::uint8_t> packet(1262);
+  for (int s = 0; s < seconds; ++s) {
+    for (int f = 0; f < 3; ++f) {
+      const std::uint64_t t = kT0 + s * 1'000'000'000ull + f * 100'000'000ull;
+      TestFrame frame(3000, static_cast<std::int64_t>(t));
+      file.add_frame(frame.frame, t);
+      for (int p = 0; p < 5; ++p) {
+        packet[0] = 0xEE;
+        packet[1] = static_cast<std::uint8_t>(p);
+        file.add_packet(packet, static_cast<std::int64_t>(t + p), t + p);
+      }
+    }
+    file.add_health(
+        R"({"state":"ok","counters":{"datagrams_received":)" + std::to_string(s) + "}}\n",
+        kT0 + s * 1'000'000'000ull + 900'000'000ull);
+    file.flush();
+  }
+  const std::uint64_t messages = file.messages();
+  file.close();
+  return messages;
+}
+
+std::string read_all(const fs::path& path) {
+  return harness::read_file(path);
+}
+
+}  // namespace
+
+TEST_CASE("an MCAP file is read whole by the MCAP project's reader, messages decoded",
+          "[mcap][outputs]") {
+  test::ScratchDir dir("mcap-file");
+  const fs::path path = dir / "a.mcap";
+  const McapFileOptions options = small_options();
+  const std::uint64_t messages = write_file(path, options, 2);
+  CHECK(messages == 2 * (3 + 15 + 1));
+  const auto read = test::read_mcap_independently(path);
+  if (read.reader_missing) return;
+  INFO(read.error);
+  REQUIRE(read.file);
+  const auto& f = *read.file;
+  CHECK(f["header"]["profile"] == "ros2");
+  CHECK(f["header"]["library"] == "pandarcap test");
+  CHECK(f["statistics"]["message_count"] == messages);
+  CHECK(f["statistics"]["chunk_count"].get<int>() >= 6);  // a frame fills a 64 kB chunk
+  CHECK(f["chunk_compression"] == nlohmann::json::array({"zstd"}));
+  REQUIRE(f["attachments"].size() == 1);
+  CHECK(f["attachments"][0]["name"] == "calibration.csv");
+  CHECK(f["attachments"][0]["text"] == options.calibration_csv);
+  CHECK(f["metadata"][0]["entries"]["version"] == "test");
+  const auto& points = f["topics"]["/pandar/points"];
+  CHECK(points["schema"] == "sensor_msgs/msg/PointCloud2");
+  REQUIRE(points["count"] == 6);
+  const auto& first = points["messages"][0];
+  CHECK(first["frame_id"] == "pandar");
+  CHECK(first["points"] == 3000);
+  CHECK(first["width"] == 3000);
+  CHECK(first["point_step"] == kPcdPointBytes);
+  CHECK(first["stamp"]["sec"] == kT0 / 1'000'000'000);
+  CHECK(first["last"]["x"].get<double>() == Approx(2999 * 0.25));
+  CHECK(first["last"]["y"].get<double>() == Approx(-2999));
+  CHECK(first["last"]["channel"] == 2999 % 40);
+  CHECK(first["last"]["return_type"] == 3);
+  CHECK(first["last"]["timestamp"].get<double>() ==
+        Approx(static_cast<double>(kT0 + 2999 * 1000) * 1e-9));
+  CHECK(first["sums"]["z"].get<double>() == Approx(3000 * 1.5));
+  const auto& packets = f["topics"]["/pandar/packets"];
+  CHECK(packets["schema"] == "pandar_msgs/msg/PandarPacket");
+  CHECK(packets["count"] == 30);
+  CHECK(packets["messages"][1]["size"] == 1262);
+  CHECK(packets["messages"][1]["first_bytes"] == nlohmann::json::array({0xEE, 1}));
+  const auto& health = f["topics"]["/pandar/health"];
+  CHECK(health["count"] == 2);
+  CHECK(health["messages"][1]["datagrams_received"] == 1);
+}
+
+TEST_CASE("a file cut anywhere is finished into one the reader accepts, keeping whole chunks",
+          "[mcap][recovery]") {
+  test::ScratchDir dir("mcap-recovery");
+  const fs::path whole = dir / "whole.mcap";
+  const McapFileOptions options = small_options();
+  const std::uint64_t messages = write_file(whole, options, 3);
+  const std::string bytes = read_all(whole);
+  std::mt19937 rng(20261125);
+  std::vector<std::uint64_t> cuts{9, 40, bytes.size() / 2, bytes.size() - 1, bytes.size() - 30};
+  for (int i = 0; i < 12; ++i)
+    cuts.push_back(rng() % bytes.size());
+  std::uint64_t previous_kept = 0;
+  for (const std::uint64_t cut : cuts) {
+    INFO("cut at " << cut << " of " << bytes.size());
+    const fs::path part = dir / ("cut-" + std::to_string(cut) + ".mcap.part");
+    std::ofstream(part, std::ios::binary) << bytes.substr(0, cut);
+    const McapRecovery r = finish_interrupted_mcap(part.string());
+    CHECK(r.ours);
+    CHECK(r.messages <= messages);
+    CHECK(r.kept_bytes <= cut);
+    CHECK(r.cut_bytes == cut - r.kept_bytes);
+    if (r.messages == 0) {
+      CHECK(fs::file_size(part) == cut);  // left for the caller to remove
+      continue;
+    }
+    // Kept: exactly the bytes before the cut point, then a new tail.
+    const std::string after = read_all(part);
+    CHECK(after.compare(0, r.kept_bytes, bytes, 0, r.kept_bytes) == 0);
+    const auto read = test::read_mcap_independently(part);
+    if (read.reader_missing) continue;
+    INFO(read.error);
+    REQUIRE(read.file);
+    CHECK((*read.file)["statistics"]["message_count"] == r.messages);
+    CHECK((*read.file)["attachments"][0]["name"] == "calibration.csv");
+    previous_kept = std::max(previous_kept, r.kept_bytes);
+  }
+  CHECK(previous_kept > 0);
+  // The whole file as a .part (killed after its footer, before its rename): all kept.
+  const fs::path done = dir / "done.mcap.part";
+  fs::copy_file(whole, done);
+  const McapRecovery r = finish_interrupted_mcap(done.string());
+  CHECK(r.messages == messages);
+  const auto read = test::read_mcap_independently(done);
+  if (!read.reader_missing) {
+    INFO(read.error);
+    REQUIRE(read.file);
+    CHECK((*read.file)["statistics"]["message_count"] == messages);
+  }
+}
+
+TEST_CASE("recovery leaves files that are not pandarcap's MCAP alone and refuses links",
+          "[mcap][recovery]") {
+  test::ScratchDir dir("mcap-not-ours");
+  const fs::path text = dir / "notes.mcap.part";
+  std::ofstream(text) << "not an MCAP file at all\n";
+  CHECK_FALSE(finish_interrupted_mcap(text.string()).ours);
+  CHECK(read_all(text) == "not an MCAP file at all\n");
+
+  // Another writer's MCAP (its Header names another library): not ours to cut.
+  const fs::path other = dir / "other.mcap.part";
+  {
+    std::vector<std::uint8_t> out;
+    mcap::ByteWriter w(out);
+    w.bytes(mcap::kMagic);
+    mcap::write_header(w, "ros2", "rosbag2");
+    w.bytes(std::string_view("trailing bytes of a cut record"));
+    std::ofstream(other, std::ios::binary)
+        .write(reinterpret_cast<const char*>(out.data()), static_cast<std::streamsize>(out.size()));
+  }
+  const std::string before = read_all(other);
+  CHECK_FALSE(finish_interrupted_mcap(other.string()).ours);
+  CHECK(read_all(other) == before);
+
+  // A link to a file of ours: refused, and its target untouched.
+  const fs::path target = dir / "target.mcap";
+  write_file(target, small_options(), 1);
+  const std::string target_bytes = read_all(target);
+  const fs::path link = dir / "link.mcap.part";
+  fs::create_symlink(target, link);
+  CHECK_THROWS(finish_interrupted_mcap(link.string()));
+  CHECK(read_all(target) == target_bytes);
+}
+
+TEST_CASE("a damaged chunk ends what is kept: nothing after it is trusted", "[mcap][recovery]") {
+  test::ScratchDir dir("mcap-damaged");
+  const fs::path whole = dir / "whole.mcap";
+  const std::uint64_t messages = write_file(whole, small_options(), 2);
+  std::string bytes = read_all(whole);
+  // The second half of the file flipped: its chunks no longer decompress or match their CRC.
+  for (std::size_t i = bytes.size() / 2; i < bytes.size(); i += 97)
+    bytes[i] ^= 0x5A;
+  const fs::path part = dir / "damaged.mcap.part";
+  std::ofstream(part, std::ios::binary) << bytes;
+  const McapRecovery r = finish_interrupted_mcap(part.string());
+  CHECK(r.ours);
+  CHECK(r.messages > 0);
+  CHECK(r.messages < messages);
+  const auto read = test::read_mcap_independently(part);
+  if (read.reader_missing) return;
+  INFO(read.error);
+  REQUIRE(read.file);
+  CHECK((*read.file)["statistics"]["message_count"] == r.messages);
+}
+
+TEST_CASE("McapFile::abandon cuts back to the last whole chunk", "[mcap][recovery]") {
+  test::ScratchDir dir("mcap-abandon");
+  const fs::path path = dir / "a.mcap.part";
+  McapFile file(small_options());
+  file.open(path.string(), kT0);
+  TestFrame frame(3000, static_cast<std::int64_t>(kT0));
+  file.add_frame(frame.frame, kT0);
+  file.flush();
+  const auto flushed = fs::file_size(path);
+  file.add_health(R"({"state":"ok"})", kT0 + 1);  // in the open chunk, not on disk
+  CHECK(file.abandon() == 1);
+  CHECK(fs::file_size(path) == flushed);
+  const McapRecovery r = finish_interrupted_mcap(path.string());
+  CHECK(r.messages == 1);
+  CHECK(r.cut_bytes == 0);
+}

@@ -1,0 +1,337 @@
+// pandarcapd's MCAP output end to end: the real binary, real sockets and files, read back by the
+// MCAP project's own reader (support/mcap_reader.hpp) and compared with the PCD files, the pcap
+// and health.jsonl of the same run.
+#include <fmt/format.h>
+#include <signal.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "bench/child_process.hpp"
+#include "core/pcd.hpp"
+#include "support/mcap_reader.hpp"
+#include "support/test_support.hpp"
+
+using namespace pandarcap;
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+std::string quoted(const fs::path& path) {
+  return "'" + path.string() + "'";
+}
+
+// Runs pandarcapd with `args` and a configuration of `toml`; returns its exit status and output.
+test::CommandResult run_daemon(const test::ScratchDir& dir, const std::string& toml,
+                               const std::string& args) {
+  const fs::path config = dir / "pandarcap.toml";
+  std::ofstream(config) << toml;
+  return test::run_command(test::pandarcapd_command() + " -c " + quoted(config) + " " + args +
+                           " 2>&1");
+}
+
+// A PCD file's points, decoded.
+std::vector<PcdPoint> pcd_points(const fs::path& file) {
+  const std::string bytes = harness::read_file(file);
+  const std::size_t data = bytes.find("DATA binary\n");
+  REQUIRE(data != std::string::npos);
+  const std::size_t begin = data + 12;
+  REQUIRE((bytes.size() - begin) % kPcdPointBytes == 0);
+  std::vector<PcdPoint> points;
+  for (std::size_t at = begin; at < bytes.size(); at += kPcdPointBytes) {
+    points.push_back(decode_pcd_point(std::span<const std::uint8_t, kPcdPointBytes>(
+        reinterpret_cast<const std::uint8_t*>(bytes.data() + at), kPcdPointBytes)));
+  }
+  return points;
+}
+
+// The reader's view of one point against a PCD point: the same bytes, so exactly equal.
+void check_point(const json& m, const PcdPoint& p) {
+  CHECK(m["x"].get<float>() == p.x);
+  CHECK(m["y"].get<float>() == p.y);
+  CHECK(m["z"].get<float>() == p.z);
+  CHECK(m["intensity"] == p.intensity);
+  CHECK(m["channel"] == p.channel);
+  CHECK(m["return_type"] == p.return_type);
+  CHECK(m["timestamp"].get<double>() == p.timestamp_s);
+}
+
+// Every PointCloud2 of `file` against the PCD files, in order: point counts, the first and last
+// point exactly, and the sums of x, y, z.
+void check_frames_equal_pcd(const json& file, const std::vector<fs::path>& pcds) {
+  const json& messages = file["topics"]["/pandar/points"]["messages"];
+  REQUIRE(messages.size() == pcds.size());
+  for (std::size_t i = 0; i < pcds.size(); ++i) {
+    INFO("frame " << i << ": " << pcds[i].filename().string());
+    const std::vector<PcdPoint> points = pcd_points(pcds[i]);
+    const json& m = messages[i];
+    REQUIRE(m["points"] == points.size());
+    if (points.empty()) continue;
+    check_point(m["first"], points.front());
+    check_point(m["last"], points.back());
+    double sx = 0, sy = 0, sz = 0;
+    for (const PcdPoint& p : points) {
+      sx += p.x;
+      sy += p.y;
+      sz += p.z;
+    }
+    CHECK(m["sums"]["x"].get<double>() == Approx(sx).epsilon(1e-9));
+    CHECK(m["sums"]["y"].get<double>() == Approx(sy).epsilon(1e-9));
+    CHECK(m["sums"]["z"].get<double>() == Approx(sz).epsilon(1e-9));
+    // header.stamp: the frame's first firing, no later than its first point.
+    const double stamp =
+        m["stamp"]["sec"].get<double>() + m["stamp"]["nanosec"].get<double>() * 1e-9;
+    CHECK(stamp <= points.front().timestamp_s + 1e-6);
+  }
+}
+
+json read_or_fail(const fs::path& file) {
+  const auto read = test::read_mcap_independently(file);
+  if (read.reader_missing) return json();
+  INFO(file.string() << ": " << read.error);
+  REQUIRE(read.file);
+  return *read.file;
+}
+
+}  // namespace
+
+TEST_CASE("--simulate with MCAP: frames, packets, health and calibration, as the other outputs",
+          "[daemon][mcap]") {
+  test::ScratchDir dir("mcap-simulate");
+  const fs::path out = dir / "out";
+  const auto r =
+      run_daemon(dir,
+                 "[output]\nmcap = true\nmcap_packets = true\n"
+                 "mcap_frame_id = \"lidar_front\"\nmcap_points_topic = \"/front/points\"\n",
+                 "--simulate --duration 3 --output-dir " + quoted(out));
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  CHECK(r.out.find("  mcap    " + (out / "mcap").string()) != std::string::npos);
+  const auto files = test::files_ending(out / "mcap", ".mcap");
+  REQUIRE(files.size() == 1);
+  CHECK(test::files_ending(out / "mcap", ".part").empty());
+  const json h = test::last_health_record(out);
+  json file = read_or_fail(files[0]);
+  if (file.is_null()) return;
+  INFO(file["statistics"].dump());
+
+  CHECK(file["header"]["profile"] == "ros2");
+  CHECK(file["header"]["library"].get<std::string>().starts_with("pandarcap "));
+  // The topic names and frame id configured; the health topic's default.
+  json points = file["topics"]["/front/points"];
+  REQUIRE(points.is_object());
+  file["topics"]["/pandar/points"] = points;  // for check_frames_equal_pcd
+  CHECK(points["messages"][0]["frame_id"] == "lidar_front");
+  const auto pcds = test::files_ending(out / "frames", ".pcd");
+  CHECK(points["count"] == test::health_counter(h, "frames_written"));
+  check_frames_equal_pcd(file, pcds);
+
+  // Every datagram, as in the pcap.
+  const auto pcaps = test::files_ending(out / "raw", ".pcap");
+  REQUIRE(pcaps.size() == 1);
+  const auto [status, records] = test::read_capture(pcaps[0]);
+  CHECK(file["topics"]["/pandar/packets"]["count"] == records);
+  CHECK(file["topics"]["/pandar/packets"]["count"] ==
+        test::health_counter(h, "datagrams_received"));
+  CHECK(file["topics"]["/pandar/packets"]["messages"][0]["size"] == 1262);
+  CHECK(file["topics"]["/pandar/packets"]["messages"][0]["first_bytes"] ==
+        json::array({0xFF, 0xEE}));  // the first block's marker
+
+  // A health message per health.jsonl line written while the file was open, the last one the
+  // final record.
+  const json& health = file["topics"]["/pandar/health"];
+  CHECK(health["count"].get<int>() >= 3);
+  CHECK(health["messages"].back()["state"] == h["state"]);
+  CHECK(health["messages"].back()["datagrams_received"] ==
+        test::health_counter(h, "datagrams_received"));
+
+  // The calibration in use, as saved beside the pcap.
+  REQUIRE(file["attachments"].size() == 1);
+  CHECK(file["attachments"][0]["name"] == "calibration.csv");
+  CHECK(file["attachments"][0]["text"] == harness::read_file(out / "raw" / "calibration.csv"));
+  CHECK(file["metadata"][0]["name"] == "pandarcap");
+  CHECK(file["metadata"][0]["entries"].contains("decoder"));
+
+  // The health counters agree with the file. The last health.jsonl record was written before
+  // its own MCAP message and the file's tail; the exit summary counts both.
+  const auto messages = file["statistics"]["message_count"].get<std::uint64_t>();
+  CHECK(test::health_counter(h, "mcap_messages_written") == messages - 1);
+  CHECK(test::health_counter(h, "mcap_messages_not_written") == 0);
+  CHECK(test::health_counter(h, "mcap_bytes_written") > 0);
+  CHECK(test::health_counter(h, "mcap_bytes_written") < fs::file_size(files[0]));
+  CHECK(r.out.find(fmt::format("mcap: {} messages written, 0 not written, {} bytes", messages,
+                               fs::file_size(files[0]))) != std::string::npos);
+}
+
+TEST_CASE("--replay FILE --mcap-only converts the real capture: the same frames as its PCDs",
+          "[daemon][mcap][real]") {
+  const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
+  if (!capture) return;
+  test::ScratchDir dir("mcap-convert");
+  const std::string replay = test::pandarcapd_command() + " --replay " + quoted(*capture);
+  const auto pcd = test::run_command(replay + " --output-dir " + quoted(dir / "pcd") + " 2>&1");
+  REQUIRE(pcd.exit_code == 0);
+  const auto r = test::run_command(replay + " --mcap-only --output-dir " +
+                                   quoted(dir / "mcap-only") + " 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  CHECK_FALSE(fs::exists(dir / "mcap-only" / "frames"));
+  CHECK_FALSE(fs::exists(dir / "mcap-only" / "raw"));
+  const auto files = test::files_ending(dir / "mcap-only" / "mcap", ".mcap");
+  REQUIRE(files.size() == 1);
+  const json file = read_or_fail(files[0]);
+  if (file.is_null()) return;
+  const auto pcds = test::files_ending(dir / "pcd" / "frames", ".pcd");
+  REQUIRE_FALSE(pcds.empty());
+  check_frames_equal_pcd(file, pcds);
+  CHECK_FALSE(file["topics"].contains("/pandar/packets"));
+  // Log times are the capture's, not the host's clock at conversion: the file plays back at the
+  // pace it was recorded, and health messages stay inside the recording's time range.
+  const std::uint64_t start =
+      std::stoull(file["statistics"]["message_start_time"].get<std::string>());
+  const std::uint64_t end = std::stoull(file["statistics"]["message_end_time"].get<std::string>());
+  const auto now_ns =
+      static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                     std::chrono::system_clock::now().time_since_epoch())
+                                     .count());
+  // The capture's record times (2023-01-11, 1.2 s of it), not the sensor's clock (2017).
+  CHECK(start >= 1'673'400'149'000'000'000ull);
+  CHECK(end - start < 3'000'000'000ull);
+  CHECK(now_ns - end > 3600'000'000'000ull);  // recorded long before this test ran
+}
+
+TEST_CASE("a killed run's MCAP, cut anywhere, is finished at the next start for the reader",
+          "[daemon][mcap][recovery]") {
+  test::ScratchDir dir("mcap-killed");
+  const fs::path out = dir / "out";
+  const fs::path config = dir / "pandarcap.toml";
+  std::ofstream(config) << "[output]\nmcap = true\nmcap_chunk_bytes = 65536\n";
+  std::optional<harness::ChildProcess> daemon;
+  daemon.emplace(test::binary("pandarcapd"),
+                 std::vector<std::string>{"--allow-root", "-c", config.string(), "--simulate",
+                                          "--output-dir", out.string()},
+                 dir / "log.txt");
+  // Killed once the file holds a few seconds' chunks.
+  const auto part_size = [&]() -> std::uintmax_t {
+    const auto parts = test::files_ending(out / "mcap", ".part");
+    std::error_code ec;
+    return parts.empty() ? 0 : fs::file_size(parts[0], ec);
+  };
+  REQUIRE(harness::wait_until([&] { return part_size() > 4'000'000; }, 30s));
+  daemon->signal(SIGKILL);
+  REQUIRE(daemon->wait_exit(10s));
+  daemon.reset();
+  const auto parts = test::files_ending(out / "mcap", ".part");
+  REQUIRE(parts.size() == 1);
+  // And cut at a random offset past its first chunk, as a power loss mid-write leaves it.
+  std::mt19937 rng(std::random_device{}());
+  const std::uintmax_t size = fs::file_size(parts[0]);
+  const std::uintmax_t cut = size / 4 + rng() % (size - size / 4);
+  INFO("cut at " << cut << " of " << size);
+  fs::resize_file(parts[0], cut);
+
+  const auto r =
+      test::run_command(test::pandarcapd_command() + " -c " + quoted(config) +
+                        " --simulate --duration 1 --output-dir " + quoted(out) + " 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  CHECK(test::files_ending(out / "mcap", ".part").empty());
+  const auto files = test::files_ending(out / "mcap", ".mcap");
+  REQUIRE(files.size() == 2);  // the recovered one, this run's
+  const fs::path recovered = parts[0].parent_path() / parts[0].stem();  // NAME.mcap
+  REQUIRE(fs::exists(recovered));
+  CHECK(fs::file_size(recovered) < cut + 1'000'000);
+  const json file = read_or_fail(recovered);
+  if (file.is_null()) return;
+  CHECK(file["statistics"]["message_count"].get<int>() > 0);
+  CHECK(file["topics"]["/pandar/points"]["count"].get<int>() > 0);
+  CHECK(file["attachments"][0]["name"] == "calibration.csv");
+  read_or_fail(files[0] == recovered ? files[1] : files[0]);
+}
+
+TEST_CASE("MCAP files rotate by size and are kept to mcap_max_files across runs",
+          "[daemon][mcap][outputs]") {
+  test::ScratchDir dir("mcap-rotate");
+  const fs::path out = dir / "out";
+  const std::string toml =
+      "[output]\nmcap = true\nframes = false\npcap = false\nmcap_chunk_bytes = 65536\n"
+      "mcap_rotate_bytes = 3000000\nmcap_max_files = 3\n";
+  for (int run = 0; run < 2; ++run) {
+    const auto r = run_daemon(dir, toml, "--simulate --duration 2 --output-dir " + quoted(out));
+    INFO(r.out);
+    REQUIRE(r.exit_code == 0);
+  }
+  const auto files = test::files_ending(out / "mcap", ".mcap");
+  CHECK(files.size() == 3);
+  for (const fs::path& f : files) {
+    INFO(f.string());
+    CHECK(fs::file_size(f) < 3'000'000 + 2'500'000);  // one frame and a tail past the limit
+    read_or_fail(f);
+  }
+  // Numbered on from the earlier run: the newest file carries the highest number.
+  CHECK(files.back().filename().string() > files.front().filename().string());
+}
+
+TEST_CASE("MCAP configuration errors name the key and its place", "[daemon][mcap][config]") {
+  test::ScratchDir dir("mcap-config");
+  const auto topic =
+      run_daemon(dir, "[output]\nmcap = true\nmcap_points_topic = \"points\"\n", "--check-config");
+  CHECK(topic.exit_code == 78);
+  CHECK(topic.out.find(":3:") != std::string::npos);
+  CHECK(topic.out.find("must start with '/'") != std::string::npos);
+  const auto frame =
+      run_daemon(dir, "[output]\nmcap_frame_id = \"/base link\"\n", "--check-config");
+  CHECK(frame.exit_code == 78);
+  CHECK(frame.out.find("mcap_frame_id") != std::string::npos);
+  const auto compression =
+      run_daemon(dir, "[output]\nmcap_compression = \"lz4\"\n", "--check-config");
+  CHECK(compression.exit_code == 78);
+  CHECK(compression.out.find("zstd") != std::string::npos);
+  const auto chunk = run_daemon(dir, "[output]\nmcap_chunk_bytes = 10\n", "--check-config");
+  CHECK(chunk.exit_code == 78);
+}
+
+TEST_CASE("a full disk under MCAP: what was written is finished for the reader, losses counted",
+          "[daemon][mcap][outputs]") {
+  if (test::run_command("command -v prlimit").exit_code != 0)
+    FAIL("prlimit (util-linux) is needed");
+  test::ScratchDir dir("mcap-full");
+  const fs::path out = dir / "out";
+  const fs::path config = dir / "pandarcap.toml";
+  std::ofstream(config) << "[output]\nmcap = true\nframes = false\npcap = false\n"
+                           "mcap_chunk_bytes = 65536\n";
+  // Files may not grow past 3 MB: the MCAP file's write fails (EFBIG, as ENOSPC would) within the
+  // first seconds.
+  const auto r = test::run_command("prlimit --fsize=3000000 " + test::pandarcapd_command() +
+                                   " -c " + quoted(config) + " --simulate --duration 3 " +
+                                   "--output-dir " + quoted(out) + " 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  const json h = test::last_health_record(out);
+  CHECK(test::health_counter(h, "mcap_messages_not_written") > 0);
+  CHECK(test::health_counter(h, "write_errors") > 0);
+  CHECK(test::files_ending(out / "mcap", ".part").empty());
+  const auto files = test::files_ending(out / "mcap", ".mcap");
+  REQUIRE_FALSE(files.empty());
+  std::uint64_t messages = 0;
+  for (const fs::path& f : files) {
+    INFO(f.string());
+    CHECK(fs::file_size(f) <= 3'000'000);
+    const json file = read_or_fail(f);
+    if (!file.is_null()) messages += file["statistics"]["message_count"].get<std::uint64_t>();
+  }
+  // Every message the exit summary counts as written is in a file the reader accepts.
+  if (messages > 0) {
+    CHECK(r.out.find(fmt::format("mcap: {} messages written, {} not written", messages,
+                                 test::health_counter(h, "mcap_messages_not_written"))) !=
+          std::string::npos);
+  }
+}
