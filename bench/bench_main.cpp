@@ -172,6 +172,8 @@ Options:
   --latency-budget-ms N  the daemon's latency.budget_ms in every trial (default: its own, 5);
                          the sensor-rate trials also run it with 0, for the comparison
   --compare-budget-0     run the zero-loss search again with budget 0 (the same run)
+  --compare-mcap         MCAP on vs off in the same run: the sensor-rate trial and the zero-loss
+                         search again with --mcap --mcap-packets, with the bytes each wrote
   --receiver-command CMD measure another receiver (e.g. a vendor driver) under the same traffic
                          at the sensor's rate: started as /bin/sh -c 'exec CMD', its CPU (all
                          threads) and peak RSS are reported, and, if it prints a line
@@ -190,10 +192,15 @@ bare_recvmmsg_zero_loss_pps, recvfrom_zero_loss_pps, daemon_vs_bare, daemon_vs_r
 at_sensor_rate {budget_ms, cpu_fraction_of_one_core, cpu_us_per_packet, cpu_by_thread,
 bare_recvmmsg_cpu_fraction_of_one_core, daemon_vs_bare_cpu, wakeups_per_second {receive, decode,
 writer}, frame_latency_p50_ms, frame_latency_p99_ms, latency_p50_us, latency_p99_us,
-latency_p999_us, latency_max_us, hot_path_allocations, peak_rss_bytes, budget_0 {the same for
-budget 0}, other_receiver {command, cpu_fraction_of_one_core, cpu_us_per_packet,
+latency_p999_us, latency_max_us, hot_path_allocations, peak_rss_bytes, written_bytes {pcd,
+pcap, mcap}, budget_0 {the same for budget 0}, mcap_on {the same with MCAP on, with
+--compare-mcap}, other_receiver {command, cpu_fraction_of_one_core, cpu_us_per_packet,
 peak_rss_bytes, received, lost, vs_daemon_cpu}}, daemon_zero_loss_pps_budget_0 (with
---compare-budget-0), goals, environment, settings, trials.
+--compare-budget-0), mcap_comparison {cpu_fraction_of_one_core_off, cpu_fraction_of_one_core_on,
+cpu_on_vs_off, written_mb_per_second_off, written_mb_per_second_on, mcap_mb_per_second,
+extra_cpu_us_per_extra_mb, writer_cpu_us_per_written_mb_off, zero_loss_on, peak_rss_bytes_off,
+peak_rss_bytes_on, daemon_zero_loss_pps_off, daemon_zero_loss_pps_on, zero_loss_pps_on_vs_off}
+(with --compare-mcap), goals, environment, settings, trials.
 Exit status: 0, 1 if the daemon could not be run, 64 for a usage error.
 )";
 
@@ -235,6 +242,8 @@ int run_zero_loss(int argc, char** argv) {
       options.latency_budget_ms = static_cast<std::uint32_t>(args.integer(arg, 0, 1000));
     } else if (arg == "--compare-budget-0") {
       options.compare_budget_0 = true;
+    } else if (arg == "--compare-mcap") {
+      options.compare_mcap = true;
     } else if (arg == "--receiver-command") {
       options.receiver_command = std::string(args.value(arg));
     } else if (arg == "--receiver-port") {

@@ -199,7 +199,8 @@ class Harness {
   // One trial of the real daemon at `rate`; its outputs are removed afterwards (a fast trial
   // writes gigabytes of pcap).
   ordered_json daemon_trial(double rate, double seconds,
-                            std::optional<std::uint32_t> budget_ms = std::nullopt) {
+                            std::optional<std::uint32_t> budget_ms = std::nullopt,
+                            const std::vector<std::string>& extra_args = {}) {
     const fs::path dir = work_ / fmt::format("daemon_{:03d}", trials_++);
     fs::create_directories(dir);
     const fs::path out = dir / "out";
@@ -218,6 +219,7 @@ class Harness {
           std::to_string(port), std::string("--output-dir"), out.string()}) {
       args.push_back(a);
     }
+    args.insert(args.end(), extra_args.begin(), extra_args.end());
     harness::ChildProcess process(daemon_, args, dir / "daemon.log");
     if (!harness::wait_until([&] { return process.log().find("ready:") != std::string::npos; },
                              15s)) {
@@ -263,6 +265,7 @@ class Harness {
                            {"frames_dropped", counter(h, "frames_dropped_no_arena")},
                            {"pcap_packets_not_recorded", counter(h, "pcap_packets_not_recorded")},
                            {"write_errors", counter(h, "write_errors")},
+                           {"mcap_messages_not_written", counter(h, "mcap_messages_not_written")},
                            {"unaccounted", sent.sent > received + counter(h, "kernel_drops")
                                                ? sent.sent - received - counter(h, "kernel_drops")
                                                : 0}};
@@ -297,6 +300,10 @@ class Harness {
         {"frame_latency", h.contains("frame_latency") ? h["frame_latency"] : ordered_json()},
         {"wakeups_per_second", wakeups},
         {"peak_rss_bytes", rss},
+        {"written_bytes",
+         {{"pcd", counter(h, "pcd_bytes_written")},
+          {"pcap", counter(h, "pcap_bytes_written")},
+          {"mcap", counter(h, "mcap_bytes_written")}}},
         {"hot_path_allocations", h["counters"].contains("hot_path_allocations")
                                      ? ordered_json(counter(h, "hot_path_allocations"))
                                      : ordered_json(nullptr)}};
@@ -379,6 +386,50 @@ class Harness {
   int trials_ = 0;
 };
 
+// MCAP on against off at the sensor's rate (and the two zero-loss rates when searched): what
+// MCAP adds in CPU and in bytes, and the extra CPU per extra megabyte set against what the writer
+// thread spends per megabyte of PCD and pcap with MCAP off.
+ordered_json mcap_comparison(const ordered_json& off, const ordered_json& on, double seconds,
+                             double zero_loss_off, double zero_loss_on, bool searched) {
+  const auto bytes = [](const ordered_json& t) {
+    const ordered_json& w = t["written_bytes"];
+    return static_cast<double>(w["pcd"].get<std::uint64_t>() + w["pcap"].get<std::uint64_t>() +
+                               w["mcap"].get<std::uint64_t>());
+  };
+  const auto writer_cpu = [](const ordered_json& t) {
+    double cpu = 0;
+    for (const auto& [name, thread] : t["cpu_by_thread"].items()) {
+      if (name.find("writ") != std::string::npos)
+        cpu += thread["cpu_fraction_of_one_core"].get<double>();
+    }
+    return cpu;
+  };
+  const double cpu_off = off["cpu_fraction_of_one_core"].get<double>();
+  const double cpu_on = on["cpu_fraction_of_one_core"].get<double>();
+  const double extra_mb_per_s = (bytes(on) - bytes(off)) / seconds / 1e6;
+  const double extra_cpu_us_per_s = (cpu_on - cpu_off) * 1e6;
+  ordered_json m = {
+      {"cpu_fraction_of_one_core_off", cpu_off},
+      {"cpu_fraction_of_one_core_on", cpu_on},
+      {"cpu_on_vs_off", (cpu_off > 0 ? cpu_on / cpu_off : 0.0)},
+      {"written_mb_per_second_off", bytes(off) / seconds / 1e6},
+      {"written_mb_per_second_on", bytes(on) / seconds / 1e6},
+      {"mcap_mb_per_second",
+       static_cast<double>(on["written_bytes"]["mcap"].get<std::uint64_t>()) / seconds / 1e6},
+      {"extra_cpu_us_per_extra_mb", extra_mb_per_s > 0 ? extra_cpu_us_per_s / extra_mb_per_s : 0.0},
+      {"writer_cpu_us_per_written_mb_off",
+       bytes(off) > 0 ? writer_cpu(off) * 1e6 / (bytes(off) / seconds / 1e6) : 0.0},
+      {"zero_loss_on", on["zero_loss"]},
+      {"peak_rss_bytes_off", off["peak_rss_bytes"]},
+      {"peak_rss_bytes_on", on["peak_rss_bytes"]}};
+  if (searched) {
+    m["daemon_zero_loss_pps_off"] = zero_loss_off;
+    m["daemon_zero_loss_pps_on"] = zero_loss_on;
+    m["zero_loss_pps_on_vs_off"] = (zero_loss_off > 0 ? zero_loss_on / zero_loss_off : 0.0);
+  }
+  return m;
+}
+
 struct SearchResult {
   double pps = 0;  // the rate actually sent in the best passing trial (0: even the lowest failed)
   bool generator_limited = false;  // that trial could not send its offered rate
@@ -456,7 +507,14 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
                              std::max(at_sensor["cpu_fraction_of_one_core"].get<double>(), 1e-9);
   }
 
-  SearchResult daemon_zero, daemon_within, daemon_zero_budget_0;
+  // MCAP on, right after the trial with it off, under the same conditions.
+  const std::vector<std::string> mcap_on{"--mcap", "--mcap-packets"};
+  ordered_json at_sensor_mcap;
+  if (o.compare_mcap) {
+    at_sensor_mcap = harness.daemon_trial(o.sensor_rate, sensor_seconds, std::nullopt, mcap_on);
+  }
+
+  SearchResult daemon_zero, daemon_within, daemon_zero_budget_0, daemon_zero_mcap;
   if (!o.sensor_rate_only) {
     daemon_zero = search(daemon, zero, o.min_rate, o.max_rate, o.steps, trials["daemon"]);
     daemon_within = search(daemon, within, std::max(daemon_zero.pps, o.min_rate), o.max_rate,
@@ -466,6 +524,14 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
       daemon_zero_budget_0 =
           search([&](double rate) { return harness.daemon_trial(rate, o.trial_seconds, 0u); }, zero,
                  o.min_rate, o.max_rate, o.steps, trials["daemon_budget_0"]);
+    }
+    if (o.compare_mcap) {
+      trials["daemon_mcap"] = ordered_json::array();
+      daemon_zero_mcap = search(
+          [&](double rate) {
+            return harness.daemon_trial(rate, o.trial_seconds, std::nullopt, mcap_on);
+          },
+          zero, o.min_rate, o.max_rate, o.steps, trials["daemon_mcap"]);
     }
   }
   SearchResult bare, recvfrom;
@@ -519,13 +585,20 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
         {"latency_p999_us", latency.value("p999_us", 0.0)},
         {"latency_max_us", latency.value("max_us", 0.0)},
         {"hot_path_allocations", t["hot_path_allocations"]},
-        {"peak_rss_bytes", t["peak_rss_bytes"]}};
+        {"peak_rss_bytes", t["peak_rss_bytes"]},
+        {"written_bytes", t["written_bytes"]}};
   };
   ordered_json sensor = sensor_summary(at_sensor);
   sensor["bare_recvmmsg_cpu_fraction_of_one_core"] = bare_cpu;
   sensor["budget_0"] = sensor_summary(at_sensor_0);
   if (!other.is_null()) sensor["other_receiver"] = other;
+  if (o.compare_mcap) sensor["mcap_on"] = sensor_summary(at_sensor_mcap);
   report["at_sensor_rate"] = sensor;
+  if (o.compare_mcap) {
+    report["mcap_comparison"] =
+        mcap_comparison(at_sensor, at_sensor_mcap, sensor_seconds, daemon_zero.pps,
+                        daemon_zero_mcap.pps, !o.sensor_rate_only);
+  }
   const auto& s = report["at_sensor_rate"];
   const double budget = s["budget_ms"].is_number() ? s["budget_ms"].get<double>() : 0.0;
   report["goals"] = {
@@ -548,6 +621,17 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
     report["goals"]["no_zero_loss_rate_regression_vs_budget_0"] =
         daemon_zero.pps >= 0.9 * daemon_zero_budget_0.pps;
   }
+  if (o.compare_mcap) {
+    const ordered_json& m = report["mcap_comparison"];
+    report["goals"]["mcap_zero_loss_at_sensor_rate"] = at_sensor_mcap["zero_loss"].get<bool>();
+    report["goals"]["mcap_extra_cpu_per_mb_within_2x_writer_cpu_per_mb"] =
+        m["extra_cpu_us_per_extra_mb"].get<double>() <=
+        2.0 * m["writer_cpu_us_per_written_mb_off"].get<double>();
+    if (!o.sensor_rate_only) {
+      report["goals"]["mcap_zero_loss_rate_at_least_0_9_of_off"] =
+          daemon_zero_mcap.pps >= 0.9 * daemon_zero.pps;
+    }
+  }
   ordered_json env = environment(o, harness.daemon());
   env["daemon_socket_buffer_granted"] = harness.daemon_socket_buffer;
   if (!trials["bare_recvmmsg"].empty()) {
@@ -568,6 +652,7 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
        "both ends, then geometric bisection; a trial passes with zero "
        "loss at every stage"}};
   trials["at_sensor_rate"] = {at_sensor, at_sensor_0};
+  if (o.compare_mcap) trials["at_sensor_rate"].push_back(at_sensor_mcap);
   report["trials"] = trials;
   if (temporary) {
     std::error_code ec;

@@ -42,6 +42,10 @@ struct ZeroLossOptions {
   std::optional<std::uint32_t> latency_budget_ms;
   // The rate search again with budget 0, for the comparison of zero-loss rates in one run.
   bool compare_budget_0 = false;
+  // MCAP on vs off in one run: the sensor-rate trial and the zero-loss search again with
+  // output.mcap (and output.mcap_packets) on, with the bytes each wrote, so the extra CPU can be
+  // set against the extra bytes.
+  bool compare_mcap = false;
   // Any other receiver, measured under the same traffic at the sensor's rate: started with
   // /bin/sh -c 'exec COMMAND', sent to 127.0.0.1:receiver_port; if it prints a line
   // "received N" (the last one counts), its loss is reported too.

@@ -199,6 +199,10 @@ std::string zero_loss_markdown(const ordered_json& r) {
     md += "| receiver | zero-loss rate (packets/s) |\n|---|---:|\n";
     md += fmt::format("| pandarcapd (config: {}) | {} |\n", env["daemon_config"].get<std::string>(),
                       rate(r["daemon_zero_loss_pps"].get<double>()));
+    if (r.contains("mcap_comparison") && r["mcap_comparison"].contains("daemon_zero_loss_pps_on")) {
+      md += fmt::format("| pandarcapd, MCAP on (frames and packets) | {} |\n",
+                        rate(r["mcap_comparison"]["daemon_zero_loss_pps_on"].get<double>()));
+    }
     if (r.contains("daemon_zero_loss_pps_budget_0")) {
       md += fmt::format("| pandarcapd, latency budget 0 | {} |\n",
                         rate(r["daemon_zero_loss_pps_budget_0"].get<double>()));
@@ -247,6 +251,18 @@ std::string zero_loss_markdown(const ordered_json& r) {
         "- | 1x | - | - | - | - |\n",
         100 * bare);
   }
+  if (s.contains("mcap_on")) {
+    const auto& t = s["mcap_on"];
+    const auto& w = t["wakeups_per_second"];
+    md += fmt::format(
+        "| pandarcapd, MCAP on (frames and packets) | {} ms | {:.2f} | {:.2f} | {:.2f}x | "
+        "{:.0f}, {:.0f}, {:.0f} | {:.1f} ms | {:.2f} ms | {} |\n",
+        t["budget_ms"].dump(), 100 * t["cpu_fraction_of_one_core"].get<double>(),
+        t["cpu_us_per_packet"].get<double>(), t["daemon_vs_bare_cpu"].get<double>(),
+        w.value("receive", 0.0), w.value("decode", 0.0), w.value("writer", 0.0),
+        t["frame_latency_p99_ms"].get<double>(), t["latency_p99_us"].get<double>() / 1e3,
+        t["lost"].dump());
+  }
   if (s.contains("other_receiver")) {
     const auto& o = s["other_receiver"];
     md += fmt::format(
@@ -257,6 +273,27 @@ std::string zero_loss_markdown(const ordered_json& r) {
         o["lost"].dump());
   }
   md += "\n";
+  if (r.contains("mcap_comparison")) {
+    const auto& m = r["mcap_comparison"];
+    md += fmt::format(
+        "MCAP on vs off (same run): CPU **{:.2f}x** ({:.2f} % -> {:.2f} % of a core); written "
+        "{:.1f} -> {:.1f} MB/s ({:.1f} MB/s of MCAP); the extra CPU is {:.0f} µs per extra MB, "
+        "against {:.0f} µs per MB the writer spends on PCD and pcap with MCAP off (goal <= 2x: "
+        "{}); zero loss with MCAP on: {}",
+        m["cpu_on_vs_off"].get<double>(), 100 * m["cpu_fraction_of_one_core_off"].get<double>(),
+        100 * m["cpu_fraction_of_one_core_on"].get<double>(),
+        m["written_mb_per_second_off"].get<double>(), m["written_mb_per_second_on"].get<double>(),
+        m["mcap_mb_per_second"].get<double>(), m["extra_cpu_us_per_extra_mb"].get<double>(),
+        m["writer_cpu_us_per_written_mb_off"].get<double>(),
+        yes_no(g["mcap_extra_cpu_per_mb_within_2x_writer_cpu_per_mb"]),
+        yes_no(g["mcap_zero_loss_at_sensor_rate"]));
+    if (m.contains("zero_loss_pps_on_vs_off")) {
+      md += fmt::format("; zero-loss rate on/off {:.2f} (goal >= 0.90: {})",
+                        m["zero_loss_pps_on_vs_off"].get<double>(),
+                        yes_no(g["mcap_zero_loss_rate_at_least_0_9_of_off"]));
+    }
+    md += ".\n\n";
+  }
   md += fmt::format(
       "- CPU with the budget: **{:.2f} %** of one core (goal <= the bare loop's: {}; <= 2 %: {})",
       100 * s["cpu_fraction_of_one_core"].get<double>(),

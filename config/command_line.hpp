@@ -36,6 +36,7 @@ inline constexpr std::array kKeyOptions{
     KeyOption{"--rpm", "sensor.rotation_speed"},
     KeyOption{"--return-mode", "sensor.return_mode"},
     KeyOption{"--mcap", "output.mcap", true},
+    KeyOption{"--mcap-packets", "output.mcap_packets", true},
     KeyOption{"--decoder", "decoder"},
     KeyOption{"--latency-budget-ms", "latency.budget_ms"},
     KeyOption{"--log-level", "log_level"},

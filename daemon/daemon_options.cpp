@@ -36,6 +36,7 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.mcap_max_files = o.mcap_max_files;
   wo.mcap_max_bytes = o.mcap_max_bytes;
   wo.mcap_file.compress = o.mcap_compression == "zstd";
+  wo.mcap_file.compression_level = o.mcap_compression_level;
   wo.mcap_file.chunk_bytes = o.mcap_chunk_bytes;
   wo.mcap_file.max_frame_points = config.arenas.points_per_frame;
   wo.mcap_file.packets = o.mcap_packets;

@@ -335,3 +335,23 @@ TEST_CASE("a full disk under MCAP: what was written is finished for the reader, 
           std::string::npos);
   }
 }
+
+TEST_CASE("every compression setting gives files the reader accepts", "[daemon][mcap]") {
+  for (const std::string setting : {"mcap_compression = \"none\"", "mcap_compression_level = -7",
+                                    "mcap_compression_level = 19"}) {
+    test::ScratchDir dir("mcap-compression");
+    const fs::path out = dir / "out";
+    const auto r =
+        run_daemon(dir, "[output]\nmcap = true\nframes = false\npcap = false\n" + setting + "\n",
+                   "--simulate --duration 1 --output-dir " + quoted(out));
+    INFO(setting << "\n" << r.out);
+    REQUIRE(r.exit_code == 0);
+    const auto files = test::files_ending(out / "mcap", ".mcap");
+    REQUIRE(files.size() == 1);
+    const json file = read_or_fail(files[0]);
+    if (file.is_null()) continue;
+    CHECK(file["topics"]["/pandar/points"]["count"].get<int>() >= 5);
+    CHECK(file["chunk_compression"] ==
+          json::array({setting.find("none") != std::string::npos ? "" : "zstd"}));
+  }
+}

@@ -27,7 +27,8 @@ McapFile::McapFile(const McapFileOptions& options)
     : options_(options),
       compressor_(options.chunk_bytes + (mcap::kMessagePrefixBytes +
                                          mcap::pointcloud2_prefix_bytes(options.frame_id.size()) +
-                                         options.max_frame_points * kPcdPointBytes + 1)),
+                                         options.max_frame_points * kPcdPointBytes + 1),
+                  options.compression_level),
       max_message_bytes_(mcap::pointcloud2_prefix_bytes(options.frame_id.size()) +
                          options.max_frame_points * kPcdPointBytes + 1),
       // A chunk holds chunk_bytes; its smallest messages (packets) are over 1 KB.

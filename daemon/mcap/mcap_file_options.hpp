@@ -11,6 +11,7 @@ namespace pandarcap {
 
 struct McapFileOptions {
   bool compress = true;                    // zstd chunks; false: stored as they are
+  int compression_level = 1;               // zstd's: -7 (fastest) .. 19
   std::size_t chunk_bytes = 4u << 20;      // uncompressed messages per chunk, about
   std::size_t max_frame_points = 180'000;  // the largest frame (the arenas' capacity)
   std::size_t max_chunks = 16'384;         // per file
