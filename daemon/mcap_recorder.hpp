@@ -16,7 +16,8 @@
 // (daemon/mcap/mcap_recovery.hpp). A failed write cuts the file back to its last whole chunk,
 // finishes it there, and counts the messages lost (mcap_messages_not_written, write_errors); the
 // next message starts a new file. Owned by the writer thread; buffers are allocated in prepare(),
-// so recording allocates nothing but a new file's name and its few header records.
+// so recording a message allocates nothing; starting a file allocates only its name's time stamp
+// (as the pcap's does) and, with retention on, its entry in the retention list.
 #pragma once
 
 #include <cstdint>

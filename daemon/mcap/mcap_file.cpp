@@ -41,6 +41,11 @@ McapFile::McapFile(const McapFileOptions& options)
                options.calibration_csv.size());
   for (auto& index : index_)
     index.reserve(max_index_entries_);
+  // What open() records, made here so that starting a file (a rotation) allocates nothing.
+  for (const auto& [key, value] : options_.metadata)
+    metadata_.emplace_back(key, value);
+  summary_.metadata.reserve(1);
+  summary_.attachments.reserve(1);
   summary_.chunks.reserve(options.max_chunks);
   summary_.schemas.push_back(
       {1, std::string(mcap::kPointCloud2Name), "ros2msg", std::string(mcap::kPointCloud2Schema)});
@@ -77,11 +82,8 @@ void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
   for (const auto& channel : summary_.channels)
     mcap::write_channel(w, channel);
   {
-    std::vector<std::pair<std::string_view, std::string_view>> entries;
-    for (const auto& [key, value] : options_.metadata)
-      entries.emplace_back(key, value);
     const std::size_t at = w.size();
-    mcap::write_metadata(w, "pandarcap", entries);
+    mcap::write_metadata(w, "pandarcap", metadata_);
     summary_.metadata.push_back({at, w.size() - at, "pandarcap"});
   }
   {

@@ -20,6 +20,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/frame.hpp"
@@ -66,6 +67,7 @@ class McapFile {
   void write_out();  // out_ to the file
 
   McapFileOptions options_;
+  std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_
   mcap::ChunkCompressor compressor_;
   std::size_t max_message_bytes_;
   std::size_t max_index_entries_;
