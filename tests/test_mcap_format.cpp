@@ -265,3 +265,17 @@ TEST_CASE("MCAP tail: summary offsets point at their groups, footer CRC covers t
   }
   CHECK(groups == 4);  // schema, channel, statistics, chunk index
 }
+
+TEST_CASE("a chunk's stored size is read from its zstd frame header before any decompression",
+          "[mcap]") {
+  std::vector<std::uint8_t> records(100'000, 0x42);
+  ChunkCompressor compressor(records.size());
+  std::vector<std::uint8_t> compressed(compressor.bound());
+  compressed.resize(compressor.compress(records, compressed));
+  CHECK(stored_content_size("zstd", compressed) == std::optional<std::uint64_t>(100'000));
+  CHECK(stored_content_size("", compressed) == std::optional<std::uint64_t>(compressed.size()));
+  CHECK_FALSE(stored_content_size("lz4", compressed));
+  const std::vector<std::uint8_t> garbage(16, 0xAB);
+  CHECK_FALSE(stored_content_size("zstd", garbage));
+  CHECK_FALSE(stored_content_size("zstd", std::span<const std::uint8_t>()));
+}

@@ -33,6 +33,15 @@ std::size_t ChunkCompressor::compress(std::span<const std::uint8_t> in,
   return n;
 }
 
+std::optional<std::uint64_t> stored_content_size(std::string_view compression,
+                                                 std::span<const std::uint8_t> stored) noexcept {
+  if (compression.empty()) return stored.size();
+  if (compression != "zstd") return std::nullopt;
+  const unsigned long long content = ZSTD_getFrameContentSize(stored.data(), stored.size());
+  if (content == ZSTD_CONTENTSIZE_UNKNOWN || content == ZSTD_CONTENTSIZE_ERROR) return std::nullopt;
+  return content;
+}
+
 bool decompress_chunk(std::string_view compression, std::span<const std::uint8_t> stored,
                       std::span<std::uint8_t> out) noexcept {
   if (compression.empty()) {

@@ -39,6 +39,11 @@ class ChunkCompressor {
 // Decompresses a chunk's records stored with `compression` ("" or "zstd") into `out`, which must
 // be exactly the chunk's uncompressed size. False when the compression is unknown or the bytes do
 // not decompress to exactly that size (a damaged or cut chunk).
+// The size `stored` says it decompresses to (its zstd frame header's content size), read without
+// decompressing; nothing when the compression is unknown or the header does not say.
+std::optional<std::uint64_t> stored_content_size(std::string_view compression,
+                                                 std::span<const std::uint8_t> stored) noexcept;
+
 bool decompress_chunk(std::string_view compression, std::span<const std::uint8_t> stored,
                       std::span<std::uint8_t> out) noexcept;
 

@@ -76,8 +76,16 @@ struct ChunkContents {
   std::array<std::uint64_t, mcap::kMaxChannels + 1> count{};
   std::vector<std::uint64_t> log_times[mcap::kMaxChannels + 1];
 };
+// pandarcap's chunks compress 2x or so (points), 10x at most (health JSON): a chunk whose
+// stated size is far beyond its stored bytes is damage, and is refused before any allocation.
+constexpr std::uint64_t kMaxCompressionRatio = 64;
+
 std::optional<ChunkContents> read_chunk(const mcap::ChunkView& chunk) {
-  if (chunk.uncompressed_size > kMaxRecordBytes) return std::nullopt;
+  if (chunk.uncompressed_size > kMaxRecordBytes ||
+      chunk.uncompressed_size > kMaxCompressionRatio * chunk.records.size() + 65536 ||
+      mcap::stored_content_size(chunk.compression, chunk.records) != chunk.uncompressed_size) {
+    return std::nullopt;
+  }
   std::vector<std::uint8_t> records(chunk.uncompressed_size);
   if (!mcap::decompress_chunk(chunk.compression, chunk.records, records)) return std::nullopt;
   if (chunk.uncompressed_crc != 0 && mcap::crc32(records) != chunk.uncompressed_crc) {

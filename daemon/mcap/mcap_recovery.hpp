@@ -20,7 +20,7 @@
 namespace pandarcap {
 
 struct McapRecovery {
-  bool ours = false;
+  bool ours = false;             // when false, nothing was examined or changed (the counts are 0)
   std::uint64_t messages = 0;    // messages kept
   std::uint64_t kept_bytes = 0;  // bytes of the data section kept
   std::uint64_t cut_bytes = 0;   // bytes removed from the end (a cut chunk, an old tail)
