@@ -103,8 +103,9 @@ json read_or_fail(const fs::path& file) {
 
 }  // namespace
 
-TEST_CASE("--simulate with MCAP: frames, packets, health and calibration, as the other outputs",
-          "[daemon][mcap]") {
+TEST_CASE(
+    "a simulated run with MCAP: frames, packets, health and calibration, as the other outputs",
+    "[daemon][mcap]") {
   test::ScratchDir dir("mcap-simulate");
   const fs::path out = dir / "out";
   const auto r =
@@ -171,7 +172,7 @@ TEST_CASE("--simulate with MCAP: frames, packets, health and calibration, as the
                                fs::file_size(files[0]))) != std::string::npos);
 }
 
-TEST_CASE("--replay FILE --mcap-only converts the real capture: the same frames as its PCDs",
+TEST_CASE("a replay with --mcap-only converts the real capture: the same frames as its PCDs",
           "[daemon][mcap][real]") {
   const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
   if (!capture) return;
