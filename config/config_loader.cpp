@@ -9,9 +9,9 @@
 #include <fmt/format.h>
 #include <toml++/toml.h>
 
+#include <cctype>
 #include <cerrno>
 #include <charconv>
-#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -120,8 +120,12 @@ std::optional<std::string> ros_name(const std::string& s, bool absolute) {
   }
   return std::nullopt;
 }
-std::optional<std::string> topic(const std::string& s) { return ros_name(s, true); }
-std::optional<std::string> frame_id(const std::string& s) { return ros_name(s, false); }
+std::optional<std::string> topic(const std::string& s) {
+  return ros_name(s, true);
+}
+std::optional<std::string> frame_id(const std::string& s) {
+  return ros_name(s, false);
+}
 
 std::optional<std::string> log_level(const std::string& s) {
   return one_of(s, {"trace", "debug", "info", "warn", "error", "critical", "off"});
