@@ -29,6 +29,7 @@ void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
 void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   // Filled in place: its strings keep their capacity from one second to the next.
   HealthSnapshot& h = health_;
+  json_text_current_ = false;
   const ReceiveCounters& receive = sources.receive;
   const DecodeSnapshot& decode = sources.decode;
   h.unix_time_ns = realtime_ns();
@@ -152,8 +153,16 @@ void HealthPublisher::write_prometheus() {
   write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, prom_file_);
 }
 
+const std::string& HealthPublisher::json_line() {
+  if (!json_text_current_) {
+    render_json_line(health_, json_text_);
+    json_text_current_ = true;
+  }
+  return json_text_;
+}
+
 void HealthPublisher::write_jsonl_line() {
-  render_json_line(health_, json_text_);
+  json_line();
   // Kept open between ticks (appending); reopened after rotation or a failed write.
   if (!jsonl_file_.is_open()) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
   if (options_.jsonl_rotate_bytes != 0 &&
@@ -174,6 +183,7 @@ void HealthPublisher::write_jsonl_line() {
 }
 
 void HealthPublisher::count_mcap(const McapRecorder& mcap) noexcept {
+  json_text_current_ = false;
   HealthCounters& c = health_.counters;
   c.mcap_messages_written = mcap.messages_written();
   c.mcap_messages_not_written = mcap.messages_not_written();

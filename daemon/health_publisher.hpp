@@ -63,6 +63,9 @@ class HealthPublisher {
   void write();
 
   const HealthSnapshot& snapshot() const noexcept { return health_; }
+  // snapshot() as one JSON line, rendered once per record whoever asks first (health.jsonl,
+  // the MCAP health message).
+  const std::string& json_line();
   // The MCAP counters of snapshot() brought up to date, nothing else: after the last MCAP file
   // is closed with the final record in it, for the exit summary.
   void count_mcap(const McapRecorder& mcap) noexcept;
@@ -81,6 +84,7 @@ class HealthPublisher {
   DecodeSnapshot decode_prev_;              // the decoder's counters of the last record, for rates
   std::string prom_path_, prom_temporary_path_, jsonl_path_, jsonl_rotated_path_;
   std::string prom_text_, json_text_;
+  bool json_text_current_ = false;  // json_text_ is health_ as it is now
   OutputFile prom_file_, jsonl_file_;
 };
 

@@ -9,7 +9,6 @@
 #include <chrono>
 #include <filesystem>
 
-#include "core/health_format.hpp"
 #include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
@@ -76,7 +75,6 @@ void Writer::prepare() {
   if (options_.mcap) {
     mcap_.adopt_earlier_files();
     mcap_.prepare();
-    mcap_health_json_.reserve(8192);
   }
   frames_.reserve();
   // Proves the health directories are writable before the daemon reports ready.
@@ -106,8 +104,7 @@ void Writer::write_health() {
   reported_silent_ = silent(now);
   health_.write();
   if (options_.mcap) {
-    render_json_line(health_.snapshot(), mcap_health_json_);
-    mcap_.write_health(mcap_health_json_, realtime_ns());
+    mcap_.write_health(health_.json_line(), realtime_ns());
   }
 }
 

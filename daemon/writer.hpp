@@ -24,7 +24,6 @@
 
 #include <atomic>
 #include <cstdint>
-#include <string>
 
 #include "core/health.hpp"
 #include "daemon/decode_worker.hpp"
@@ -85,7 +84,6 @@ class Writer {
   PcapRecorder pcap_;
   McapRecorder mcap_;
   HealthPublisher health_;
-  std::string mcap_health_json_;  // the health record as the MCAP's health message
 
   DecodeSnapshot decode_;        // the latest counters from the decoder
   bool reported_silent_ = true;  // the last health written said "no data"
