@@ -7,11 +7,11 @@
 #include <span>
 #include <system_error>
 
-#include "core/units.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
 #include "daemon/output_leftovers.hpp"
+#include "daemon/rotation.hpp"
 
 namespace pandarcap {
 
@@ -49,10 +49,8 @@ std::uint64_t McapRecorder::bytes_written() const noexcept {
 
 bool McapRecorder::ready(std::uint64_t log_time) {
   if (file_->is_open() &&
-      (file_->full() ||
-       (options_.mcap_rotate_bytes != 0 && file_->bytes() >= options_.mcap_rotate_bytes) ||
-       (options_.mcap_rotate_seconds != 0 &&
-        monotonic_ns() - opened_monotonic_ns_ >= options_.mcap_rotate_seconds * kNsPerSecond))) {
+      (file_->full() || rotation_due(file_->bytes(), opened_monotonic_ns_,
+                                     options_.mcap_rotate_bytes, options_.mcap_rotate_seconds))) {
     close();
   }
   if (file_->is_open()) return true;

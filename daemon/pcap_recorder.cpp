@@ -9,10 +9,10 @@
 #include <system_error>
 
 #include "core/text_file.hpp"
-#include "core/units.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/output_leftovers.hpp"
+#include "daemon/rotation.hpp"
 
 namespace pandarcap {
 PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting)
@@ -127,11 +127,8 @@ void PcapRecorder::write(const RawBatch& batch) {
       continue;
     }
     try {
-      if (pcap_ &&
-          ((options_.pcap_rotate_bytes != 0 && pcap_->bytes() >= options_.pcap_rotate_bytes) ||
-           (options_.pcap_rotate_seconds != 0 &&
-            monotonic_ns() - opened_monotonic_ns_ >=
-                options_.pcap_rotate_seconds * kNsPerSecond))) {
+      if (pcap_ && rotation_due(pcap_->bytes(), opened_monotonic_ns_, options_.pcap_rotate_bytes,
+                                options_.pcap_rotate_seconds)) {
         close();
       }
       if (!pcap_) open(packet.receive_time_ns);
