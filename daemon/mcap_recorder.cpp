@@ -79,16 +79,7 @@ void McapRecorder::failed(const std::exception& error) {
   messages_not_written_ += lost;
   accounting_.write_failed(error, 0);
   try {
-    const McapRecovery recovered = finish_interrupted_mcap(part_path_);
-    if (recovered.messages == 0) {
-      ::unlink(part_path_.c_str());
-    } else {
-      accounting_.put_in_place(part_path_, final_path_);
-      messages_closed_ += recovered.messages;
-      const std::uint64_t bytes = std::filesystem::file_size(final_path_);
-      bytes_closed_ += bytes;
-      retention_.add(final_path_, bytes);
-    }
+    place_finished(finish_interrupted_mcap(part_path_).messages);
   } catch (const std::exception& again) {
     // The disk is still full: the .part stays, and the next start finishes it.
     spdlog::warn("{}: left unfinished after a failed write ({}); the next start finishes it",
@@ -176,18 +167,22 @@ void McapRecorder::close() {
 
 void McapRecorder::finish_file() {
   try {
-    if (file_->messages() == 0) {
-      ::unlink(part_path_.c_str());
-      return;
-    }
-    const std::uint64_t bytes = std::filesystem::file_size(part_path_);
-    accounting_.put_in_place(part_path_, final_path_);
-    messages_closed_ += file_->messages();
-    bytes_closed_ += bytes;
-    retention_.add(final_path_, bytes);
+    place_finished(file_->messages());
   } catch (const std::exception& error) {
     accounting_.write_failed(error, 0);
   }
+}
+
+void McapRecorder::place_finished(std::uint64_t messages) {
+  if (messages == 0) {
+    ::unlink(part_path_.c_str());  // nothing worth keeping
+    return;
+  }
+  const std::uint64_t bytes = std::filesystem::file_size(part_path_);
+  accounting_.put_in_place(part_path_, final_path_);
+  messages_closed_ += messages;
+  bytes_closed_ += bytes;
+  retention_.add(final_path_, bytes);
 }
 
 void McapRecorder::rotate() {

@@ -67,6 +67,9 @@ class McapRecorder {
   bool ready(std::uint64_t log_time);
   void failed(const std::exception& error);
   void finish_file();
+  // The finished .part holding `messages`: put in place under its final name, counted and listed
+  // for retention (removed when it holds none). Throws std::system_error.
+  void place_finished(std::uint64_t messages);
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
