@@ -101,6 +101,12 @@ TEST_CASE("MCAP message prefix, chunk and message index round trip", "[mcap]") {
   CHECK(chunk->compression == "zstd");
   CHECK(chunk->uncompressed_size == records.size());
   CHECK(chunk->uncompressed_crc == crc32(records));
+  // The header alone, the stored records written after it, is the same record.
+  std::vector<std::uint8_t> split;
+  ByteWriter s(split);
+  write_chunk_header(s, 1000, 1000, records, "zstd", compressed.size());
+  s.bytes(compressed);
+  CHECK(split == out);
   std::vector<std::uint8_t> back(chunk->uncompressed_size);
   REQUIRE(decompress_chunk(chunk->compression, chunk->records, back));
   CHECK(back == records);

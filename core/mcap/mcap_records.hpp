@@ -180,6 +180,11 @@ void write_message_prefix(ByteWriter& w, std::uint16_t channel, std::uint32_t se
 void write_chunk(ByteWriter& w, std::uint64_t message_start_time, std::uint64_t message_end_time,
                  std::span<const std::uint8_t> uncompressed, std::string_view compression,
                  std::span<const std::uint8_t> stored);
+// The same Chunk record up to its stored records, which the caller writes next
+// (`stored_bytes` of them): the writer sends a compressed chunk to the file without copying it.
+void write_chunk_header(ByteWriter& w, std::uint64_t message_start_time,
+                        std::uint64_t message_end_time, std::span<const std::uint8_t> uncompressed,
+                        std::string_view compression, std::uint64_t stored_bytes);
 // A MessageIndex record: (log_time, offset in the chunk's uncompressed records) pairs.
 struct MessageIndexEntry {
   std::uint64_t log_time = 0, offset = 0;

@@ -37,8 +37,12 @@ McapFile::McapFile(const McapFileOptions& options)
       options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_;
   chunk_.reserve(chunk_capacity);
   compressed_.resize(compressor_.bound());
-  out_.reserve(compressor_.bound() + kRecordSlack + options.max_chunks * kTailBytesPerChunk +
-               options.calibration_csv.size());
+  // out_ holds the opening records (the calibration among them), a chunk's fields and message
+  // indexes (its records go to the file from chunk_ or compressed_), or the tail.
+  const std::size_t index_bytes =
+      mcap::kMaxChannels * (mcap::kRecordPrefixBytes + 2 + 4 + max_index_entries_ * 16);
+  out_.reserve(kRecordSlack + options.calibration_csv.size() + index_bytes +
+               options.max_chunks * kTailBytesPerChunk);
   for (auto& index : index_)
     index.reserve(max_index_entries_);
   // What open() records, made here so that starting a file (a rotation) allocates nothing.
@@ -96,7 +100,7 @@ void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
                                     "calibration.csv", "text/csv"});
   }
   whole_bytes_ = 0;
-  write_out();
+  write_out({out_});
 }
 
 void McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
@@ -159,26 +163,30 @@ void McapFile::write_chunk() {
     stored = std::span<const std::uint8_t>(compressed_.data(),
                                            compressor_.compress(records, compressed_));
   }
+  const std::string_view compression = options_.compress ? "zstd" : "";
+  // The chunk's fields, its stored records straight from where they are, then its indexes.
   out_.clear();
   mcap::ByteWriter w(out_);
-  mcap::write_chunk(w, chunk_start_time_, chunk_end_time_, records, options_.compress ? "zstd" : "",
-                    stored);
+  mcap::write_chunk_header(w, chunk_start_time_, chunk_end_time_, records, compression,
+                           stored.size());
+  const std::size_t header_bytes = w.size();
   mcap::ChunkInfo info;
   info.message_start_time = chunk_start_time_;
   info.message_end_time = chunk_end_time_;
   info.chunk_start_offset = chunk_start;
-  info.chunk_length = w.size();
-  info.compression = options_.compress ? "zstd" : "";
+  info.chunk_length = header_bytes + stored.size();
+  info.compression = compression;
   info.compressed_size = stored.size();
   info.uncompressed_size = records.size();
-  const std::size_t indexes_at = w.size();
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
     if (index_[c].empty()) continue;
-    info.message_index_offset[c] = chunk_start + w.size();
+    info.message_index_offset[c] = chunk_start + info.chunk_length + (w.size() - header_bytes);
     mcap::write_message_index(w, static_cast<std::uint16_t>(c + 1), index_[c]);
   }
-  info.message_index_length = w.size() - indexes_at;
-  write_out();  // throws: the chunk stays unwritten and uncounted
+  info.message_index_length = w.size() - header_bytes;
+  const std::span<const std::uint8_t> out(out_);
+  // Throws: the chunk stays unwritten and uncounted.
+  write_out({out.first(header_bytes), stored, out.subspan(header_bytes)});
   summary_.chunks.push_back(info);
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
     for (const auto& entry : index_[c])
@@ -189,9 +197,10 @@ void McapFile::write_chunk() {
   chunk_messages_ = 0;
 }
 
-void McapFile::write_out() {
+void McapFile::write_out(std::initializer_list<std::span<const std::uint8_t>> parts) {
   try {
-    file_.write(std::span<const std::uint8_t>(out_));
+    for (const auto part : parts)
+      file_.write(part);
   } catch (...) {
     file_.truncate(whole_bytes_);
     throw;
@@ -209,7 +218,7 @@ void McapFile::close() {
   out_.clear();
   mcap::ByteWriter w(out_);
   mcap::write_tail(w, file_.size(), summary_);
-  write_out();
+  write_out({out_});
   file_.close();
 }
 

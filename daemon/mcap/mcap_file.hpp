@@ -17,6 +17,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
 #include <span>
 #include <string>
 #include <string_view>
@@ -64,7 +65,9 @@ class McapFile {
   void make_room(std::size_t data_bytes, std::uint16_t channel);
   void begin_message(std::uint16_t channel, std::uint64_t log_time, std::size_t data_bytes);
   void write_chunk();
-  void write_out();  // out_ to the file
+  // `parts` to the file, one after the other; on a failure the file is cut back to its last
+  // whole chunk and the error rethrown.
+  void write_out(std::initializer_list<std::span<const std::uint8_t>> parts);
 
   McapFileOptions options_;
   std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_
