@@ -96,8 +96,14 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes", "[cli]
 
   const json s = inspect_json("--summary " + quoted(captures.front())).at("summary");
   // 1800 packets/s in single return whatever the RPM, sent in real time for about a second;
-  // the recording holds exactly what the daemon says it received.
-  CHECK(s.at("packets") == counters.at("datagrams_received"));
+  // the recording holds exactly what the daemon says it received (sanitizer builds: less what
+  // it counted as not recorded or dropped, see kSanitizerBuild).
+  const auto counted = [&](const char* name) {
+    return test::kSanitizerBuild ? counters.at(name).get<std::uint64_t>() : 0;
+  };
+  const std::uint64_t not_recorded = counted("pcap_packets_not_recorded");
+  const std::uint64_t frames_dropped = counted("frames_dropped_no_arena");
+  CHECK(s.at("packets").get<std::uint64_t>() + not_recorded == counters.at("datagrams_received"));
   CHECK(s.at("packets") == counters.at("pcap_packets_written"));
   CHECK(s.at("packets").get<int>() >= 1500);
   CHECK(s.at("packets").get<int>() <= 1900);
@@ -112,7 +118,9 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes", "[cli]
   // one have not reached it when the stream ends).
   CHECK(s.at("frames_complete").get<int>() >= 15);
   CHECK(s.at("frames_complete").get<int>() <= 20);
-  CHECK(s.at("frames_complete") == counters.at("frames_complete"));
+  if (not_recorded == 0 && frames_dropped == 0) {
+    CHECK(s.at("frames_complete") == counters.at("frames_complete"));
+  }
   for (const json& points : s.at("points_per_complete_frame")) {
     // 900 firing rounds per revolution at 1200 RPM, 40 channels, minus the doorway's no-returns.
     CHECK(points.get<int>() > 30000);
