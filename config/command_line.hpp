@@ -25,6 +25,9 @@ struct KeyOption {
 inline constexpr std::array kKeyOptions{
     KeyOption{"--output-dir", "output.directory"},
     KeyOption{"--calibration", "sensor.calibration_file"},
+    KeyOption{"--calibration-source", "sensor.calibration_source"},
+    KeyOption{"--ptc-port", "sensor.ptc_port"},
+    KeyOption{"--status-interval", "sensor.status_interval_seconds"},
     KeyOption{"--host-ip", "sensor.host_ip"},
     KeyOption{"--port", "sensor.data_port"},
     KeyOption{"--sensor-ip", "sensor.sensor_ip"},

@@ -102,6 +102,10 @@ std::optional<std::string> return_mode(const std::string& s) {
   return one_of(s, {"any", "last", "strongest", "dual"});
 }
 
+std::optional<std::string> calibration_source(const std::string& s) {
+  return one_of(s, {"auto", "sensor", "file", "nominal"});
+}
+
 std::optional<std::string> mcap_compression(const std::string& s) {
   return one_of(s, {"zstd", "none"});
 }
@@ -191,6 +195,11 @@ void for_each_key(Config& c, Visitor&& v) {
     RealRange{0.0, false, kNoUpperBound, false});
   v("sensor", "calibration_file", s.calibration_file, &any_string);
   v("sensor", "firing_time_correction", s.firing_time_correction, std::monostate{});
+  v("sensor", "calibration_source", s.calibration_source, &calibration_source);
+  v("sensor", "ptc_port", s.ptc_port, IntRange{1, 65535});
+  v("sensor", "ptc_timeout_ms", s.ptc_timeout_ms, IntRange{100, 60'000});
+  v("sensor", "status_interval_seconds", s.status_interval_seconds,
+    RealRange{0.0, false, 3600.0, false});
 
   v("ring", "slots", c.ring.slots, IntRange{64, 1 << 20});
   v("ring", "receive_batch", c.ring.receive_batch, IntRange{1, 1024});
@@ -316,6 +325,15 @@ void check_values(const DaemonConfig& c, const Reporter& report) {
   if (!(s.max_range > s.min_range)) {
     report.fail("sensor.max_range", fmt::format("{} must be greater than sensor.min_range ({})",
                                                 s.max_range, s.min_range));
+  }
+  if (s.calibration_source == "file" && s.calibration_file.empty()) {
+    report.fail("sensor.calibration_source",
+                "\"file\" needs sensor.calibration_file (the CSV to decode with)");
+  }
+  if (s.status_interval_seconds > 0 && s.status_interval_seconds < 0.1) {
+    report.fail(
+        "sensor.status_interval_seconds",
+        fmt::format("{} is too often (0 = off, or at least 0.1)", s.status_interval_seconds));
   }
   const auto slots = c.ring.slots;
   if ((slots & (slots - 1)) != 0) {

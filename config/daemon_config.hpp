@@ -24,6 +24,12 @@ struct SensorSection {
   double max_range = 200.0;                     // metres, > min_range
   double dual_return_distance_threshold = 0.1;  // metres, >= 0
   std::string calibration_file;                 // CSV; "" = the nominal table
+  // Where the angles come from: "auto" (the sensor over PTC if it answers, else
+  // calibration_file, else nominal), "sensor", "file" or "nominal".
+  std::string calibration_source = "auto";
+  std::uint16_t ptc_port = 9347;        // the sensor's TCP control port (PTC) at sensor_ip
+  std::uint32_t ptc_timeout_ms = 2000;  // to connect, then for each whole answer; 100..60000
+  double status_interval_seconds = 5;   // poll the sensor's status over PTC; 0 = off
   bool firing_time_correction = false;
 };
 

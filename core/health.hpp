@@ -91,6 +91,10 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(mcap_messages_not_written, "mcap_messages_not_written",                                        \
     "Messages lost from MCAP files to failed writes")                                              \
   X(mcap_bytes_written, "mcap_written_bytes", "Bytes written to MCAP files")                       \
+  X(ptc_requests, "ptc_requests",                                                                  \
+    "Requests to the sensor's control port (PTC): calibration, inventory, config, status")         \
+  X(ptc_errors, "ptc_errors",                                                                      \
+    "PTC requests that failed: refused, timed out, cut short, malformed, or an error code")        \
   X(receive_errors, "receive_errors", "Failed receive calls on the socket")                        \
   X(write_errors, "write_errors", "Failed writes")                                                 \
   X(bytes_not_written, "not_written_bytes", "Bytes lost to failed writes")                         \
@@ -120,6 +124,34 @@ inline constexpr std::size_t kHealthCounterCount =
     0 PANDARCAP_HEALTH_COUNTERS(PANDARCAP_HEALTH_COUNTER_ONE);
 #undef PANDARCAP_HEALTH_COUNTER_ONE
 
+// What the sensor says about itself over its control port (PTC), polled every
+// sensor.status_interval_seconds by a thread off the packet path (daemon/ptc/). The values are
+// reported only while fresh: a status older than 3 intervals is stale, and says so.
+struct SensorStatusGauges {
+  bool polled = false;          // polling is on (a live sensor with sensor_ip, interval > 0)
+  bool available = false;       // a status has arrived since start-up
+  bool stale = false;           // the last status is older than 3 polling intervals
+  double age_seconds = -1;      // since the last status arrived; -1: none yet
+  double interval_seconds = 0;  // sensor.status_interval_seconds
+  bool clock_source_known = false;
+  bool clock_source_ptp = false;  // the sensor's configured clock source is PTP (else GPS)
+  // The last status's fields (ptc::SensorStatus, in units).
+  double uptime_seconds = 0;
+  double motor_rpm = 0;
+  std::array<double, 8> temperatures_celsius{};  // in ptc::kTemperatureNames order
+  bool gps_pps_locked = false;
+  bool gps_nmea_locked = false;
+  std::uint8_t ptp_state = 0;  // ptc::PtpState: 0 free run, 1 tracking, 2 locked, 3 frozen
+};
+
+// Who the sensor is and where the angles come from: found at start-up, constant after. Empty
+// strings where the sensor was not asked or did not answer.
+struct SensorIdentity {
+  std::string serial;
+  std::string firmware;            // the sensor firmware version
+  std::string calibration_source;  // "sensor", "file" or "nominal"
+};
+
 struct HealthGauges {
   double rpm_tail = 0;            // mean motor speed reported in the tails over the last second
   double rpm_measured = 0;        // from azimuth progression over packet time, last second
@@ -131,6 +163,7 @@ struct HealthGauges {
   double receive_wakeups_per_second = 0;  // over the last second
   double decode_wakeups_per_second = 0;
   double writer_wakeups_per_second = 0;
+  SensorStatusGauges sensor_status;
   HealthState state = HealthState::kNoData;
   std::string reason;  // one line saying why the state is not ok ("" when ok)
 };
@@ -141,10 +174,11 @@ struct HotPathAllocations {
 };
 
 struct HealthSnapshot {
-  std::int64_t unix_time_ns = 0;  // when it was taken (CLOCK_REALTIME)
-  std::string sensor;             // the `sensor` label (config: health.sensor_name)
-  std::string version;            // pandarcap version, for the _build_info gauge
-  std::string decoder;            // decoder target in use ("avx512", "scalar", ...), likewise
+  std::int64_t unix_time_ns = 0;   // when it was taken (CLOCK_REALTIME)
+  std::string sensor;              // the `sensor` label (config: health.sensor_name)
+  std::string version;             // pandarcap version, for the _build_info gauge
+  std::string decoder;             // decoder target in use ("avx512", "scalar", ...), likewise
+  SensorIdentity sensor_identity;  // the pandarcap_sensor_info gauge's labels
   HealthCounters counters;
   HealthGauges gauges;
   // Kernel receive timestamp -> decoded, since start-up; empty when replaying a file.

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <ctime>
 
+#include "core/ptc/ptc_messages.hpp"
+
 namespace pandarcap {
 
 std::string_view to_string(HealthState state) noexcept {
@@ -200,6 +202,98 @@ std::string escape_label_value(std::string_view value) {
   return out;
 }
 
+namespace {
+
+// The sensor's identity (always) and its PTC status (while polled; the values only while fresh).
+void sensor_prometheus(std::string& out, std::string_view sensor, const HealthSnapshot& h) {
+  const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
+    fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
+  };
+  const SensorIdentity& id = h.sensor_identity;
+  family(out, "sensor_info", "gauge",
+         "The sensor's serial number and firmware (from PTC; empty when not asked or not "
+         "answering) and where the calibration in use came from; always 1");
+  append("pandarcap_sensor_info{{{},serial=\"", sensor);
+  append_label_value(out, id.serial);
+  out += "\",firmware=\"";
+  append_label_value(out, id.firmware);
+  out += "\",calibration_source=\"";
+  append_label_value(out, id.calibration_source);
+  out += "\"} 1\n";
+
+  const SensorStatusGauges& st = h.gauges.sensor_status;
+  if (!st.polled) return;
+  family(out, "sensor_status_age_seconds", "gauge",
+         "Seconds since the sensor last answered a status request over PTC; -1 before the first");
+  append("pandarcap_sensor_status_age_seconds{{{}}} {}\n", sensor, st.age_seconds);
+  family(out, "sensor_status_stale", "gauge",
+         "1 when the last status is older than 3 polling intervals (its values are not reported)");
+  append("pandarcap_sensor_status_stale{{{}}} {}\n", sensor, st.stale ? 1 : 0);
+  if (!st.available || st.stale) return;
+  family(out, "sensor_uptime_seconds", "gauge", "The sensor's own uptime (PTC status)");
+  append("pandarcap_sensor_uptime_seconds{{{}}} {}\n", sensor, st.uptime_seconds);
+  family(out, "sensor_motor_speed_rpm", "gauge", "Motor speed the sensor reports (PTC status)");
+  append("pandarcap_sensor_motor_speed_rpm{{{}}} {}\n", sensor, st.motor_rpm);
+  family(out, "sensor_temperature_celsius", "gauge",
+         "The sensor's board temperatures (PTC status), by board and sensor");
+  for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i) {
+    append("pandarcap_sensor_temperature_celsius{{{},board=\"{}\"}} {}\n", sensor,
+           ptc::kTemperatureNames[i], st.temperatures_celsius[i]);
+  }
+  family(out, "sensor_gps_pps_locked", "gauge", "1 when the sensor reports its GPS PPS locked");
+  append("pandarcap_sensor_gps_pps_locked{{{}}} {}\n", sensor, st.gps_pps_locked ? 1 : 0);
+  family(out, "sensor_ptp_state", "gauge",
+         "1 for the sensor's PTP clock state (free_run, tracking, locked, frozen)");
+  for (std::uint8_t i = 0; i < ptc::kPtpStateCount; ++i) {
+    append("pandarcap_sensor_ptp_state{{{},state=\"{}\"}} {}\n", sensor, ptc::ptp_state_name(i),
+           st.ptp_state == i ? 1 : 0);
+  }
+  if (st.clock_source_known) {
+    family(out, "sensor_clock_source", "gauge",
+           "1 for the clock source the sensor is configured to follow (gps, ptp)");
+    append("pandarcap_sensor_clock_source{{{},source=\"gps\"}} {}\n", sensor,
+           st.clock_source_ptp ? 0 : 1);
+    append("pandarcap_sensor_clock_source{{{},source=\"ptp\"}} {}\n", sensor,
+           st.clock_source_ptp ? 1 : 0);
+  }
+}
+
+void sensor_json(std::string& out, const HealthSnapshot& h) {
+  const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
+    fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
+  };
+  const SensorIdentity& id = h.sensor_identity;
+  out += ",\"sensor_info\":{\"serial\":";
+  append_json_string(out, id.serial);
+  out += ",\"firmware\":";
+  append_json_string(out, id.firmware);
+  out += ",\"calibration_source\":";
+  append_json_string(out, id.calibration_source);
+  out += "}";
+  const SensorStatusGauges& st = h.gauges.sensor_status;
+  append(",\"sensor_status\":{{\"polled\":{},\"available\":{},\"stale\":{},\"age_seconds\":",
+         st.polled, st.available, st.stale);
+  append_json_number(out, st.age_seconds);
+  if (st.polled && st.available && !st.stale) {
+    out += ",\"uptime_seconds\":";
+    append_json_number(out, st.uptime_seconds);
+    out += ",\"motor_rpm\":";
+    append_json_number(out, st.motor_rpm);
+    out += ",\"temperatures_celsius\":{";
+    for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i) {
+      append("{}\"{}\":", i == 0 ? "" : ",", ptc::kTemperatureNames[i]);
+      append_json_number(out, st.temperatures_celsius[i]);
+    }
+    append("}},\"gps_pps_locked\":{},\"gps_nmea_locked\":{},\"ptp_state\":\"{}\"",
+           st.gps_pps_locked, st.gps_nmea_locked, ptc::ptp_state_name(st.ptp_state));
+  }
+  if (st.clock_source_known)
+    append(",\"clock_source\":\"{}\"", st.clock_source_ptp ? "ptp" : "gps");
+  out += "}";
+}
+
+}  // namespace
+
 void render_prometheus(const HealthSnapshot& h, std::string& out) {
   out.clear();
   // The sensor label, escaped once per file into a stack buffer (a name longer than ~250
@@ -219,6 +313,7 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
   out += "\",decoder=\"";
   append_label_value(out, h.decoder);
   out += "\"} 1\n";
+  sensor_prometheus(out, sensor, h);
 
   for (const CounterField& f : kCounters) {
     family(out, f.prometheus, "counter", f.help, "_total");
@@ -326,6 +421,7 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   append_json_string(out, h.gauges.return_mode);
   append(",\"high_temperature\":{}}}", h.gauges.high_temperature);
 
+  sensor_json(out, h);
   latency_json(out, "latency", h.latency, "us", 1e3);
   latency_json(out, "frame_latency", h.frame_latency, "ms", 1e6);
   out += "}\n";

@@ -6,7 +6,13 @@
 #include <iterator>
 #include <utility>
 
+#include "core/ptc/ptc_messages.hpp"
+
 namespace pandarcap {
+
+namespace {
+constexpr auto kPtpLocked = static_cast<std::uint8_t>(ptc::PtpState::kLocked);
+}  // namespace
 
 void classify_health(const HealthCounters& c, const HealthCounters& p,
                      const HealthExpectations& expected, bool silent,
@@ -44,6 +50,14 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   if (g.seconds_since_last_packet >= 0 && g.rpm_tail > 0 &&
       std::abs(g.rpm_tail - expected.rpm) > 0.1 * expected.rpm) {
     problem("motor at {:.0f} RPM (expected {})", g.rpm_tail, expected.rpm);
+  }
+  const SensorStatusGauges& sensor = g.sensor_status;
+  if (sensor.polled && sensor.available && sensor.stale) {
+    problem("sensor status stale: no answer over PTC for {:.0f} s", sensor.age_seconds);
+  } else if (sensor.polled && sensor.available && sensor.clock_source_known &&
+             sensor.clock_source_ptp && sensor.ptp_state != kPtpLocked) {
+    problem("sensor clock source is PTP but PTP is {} (not locked)",
+            ptc::ptp_state_name(sensor.ptp_state));
   }
   // Failing writes degrade (capture goes on, and every byte not written is counted; they lead
   // the reason). A failing socket is an error: the daemon is not capturing.

@@ -10,7 +10,11 @@
 //               "; " in a fixed order: write errors first (with the last error's text), then
 //               kernel drops, ring overruns, frames dropped, packets not recorded, packets lost,
 //               azimuth gaps, rejects, timestamp troubles, the high-temperature flag, a return
-//               mode other than expected, a motor speed more than 10 % off.
+//               mode other than expected, a motor speed more than 10 % off, then the
+//               sensor's own status (gauges.sensor_status): stale ("sensor status stale: no
+//               answer over PTC for 16 s"), or PTP configured but not locked ("sensor clock
+//               source is PTP but PTP is tracking (not locked)"). A sensor that never answered
+//               PTC does not degrade: it is reported (age -1, ptc_errors), not assumed broken.
 //   - ok:       none of these; the reason is "".
 // Example: "2 kernel drops; return mode dual (expected last)".
 #pragma once

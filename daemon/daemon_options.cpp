@@ -95,6 +95,35 @@ ReplayOptions replay_options(const DaemonConfig& config, const RunSource& source
   return ro;
 }
 
+std::optional<PtcClientOptions> ptc_client_options(const DaemonConfig& config,
+                                                   const RunSource& source,
+                                                   std::uint16_t simulated_ptc_port) {
+  const SensorSection& s = config.sensor;
+  PtcClientOptions o;
+  o.port = s.ptc_port;
+  o.timeout = std::chrono::milliseconds(s.ptc_timeout_ms);
+  switch (source.kind) {
+    case RunSource::Kind::kSimulated:
+      o.address = "127.0.0.1";
+      if (!source.ptc_port_given) o.port = simulated_ptc_port;
+      return o;
+    case RunSource::Kind::kReplay:
+      if (s.calibration_source != "sensor") return std::nullopt;
+      break;
+    case RunSource::Kind::kLive:
+      break;
+  }
+  if (s.sensor_ip.empty()) return std::nullopt;
+  o.address = s.sensor_ip;
+  return o;
+}
+
+bool status_polled(const DaemonConfig& config, const RunSource& source,
+                   const std::optional<PtcClientOptions>& ptc) {
+  return ptc && source.kind != RunSource::Kind::kReplay &&
+         config.sensor.status_interval_seconds > 0;
+}
+
 SyntheticSensorConfig simulated_sensor_config(const RunSource& source, std::int64_t start_unix_ns) {
   SyntheticSensorConfig sc;
   sc.rpm = source.simulated_rpm;

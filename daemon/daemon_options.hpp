@@ -13,6 +13,7 @@
 #include "core/packet.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/decode_worker.hpp"
+#include "daemon/ptc/ptc_client.hpp"
 #include "daemon/replay_source.hpp"
 #include "daemon/udp_receiver.hpp"
 #include "daemon/writer.hpp"
@@ -28,6 +29,9 @@ struct RunSource {
   // --port was given: a replay keeps only datagrams to that port; the simulator sends to it
   // (else to a free port the daemon's socket picked).
   bool port_given = false;
+  // --ptc-port was given: the simulated sensor's PTC is asked there instead of the built-in
+  // server's free port (tests point it at a misbehaving server).
+  bool ptc_port_given = false;
   // kSimulated: the sensor the simulator plays.
   int simulated_rpm = 600;
   ReturnMode simulated_mode = ReturnMode::kDual;
@@ -49,6 +53,19 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
 
 // The replay's options (source kReplay).
 ReplayOptions replay_options(const DaemonConfig& config, const RunSource& source);
+
+// Where the sensor's control port (PTC) is asked, if anywhere: live, sensor_ip:ptc_port
+// (nothing without sensor_ip); simulated, 127.0.0.1 at the built-in server's port
+// (`simulated_ptc_port`) or at --ptc-port; a replay asks only when calibration_source is
+// "sensor" (and sensor_ip is set).
+std::optional<PtcClientOptions> ptc_client_options(const DaemonConfig& config,
+                                                   const RunSource& source,
+                                                   std::uint16_t simulated_ptc_port);
+
+// Whether the sensor's status is polled: a live or simulated source asked over PTC, with
+// status_interval_seconds > 0.
+bool status_polled(const DaemonConfig& config, const RunSource& source,
+                   const std::optional<PtcClientOptions>& ptc);
 
 // The simulated sensor's settings, starting now (`start_unix_ns`).
 SyntheticSensorConfig simulated_sensor_config(const RunSource& source, std::int64_t start_unix_ns);

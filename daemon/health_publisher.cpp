@@ -26,6 +26,35 @@ void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
   json_text_.reserve(8 * 1024);
 }
 
+namespace {
+
+// The poller's latest answer, aged: values are kept in the record only while fresh.
+void fill_sensor_status(const SensorStatusSample* latest, std::int64_t now, SensorStatusGauges& st,
+                        bool polled, double interval_seconds) {
+  st.polled = polled;
+  st.interval_seconds = interval_seconds;
+  st.available = latest != nullptr;
+  if (latest == nullptr) {
+    st.age_seconds = -1;
+    st.stale = false;
+    return;
+  }
+  st.age_seconds = static_cast<double>(now - latest->monotonic_ns) / 1e9;
+  st.stale = interval_seconds > 0 && st.age_seconds > 3 * interval_seconds;
+  const ptc::SensorStatus& s = latest->status;
+  st.uptime_seconds = s.uptime_s;
+  st.motor_rpm = s.motor_rpm;
+  for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i)
+    st.temperatures_celsius[i] = s.temperature_centi_c[i] / 100.0;
+  st.gps_pps_locked = s.gps_pps_locked == 1;
+  st.gps_nmea_locked = s.gps_nmea_locked == 1;
+  st.ptp_state = s.ptp_state;
+  st.clock_source_known = latest->clock_source.has_value();
+  st.clock_source_ptp = latest->clock_source == ptc::kClockSourcePtp;
+}
+
+}  // namespace
+
 void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   // Filled in place: its strings keep their capacity from one second to the next.
   HealthSnapshot& h = health_;
@@ -119,6 +148,14 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
         static_cast<double>(c.receive_wakeups - a.receive_wakeups) / tick_s;
     g.writer_wakeups_per_second = static_cast<double>(c.writer_wakeups - a.writer_wakeups) / tick_s;
   }
+
+  c.ptc_requests = sources.ptc_requests;
+  c.ptc_errors = sources.ptc_errors;
+  h.sensor_identity.serial = options_.sensor_identity.serial;
+  h.sensor_identity.firmware = options_.sensor_identity.firmware;
+  h.sensor_identity.calibration_source = options_.sensor_identity.calibration_source;
+  fill_sensor_status(sources.sensor_status, now, g.sensor_status, options_.status_polled,
+                     options_.status_interval_seconds);
 
   classify_health(c, previous_counters_,
                   HealthExpectations{options_.expected_return_mode, options_.expected_rpm},

@@ -24,6 +24,7 @@
 #include "daemon/output_accounting.hpp"
 #include "daemon/pcap_recorder.hpp"
 #include "daemon/pipeline_types.hpp"
+#include "daemon/ptc/sensor_status_channel.hpp"
 #include "daemon/writer_options.hpp"
 
 namespace pandarcap {
@@ -37,8 +38,11 @@ struct HealthSources {
   const McapRecorder& mcap;
   const OutputAccounting& accounting;
   std::uint64_t writer_wakeups;
-  double seconds_since_last_packet;  // -1: none yet
-  bool silent;                       // no packet yet, or none for the no-data timeout
+  double seconds_since_last_packet;         // -1: none yet
+  bool silent;                              // no packet yet, or none for the no-data timeout
+  const SensorStatusSample* sensor_status;  // the sensor's latest status over PTC; null: none
+  std::uint64_t ptc_requests;
+  std::uint64_t ptc_errors;
 };
 
 class HealthPublisher {

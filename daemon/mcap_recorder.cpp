@@ -32,7 +32,10 @@ void McapRecorder::prepare() {
   o.library = fmt::format("pandarcap {}", options_.version);
   o.metadata = {{"version", options_.version},
                 {"sensor_name", options_.sensor_name},
-                {"decoder", options_.decoder}};
+                {"decoder", options_.decoder},
+                {"calibration_source", options_.sensor_identity.calibration_source},
+                {"sensor_serial", options_.sensor_identity.serial},
+                {"sensor_firmware", options_.sensor_identity.firmware}};
   o.calibration_csv = options_.calibration_csv;
   file_ = std::make_unique<McapFile>(o);
   final_path_.reserve(4096);

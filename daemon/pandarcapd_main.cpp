@@ -5,12 +5,13 @@
 //
 // Start-up, in dependency order (shutdown is the reverse):
 //   1. options and configuration (bad config: the file:line:col message and exit 78)
-//   2. logging, calibration
+//   2. logging, the sensor: calibration (sensor.calibration_source), identity, configuration
 //   3. memory: ring, frame arenas, raw batches, queues — all of it, once
 //   4. outputs prepared (directories writable) and the source opened (socket bound / file open)
 //   5. threads started, READY=1
-// Exit status: 0 done, 1 runtime failure, 64 usage, 66 capture unreadable, 73 outputs cannot be
-// created, 78 configuration (or calibration file) invalid.
+// Exit status: 0 done, 1 runtime failure, 64 usage, 66 capture unreadable, 69 the sensor did not
+// give its calibration (calibration_source = "sensor"), 73 outputs cannot be created, 78
+// configuration (or calibration file) invalid.
 #include <fmt/format.h>
 #include <pthread.h>
 #include <signal.h>
@@ -40,6 +41,7 @@
 #include "core/calibration.hpp"
 #include "core/decoder_target.hpp"
 #include "core/packet.hpp"
+#include "core/sim/simulated_unit.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/cli_args.hpp"
 #include "daemon/clocks.hpp"
@@ -51,6 +53,9 @@
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/pipeline_types.hpp"
+#include "daemon/ptc/sensor_at_start.hpp"
+#include "daemon/ptc/sensor_status_poller.hpp"
+#include "daemon/ptc/simulated_ptc_server.hpp"
 #include "daemon/replay_source.hpp"
 #include "daemon/sd_notify.hpp"
 #include "daemon/simulated_sender.hpp"
@@ -84,8 +89,9 @@ Configuration:
                          (or can be made) writable by this user; print the result and exit
                          (0, 73 outputs, 78 configuration or calibration)
   --print-config         print the effective configuration as TOML and exit
-  --print-calibration    print the angle-correction table in effect (the calibration file, or
-                         the nominal Pandar40P table) as CSV and exit
+  --print-calibration    print the angle-correction table in effect (from the sensor, the
+                         calibration file or the nominal table, as calibration_source says) as
+                         CSV and exit
 
 Sources:
   --simulate             start a simulated sensor that sends over loopback to the daemon's own
@@ -99,6 +105,12 @@ Sources:
 Overrides (same names as the configuration keys):
   --output-dir DIR       output.directory (default pandarcap-output)
   --calibration FILE     sensor.calibration_file (default: the nominal Pandar40P table)
+  --calibration-source S sensor.calibration_source: auto (default: the sensor over PTC if it
+                         answers, else the file, else nominal), sensor, file or nominal
+  --ptc-port N           sensor.ptc_port (default 9347); with --simulate: ask this port on
+                         127.0.0.1 instead of the simulated sensor's own
+  --status-interval S    sensor.status_interval_seconds (default 5): poll the sensor's status
+                         (PTP/GPS lock, motor, temperatures) over PTC; 0 = off
   --host-ip IP           sensor.host_ip (default 0.0.0.0)
   --port N               sensor.data_port (default 2368); with --replay: only datagrams to N
   --sensor-ip IP         sensor.sensor_ip: drop (and count) datagrams from other sources
@@ -127,12 +139,13 @@ Overrides (same names as the configuration keys):
   -h, --help             this text
 
 Exit status: 0 done, 1 runtime failure, 64 usage error, 66 capture file unreadable,
-73 output directory not writable or in use by another pandarcapd, 77 run as root without
+69 the sensor did not give its calibration (calibration_source = "sensor"), 73 output directory not writable or in use by another pandarcapd, 77 run as root without
 --allow-root, 78 invalid configuration or calibration file.
 )";
 
 constexpr int kExitUsage = 64;
 constexpr int kExitNoInput = 66;
+constexpr int kExitUnavailable = 69;
 constexpr int kExitCantCreate = 73;
 constexpr int kExitNoPermission = 77;
 constexpr int kExitConfig = 78;
@@ -188,6 +201,7 @@ Options parse_options(int argc, char** argv) {
       const std::string text(key->flag ? "true" : args.value(arg));
       if (const auto problem = key_option_problem(*key, text)) args.usage_error(*problem);
       if (arg == "--port") o.source.port_given = true;
+      if (arg == "--ptc-port") o.source.ptc_port_given = true;
       if (arg == "--rpm") {
         // Also the simulated sensor's speed; a Pandar40P turns at one of two.
         o.source.simulated_rpm = std::stoi(text);
@@ -254,16 +268,13 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
   }
 }
 
-// The calibration the configuration names, or the nominal table. Throws on a bad file.
-Calibration load_calibration(const DaemonConfig& config) {
-  return config.sensor.calibration_file.empty() ? Calibration::nominal()
-                                                : Calibration::load(config.sensor.calibration_file);
-}
-
 // --check-config: what the start would refuse, short of opening the socket or the capture.
 int check_config(const DaemonConfig& config, const std::string& source_name) {
   try {
-    load_calibration(config);
+    // The file the start would read; the sensor is not asked (no network here).
+    const SensorSection& s = config.sensor;
+    if (s.calibration_source != "nominal" && !s.calibration_file.empty())
+      Calibration::load(s.calibration_file);
   } catch (const std::exception& error) {
     std::fprintf(stderr, "pandarcapd: %s\n", error.what());
     return kExitConfig;
@@ -317,13 +328,43 @@ void refuse_root_unless_allowed(const Options& options) {
   spdlog::warn("running as root (--allow-root)");
 }
 
-void log_calibration(const Calibration& calibration) {
-  if (calibration.is_nominal()) {
+void log_sensor(const SensorAtStart& sensor) {
+  if (sensor.calibration_source == "nominal") {
     spdlog::warn(
-        "calibration: nominal Pandar40P table in use (no calibration_file); per-unit "
-        "elevations differ by up to ~0.45 degrees");
+        "calibration: nominal Pandar40P table in use (no sensor answer, no calibration_file); "
+        "per-unit elevations differ by up to ~0.45 degrees");
   } else {
-    spdlog::info("calibration: {}", calibration.source);
+    spdlog::info("calibration: {}", sensor.describe());
+  }
+  if (sensor.settings) {
+    const ptc::SensorSettings& s = *sensor.settings;
+    spdlog::info("sensor config: {} RPM, clock source {}, sending to {}:{}{}", s.spin_rate_rpm,
+                 ptc::clock_source_name(s.clock_source), ptc::ipv4_text(s.destination_ip),
+                 s.data_port, s.udp_sequence != 0 ? ", UDP sequence on" : "");
+  }
+}
+
+// 2. The sensor: its calibration (by calibration_source), identity and configuration. A
+// simulated run first starts the simulated sensor's PTC server (`simulated_ptc`), to be asked as
+// a real sensor is.
+SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
+                           std::unique_ptr<SimulatedPtcServer>& simulated_ptc,
+                           std::optional<PtcClientOptions>& ptc) {
+  try {
+    if (source.kind == RunSource::Kind::kSimulated && !source.ptc_port_given) {
+      simulated_ptc = std::make_unique<SimulatedPtcServer>(
+          simulated_unit(source.simulated_rpm, static_cast<std::uint8_t>(source.simulated_mode),
+                         source.simulated_udp_sequence));
+    }
+    ptc = ptc_client_options(config, source, simulated_ptc ? simulated_ptc->port() : 0);
+    return resolve_sensor_at_start(config.sensor.calibration_source, config.sensor.calibration_file,
+                                   ptc);
+  } catch (const SensorUnavailable& error) {
+    throw StartupError{kExitUnavailable, error.what()};
+  } catch (const CalibrationError& error) {
+    throw StartupError{kExitConfig, error.what()};
+  } catch (const std::exception& error) {
+    throw StartupError{1, error.what()};
   }
 }
 
@@ -456,18 +497,16 @@ int run(const Options& options) {
   if (!options.print_calibration) {
     spdlog::info("pandarcapd {} starting ({})", kVersion, describe(options.source));
   }
-  Calibration calibration;
-  try {
-    calibration = load_calibration(config);
-  } catch (const std::exception& error) {
-    throw StartupError{kExitConfig, error.what()};
-  }
+  std::unique_ptr<SimulatedPtcServer> simulated_ptc;  // outlives every thread that asks it
+  std::optional<PtcClientOptions> ptc;
+  const SensorAtStart sensor = learn_sensor(config, options.source, simulated_ptc, ptc);
+  const Calibration& calibration = sensor.calibration;
   if (options.print_calibration) {
     fmt::print("{}", calibration.to_csv());
     return 0;
   }
   refuse_root_unless_allowed(options);
-  log_calibration(calibration);
+  log_sensor(sensor);
   const DecoderTarget decoder = choose_decoder(config);
 
   Pipeline pipe(config);  // all the memory, now
@@ -481,10 +520,19 @@ int run(const Options& options) {
   WriterOptions wo = writer_options(config);
   wo.decoder = std::string(to_string(decoder));
   wo.calibration_csv = calibration.to_csv();
+  wo.sensor_identity = SensorIdentity{sensor.inventory ? sensor.inventory->serial : "",
+                                      sensor.inventory ? sensor.inventory->sensor_firmware : "",
+                                      sensor.calibration_source};
+  wo.sensor_json = sensor.to_json();
+  wo.status_polled = status_polled(config, options.source, ptc);
+  wo.status_interval_seconds = config.sensor.status_interval_seconds;
+  pipe.sensor_status.requests.store(sensor.ptc_requests);
+  pipe.sensor_status.errors.store(sensor.ptc_errors);
   wo.pcap_destination = Endpoint{0, source->recorded_port(config)};
   wo.mcap_replay_time = options.source.kind == RunSource::Kind::kReplay;
   const auto lock = claim_outputs(config.output.directory);
-  Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live);
+  Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live,
+                pipe.sensor_status);
   try {
     writer.prepare();
   } catch (const std::exception& error) {
@@ -519,6 +567,18 @@ int run(const Options& options) {
     threads.start(
         "pc-simsensor", {}, [&] { source->run_simulator(stop_simulator); },
         [&] { stop_simulator.store(true, std::memory_order_relaxed); });
+  }
+  std::optional<SensorStatusPoller> status_poller;
+  if (wo.status_polled) {
+    const auto interval = std::chrono::milliseconds(
+        static_cast<std::int64_t>(config.sensor.status_interval_seconds * 1000));
+    status_poller.emplace(
+        *ptc, interval, pipe.sensor_status,
+        sensor.settings ? std::optional(sensor.settings->clock_source) : std::nullopt);
+    spdlog::info("sensor status: asking {}:{} every {} s", ptc->address, ptc->port,
+                 config.sensor.status_interval_seconds);
+    threads.start(
+        "pc-sensorstat", {}, [&] { status_poller->run(); }, [&] { status_poller->stop(); });
   }
   if (config.threads.lock_memory) lock_all_memory();
   systemd::ready();

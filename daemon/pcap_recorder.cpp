@@ -41,6 +41,10 @@ void PcapRecorder::save_calibration(std::string_view csv) {
   write_file_replacing(current, csv);
 }
 
+void PcapRecorder::save_sensor_info(std::string_view json) {
+  write_file_replacing(dir_ / "sensor.json", json);
+}
+
 std::uint64_t PcapRecorder::bytes_written() const noexcept {
   return bytes_closed_ + (pcap_ ? pcap_->bytes() : 0);
 }

@@ -43,6 +43,9 @@ class PcapRecorder {
   // At start-up, after the leftovers are finished: earlier runs' recordings numbered and listed
   // for retention.
   void adopt_earlier_files();
+  // raw/sensor.json := `json`: where the calibration came from, the sensor's identity and
+  // configuration (replaced each start: it describes the sensor the recordings now come from).
+  void save_sensor_info(std::string_view json);
   // raw/calibration.csv := `csv`. When an earlier run used other angles, its table is kept (never
   // replaced) as calibration_before_<N>.csv: recordings numbered below N were made with it.
   // Throws std::system_error.

@@ -20,6 +20,7 @@
 #include "daemon/decode_worker.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pipeline_types.hpp"
+#include "daemon/ptc/sensor_status_channel.hpp"
 #include "daemon/writer.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
@@ -39,6 +40,7 @@ struct Pipeline {
   DecodeWorker::WriterQueue to_writer;
   ringbuf::SpscQueue<StatusLine> status;  // the writer's STATUS= lines for the main thread
   ReceiveCounters receive;
+  SensorStatusChannel sensor_status;  // the status poller's answers, for the health record
   LiveClock live;
   Heartbeats heartbeats;
   std::atomic<bool> stop_source{false};

@@ -12,6 +12,7 @@
 #include <system_error>
 
 #include "core/ipv4.hpp"
+#include "core/sim/simulated_unit.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
 
@@ -24,7 +25,7 @@ constexpr std::size_t kMaxBurst = 64;
 
 SimulatedSender::SimulatedSender(const SyntheticSensorConfig& config, const std::string& source_ip,
                                  const std::string& destination_ip, std::uint16_t destination_port)
-    : sensor_(config) {
+    : sensor_(config, simulated_unit(config.rpm).calibration) {
   const sockaddr_in source = ipv4_endpoint(source_ip, 0, "simulator source");
   const sockaddr_in destination =
       ipv4_endpoint(destination_ip, destination_port, "simulator destination");

@@ -1,7 +1,8 @@
 // The simulated sensor of `pandarcapd --simulate`: a thread that sends the core generator's
 // packets over loopback UDP to the daemon's own socket at the sensor's real rate (1800 packets/s
 // single return, 3600 dual, at 600 RPM), so the whole live path runs with no hardware.
-// Packets due are sent together with sendmmsg every millisecond.
+// Packets due are sent together with sendmmsg every millisecond. The room is rendered with the
+// simulated unit's own angles (core/sim/simulated_unit.hpp), the table its PTC serves.
 #pragma once
 
 #include <atomic>

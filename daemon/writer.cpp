@@ -31,7 +31,8 @@ void probe_writable(const std::filesystem::path& dir) {
 
 Writer::Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_decoder,
                DecodeWorker::ArenaQueue& arenas_back, DecodeWorker::RawQueue& raw_back,
-               const ReceiveCounters& receive, const LiveClock& live)
+               const ReceiveCounters& receive, const LiveClock& live,
+               SensorStatusChannel& sensor_status)
     : options_(options),
       from_decoder_(from_decoder),
       arenas_back_(arenas_back),
@@ -41,7 +42,8 @@ Writer::Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_dec
       frames_(options_, accounting_),
       pcap_(options_, accounting_),
       mcap_(options_, accounting_),
-      health_(options_, accounting_) {}
+      health_(options_, accounting_),
+      sensor_status_(sensor_status) {}
 
 Writer::~Writer() = default;
 
@@ -71,6 +73,7 @@ void Writer::prepare() {
   if (options_.pcap) {
     pcap_.adopt_earlier_files();
     pcap_.save_calibration(options_.calibration_csv);
+    if (!options_.sensor_json.empty()) pcap_.save_sensor_info(options_.sensor_json);
   }
   if (options_.mcap) {
     mcap_.adopt_earlier_files();
@@ -78,6 +81,7 @@ void Writer::prepare() {
   }
   frames_.reserve();
   // Proves the health directories are writable before the daemon reports ready.
+  take_sensor_status();
   health_.build(sources(start), start);
   health_.write_first();
 }
@@ -91,13 +95,23 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
                        .accounting = accounting_,
                        .writer_wakeups = wakeups_,
                        .seconds_since_last_packet = seconds_since_last_packet(now),
-                       .silent = silent(now)};
+                       .silent = silent(now),
+                       .sensor_status = latest_sensor_status_ ? &*latest_sensor_status_ : nullptr,
+                       .ptc_requests = sensor_status_.requests.load(std::memory_order_relaxed),
+                       .ptc_errors = sensor_status_.errors.load(std::memory_order_relaxed)};
+}
+
+void Writer::take_sensor_status() noexcept {
+  SensorStatusSample sample;
+  while (sensor_status_.samples.try_pop(sample))
+    latest_sensor_status_ = sample;
 }
 
 void Writer::write_health() {
   const std::int64_t now = monotonic_ns();
   pcap_.flush();  // the recordings on disk are at most a second behind
   if (options_.mcap) mcap_.flush();
+  take_sensor_status();
   health_.build(sources(now), now);
   health_.remember(decode_, now);
   log_fragments(now);

@@ -33,6 +33,7 @@
 #include "daemon/output_accounting.hpp"
 #include "daemon/pcap_recorder.hpp"
 #include "daemon/pipeline_types.hpp"
+#include "daemon/ptc/sensor_status_channel.hpp"
 #include "daemon/writer_options.hpp"
 
 namespace pandarcap {
@@ -46,7 +47,7 @@ class Writer {
  public:
   Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_decoder,
          DecodeWorker::ArenaQueue& arenas_back, DecodeWorker::RawQueue& raw_back,
-         const ReceiveCounters& receive, const LiveClock& live);
+         const ReceiveCounters& receive, const LiveClock& live, SensorStatusChannel& sensor_status);
   ~Writer();
 
   // Creates the output directories and proves they are writable (writes calibration.csv and a
@@ -66,6 +67,7 @@ class Writer {
   // The health record now: built from everything's counters, published.
   void write_health();
   HealthSources sources(std::int64_t now_monotonic_ns) const noexcept;
+  void take_sensor_status() noexcept;  // the poller's latest answer, if any came
   void log_fragments(std::int64_t now_monotonic_ns);
   void stall_while_test_file_exists() const;
   // Seconds since the decoder's last packet (-1: none yet), and whether that is silence.
@@ -85,7 +87,9 @@ class Writer {
   McapRecorder mcap_;
   HealthPublisher health_;
 
-  DecodeSnapshot decode_;        // the latest counters from the decoder
+  DecodeSnapshot decode_;  // the latest counters from the decoder
+  SensorStatusChannel& sensor_status_;
+  std::optional<SensorStatusSample> latest_sensor_status_;
   bool reported_silent_ = true;  // the last health written said "no data"
   std::uint64_t wakeups_ = 0;
   std::uint64_t fragments_logged_ = 0;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <string>
 
+#include "core/health.hpp"
 #include "daemon/mcap/mcap_file_options.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
@@ -42,6 +43,13 @@ struct WriterOptions {
   int expected_rpm = 600;
   Endpoint pcap_destination;  // the synthesised destination of recorded packets
   std::string calibration_csv;
+  // The sensor's identity and the calibration's source (pandarcap_sensor_info), and the
+  // neighbour file raw/sensor.json saved beside the recordings (daemon/ptc/sensor_at_start.hpp).
+  SensorIdentity sensor_identity;
+  std::string sensor_json;
+  // The sensor's status is polled over PTC every status_interval_seconds (status_polled).
+  bool status_polled = false;
+  double status_interval_seconds = 0;
   // Test hook (PANDARCAP_TEST_STALL_WRITER_FILE): while this file exists, the writer stops at its
   // next once-a-second tick, without a heartbeat, as a writer stuck on a dead disk would. Lets
   // the tests see the watchdog stop and frames drop (counted) behind a stalled writer. "" = off.

@@ -1,0 +1,32 @@
+// The simulated Pandar40P as one particular unit: what its control protocol (PTC) answers.
+//
+// Like a real unit it has its own angle calibration, which differs from the nominal design
+// table: each channel's elevation by -0.40..+0.40° and its azimuth offset by -0.20..+0.20°,
+// fixed per channel (a deterministic pattern, not random), so that decoding with the nominal
+// table puts points measurably off the room's surfaces and decoding with the fetched table puts
+// them on. `pandarcapd --simulate` renders its packets with this table and serves it over PTC.
+#pragma once
+
+#include <cstdint>
+
+#include "core/calibration.hpp"
+#include "core/ptc/ptc_messages.hpp"
+
+namespace pandarcap {
+
+struct SimulatedUnit {
+  Calibration calibration;  // this unit's table (source "simulated unit")
+  ptc::SensorInventory inventory;
+  ptc::SensorSettings settings;  // clock source PTP, spin rate and modes as simulated
+  std::uint8_t ptp_state = static_cast<std::uint8_t>(ptc::PtpState::kLocked);
+
+  // The unit's status `uptime_s` seconds after power-on.
+  ptc::SensorStatus status(std::uint32_t uptime_s) const;
+};
+
+// The simulated unit, spinning at `rpm`, sending `return_mode_code` (the packets' tail code)
+// with or without a UDP sequence, to `data_port`.
+SimulatedUnit simulated_unit(int rpm = 600, std::uint8_t return_mode_code = 0x39,
+                             bool udp_sequence = false, std::uint16_t data_port = 2368);
+
+}  // namespace pandarcap

@@ -1,0 +1,51 @@
+// The thread that asks the sensor for its status over PTC every status_interval_seconds, off the
+// packet path: the receive, decode and writer threads never wait on the sensor's TCP port.
+//
+//   poller thread --SensorStatusChannel (SPSC queue of samples, atomic counters)--> writer
+//
+// Each round asks for the status (0x09) and, until known and then every 12th round, the
+// configuration (0x08: is the clock source PTP?). A sample is pushed only for an answer; the
+// writer keeps the latest and ages it, so a sensor that stops answering turns the status stale
+// after 3 intervals instead of freezing the last values. Failures are counted; the log gets one
+// warning when the sensor stops answering and one line when it answers again.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <optional>
+
+#include "core/ptc/ptc_messages.hpp"
+#include "daemon/ptc/ptc_client.hpp"
+#include "daemon/ptc/sensor_status_channel.hpp"
+
+namespace pandarcap {
+
+class SensorStatusPoller {
+ public:
+  // `clock_source`: what the start-up's configuration read said, if it answered.
+  SensorStatusPoller(PtcClientOptions options, std::chrono::milliseconds interval,
+                     SensorStatusChannel& channel, std::optional<std::uint8_t> clock_source);
+
+  // The thread's body: polls until stop().
+  void run();
+  void stop();
+
+ private:
+  void poll_once(std::uint64_t round);
+
+  PtcClient client_;
+  std::chrono::milliseconds interval_;
+  SensorStatusChannel& channel_;
+  std::optional<std::uint8_t> clock_source_;
+  std::uint64_t base_requests_ = 0, base_errors_ = 0;  // the channel's counts before this thread
+  bool answering_ = true;  // the last status request was answered (or none failed yet)
+  bool warned_ = false;
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stop_ = false;
+};
+
+}  // namespace pandarcap
