@@ -141,7 +141,9 @@ struct SensorStatusGauges {
   std::array<double, 8> temperatures_celsius{};  // in ptc::kTemperatureNames order
   bool gps_pps_locked = false;
   bool gps_nmea_locked = false;
-  std::uint8_t ptp_state = 0;  // ptc::PtpState: 0 free run, 1 tracking, 2 locked, 3 frozen
+  std::uint8_t ptp_state = 0;     // ptc::PtpState: 0 free run, 1 tracking, 2 locked, 3 frozen
+  bool ptp_offset_known = false;  // the sensor answers PTP diagnostics (0x06)
+  double ptp_offset_seconds = 0;  // its offset from the PTP master
 };
 
 // Who the sensor is and where the angles come from: found at start-up, constant after. Empty

@@ -248,6 +248,11 @@ void sensor_prometheus(std::string& out, std::string_view sensor, const HealthSn
     append("pandarcap_sensor_ptp_state{{{},state=\"{}\"}} {}\n", sensor, ptc::ptp_state_name(i),
            st.ptp_state == i ? 1 : 0);
   }
+  if (st.ptp_offset_known) {
+    family(out, "sensor_ptp_offset_seconds", "gauge",
+           "The sensor's PTP offset from its master (PTC PTP diagnostics, where answered)");
+    append("pandarcap_sensor_ptp_offset_seconds{{{}}} {}\n", sensor, st.ptp_offset_seconds);
+  }
   if (st.clock_source_known) {
     family(out, "sensor_clock_source", "gauge",
            "1 for the clock source the sensor is configured to follow (gps, ptp)");
@@ -286,6 +291,10 @@ void sensor_json(std::string& out, const HealthSnapshot& h) {
     }
     append("}},\"gps_pps_locked\":{},\"gps_nmea_locked\":{},\"ptp_state\":\"{}\"",
            st.gps_pps_locked, st.gps_nmea_locked, ptc::ptp_state_name(st.ptp_state));
+    if (st.ptp_offset_known) {
+      out += ",\"ptp_offset_seconds\":";
+      append_json_number(out, st.ptp_offset_seconds);
+    }
   }
   if (st.clock_source_known)
     append(",\"clock_source\":\"{}\"", st.clock_source_ptp ? "ptp" : "gps");

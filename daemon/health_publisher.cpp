@@ -49,6 +49,8 @@ void fill_sensor_status(const SensorStatusSample* latest, std::int64_t now, Sens
   st.gps_pps_locked = s.gps_pps_locked == 1;
   st.gps_nmea_locked = s.gps_nmea_locked == 1;
   st.ptp_state = s.ptp_state;
+  st.ptp_offset_known = latest->ptp_offset_ns.has_value();
+  st.ptp_offset_seconds = static_cast<double>(latest->ptp_offset_ns.value_or(0)) / 1e9;
   st.clock_source_known = latest->clock_source.has_value();
   st.clock_source_ptp = latest->clock_source == ptc::kClockSourcePtp;
 }

@@ -328,7 +328,7 @@ void refuse_root_unless_allowed(const Options& options) {
   spdlog::warn("running as root (--allow-root)");
 }
 
-void log_sensor(const SensorAtStart& sensor) {
+void log_sensor(const SensorAtStart& sensor, const DaemonConfig& config, const RunSource& source) {
   if (sensor.calibration_source == "nominal") {
     spdlog::warn(
         "calibration: nominal Pandar40P table in use (no sensor answer, no calibration_file); "
@@ -338,9 +338,20 @@ void log_sensor(const SensorAtStart& sensor) {
   }
   if (sensor.settings) {
     const ptc::SensorSettings& s = *sensor.settings;
-    spdlog::info("sensor config: {} RPM, clock source {}, sending to {}:{}{}", s.spin_rate_rpm,
+    spdlog::info("sensor config: {} RPM, clock source {}, destination {}:{}{}", s.spin_rate_rpm,
                  ptc::clock_source_name(s.clock_source), ptc::ipv4_text(s.destination_ip),
                  s.data_port, s.udp_sequence != 0 ? ", UDP sequence on" : "");
+    // What the sensor says it does against what this daemon expects: a mismatch found now is
+    // an afternoon saved (the simulated sensor sends where the daemon's socket is, whatever
+    // its configuration says).
+    if (source.kind == RunSource::Kind::kLive && s.data_port != config.sensor.data_port) {
+      spdlog::warn("sensor config: the sensor sends to port {}, pandarcapd listens on {}",
+                   s.data_port, config.sensor.data_port);
+    }
+    if (s.spin_rate_rpm != config.sensor.rotation_speed) {
+      spdlog::warn("sensor config: the sensor spins at {} RPM, rotation_speed expects {}",
+                   s.spin_rate_rpm, config.sensor.rotation_speed);
+    }
   }
 }
 
@@ -354,7 +365,7 @@ SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
     if (source.kind == RunSource::Kind::kSimulated && !source.ptc_port_given) {
       simulated_ptc = std::make_unique<SimulatedPtcServer>(
           simulated_unit(source.simulated_rpm, static_cast<std::uint8_t>(source.simulated_mode),
-                         source.simulated_udp_sequence));
+                         source.simulated_udp_sequence, config.sensor.data_port));
     }
     ptc = ptc_client_options(config, source, simulated_ptc ? simulated_ptc->port() : 0);
     return resolve_sensor_at_start(config.sensor.calibration_source, config.sensor.calibration_file,
@@ -506,7 +517,7 @@ int run(const Options& options) {
     return 0;
   }
   refuse_root_unless_allowed(options);
-  log_sensor(sensor);
+  log_sensor(sensor, config, options.source);
   const DecoderTarget decoder = choose_decoder(config);
 
   Pipeline pipe(config);  // all the memory, now

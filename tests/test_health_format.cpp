@@ -47,6 +47,18 @@ HealthSnapshot distinct_snapshot() {
   h.gauges.uptime_seconds = 12.5;
   h.gauges.state = HealthState::kDegraded;
   h.gauges.reason = "3 kernel drops";
+  h.sensor_identity = SensorIdentity{"PA40\"P\\1", "4.03", "sensor"};
+  SensorStatusGauges& st = h.gauges.sensor_status;
+  st.polled = st.available = true;
+  st.age_seconds = 1.25;
+  st.interval_seconds = 5;
+  st.clock_source_known = st.clock_source_ptp = true;
+  st.uptime_seconds = 86400;
+  st.motor_rpm = 602;
+  for (std::size_t i = 0; i < st.temperatures_celsius.size(); ++i)
+    st.temperatures_celsius[i] = 40.5 + static_cast<double>(i);
+  st.gps_pps_locked = true;
+  st.ptp_state = 1;  // tracking
   return h;
 }
 
@@ -108,9 +120,10 @@ TEST_CASE("Prometheus text follows the textfile-collector conventions", "[health
   CHECK(s.at("pandarcap_state{" + sensor + ",state=\"ok\"}") == "0");
 
   // Every sample: a pandarcap_ name with the sensor label, a number, no timestamp; every
-  // counter family ends in _total; each family has HELP and TYPE once.
+  // counter family ends in _total; each family has HELP and TYPE once. Label values the sensor
+  // supplies (its serial, its firmware) are escaped like the sensor name.
   const std::regex sample(
-      R"(^pandarcap_[a-z_]+\{sensor="(?:[^"\\]|\\.)*"(,[a-z_]+="[a-zA-Z_0-9.+-]*")*\} -?[0-9.]+(e[+-][0-9]+)?$)");
+      R"(^pandarcap_[a-z_]+\{sensor="(?:[^"\\]|\\.)*"(,[a-z_]+="(?:[^"\\\n]|\\.)*")*\} -?[0-9.]+(e[+-][0-9]+)?$)");
   std::istringstream in(text);
   std::string line;
   std::map<std::string, int> types;
@@ -239,4 +252,51 @@ TEST_CASE("JSON line survives a reason that is not UTF-8", "[health]") {
   const auto j = nlohmann::json::parse(to_json_line(h));
   CHECK(j.at("state") == "no_data");
   CHECK(j.at("reason").get<std::string>().rfind("write failed: ", 0) == 0);
+}
+
+TEST_CASE("Sensor identity and status over PTC: fresh values reported, stale ones not",
+          "[health][ptc]") {
+  HealthSnapshot h = distinct_snapshot();
+  auto prom = samples(to_prometheus(h));
+  const std::string sensor = "sensor=\"front \\\"left\\\"\\\\lidar\"";
+  CHECK(prom.at("pandarcap_sensor_info{" + sensor +
+                ",serial=\"PA40\\\"P\\\\1\",firmware=\"4.03\",calibration_source=\"sensor\"}") ==
+        "1");
+  CHECK(prom.at("pandarcap_sensor_status_age_seconds{" + sensor + "}") == "1.25");
+  CHECK(prom.at("pandarcap_sensor_status_stale{" + sensor + "}") == "0");
+  CHECK(prom.at("pandarcap_sensor_uptime_seconds{" + sensor + "}") == "86400");
+  CHECK(prom.at("pandarcap_sensor_motor_speed_rpm{" + sensor + "}") == "602");
+  CHECK(prom.at("pandarcap_sensor_temperature_celsius{" + sensor + ",board=\"bottom_t1\"}") ==
+        "40.5");
+  CHECK(prom.at("pandarcap_sensor_temperature_celsius{" + sensor + ",board=\"top_rt5\"}") ==
+        "47.5");
+  CHECK(prom.at("pandarcap_sensor_ptp_state{" + sensor + ",state=\"tracking\"}") == "1");
+  CHECK(prom.at("pandarcap_sensor_ptp_state{" + sensor + ",state=\"locked\"}") == "0");
+  CHECK(prom.at("pandarcap_sensor_clock_source{" + sensor + ",source=\"ptp\"}") == "1");
+  CHECK(prom.at("pandarcap_sensor_gps_pps_locked{" + sensor + "}") == "1");
+  auto json = nlohmann::json::parse(to_json_line(h));
+  CHECK(json["sensor_info"]["serial"] == "PA40\"P\\1");
+  CHECK(json["sensor_info"]["calibration_source"] == "sensor");
+  CHECK(json["sensor_status"]["ptp_state"] == "tracking");
+  CHECK(json["sensor_status"]["clock_source"] == "ptp");
+  CHECK(json["sensor_status"]["temperatures_celsius"]["laser_rt_l"] == Approx(42.5));
+  CHECK(json["counters"]["ptc_errors"].is_number());
+
+  // Stale: age and the flag, and none of the values, as if they were current.
+  h.gauges.sensor_status.stale = true;
+  h.gauges.sensor_status.age_seconds = 16;
+  prom = samples(to_prometheus(h));
+  CHECK(prom.at("pandarcap_sensor_status_stale{" + sensor + "}") == "1");
+  CHECK(prom.count("pandarcap_sensor_uptime_seconds{" + sensor + "}") == 0);
+  CHECK(prom.count("pandarcap_sensor_ptp_state{" + sensor + ",state=\"tracking\"}") == 0);
+  json = nlohmann::json::parse(to_json_line(h));
+  CHECK(json["sensor_status"]["stale"] == true);
+  CHECK_FALSE(json["sensor_status"].contains("ptp_state"));
+
+  // Not polled: the identity only.
+  h.gauges.sensor_status = SensorStatusGauges{};
+  prom = samples(to_prometheus(h));
+  CHECK(prom.count("pandarcap_sensor_status_stale{" + sensor + "}") == 0);
+  json = nlohmann::json::parse(to_json_line(h));
+  CHECK(json["sensor_status"]["polled"] == false);
 }

@@ -177,3 +177,53 @@ TEST_CASE("Health: the reason is rewritten in place, keeping its capacity", "[he
   CHECK(g.reason == "no packet for 0.0 s");
   CHECK(g.reason.data() == storage);
 }
+
+TEST_CASE("Health: the sensor's PTP not locked degrades when PTP is its clock source",
+          "[health][policy][ptc]") {
+  const HealthCounters c;
+  HealthGauges g = streaming();
+  SensorStatusGauges& st = g.sensor_status;
+  st.polled = st.available = true;
+  st.interval_seconds = 5;
+  st.age_seconds = 1;
+  st.clock_source_known = st.clock_source_ptp = true;
+  for (const auto& [state, name] : {std::pair{0, "free_run"}, std::pair{1, "tracking"},
+                                    std::pair{3, "frozen"}, std::pair{9, "unknown"}}) {
+    st.ptp_state = static_cast<std::uint8_t>(state);
+    classify_health(c, c, kLast, false, "", g);
+    CHECK(g.state == HealthState::kDegraded);
+    CHECK(g.reason ==
+          std::string("sensor clock source is PTP but PTP is ") + name + " (not locked)");
+  }
+  st.ptp_state = 2;  // locked
+  classify_health(c, c, kLast, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+  // GPS as the clock source: the PTP byte is not the sensor's time, nothing to degrade.
+  st.ptp_state = 0;
+  st.clock_source_ptp = false;
+  classify_health(c, c, kLast, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+}
+
+TEST_CASE("Health: a sensor status gone stale degrades; one never received does not",
+          "[health][policy][ptc]") {
+  const HealthCounters c;
+  HealthGauges g = streaming();
+  SensorStatusGauges& st = g.sensor_status;
+  st.polled = true;
+  st.interval_seconds = 5;
+  st.available = false;  // never answered: reported (age -1, ptc_errors), not degraded
+  st.age_seconds = -1;
+  classify_health(c, c, kLast, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+  st.available = st.stale = true;
+  st.age_seconds = 16.4;
+  st.clock_source_known = st.clock_source_ptp = true;
+  st.ptp_state = 1;  // a stale status's PTP state is not reported as current
+  classify_health(c, c, kLast, false, "", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason == "sensor status stale: no answer over PTC for 16 s");
+  // Silence still wins: no_data says what matters most.
+  classify_health(c, c, kLast, true, "", g);
+  CHECK(g.state == HealthState::kNoData);
+}

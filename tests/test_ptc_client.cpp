@@ -66,8 +66,15 @@ TEST_CASE("PTC client reads every command from the simulated sensor on one conne
   CHECK(client.errors() == 0);
   CHECK(server.requests() == 5);
 
-  // 0x06 is not supported by the simulated unit (nor, as far as known, by every 40P firmware):
-  // an error return code, counted, and the next request reconnects and succeeds.
+  // 0x06 is not supported by the simulated unit (nor, as far as known, by every 40P firmware).
+  // Asked for the feature, "unsupported" is an answer, not a failure: not counted.
+  const auto no_ptp = fetch_ptp_status(client);
+  REQUIRE(no_ptp.error);
+  CHECK(no_ptp.error->return_code == 0x05);
+  CHECK_THAT(no_ptp.error->message, Catch::Contains("not supported by this sensor"));
+  CHECK(client.errors() == 0);
+  // Asked as a plain request, the same answer is an error return code, counted, and the next
+  // request reconnects and succeeds.
   const PtcReply ptp = client.request(ptc::Command::kPtpDiagnostics, std::vector<std::uint8_t>{1});
   REQUIRE(ptp.error);
   CHECK(ptp.error->kind == ptc::ErrorKind::kErrorCode);
@@ -183,4 +190,17 @@ TEST_CASE("PTC client: a calibration answer that is not a 40-channel table is re
 
 TEST_CASE("PTC client: an address that is not IPv4 is refused before any connection", "[ptc]") {
   CHECK_THROWS_AS(PtcClient(PtcClientOptions{.address = "sensor.local"}), std::invalid_argument);
+}
+
+TEST_CASE("PTC client reads the PTP offset from a sensor that answers 0x06", "[ptc]") {
+  SimulatedUnit unit = simulated_unit();
+  unit.answers_ptp_diagnostics = true;
+  unit.ptp_offset_ns = -1234;
+  SimulatedPtcServer server(unit);
+  PtcClient client(local(server.port()));
+  const auto ptp = fetch_ptp_status(client);
+  REQUIRE(ptp.value);
+  CHECK(ptp.value->master_offset_ns == -1234);
+  CHECK(ptp.value->state == 2);
+  CHECK(client.errors() == 0);
 }

@@ -198,3 +198,16 @@ TEST_CASE("the simulated unit's calibration differs from the nominal table withi
   CHECK(again.elevation_deg == unit.elevation_deg);
   CHECK(again.azimuth_offset_deg == unit.azimuth_offset_deg);
 }
+
+TEST_CASE("PTC PTP diagnostics: a 64-bit signed offset, then state and elapsed time", "[ptc]") {
+  const ptc::PtpDiagnostics ptp{-2'500'000'000'123, 2, 86'400'000};
+  const std::vector<std::uint8_t> bytes = encode_ptp_status(ptp);
+  REQUIRE(bytes.size() == kPtpStatusBytes);
+  CHECK(bytes[0] == 0xFF);  // the offset's high byte: negative, big-endian
+  const auto parsed = parse_ptp_status(bytes);
+  REQUIRE(parsed.value);
+  CHECK(parsed.value->master_offset_ns == -2'500'000'000'123);
+  CHECK(parsed.value->state == 2);
+  CHECK(parsed.value->elapsed_ms == 86'400'000);
+  CHECK_FALSE(parse_ptp_status(std::vector<std::uint8_t>(15)).value);
+}

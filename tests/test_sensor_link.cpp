@@ -252,6 +252,8 @@ TEST_CASE("PTP not locked degrades the state, a status gone stale too", "[ptc][d
   test::ScratchDir dir("ptc-ptp");
   SimulatedUnit unit = simulated_unit();
   unit.ptp_state = static_cast<std::uint8_t>(ptc::PtpState::kTracking);
+  unit.answers_ptp_diagnostics = true;
+  unit.ptp_offset_ns = -2500;
   std::optional<SimulatedPtcServer> sensor(std::in_place, unit);
   test::LiveDaemon daemon(dir, "ptc_port = " + std::to_string(sensor->port()) +
                                    "\nptc_timeout_ms = 500\nstatus_interval_seconds = 0.3\n");
@@ -265,6 +267,8 @@ TEST_CASE("PTP not locked degrades the state, a status gone stale too", "[ptc][d
                std::string::npos;
   };
   CHECK(send_until(daemon, sent, tracking));
+  const nlohmann::json tracked = test::last_health_record(daemon.out);
+  CHECK(tracked["sensor_status"]["ptp_offset_seconds"] == Approx(-2.5e-6));
   CHECK_THAT(harness::read_file(daemon.out / "health" / "pandarcap.prom"),
              Catch::Contains("state=\"tracking\"} 1"));
 

@@ -163,6 +163,29 @@ Parsed<SensorStatus> parse_status(std::span<const std::uint8_t> payload) {
   return out;
 }
 
+Parsed<PtpDiagnostics> parse_ptp_status(std::span<const std::uint8_t> payload) {
+  Parsed<PtpDiagnostics> out;
+  if (!long_enough(payload, kPtpStatusBytes, "PTP status", out)) return out;
+  const Reader r(payload);
+  PtpDiagnostics v;
+  v.master_offset_ns =
+      static_cast<std::int64_t>((std::uint64_t{r.u32(0)} << 32) | std::uint64_t{r.u32(4)});
+  v.state = r.i32(8);
+  v.elapsed_ms = r.i32(12);
+  out.value = v;
+  return out;
+}
+
+std::vector<std::uint8_t> encode_ptp_status(const PtpDiagnostics& v) {
+  Writer w(kPtpStatusBytes);
+  const auto offset = static_cast<std::uint64_t>(v.master_offset_ns);
+  w.u32(0, static_cast<std::uint32_t>(offset >> 32));
+  w.u32(4, static_cast<std::uint32_t>(offset));
+  w.u32(8, static_cast<std::uint32_t>(v.state));
+  w.u32(12, static_cast<std::uint32_t>(v.elapsed_ms));
+  return w.take();
+}
+
 std::vector<std::uint8_t> encode_inventory(const SensorInventory& v) {
   Writer w(kInventoryBytes);
   w.text(0, 18, v.serial);

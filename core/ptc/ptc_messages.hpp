@@ -89,6 +89,16 @@ struct SensorStatus {
   std::uint8_t ptp_state = 0;  // PtpState, or an unknown code as received
 };
 
+// 0x06 with query 0x01 ("PTP status"): 16 bytes. Whether a Pandar40P firmware answers it is
+// unknown (spec §4); an "unsupported" return code is expected, and the status byte used instead.
+inline constexpr std::size_t kPtpStatusBytes = 16;
+inline constexpr std::uint8_t kPtpQueryStatus = 0x01;
+struct PtpDiagnostics {
+  std::int64_t master_offset_ns = 0;  // linuxptp's "offset from master", in nanoseconds
+  std::int32_t state = 0;
+  std::int32_t elapsed_ms = 0;
+};
+
 template <typename T>
 struct Parsed {
   std::optional<T> value;
@@ -99,11 +109,13 @@ struct Parsed {
 Parsed<SensorInventory> parse_inventory(std::span<const std::uint8_t> payload);
 Parsed<SensorSettings> parse_settings(std::span<const std::uint8_t> payload);
 Parsed<SensorStatus> parse_status(std::span<const std::uint8_t> payload);
+Parsed<PtpDiagnostics> parse_ptp_status(std::span<const std::uint8_t> payload);
 
 // The layouts back to bytes (reserved bytes zero; strings cut to their field).
 std::vector<std::uint8_t> encode_inventory(const SensorInventory& inventory);
 std::vector<std::uint8_t> encode_settings(const SensorSettings& settings);
 std::vector<std::uint8_t> encode_status(const SensorStatus& status);
+std::vector<std::uint8_t> encode_ptp_status(const PtpDiagnostics& ptp);
 
 // "aa:bb:cc:dd:ee:ff", "192.168.1.201".
 std::string mac_text(const std::array<std::uint8_t, 6>& mac);

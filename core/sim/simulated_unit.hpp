@@ -19,6 +19,10 @@ struct SimulatedUnit {
   ptc::SensorInventory inventory;
   ptc::SensorSettings settings;  // clock source PTP, spin rate and modes as simulated
   std::uint8_t ptp_state = static_cast<std::uint8_t>(ptc::PtpState::kLocked);
+  // Whether it answers PTP diagnostics (0x06), and the offset it reports. Off by default: as
+  // far as is known a Pandar40P answers "unsupported".
+  bool answers_ptp_diagnostics = false;
+  std::int64_t ptp_offset_ns = 0;
 
   // The unit's status `uptime_s` seconds after power-on.
   ptc::SensorStatus status(std::uint32_t uptime_s) const;

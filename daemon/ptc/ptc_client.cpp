@@ -89,7 +89,8 @@ std::optional<PtcError> PtcClient::connect(ptc::Command command) {
   return std::nullopt;
 }
 
-PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> payload) {
+PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> payload,
+                            bool unsupported_is_an_answer) {
   ++requests_;
   PtcReply reply;
   if (!fd_) {
@@ -162,6 +163,13 @@ PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> 
                                   "reading the response payload")) {
     reply.payload.clear();
     reply.error = std::move(problem);
+    return reply;
+  }
+  if (h.return_code == ptc::kReturnUnsupported && unsupported_is_an_answer) {
+    reply.payload.clear();
+    reply.error = PtcError{
+        ptc::ErrorKind::kErrorCode, h.return_code,
+        fmt::format("PTC {} {}: not supported by this sensor", endpoint_, ptc::to_string(command))};
     return reply;
   }
   if (h.return_code != ptc::kReturnOk) {

@@ -51,8 +51,12 @@ class PtcClient {
   // Throws std::invalid_argument when `address` is not an IPv4 address.
   explicit PtcClient(PtcClientOptions options);
 
-  // Sends `command` with `payload` and waits for its response, within the deadlines.
-  PtcReply request(ptc::Command command, std::span<const std::uint8_t> payload = {});
+  // Sends `command` with `payload` and waits for its response, within the deadlines. With
+  // `unsupported_is_an_answer`, a return code 0x05 (unsupported command) is still reported as
+  // an error of kind kErrorCode but not counted in errors(): asking whether a sensor has a
+  // feature is not a failure when it says no.
+  PtcReply request(ptc::Command command, std::span<const std::uint8_t> payload = {},
+                   bool unsupported_is_an_answer = false);
 
   // Counts a failure found by the caller (a payload that does not parse) in errors(): the
   // connection is dropped too.

@@ -8,9 +8,11 @@ namespace pandarcap {
 namespace {
 
 template <typename T, typename Parse>
-Fetched<T> fetch(PtcClient& client, ptc::Command command, Parse parse) {
+Fetched<T> fetch(PtcClient& client, ptc::Command command, Parse parse,
+                 std::span<const std::uint8_t> request = {},
+                 bool unsupported_is_an_answer = false) {
   Fetched<T> out;
-  PtcReply reply = client.request(command);
+  PtcReply reply = client.request(command, request, unsupported_is_an_answer);
   if (!reply.ok()) {
     out.error = std::move(reply.error);
     return out;
@@ -56,6 +58,12 @@ Fetched<ptc::SensorSettings> fetch_settings(PtcClient& client) {
 
 Fetched<ptc::SensorStatus> fetch_status(PtcClient& client) {
   return fetch<ptc::SensorStatus>(client, ptc::Command::kGetStatus, &ptc::parse_status);
+}
+
+Fetched<ptc::PtpDiagnostics> fetch_ptp_status(PtcClient& client) {
+  static constexpr std::uint8_t kQuery[] = {ptc::kPtpQueryStatus};
+  return fetch<ptc::PtpDiagnostics>(client, ptc::Command::kPtpDiagnostics, &ptc::parse_ptp_status,
+                                    kQuery, true);
 }
 
 }  // namespace pandarcap

@@ -5,6 +5,7 @@
 //   fetch_inventory    0x07  serial number, firmware versions
 //   fetch_settings     0x08  clock source, spin rate, return mode, destination
 //   fetch_status       0x09  uptime, motor speed, temperatures, GPS and PTP state
+//   fetch_ptp_status   0x06  PTP offset from master, where the firmware answers it
 //
 // A payload longer than its layout parses; `extra_bytes` says by how much (newer firmware), and
 // the caller logs it once.
@@ -30,5 +31,8 @@ Fetched<Calibration> fetch_calibration(PtcClient& client);
 Fetched<ptc::SensorInventory> fetch_inventory(PtcClient& client);
 Fetched<ptc::SensorSettings> fetch_settings(PtcClient& client);
 Fetched<ptc::SensorStatus> fetch_status(PtcClient& client);
+// 0x06 query 0x01; many sensors answer "unsupported": an error of kind kErrorCode, code 0x05,
+// not counted in the client's errors (the sensor answered; it lacks the feature).
+Fetched<ptc::PtpDiagnostics> fetch_ptp_status(PtcClient& client);
 
 }  // namespace pandarcap

@@ -15,7 +15,8 @@ namespace pandarcap {
 struct SensorStatusSample {
   std::int64_t monotonic_ns = 0;  // when the answer arrived
   ptc::SensorStatus status;
-  std::optional<std::uint8_t> clock_source;  // from the last configuration read, if any
+  std::optional<std::uint8_t> clock_source;   // from the last configuration read, if any
+  std::optional<std::int64_t> ptp_offset_ns;  // from 0x06, where the sensor answers it
 };
 
 // Between the poller (producer) and the writer (consumer). Preallocated; a full queue drops the

@@ -38,6 +38,18 @@ void SensorStatusPoller::poll_once(std::uint64_t round) {
     const Fetched<ptc::SensorSettings> settings = fetch_settings(client_);
     if (settings.value) clock_source_ = settings.value->clock_source;
   }
+  std::optional<std::int64_t> ptp_offset_ns;
+  if (ask_ptp_diagnostics_) {
+    const Fetched<ptc::PtpDiagnostics> ptp = fetch_ptp_status(client_);
+    if (ptp.value) {
+      ptp_offset_ns = ptp.value->master_offset_ns;
+    } else if (ptp.error->kind == ptc::ErrorKind::kErrorCode ||
+               ptp.error->kind == ptc::ErrorKind::kUnexpectedPayload) {
+      spdlog::info("sensor status: no PTP offset ({}); the status's PTP state is used",
+                   ptp.error->message);
+      ask_ptp_diagnostics_ = false;
+    }
+  }
   const Fetched<ptc::SensorStatus> status = fetch_status(client_);
   channel_.requests.store(base_requests_ + client_.requests(), std::memory_order_relaxed);
   channel_.errors.store(base_errors_ + client_.errors(), std::memory_order_relaxed);
@@ -48,7 +60,8 @@ void SensorStatusPoller::poll_once(std::uint64_t round) {
                    status.extra_bytes);
     }
     answering_ = true;
-    channel_.samples.try_push(SensorStatusSample{monotonic_ns(), *status.value, clock_source_});
+    channel_.samples.try_push(
+        SensorStatusSample{monotonic_ns(), *status.value, clock_source_, ptp_offset_ns});
     return;
   }
   if (answering_) {

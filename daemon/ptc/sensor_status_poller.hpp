@@ -3,11 +3,13 @@
 //
 //   poller thread --SensorStatusChannel (SPSC queue of samples, atomic counters)--> writer
 //
-// Each round asks for the status (0x09) and, until known and then every 12th round, the
-// configuration (0x08: is the clock source PTP?). A sample is pushed only for an answer; the
-// writer keeps the latest and ages it, so a sensor that stops answering turns the status stale
-// after 3 intervals instead of freezing the last values. Failures are counted; the log gets one
-// warning when the sensor stops answering and one line when it answers again.
+// Each round asks for the status (0x09); until known and then every 12th round, the
+// configuration (0x08: is the clock source PTP?); and PTP diagnostics (0x06: the offset from
+// the master) until the sensor answers anything but a valid PTP status (the first round's
+// "unsupported" is counted once, logged once, and not asked again). A sample is pushed only for an
+// answer; the writer keeps the latest and ages it, so a sensor that stops answering turns the
+// status stale after 3 intervals instead of freezing the last values. Failures are counted; the log
+// gets one warning when the sensor stops answering and one line when it answers again.
 #pragma once
 
 #include <atomic>
@@ -40,6 +42,7 @@ class SensorStatusPoller {
   std::chrono::milliseconds interval_;
   SensorStatusChannel& channel_;
   std::optional<std::uint8_t> clock_source_;
+  bool ask_ptp_diagnostics_ = true;  // until the sensor says it does not answer 0x06
   std::uint64_t base_requests_ = 0, base_errors_ = 0;  // the channel's counts before this thread
   bool answering_ = true;  // the last status request was answered (or none failed yet)
   bool warned_ = false;

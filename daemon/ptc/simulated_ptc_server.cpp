@@ -92,7 +92,8 @@ void SimulatedPtcServer::serve_connection(int fd) {
     if (!read_exactly(payload.data(), request.payload_length)) return;
     requests_.fetch_add(1, std::memory_order_relaxed);
     std::uint8_t return_code = ptc::kReturnOk;
-    const std::vector<std::uint8_t> body = answer(request.command, return_code);
+    const std::vector<std::uint8_t> body =
+        answer(request.command, std::span(payload).first(request.payload_length), return_code);
     std::vector<std::uint8_t> out(ptc::kHeaderBytes + body.size());
     const auto header = ptc::encode_header(static_cast<ptc::Command>(request.command), return_code,
                                            static_cast<std::uint32_t>(body.size()));
@@ -107,6 +108,7 @@ void SimulatedPtcServer::serve_connection(int fd) {
 }
 
 std::vector<std::uint8_t> SimulatedPtcServer::answer(std::uint8_t command,
+                                                     std::span<const std::uint8_t> payload,
                                                      std::uint8_t& return_code) const {
   switch (static_cast<ptc::Command>(command)) {
     case ptc::Command::kGetCalibration:
@@ -123,6 +125,11 @@ std::vector<std::uint8_t> SimulatedPtcServer::answer(std::uint8_t command,
       return ptc::encode_status(now.status(static_cast<std::uint32_t>(uptime.count())));
     }
     case ptc::Command::kPtpDiagnostics:
+      if (unit_.answers_ptp_diagnostics && payload.size() == 1 &&
+          payload[0] == ptc::kPtpQueryStatus) {
+        return ptc::encode_ptp_status(ptc::PtpDiagnostics{
+            unit_.ptp_offset_ns, static_cast<std::int32_t>(ptp_state_.load()), 1000});
+      }
       break;
   }
   return_code = ptc::kReturnUnsupported;

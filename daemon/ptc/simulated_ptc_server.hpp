@@ -4,12 +4,14 @@
 // would from a real sensor; the tests and pandarcap-ctl's tests talk to it too.
 //
 // Like the sensor it serves one connection at a time, any number of requests on it, in order.
-// 0x06 (PTP diagnostics) and every command that would change a sensor are answered with return
-// code 0x05 (unsupported). A request announcing more than 64 payload bytes ends the connection.
+// 0x06 (PTP diagnostics) is answered only by a unit that says so (query 0x01); it and every
+// command that would change a sensor are otherwise answered with return code 0x05 (unsupported). A
+// request announcing more than 64 payload bytes ends the connection.
 #pragma once
 
 #include <atomic>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <thread>
 
@@ -35,7 +37,8 @@ class SimulatedPtcServer {
  private:
   void serve();
   void serve_connection(int fd);
-  std::vector<std::uint8_t> answer(std::uint8_t command, std::uint8_t& return_code) const;
+  std::vector<std::uint8_t> answer(std::uint8_t command, std::span<const std::uint8_t> payload,
+                                   std::uint8_t& return_code) const;
 
   SimulatedUnit unit_;
   std::string calibration_csv_;
