@@ -205,7 +205,7 @@ TEST_CASE("Health: the sensor's PTP not locked degrades when PTP is its clock so
   CHECK(g.state == HealthState::kOk);
 }
 
-TEST_CASE("Health: a sensor status gone stale degrades; one never received does not",
+TEST_CASE("Health: a sensor status gone stale degrades, one never received does not",
           "[health][policy][ptc]") {
   const HealthCounters c;
   HealthGauges g = streaming();
