@@ -508,6 +508,10 @@ int run(const Options& options) {
   if (!options.print_calibration) {
     spdlog::info("pandarcapd {} starting ({})", kVersion, describe(options.source));
   }
+  // Signals are blocked before the first thread starts (the simulated sensor's PTC server is
+  // one): a SIGTERM delivered to a thread that has it unblocked would kill the process instead
+  // of reaching supervise().
+  const sigset_t signals = block_signals();
   std::unique_ptr<SimulatedPtcServer> simulated_ptc;  // outlives every thread that asks it
   std::optional<PtcClientOptions> ptc;
   const SensorAtStart sensor = learn_sensor(config, options.source, simulated_ptc, ptc);
@@ -552,7 +556,6 @@ int run(const Options& options) {
   DecodeWorker worker(calibration, decode_worker_options(config, decoder, options.source),
                       pipe.ring, pipe.to_writer, pipe.free_arenas, pipe.free_raw);
 
-  const sigset_t signals = block_signals();
   const ThreadsSection& placement = config.threads;
   std::atomic<bool> stop_simulator{false};
   PipelineThreads threads;
