@@ -73,15 +73,9 @@ struct ChannelConstants {
   const std::int32_t* label_offset;  // offset_q (- correction), wrapped into [0, full), + 1/2
 };
 
-// Filter counts as lane-wise vectors (one subtract per mask), summed once per packet.
-struct FilterTally {
-  hn::Vec<DI> no_return, below, above, duplicate, too_close;
-  FilterTally() {
-    const DI di;
-    no_return = below = above = duplicate = too_close = hn::Zero(di);
-  }
-};
-
+// Filter counts are lane-wise vectors (one subtract per mask), summed once per packet. They are
+// separate locals of DecodeKernel, not members of a struct: SVE vectors are sizeless and cannot
+// be members (nor can a record's two vectors, below).
 HWY_INLINE void count(hn::Vec<DI>& counter, hn::Mask<DI> mask) {
   counter = hn::Sub(counter, hn::VecFromMask(DI(), mask));  // true lanes are -1
 }
@@ -90,18 +84,22 @@ HWY_INLINE std::uint64_t total(hn::Vec<DI> counter) {
   return static_cast<std::uint64_t>(hn::GetLane(hn::SumOfLanes(DI(), counter)));
 }
 
-struct Records {
-  hn::Vec<DI> distance, reflectivity;
-};
-
-HWY_INLINE Records load_records(const std::uint8_t* records, std::size_t i) {
+// The 3-byte records of channels i..i+N, regrouped so that each 128-bit block holds 4 of them;
+// distance() and reflectivity() then pick their bytes.
+HWY_INLINE hn::Vec<DU8> load_records(const std::uint8_t* records, std::size_t i) {
   const DI di;
   const DU8 d8;
   const auto words = hn::TableLookupLanes(hn::BitCast(di, hn::LoadU(d8, records + 3 * i)),
                                           hn::SetTableIndices(di, kRecordWords));
-  const auto bytes = hn::BitCast(d8, words);
-  return {hn::BitCast(di, hn::TableLookupBytesOr0(bytes, hn::Load(d8, kDistanceBytes))),
-          hn::BitCast(di, hn::TableLookupBytesOr0(bytes, hn::Load(d8, kReflectivityBytes)))};
+  return hn::BitCast(d8, words);
+}
+
+HWY_INLINE hn::Vec<DI> distance(hn::Vec<DU8> records) {
+  return hn::BitCast(DI(), hn::TableLookupBytesOr0(records, hn::Load(DU8(), kDistanceBytes)));
+}
+
+HWY_INLINE hn::Vec<DI> reflectivity(hn::Vec<DU8> records) {
+  return hn::BitCast(DI(), hn::TableLookupBytesOr0(records, hn::Load(DU8(), kReflectivityBytes)));
 }
 
 // Lanes of real channels (the last vector of a 16-lane target covers channels 32..47).
@@ -110,19 +108,21 @@ HWY_INLINE hn::Mask<DI> real_channels(std::size_t i) {
   return hn::Lt(hn::Iota(di, static_cast<std::int32_t>(i)), hn::Set(di, kChannels));
 }
 
-// The range filter on one vector of distances; counts each reason once per real channel.
-HWY_INLINE hn::Mask<DI> in_range(const SimdDecoderTables& t, hn::Vec<DI> distance,
-                                 hn::Mask<DI> real, FilterTally& tally) {
+// The range filter on one vector of distances; counts each reason once per real channel into
+// the packet's lane-wise counters.
+HWY_INLINE hn::Mask<DI> in_range(const SimdDecoderTables& t, hn::Vec<DI> raw, hn::Mask<DI> real,
+                                 hn::Vec<DI>& no_return, hn::Vec<DI>& below_min,
+                                 hn::Vec<DI>& above_max) {
   const DI di;
-  const auto zero = hn::And(hn::Eq(distance, hn::Zero(di)), real);
+  const auto zero = hn::And(hn::Eq(raw, hn::Zero(di)), real);
   const auto returned = hn::AndNot(zero, real);
   const auto below =
-      hn::And(hn::Lt(distance, hn::Set(di, static_cast<std::int32_t>(t.limits.min))), returned);
+      hn::And(hn::Lt(raw, hn::Set(di, static_cast<std::int32_t>(t.limits.min))), returned);
   const auto above =
-      hn::And(hn::Gt(distance, hn::Set(di, static_cast<std::int32_t>(t.limits.max))), returned);
-  count(tally.no_return, zero);
-  count(tally.below, below);
-  count(tally.above, above);
+      hn::And(hn::Gt(raw, hn::Set(di, static_cast<std::int32_t>(t.limits.max))), returned);
+  count(no_return, zero);
+  count(below_min, below);
+  count(above_max, above);
   return hn::AndNot(hn::Or(below, above), returned);
 }
 
@@ -135,8 +135,9 @@ struct BlockContext {
 
 // Computes one vector of points (channels i..i+N) of a block into `out`.
 HWY_INLINE void emit(const SimdDecoderTables& t, const ChannelConstants& k, std::size_t i,
-                     const BlockContext& block, Records records, hn::Vec<DI> return_type,
-                     hn::Mask<DI> keep, BlockPoints& out) {
+                     const BlockContext& block, hn::Vec<DI> distance_raw,
+                     hn::Vec<DI> reflectivity_raw, hn::Vec<DI> return_type, hn::Mask<DI> keep,
+                     BlockPoints& out) {
   const DF df;
   const DI di;
   const DU du;
@@ -144,7 +145,7 @@ HWY_INLINE void emit(const SimdDecoderTables& t, const ChannelConstants& k, std:
   if (hn::AllFalse(di, keep)) return;
 
   const auto r =
-      hn::Mul(hn::ConvertTo(df, records.distance), hn::Set(df, static_cast<float>(kDistanceUnitM)));
+      hn::Mul(hn::ConvertTo(df, distance_raw), hn::Set(df, static_cast<float>(kDistanceUnitM)));
   const auto a = hn::Load(df, k.a + i);
   const auto b = hn::Load(df, k.b + i);
   const auto sin_a = hn::Set(df, block.sin_azimuth);
@@ -174,7 +175,7 @@ HWY_INLINE void emit(const SimdDecoderTables& t, const ChannelConstants& k, std:
   const auto borrow = hn::Lt(hn::Set(di, static_cast<std::int32_t>(time_low ^ 0x80000000u)),
                              hn::Load(di, t.firing_offset_biased.data() + i));
   const auto high = hn::Add(hn::Set(du, time_high), hn::BitCast(du, hn::VecFromMask(di, borrow)));
-  const auto meta = hn::Or(hn::Or(cdeg, hn::ShiftLeft<16>(records.reflectivity)),
+  const auto meta = hn::Or(hn::Or(cdeg, hn::ShiftLeft<16>(reflectivity_raw)),
                            hn::Load(di, t.channel_byte.data() + i));
   hn::StoreInterleaved4(low, high, hn::BitCast(du, meta), hn::BitCast(du, return_type), du,
                         out.tail + 4 * i);
@@ -274,7 +275,8 @@ DecodedPacket DecodeKernel(const SimdDecoderTables& t, const PacketView& packet,
   }
 
   DecodedPacket result;
-  FilterTally tally;
+  auto no_return = hn::Zero(di), below = hn::Zero(di), above = hn::Zero(di);
+  auto duplicate = hn::Zero(di), too_close = hn::Zero(di);
   std::size_t n = 0;
   BlockPoints points[2];
 
@@ -283,9 +285,10 @@ DecodedPacket DecodeKernel(const SimdDecoderTables& t, const PacketView& packet,
     for (int b = 0; b < kBlocks; ++b) {
       points[0].kept = 0;
       for (std::size_t i = 0; i < static_cast<std::size_t>(kChannels); i += lanes) {
-        const Records r = load_records(records[b], i);
-        const auto keep = in_range(t, r.distance, real_channels(i), tally);
-        emit(t, k, i, blocks[b], r, single, keep, points[0]);
+        const auto r = load_records(records[b], i);
+        const auto d = distance(r);
+        const auto keep = in_range(t, d, real_channels(i), no_return, below, above);
+        emit(t, k, i, blocks[b], d, reflectivity(r), single, keep, points[0]);
       }
       result.block_begin[b] = static_cast<std::uint16_t>(n);
       n = write_points(points[0], out, n);
@@ -299,25 +302,25 @@ DecodedPacket DecodeKernel(const SimdDecoderTables& t, const PacketView& packet,
       points[0].kept = points[1].kept = 0;
       for (std::size_t i = 0; i < static_cast<std::size_t>(kChannels); i += lanes) {
         const auto real = real_channels(i);
-        const Records r_last = load_records(records[b], i);
-        const Records r_strongest = load_records(records[b + 1], i);
-        auto keep_last = in_range(t, r_last.distance, real, tally);
-        const auto keep_strongest = in_range(t, r_strongest.distance, real, tally);
+        const auto r_last = load_records(records[b], i);
+        const auto r_strongest = load_records(records[b + 1], i);
+        const auto d_last = distance(r_last), d_strongest = distance(r_strongest);
+        const auto f_last = reflectivity(r_last), f_strongest = reflectivity(r_strongest);
+        auto keep_last = in_range(t, d_last, real, no_return, below, above);
+        const auto keep_strongest = in_range(t, d_strongest, real, no_return, below, above);
         // Both echoes kept: identical, or closer than the threshold, keeps only the odd block's.
         const auto both = hn::And(keep_last, keep_strongest);
         const auto identical =
-            hn::And(both, hn::And(hn::Eq(r_last.distance, r_strongest.distance),
-                                  hn::Eq(r_last.reflectivity, r_strongest.reflectivity)));
-        const auto close =
-            hn::And(hn::AndNot(identical, both),
-                    hn::Lt(hn::Abs(hn::Sub(r_last.distance, r_strongest.distance)), threshold));
+            hn::And(both, hn::And(hn::Eq(d_last, d_strongest), hn::Eq(f_last, f_strongest)));
+        const auto close = hn::And(hn::AndNot(identical, both),
+                                   hn::Lt(hn::Abs(hn::Sub(d_last, d_strongest)), threshold));
         const auto merged = hn::Or(identical, close);
-        count(tally.duplicate, identical);
-        count(tally.too_close, close);
+        count(duplicate, identical);
+        count(too_close, close);
         keep_last = hn::AndNot(merged, keep_last);
-        emit(t, k, i, blocks[b], r_last, last, keep_last, points[0]);
-        emit(t, k, i, blocks[b + 1], r_strongest, hn::IfThenElse(merged, merged_type, strongest),
-             keep_strongest, points[1]);
+        emit(t, k, i, blocks[b], d_last, f_last, last, keep_last, points[0]);
+        emit(t, k, i, blocks[b + 1], d_strongest, f_strongest,
+             hn::IfThenElse(merged, merged_type, strongest), keep_strongest, points[1]);
       }
       result.block_begin[b] = static_cast<std::uint16_t>(n);
       n = write_points(points[0], out, n);
@@ -327,11 +330,11 @@ DecodedPacket DecodeKernel(const SimdDecoderTables& t, const PacketView& packet,
   }
   result.block_begin[kBlocks] = static_cast<std::uint16_t>(n);
   result.point_count = static_cast<std::uint16_t>(n);
-  filtered.add(FilterReason::kNoReturn, total(tally.no_return));
-  filtered.add(FilterReason::kBelowMinRange, total(tally.below));
-  filtered.add(FilterReason::kAboveMaxRange, total(tally.above));
-  filtered.add(FilterReason::kDualDuplicate, total(tally.duplicate));
-  filtered.add(FilterReason::kDualTooClose, total(tally.too_close));
+  filtered.add(FilterReason::kNoReturn, total(no_return));
+  filtered.add(FilterReason::kBelowMinRange, total(below));
+  filtered.add(FilterReason::kAboveMaxRange, total(above));
+  filtered.add(FilterReason::kDualDuplicate, total(duplicate));
+  filtered.add(FilterReason::kDualTooClose, total(too_close));
   return result;
 }
 
