@@ -38,7 +38,8 @@ std::vector<DecoderTarget> supported_decoder_targets();
 
 // The target "auto" resolves to on this machine: the first supported entry of a preference order
 // set from `pandarcap-bench decode` measurements (AVX-512, AVX2, SSE4, SVE2, SVE, NEON, scalar;
-// see README "Performance").
+// see README "Performance"), where SVE and SVE2 count only with vectors wider than 128 bits
+// (instruction counts under QEMU; README "Build for ARM64").
 DecoderTarget best_decoder_target();
 
 // Resolves a config/CLI value: "auto" or a target name. Returns the target, or an error message

@@ -96,8 +96,15 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
     spdlog::info("socket receive buffer: {} bytes", granted_rcvbuf_);
   }
 
-  if (::setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) != 0)
-    io::throw_errno("SO_TIMESTAMPNS");
+  // Kernel receive timestamps. Every Linux since 2.6.22 has them; an emulator may not (QEMU's
+  // user mode refuses SO_TIMESTAMPNS with ENOPROTOOPT). Without them each datagram gets the time
+  // its batch was taken from the socket, later by up to the latency budget: said once, not fatal.
+  if (::setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) != 0) {
+    if (errno != ENOPROTOOPT) io::throw_errno("SO_TIMESTAMPNS");
+    spdlog::warn(
+        "SO_TIMESTAMPNS: not available here (an emulator?): receive times are read when each "
+        "batch is taken, so latencies are measured from then, not from arrival");
+  }
   const timeval timeout{0, 100'000};
   if (::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout) != 0) {
     io::throw_errno("SO_RCVTIMEO");
@@ -131,6 +138,16 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
     spdlog::info("joined multicast group {}", options.multicast_ip);
   }
   if (!options.sensor_ip.empty()) sensor_ip_ = require_ipv4(options.sensor_ip, "sensor_ip").s_addr;
+  // Kernel drops are read with SO_MEMINFO (Linux 3.19+). Where it is refused (QEMU's user mode)
+  // they cannot be counted at all: said at start, since every other stage's drops are counted.
+  {
+    std::array<std::uint32_t, SK_MEMINFO_VARS> info{};
+    socklen_t info_length = sizeof info;
+    if (::getsockopt(fd_, SOL_SOCKET, SO_MEMINFO, info.data(), &info_length) != 0) {
+      spdlog::warn("SO_MEMINFO: {}: kernel drops (a full socket buffer) cannot be counted here",
+                   std::strerror(errno));
+    }
+  }
   spdlog::info(
       "receiving UDP on {}:{}{}; {}", options.host_ip, bound_port_,
       options.sensor_ip.empty() ? std::string(" from any source") : " from " + options.sensor_ip,

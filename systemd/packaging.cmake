@@ -18,6 +18,14 @@ set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_SECTION "science")
 set(CPACK_DEBIAN_PACKAGE_PRIORITY "optional")
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
+# Cross-built (the package-arm64 preset): the package is for the target, not for the machine
+# that built it (CPack would ask dpkg for this machine's architecture), and dpkg-shlibdeps finds
+# the arm64 libraries' symbols files by the target's multiarch triplet. CPack strips with the
+# target's strip.
+if(CMAKE_CROSSCOMPILING AND CMAKE_SYSTEM_PROCESSOR STREQUAL "aarch64")
+  set(CPACK_DEBIAN_PACKAGE_ARCHITECTURE "arm64")
+  set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS_PRIVATE_DIRS "/usr/lib/aarch64-linux-gnu")
+endif()
 # systemd-sysusers and systemd-tmpfiles run from the maintainer scripts; /bin/kill (procps)
 # is the unit's ExecReload=.
 set(CPACK_DEBIAN_PACKAGE_DEPENDS "systemd, procps")

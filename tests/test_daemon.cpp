@@ -251,7 +251,7 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
   check_no_temporary_files(out);
 }
 
-TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon]") {
+TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon][realtime]") {
   test::ScratchDir dir("daemon-simulate");
   const fs::path out = dir / "out";
   harness::ChildProcess daemon(
@@ -470,7 +470,7 @@ TEST_CASE("replay --rate: timestamps decades apart neither overflow nor hold SIG
 }
 
 TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blocks, RSS flat",
-          "[daemon][reliability]") {
+          "[daemon][reliability][realtime]") {
   test::ScratchDir dir("daemon-slow-writer");
   const fs::path out = dir / "out";
   const fs::path stall = dir / "stall-writer";

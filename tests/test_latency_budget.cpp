@@ -149,7 +149,7 @@ TEST_CASE(
 TEST_CASE(
     "latency budget: a burst that would overflow the socket within the budget is drained "
     "early, without a kernel drop",
-    "[daemon][latency]") {
+    "[daemon][latency][realtime]") {
   test::ScratchDir dir("latency-burst");
   // The socket holds about 170 datagrams (200 000 bytes, doubled by the kernel, ~2.3 kB of
   // memory each). The budget is a second: a receiver that slept it whole would overflow during

@@ -105,7 +105,7 @@ json read_or_fail(const fs::path& file) {
 
 TEST_CASE(
     "a simulated run with MCAP: frames, packets, health and calibration, as the other outputs",
-    "[daemon][mcap]") {
+    "[daemon][mcap][realtime]") {
   test::ScratchDir dir("mcap-simulate");
   const fs::path out = dir / "out";
   const auto r =
@@ -339,7 +339,7 @@ TEST_CASE("a full disk under MCAP: what was written is finished for the reader, 
   }
 }
 
-TEST_CASE("every compression setting gives files the reader accepts", "[daemon][mcap]") {
+TEST_CASE("every compression setting gives files the reader accepts", "[daemon][mcap][realtime]") {
   for (const std::string setting : {"mcap_compression = \"none\"", "mcap_compression_level = -7",
                                     "mcap_compression_level = 19"}) {
     test::ScratchDir dir("mcap-compression");

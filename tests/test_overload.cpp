@@ -65,7 +65,7 @@ void check_per_second_records(const std::vector<json>& records, const json& fina
 TEST_CASE(
     "overload: sent = kernel drops + rejects + ring overruns + accepted, gaps agree, "
     "per-second records add up",
-    "[daemon][reliability][overload]") {
+    "[daemon][reliability][overload][realtime]") {
   test::ScratchDir dir("daemon-overload");
   // A socket buffer of a few dozen datagrams and the smallest ring: bursts must overflow.
   LiveDaemon daemon(dir,

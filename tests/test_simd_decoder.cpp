@@ -3,8 +3,15 @@
 // alike), the same channel, return type, intensity, time and azimuth label, and x, y, z and
 // distance within 1e-4 m. A target the CPU supports but the binary does not offer, or a kernel
 // that is not the one asked for, fails the run: no silent fallback to scalar.
+#if defined(__aarch64__)
+#include <asm/hwcap.h>
+#include <sys/auxv.h>
+#include <sys/prctl.h>
+#endif
+
 #include <catch2/catch.hpp>
 #include <cmath>
+#include <cstdlib>
 #include <random>
 #include <string>
 #include <vector>
@@ -165,6 +172,36 @@ TEST_CASE("every SIMD target this CPU has is offered: no silent fallback to scal
     const DecoderChoice choice = choose_decoder_target("avx512");
     CHECK_FALSE(choice.target.has_value());
     CHECK_THAT(choice.error, Catch::Contains("not supported by this CPU"));
+  }
+#elif defined(__aarch64__)
+  // The kernel's hardware capabilities, asked independently of Highway.
+  const unsigned long hwcap = getauxval(AT_HWCAP);
+  const unsigned long hwcap2 = getauxval(AT_HWCAP2);
+  if ((hwcap & HWCAP_ASIMD) != 0) CHECK(offered(DecoderTarget::kNeon));
+  if ((hwcap & HWCAP_SVE) != 0) CHECK(offered(DecoderTarget::kSve));
+  if ((hwcap2 & HWCAP2_SVE2) != 0) CHECK(offered(DecoderTarget::kSve2));
+  if ((hwcap & HWCAP_SVE) == 0) {
+    const DecoderChoice choice = choose_decoder_target("sve");
+    CHECK_FALSE(choice.target.has_value());
+    CHECK_THAT(choice.error, Catch::Contains("not supported by this CPU"));
+  }
+  // Under emulation (tests/CMakeLists.txt runs this under QEMU at each SVE vector length) the
+  // length asked for must be the one in effect, or a run would not test what it claims to.
+  if (const char* expected = std::getenv("PANDARCAP_EXPECT_SVE_VL_BYTES")) {
+    const int vl_bytes = std::atoi(expected);
+    INFO("QEMU_CPU=" << (std::getenv("QEMU_CPU") ? std::getenv("QEMU_CPU") : ""));
+    if (vl_bytes == 0) {
+      CHECK((hwcap & HWCAP_SVE) == 0);
+      CHECK_FALSE(offered(DecoderTarget::kSve));
+    } else {
+      REQUIRE((hwcap & HWCAP_SVE) != 0);
+      CHECK((prctl(PR_SVE_GET_VL) & PR_SVE_VL_LEN_MASK) == vl_bytes);
+      CHECK(offered(DecoderTarget::kSve));
+      CHECK(offered(DecoderTarget::kSve2));
+    }
+    // "auto": SVE2 only where its vectors are wider than NEON's (fewer instructions per packet
+    // there; more at 128 bits).
+    CHECK(best_decoder_target() == (vl_bytes > 16 ? DecoderTarget::kSve2 : DecoderTarget::kNeon));
   }
 #endif
   // A decoder built for a target runs that target's kernel, or refuses to be built.
