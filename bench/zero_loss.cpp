@@ -240,8 +240,20 @@ class Harness {
     const GeneratorResult sent = run_generator(source_, g);
     const auto cpu_after = thread_ticks(process.pid());
     const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
-    // The last health written while the traffic ran: its per-second wake-up rates.
-    const auto during = last_health(out);
+    // A health record written in the traffic's last half second or after it: its per-second
+    // wake-up rates cover the traffic. (The latest record on disk may be older on a slow machine:
+    // the one written at once when packets began, whose rates are the idle second's before.)
+    const auto traffic_end = std::chrono::system_clock::now();
+    const auto since_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                              traffic_end.time_since_epoch() - std::chrono::milliseconds(500))
+                              .count();
+    std::optional<ordered_json> during;
+    harness::wait_until(
+        [&] {
+          during = last_health(out);
+          return during && during->value("unix_time_ns", std::int64_t{0}) >= since_ns;
+        },
+        3s);
     // Let the daemon count everything (it reads kernel drops once a second), then stop it.
     harness::wait_until(
         [&] {
