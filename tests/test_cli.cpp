@@ -71,7 +71,8 @@ TEST_CASE("inspect --json on the real single 1266-byte packet", "[cli][real]") {
   CHECK(s.at("rpm_min") == 599);
 }
 
-TEST_CASE("pandarcapd --simulate records a capture that inspect decodes", "[cli][simulate][realtime]") {
+TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
+          "[cli][simulate][realtime]") {
   test::ScratchDir dir("simulate");
   const auto result = test::run_command(quoted(test::binary("pandarcapd")) + " --allow-root" +
                                         " --simulate --duration 1 --rpm 1200 --return-mode last "
