@@ -9,19 +9,6 @@
 #include "daemon/ptc/sensor_queries.hpp"
 
 namespace pandarcap {
-namespace {
-
-Calibration from_file_or_nominal(const std::string& file, SensorAtStart& out) {
-  if (!file.empty()) {
-    out.calibration_source = "file";
-    return Calibration::load(file);
-  }
-  out.calibration_source = "nominal";
-  return Calibration::nominal();
-}
-
-}  // namespace
-
 std::string SensorAtStart::describe() const {
   if (calibration_source == "sensor") {
     return fmt::format("from sensor (serial {}, firmware {}) at {}",
@@ -56,19 +43,23 @@ SensorAtStart resolve_sensor_at_start(const std::string& source, const std::stri
     out.calibration_source = "file";
     return out;
   }
-  if (!ptc) {
-    if (source == "sensor") {
-      throw SensorUnavailable(
-          "calibration_source = \"sensor\" needs sensor.sensor_ip (where PTC connects)");
-    }
-    out.calibration = from_file_or_nominal(file, out);
-    return out;
+  if (!ptc && source == "sensor") {
+    throw SensorUnavailable(
+        "calibration_source = \"sensor\" needs sensor.sensor_ip (where PTC connects)");
   }
 
   // A calibration_file named beside "auto" is checked now, whatever the sensor answers: a broken
   // fallback is a configuration error to hear about today, not on the day the sensor is silent.
   std::optional<Calibration> file_table;
   if (!file.empty()) file_table = Calibration::load(file);
+  const auto fall_back = [&] {
+    out.calibration_source = file_table ? "file" : "nominal";
+    out.calibration = file_table ? std::move(*file_table) : Calibration::nominal();
+  };
+  if (!ptc) {
+    fall_back();
+    return out;
+  }
 
   PtcClient client(*ptc);
   out.endpoint = client.endpoint();
@@ -93,8 +84,7 @@ SensorAtStart resolve_sensor_at_start(const std::string& source, const std::stri
     throw SensorUnavailable(
         fmt::format("calibration_source = \"sensor\": {}", table.error->message));
   } else {
-    out.calibration = file_table ? *file_table : Calibration::nominal();
-    out.calibration_source = file_table ? "file" : "nominal";
+    fall_back();
     spdlog::warn("calibration: {}; using {}", table.error->message,
                  file.empty() ? "the nominal table" : "calibration_file " + file);
   }
