@@ -47,8 +47,8 @@ PtcClient::PtcClient(PtcClientOptions options)
   require_ipv4(options_.address, "sensor_ip");
 }
 
-PtcError PtcClient::error(ptc::Command command, ptc::ErrorKind kind, std::string_view what,
-                          std::uint8_t return_code) {
+PtcError PtcClient::fail(ptc::Command command, ptc::ErrorKind kind, std::string_view what,
+                         std::uint8_t return_code) {
   fd_.reset();  // whatever is left in the stream belongs to no request of ours
   ++errors_total_;
   ++errors_[static_cast<std::size_t>(kind)];
@@ -56,33 +56,29 @@ PtcError PtcClient::error(ptc::Command command, ptc::ErrorKind kind, std::string
                   fmt::format("PTC {} {}: {}", endpoint_, ptc::to_string(command), what)};
 }
 
-PtcError PtcClient::fail(ptc::Command command, ptc::ErrorKind kind, std::string_view what) {
-  return error(command, kind, what);
-}
-
 std::optional<PtcError> PtcClient::connect(ptc::Command command) {
   const sockaddr_in to = ipv4_endpoint(options_.address, options_.port, "sensor_ip");
   io::UniqueFd fd(::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0));
-  if (!fd) return error(command, ptc::ErrorKind::kConnectFailed, std::strerror(errno));
+  if (!fd) return fail(command, ptc::ErrorKind::kConnectFailed, std::strerror(errno));
   const int one = 1;
   ::setsockopt(fd.get(), IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
   const auto deadline = Clock::now() + options_.timeout;
   if (::connect(fd.get(), reinterpret_cast<const sockaddr*>(&to), sizeof to) != 0) {
     if (errno != EINPROGRESS) {
-      return error(command, ptc::ErrorKind::kConnectFailed,
-                   fmt::format("cannot connect: {}", std::strerror(errno)));
+      return fail(command, ptc::ErrorKind::kConnectFailed,
+                  fmt::format("cannot connect: {}", std::strerror(errno)));
     }
     if (!wait_for(fd.get(), POLLOUT, deadline)) {
-      return error(command, ptc::ErrorKind::kTimeout,
-                   fmt::format("no connection within {} ms (sensor off, or another address?)",
-                               options_.timeout.count()));
+      return fail(command, ptc::ErrorKind::kTimeout,
+                  fmt::format("no connection within {} ms (sensor off, or another address?)",
+                              options_.timeout.count()));
     }
     int so_error = 0;
     socklen_t size = sizeof so_error;
     ::getsockopt(fd.get(), SOL_SOCKET, SO_ERROR, &so_error, &size);
     if (so_error != 0) {
-      return error(command, ptc::ErrorKind::kConnectFailed,
-                   fmt::format("cannot connect: {}", std::strerror(so_error)));
+      return fail(command, ptc::ErrorKind::kConnectFailed,
+                  fmt::format("cannot connect: {}", std::strerror(so_error)));
     }
   }
   fd_ = std::move(fd);
@@ -101,9 +97,9 @@ PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> 
   }
   const auto deadline = Clock::now() + options_.timeout;
   const auto timed_out = [&](std::string_view stage, std::size_t got, std::size_t wanted) {
-    return error(command, ptc::ErrorKind::kTimeout,
-                 fmt::format("timed out after {} ms {} ({} of {} bytes)", options_.timeout.count(),
-                             stage, got, wanted));
+    return fail(command, ptc::ErrorKind::kTimeout,
+                fmt::format("timed out after {} ms {} ({} of {} bytes)", options_.timeout.count(),
+                            stage, got, wanted));
   };
 
   // The request: header and payload in one buffer, sent whole (a few bytes: one segment).
@@ -121,8 +117,8 @@ PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> 
         return reply;
       }
     } else {
-      reply.error = error(command, ptc::ErrorKind::kIncomplete,
-                          fmt::format("cannot send the request: {}", std::strerror(errno)));
+      reply.error = fail(command, ptc::ErrorKind::kIncomplete,
+                         fmt::format("cannot send the request: {}", std::strerror(errno)));
       return reply;
     }
   }
@@ -135,14 +131,14 @@ PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> 
       if (n > 0) {
         got += static_cast<std::size_t>(n);
       } else if (n == 0) {
-        return error(
+        return fail(
             command, ptc::ErrorKind::kIncomplete,
             fmt::format("the sensor closed the connection {} ({} of {} bytes)", stage, got, size));
       } else if (errno == EAGAIN || errno == EINTR) {
         if (!wait_for(fd_.get(), POLLIN, deadline)) return timed_out(stage, got, size);
       } else {
-        return error(command, ptc::ErrorKind::kIncomplete,
-                     fmt::format("{} {}: {}", "connection failed", stage, std::strerror(errno)));
+        return fail(command, ptc::ErrorKind::kIncomplete,
+                    fmt::format("connection failed {}: {}", stage, std::strerror(errno)));
       }
     }
     return std::nullopt;
@@ -155,7 +151,7 @@ PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> 
   }
   const ptc::ResponseHeader h = ptc::decode_header(head);
   if (auto problem = ptc::check_response_header(h, head, command, options_.max_payload_bytes)) {
-    reply.error = error(command, problem->kind, problem->message);
+    reply.error = fail(command, problem->kind, problem->message);
     return reply;
   }
   reply.payload.resize(h.payload_length);  // bounded by max_payload_bytes, checked above
@@ -176,10 +172,10 @@ PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> 
     // The stream is in step (the whole response was read): the connection could be kept, but
     // a sensor that errs is asked again from scratch, as nebula does.
     reply.payload.clear();
-    reply.error = error(command, ptc::ErrorKind::kErrorCode,
-                        fmt::format("the sensor answered return code 0x{:02X} ({})", h.return_code,
-                                    ptc::describe_return_code(h.return_code)),
-                        h.return_code);
+    reply.error = fail(command, ptc::ErrorKind::kErrorCode,
+                       fmt::format("the sensor answered return code 0x{:02X} ({})", h.return_code,
+                                   ptc::describe_return_code(h.return_code)),
+                       h.return_code);
   }
   return reply;
 }

@@ -58,9 +58,11 @@ class PtcClient {
   PtcReply request(ptc::Command command, std::span<const std::uint8_t> payload = {},
                    bool unsupported_is_an_answer = false);
 
-  // Counts a failure found by the caller (a payload that does not parse) in errors(): the
-  // connection is dropped too.
-  PtcError fail(ptc::Command command, ptc::ErrorKind kind, std::string_view what);
+  // A failure of `command`: counted in errors(), the connection dropped (whatever is left in
+  // the stream belongs to no request), and the message built. Used by request() and by callers
+  // that find the payload does not parse.
+  PtcError fail(ptc::Command command, ptc::ErrorKind kind, std::string_view what,
+                std::uint8_t return_code = 0);
 
   std::uint64_t requests() const noexcept { return requests_; }
   std::uint64_t errors() const noexcept { return errors_total_; }
@@ -72,8 +74,6 @@ class PtcClient {
 
  private:
   std::optional<PtcError> connect(ptc::Command command);
-  PtcError error(ptc::Command command, ptc::ErrorKind kind, std::string_view what,
-                 std::uint8_t return_code = 0);
 
   PtcClientOptions options_;
   std::string endpoint_;
