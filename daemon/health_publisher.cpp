@@ -22,6 +22,7 @@ void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
   assign_temporary_name(prom_temporary_path_, prom_path_);
   jsonl_path_ = (options_.health_dir / "health.jsonl").native();
   jsonl_rotated_path_ = jsonl_path_ + ".1";
+  health_.sensor_identity = options_.sensor_identity;  // found at start-up, constant after
   prom_text_.reserve(64 * 1024);
   json_text_.reserve(8 * 1024);
 }
@@ -153,9 +154,6 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
 
   c.ptc_requests = sources.ptc_requests;
   c.ptc_errors = sources.ptc_errors;
-  h.sensor_identity.serial = options_.sensor_identity.serial;
-  h.sensor_identity.firmware = options_.sensor_identity.firmware;
-  h.sensor_identity.calibration_source = options_.sensor_identity.calibration_source;
   fill_sensor_status(sources.sensor_status, now, g.sensor_status, options_.status_polled,
                      options_.status_interval_seconds);
 
