@@ -54,7 +54,7 @@ void SensorStatusPoller::poll_once(std::uint64_t round) {
   channel_.requests.store(base_requests_ + client_.requests(), std::memory_order_relaxed);
   channel_.errors.store(base_errors_ + client_.errors(), std::memory_order_relaxed);
   if (status.value) {
-    if (!answering_ && warned_) spdlog::info("sensor status: {} answers again", client_.endpoint());
+    if (!answering_) spdlog::info("sensor status: {} answers again", client_.endpoint());
     if (status.extra_bytes > 0 && round == 0) {
       spdlog::info("sensor status: {} bytes more than the Pandar40P layout (newer firmware?)",
                    status.extra_bytes);
@@ -67,7 +67,6 @@ void SensorStatusPoller::poll_once(std::uint64_t round) {
   if (answering_) {
     spdlog::warn("sensor status: {}; asking again every {} ms", status.error->message,
                  interval_.count());
-    warned_ = true;
   }
   answering_ = false;
 }

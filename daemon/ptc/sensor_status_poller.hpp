@@ -44,8 +44,9 @@ class SensorStatusPoller {
   std::optional<std::uint8_t> clock_source_;
   bool ask_ptp_diagnostics_ = true;  // until the sensor says it does not answer 0x06
   std::uint64_t base_requests_ = 0, base_errors_ = 0;  // the channel's counts before this thread
-  bool answering_ = true;  // the last status request was answered (or none failed yet)
-  bool warned_ = false;
+  // The last status request was answered, or none failed yet: a failure after an answer is
+  // warned about once, an answer after a failure said once.
+  bool answering_ = true;
   std::mutex mutex_;
   std::condition_variable wake_;
   bool stop_ = false;

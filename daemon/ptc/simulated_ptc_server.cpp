@@ -118,11 +118,11 @@ std::vector<std::uint8_t> SimulatedPtcServer::answer(std::uint8_t command,
     case ptc::Command::kGetConfig:
       return ptc::encode_settings(unit_.settings);
     case ptc::Command::kGetStatus: {
-      SimulatedUnit now = unit_;
-      now.ptp_state = ptp_state_.load();
       const auto uptime = std::chrono::duration_cast<std::chrono::seconds>(
           std::chrono::steady_clock::now() - powered_on_);
-      return ptc::encode_status(now.status(static_cast<std::uint32_t>(uptime.count())));
+      ptc::SensorStatus status = unit_.status(static_cast<std::uint32_t>(uptime.count()));
+      status.ptp_state = ptp_state_.load();
+      return ptc::encode_status(status);
     }
     case ptc::Command::kPtpDiagnostics:
       if (unit_.answers_ptp_diagnostics && payload.size() == 1 &&
