@@ -139,8 +139,9 @@ Overrides (same names as the configuration keys):
   -h, --help             this text
 
 Exit status: 0 done, 1 runtime failure, 64 usage error, 66 capture file unreadable,
-69 the sensor did not give its calibration (calibration_source = "sensor"), 73 output directory not writable or in use by another pandarcapd, 77 run as root without
---allow-root, 78 invalid configuration or calibration file.
+69 the sensor did not give its calibration (calibration_source = "sensor"), 73 output
+directory not writable or in use by another pandarcapd, 77 run as root without --allow-root,
+78 invalid configuration or calibration file.
 )";
 
 constexpr int kExitUsage = 64;
