@@ -481,8 +481,9 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   REQUIRE(harness::wait_until(
       [&] { return health_counter(last_health(out), "frames_written") >= 8; }, 15s));
   const std::uint64_t rss_before = harness::process_memory_bytes(daemon.pid(), "VmRSS");
+  // Usually 0, but a sanitizer build on a busy machine can lose a frame while warming up: the
+  // stall's drops are counted from here.
   const std::uint64_t dropped_before = health_counter(last_health(out), "frames_dropped_no_arena");
-  CHECK(dropped_before == 0);
 
   // The scenario: the writer stops (a disk that hangs) for two seconds, twenty frames' worth.
   std::ofstream(stall).put('\n');
@@ -494,7 +495,8 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   const std::uint64_t rss_stalled = harness::process_memory_bytes(daemon.pid(), "VmRSS");
   fs::remove(stall);
   REQUIRE(harness::wait_until(
-      [&] { return health_counter(last_health(out), "frames_dropped_no_arena") > 0; }, 10s));
+      [&] { return health_counter(last_health(out), "frames_dropped_no_arena") > dropped_before; },
+      10s));
 
   daemon.signal(SIGTERM);
   INFO(daemon.log());
@@ -502,7 +504,7 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   const json h = last_health(out);
   INFO(h.dump());
   // Drops only as counted frame drops: nothing lost before the decoder.
-  CHECK(health_counter(h, "frames_dropped_no_arena") >= 10);
+  CHECK(health_counter(h, "frames_dropped_no_arena") >= dropped_before + 10);
   CHECK(health_counter(h, "kernel_drops") == 0);
   CHECK(health_counter(h, "ring_overruns") == 0);
   CHECK(health_counter(h, "packets_accepted") == health_counter(h, "datagrams_received"));
