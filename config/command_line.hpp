@@ -43,6 +43,7 @@ inline constexpr std::array kKeyOptions{
     KeyOption{"--decoder", "decoder"},
     KeyOption{"--latency-budget-ms", "latency.budget_ms"},
     KeyOption{"--log-level", "log_level"},
+    KeyOption{"--max-clock-offset", "health.max_sensor_clock_offset_seconds"},
 };
 
 // The entry for `option`, or null when it sets no key.

@@ -238,6 +238,8 @@ void for_each_key(Config& c, Visitor&& v) {
   v("health", "sensor_name", h.sensor_name, &label);
   v("health", "no_data_timeout_seconds", h.no_data_timeout_seconds,
     RealRange{0.0, true, 86400.0, false});
+  v("health", "max_sensor_clock_offset_seconds", h.max_sensor_clock_offset_seconds,
+    RealRange{0.0, false, kNoUpperBound, true});
   v("health", "prometheus", h.prometheus, std::monostate{});
   v("health", "jsonl", h.jsonl, std::monostate{});
   v("health", "jsonl_rotate_bytes", h.jsonl_rotate_bytes, IntRange{0, kI64});

@@ -79,6 +79,7 @@ struct OutputSection {
 struct HealthSection {
   std::string sensor_name = "pandar40p";         // the `sensor` label on every metric
   double no_data_timeout_seconds = 1.0;          // silence longer than this: state no_data
+  double max_sensor_clock_offset_seconds = 1.0;  // sensor clock further off: degraded; 0 = off
   bool prometheus = true;                        // health/pandarcap.prom
   bool jsonl = true;                             // health/health.jsonl
   std::uint64_t jsonl_rotate_bytes = 64u << 20;  // rotate health.jsonl; 0 = never

@@ -160,6 +160,12 @@ struct HealthGauges {
   double frame_rate_hz = 0;       // complete frames cut in the last second
   std::string return_mode;        // "last", "strongest", "dual", or "" before the first packet
   bool high_temperature = false;  // the last packet's flag
+  // The sensor's clock minus the host's: the last accepted packet's time (its tail) minus the
+  // kernel's receive time of it (a replay: the recording's capture time). A synchronised sensor
+  // reads a fraction of a millisecond below 0 (the packet is sent after its blocks fired);
+  // one that has lost its clock reads years. Unknown before the first packet with a receive time.
+  bool sensor_clock_offset_known = false;
+  double sensor_clock_offset_seconds = 0;
   double seconds_since_last_packet = -1;  // -1 before the first packet
   double uptime_seconds = 0;
   double receive_wakeups_per_second = 0;  // over the last second

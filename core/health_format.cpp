@@ -221,6 +221,14 @@ void sensor_prometheus(std::string& out, std::string_view sensor, const HealthSn
   append_label_value(out, id.calibration_source);
   out += "\"} 1\n";
 
+  if (h.gauges.sensor_clock_offset_known) {
+    family(out, "sensor_clock_offset_seconds", "gauge",
+           "The sensor's clock minus the host's: the last packet's time minus its kernel receive "
+           "time (a replay: its capture time)");
+    append("pandarcap_sensor_clock_offset_seconds{{{}}} {}\n", sensor,
+           h.gauges.sensor_clock_offset_seconds);
+  }
+
   const SensorStatusGauges& st = h.gauges.sensor_status;
   if (!st.polled) return;
   family(out, "sensor_status_age_seconds", "gauge",
@@ -428,7 +436,12 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   }
   out += ",\"return_mode\":";
   append_json_string(out, h.gauges.return_mode);
-  append(",\"high_temperature\":{}}}", h.gauges.high_temperature);
+  append(",\"high_temperature\":{}", h.gauges.high_temperature);
+  if (h.gauges.sensor_clock_offset_known) {
+    out += ",\"sensor_clock_offset_seconds\":";
+    append_json_number(out, h.gauges.sensor_clock_offset_seconds);
+  }
+  out += '}';
 
   sensor_json(out, h);
   latency_json(out, "latency", h.latency, "us", 1e3);

@@ -51,6 +51,12 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
       std::abs(g.rpm_tail - expected.rpm) > 0.1 * expected.rpm) {
     problem("motor at {:.0f} RPM (expected {})", g.rpm_tail, expected.rpm);
   }
+  if (expected.max_clock_offset_seconds > 0 && g.sensor_clock_offset_known &&
+      std::abs(g.sensor_clock_offset_seconds) > expected.max_clock_offset_seconds) {
+    const double off = std::abs(g.sensor_clock_offset_seconds);
+    problem("sensor clock off by {:.{}f} s ({} the host): not synchronised?", off,
+            off >= 10 ? 0 : 3, g.sensor_clock_offset_seconds < 0 ? "behind" : "ahead of");
+  }
   const SensorStatusGauges& sensor = g.sensor_status;
   if (sensor.polled && sensor.available && sensor.stale) {
     problem("sensor status stale: no answer over PTC for {:.0f} s", sensor.age_seconds);

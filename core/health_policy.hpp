@@ -10,7 +10,9 @@
 //               "; " in a fixed order: write errors first (with the last error's text), then
 //               kernel drops, ring overruns, frames dropped, packets not recorded, packets lost,
 //               azimuth gaps, rejects, timestamp troubles, the high-temperature flag, a return
-//               mode other than expected, a motor speed more than 10 % off, then the
+//               mode other than expected, a motor speed more than 10 % off, a sensor clock
+//               off from the host's by more than the bound ("sensor clock off by 168035162 s
+//               (behind the host): not synchronised?"), then the
 //               sensor's own status (gauges.sensor_status): stale ("sensor status stale: no
 //               answer over PTC for 16 s"), or PTP configured but not locked ("sensor clock
 //               source is PTP but PTP is tracking (not locked)"). A sensor that never answered
@@ -28,6 +30,10 @@ namespace pandarcap {
 struct HealthExpectations {
   std::string_view return_mode = "any";  // "any", or the mode the sensor must send
   int rpm = 600;                         // motor speed; a tail more than 10 % off is a problem
+  // A sensor clock further than this from the host's is a problem (gauges'
+  // sensor_clock_offset_seconds); 0 = not checked. The daemon's default is 1 s
+  // (health.max_sensor_clock_offset_seconds); 0 here keeps the pure default neutral.
+  double max_clock_offset_seconds = 0;
 };
 
 // Sets gauges.state and gauges.reason from `now` against `before` (the counters of the previous

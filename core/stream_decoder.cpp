@@ -81,6 +81,7 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   track_azimuth(packet.azimuth_cdeg(0), time.t0_ns, rpm, mode, sequence_present);
   previous_t0_ns_ = time.t0_ns;
   stats_.last_t0_ns = time.t0_ns;
+  stats_.last_time_valid = time.status == PacketTimeStatus::kValid;
   stats_.last_rpm = rpm;
   stats_.last_high_temperature = high_temperature;
 

@@ -60,6 +60,7 @@ struct StreamStats {
   std::uint64_t measured_time_ns = 0;
   // The last accepted packet.
   std::int64_t last_t0_ns = 0;
+  bool last_time_valid = false;  // its tail's date and microseconds made a real time
   std::uint16_t last_rpm = 0;
   bool last_high_temperature = false;
 

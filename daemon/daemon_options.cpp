@@ -50,6 +50,7 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.sensor_name = config.health.sensor_name;
   wo.version = PANDARCAP_VERSION;
   wo.no_data_timeout_seconds = config.health.no_data_timeout_seconds;
+  wo.max_sensor_clock_offset_seconds = config.health.max_sensor_clock_offset_seconds;
   wo.expected_return_mode = config.sensor.return_mode;
   wo.expected_rpm = config.sensor.rotation_speed;
   return wo;

@@ -136,7 +136,11 @@ void DecodeWorker::process(const PacketSlot& slot) {
   // kept length: an empty payload is exactly that reject. The kept length never exceeds the slot.
   const std::size_t length =
       slot.truncated ? 0 : std::min<std::size_t>(slot.length, sizeof slot.payload);
-  decoder_.process(std::span<const std::uint8_t>(slot.payload, length));
+  const RejectReason verdict =
+      decoder_.process(std::span<const std::uint8_t>(slot.payload, length));
+  const StreamStats& stats = decoder_.stats();
+  if (verdict == RejectReason::kNone && stats.last_time_valid && slot.receive_time_ns > 0)
+    clock_offset_ns_ = stats.last_t0_ns - slot.receive_time_ns;
 }
 
 DecodeSnapshot DecodeWorker::snapshot() const {
@@ -150,6 +154,7 @@ DecodeSnapshot DecodeWorker::snapshot() const {
   s.wakeups = wakeups_;
   s.monotonic_ns = coarse_monotonic_ns();
   s.latency = latency_;
+  s.sensor_clock_offset_ns = clock_offset_ns_;
   return s;
 }
 

@@ -11,6 +11,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "core/calibration.hpp"
@@ -93,6 +94,9 @@ class DecodeWorker final : public FrameSink {
   std::uint64_t wakeups_ = 0;
   std::int64_t current_receive_ns_ = 0;  // the packet being decoded (frame latency's start)
   std::int64_t last_receive_ns_ = 0;     // the latest packet's, kept through the shutdown
+  // The sensor's clock minus the host's, at the last accepted packet with a valid time and a
+  // receive time (the health's sensor_clock_offset_seconds).
+  std::optional<std::int64_t> clock_offset_ns_;
   std::uint64_t raw_dropped_ = 0;
   LatencyHistogram latency_;
 };

@@ -141,6 +141,9 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
         static_cast<double>(decode.wakeups - decode_prev_.wakeups) / span_s;
   }
   g.seconds_since_last_packet = sources.seconds_since_last_packet;
+  g.sensor_clock_offset_known = decode.sensor_clock_offset_ns.has_value();
+  g.sensor_clock_offset_seconds =
+      static_cast<double>(decode.sensor_clock_offset_ns.value_or(0)) / 1e9;
   // Per second of the writer's own ticks; the decoder's over the span of its last two snapshots
   // (they arrive about once a second, not in step with the ticks). A final tick shorter than
   // half a second keeps the last rates.
@@ -158,7 +161,8 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
                      options_.status_interval_seconds);
 
   classify_health(c, previous_counters_,
-                  HealthExpectations{options_.expected_return_mode, options_.expected_rpm},
+                  HealthExpectations{options_.expected_return_mode, options_.expected_rpm,
+                                     options_.max_sensor_clock_offset_seconds},
                   sources.silent, sources.accounting.last_error(), g);
 }
 

@@ -40,6 +40,7 @@
 #include "config/daemon_config.hpp"
 #include "core/calibration.hpp"
 #include "core/decoder_target.hpp"
+#include "core/health_state_log.hpp"
 #include "core/packet.hpp"
 #include "core/sim/simulated_unit.hpp"
 #include "core/sim/synthetic_sensor.hpp"
@@ -132,6 +133,9 @@ Overrides (same names as the configuration keys):
   --latency-budget-ms N  latency.budget_ms (default 5): how long a datagram may wait before the
                          receive thread drains the socket; 0 = wake for every datagram
   --log-level LEVEL      trace, debug, info, warn, error, critical, off
+  --max-clock-offset S   health.max_sensor_clock_offset_seconds (default 1): a sensor clock
+                         further from the host's makes the state degraded; 0 = not checked
+                         (replays of recordings from an unsynchronised sensor)
   --allow-root           run even as root (refused otherwise: pandarcapd needs no privilege,
                          and a parser of network packets should not hold one; the systemd unit
                          runs it as the user pandarcap)
@@ -432,6 +436,7 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
   const auto tick = std::chrono::milliseconds(100);
   auto next_watchdog = start;
   std::uint64_t seen[3] = {~0ull, ~0ull, ~0ull};
+  HealthStateLog state_log;
   for (;;) {
     const timespec timeout{0, std::chrono::nanoseconds(tick).count()};
     const int signal = sigtimedwait(&signals, nullptr, &timeout);
@@ -447,8 +452,18 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
     }
     if (pipe.source_done.load(std::memory_order_acquire)) return;  // replay finished
     StatusLine status;
-    while (pipe.status.try_pop(status))
+    while (pipe.status.try_pop(status)) {
       systemd::status(status.text);
+      const double since_start =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (auto line = state_log.update(status.state, status.reason, since_start)) {
+        if (line->warning) {
+          spdlog::warn("{}", line->text);
+        } else {
+          spdlog::info("{}", line->text);
+        }
+      }
+    }
     const auto now = std::chrono::steady_clock::now();
     if (watchdog && now >= next_watchdog) {
       // Only while all three loops are making progress (each bumps its counter even when idle).

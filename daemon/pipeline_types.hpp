@@ -14,6 +14,7 @@
 #include <netinet/in.h>
 
 #include <atomic>
+#include <optional>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -72,6 +73,8 @@ struct DecodeSnapshot {
   std::uint64_t wakeups = 0;              // returns from the decoder's wait on the ring
   std::int64_t monotonic_ns = 0;  // when it was taken (the last packet's time is in LiveClock)
   LatencyHistogram latency;       // kernel receive timestamp -> decoded (live sources only)
+  // The last accepted packet's time minus its receive time (see HealthGauges); none before one.
+  std::optional<std::int64_t> sensor_clock_offset_ns;
 };
 
 // Messages are copied into the queue's preallocated cells; a snapshot travels by value.

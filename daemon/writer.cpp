@@ -218,6 +218,8 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
                        h.gauges.rpm_tail,
                        c.kernel_drops + c.ring_overruns + c.frames_dropped_no_arena,
                        h.gauges.reason.empty() ? "" : " - ", h.gauges.reason);
+      status.state = h.gauges.state;
+      fmt::format_to_n(status.reason, sizeof status.reason - 1, "{}", h.gauges.reason);
       status_out.try_push(status);
       next_tick = silence_changed ? now + kNsPerSecond : std::max(next_tick + kNsPerSecond, now);
     }

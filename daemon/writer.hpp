@@ -40,7 +40,10 @@ namespace pandarcap {
 
 // One line for sd_notify STATUS=, handed to the main thread once a second.
 struct StatusLine {
-  char text[200] = {};
+  char text[200] = {};  // sd_notify's STATUS=
+  // For the journal's state changes (core/health_state_log.hpp), logged by the main thread.
+  HealthState state = HealthState::kNoData;
+  char reason[400] = {};  // cut to fit
 };
 
 class Writer {

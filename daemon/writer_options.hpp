@@ -39,6 +39,7 @@ struct WriterOptions {
   std::string version;
   std::string decoder;  // decoder target in use, reported in the health output
   double no_data_timeout_seconds = 1.0;
+  double max_sensor_clock_offset_seconds = 1.0;  // further off is degraded; 0 = not checked
   std::string expected_return_mode = "any";
   int expected_rpm = 600;
   Endpoint pcap_destination;  // the synthesised destination of recorded packets

@@ -300,3 +300,18 @@ TEST_CASE("Sensor identity and status over PTC: fresh values reported, stale one
   json = nlohmann::json::parse(to_json_line(h));
   CHECK(json["sensor_status"]["polled"] == false);
 }
+
+TEST_CASE("The sensor clock offset is a gauge and a JSON key once known, absent before",
+          "[health]") {
+  HealthSnapshot h;
+  h.sensor = "front";
+  CHECK(to_prometheus(h).find("sensor_clock_offset_seconds") == std::string::npos);
+  CHECK_FALSE(
+      nlohmann::json::parse(to_json_line(h)).at("gauges").contains("sensor_clock_offset_seconds"));
+  h.gauges.sensor_clock_offset_known = true;
+  h.gauges.sensor_clock_offset_seconds = -168035162.5;
+  CHECK(to_prometheus(h).find("pandarcap_sensor_clock_offset_seconds{sensor=\"front\"} "
+                              "-168035162.5\n") != std::string::npos);
+  CHECK(nlohmann::json::parse(to_json_line(h)).at("gauges").at("sensor_clock_offset_seconds") ==
+        -168035162.5);
+}

@@ -227,3 +227,35 @@ TEST_CASE("Health: a sensor status gone stale degrades, one never received does 
   classify_health(c, c, kLast, true, "", g);
   CHECK(g.state == HealthState::kNoData);
 }
+
+TEST_CASE("Health: a sensor clock off from the host's past the bound is degraded, with the offset",
+          "[health][policy]") {
+  HealthCounters before, now;
+  HealthGauges g = streaming();
+  g.sensor_clock_offset_known = true;
+  // The real capture: the sensor's clock read 2017-09-06 while the host recorded in 2023.
+  g.sensor_clock_offset_seconds = -168'035'162.4;
+  HealthExpectations bounded = kLast;
+  bounded.max_clock_offset_seconds = 1.0;
+  classify_health(now, before, bounded, false, "", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason == "sensor clock off by 168035162 s (behind the host): not synchronised?");
+
+  g.sensor_clock_offset_seconds = 1.25;  // small offsets keep their milliseconds
+  classify_health(now, before, bounded, false, "", g);
+  CHECK(g.reason == "sensor clock off by 1.250 s (ahead of the host): not synchronised?");
+
+  g.sensor_clock_offset_seconds = -0.0004;  // a synchronised sensor: its packet left 0.4 ms ago
+  classify_health(now, before, bounded, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+
+  g.sensor_clock_offset_seconds = 1e9;
+  bounded.max_clock_offset_seconds = 0;  // 0: not checked (replays)
+  classify_health(now, before, bounded, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+
+  bounded.max_clock_offset_seconds = 1.0;
+  g.sensor_clock_offset_known = false;  // no packet with a receive time yet: nothing to judge
+  classify_health(now, before, bounded, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+}
