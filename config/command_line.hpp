@@ -32,6 +32,8 @@ inline constexpr std::array kKeyOptions{
     KeyOption{"--port", "sensor.data_port"},
     KeyOption{"--sensor-ip", "sensor.sensor_ip"},
     KeyOption{"--cut-angle", "sensor.cut_angle"},
+    KeyOption{"--frame", "sensor.frame"},
+    KeyOption{"--pcd-fields", "output.pcd_fields"},
     KeyOption{"--min-range", "sensor.min_range"},
     KeyOption{"--max-range", "sensor.max_range"},
     KeyOption{"--dual-return-distance-threshold", "sensor.dual_return_distance_threshold"},

@@ -106,6 +106,14 @@ std::optional<std::string> calibration_source(const std::string& s) {
   return one_of(s, {"auto", "sensor", "file", "nominal"});
 }
 
+std::optional<std::string> pcd_fields(const std::string& s) {
+  return one_of(s, {"pcl", "pandarcap", "velodyne", "autoware"});
+}
+
+std::optional<std::string> axes(const std::string& s) {
+  return one_of(s, {"hesai", "ros"});
+}
+
 std::optional<std::string> mcap_compression(const std::string& s) {
   return one_of(s, {"zstd", "none"});
 }
@@ -196,6 +204,7 @@ void for_each_key(Config& c, Visitor&& v) {
   v("sensor", "calibration_file", s.calibration_file, &any_string);
   v("sensor", "firing_time_correction", s.firing_time_correction, std::monostate{});
   v("sensor", "calibration_source", s.calibration_source, &calibration_source);
+  v("sensor", "frame", s.frame, &axes);
   v("sensor", "ptc_port", s.ptc_port, IntRange{1, 65535});
   v("sensor", "ptc_timeout_ms", s.ptc_timeout_ms, IntRange{100, 60'000});
   v("sensor", "status_interval_seconds", s.status_interval_seconds,
@@ -211,6 +220,7 @@ void for_each_key(Config& c, Visitor&& v) {
   auto& o = c.output;
   v("output", "directory", o.directory, &non_empty);
   v("output", "frames", o.frames, std::monostate{});
+  v("output", "pcd_fields", o.pcd_fields, &pcd_fields);
   v("output", "frame_decimation", o.frame_decimation, IntRange{1, kU32});
   v("output", "frames_min_fraction", o.frames_min_fraction, RealRange{0.0, false, 1.0, false});
   v("output", "frames_max_files", o.frames_max_files, IntRange{0, kI64});

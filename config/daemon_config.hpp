@@ -31,6 +31,9 @@ struct SensorSection {
   std::uint32_t ptc_timeout_ms = 2000;  // to connect, then for each whole answer; 100..60000
   double status_interval_seconds = 5;   // poll the sensor's status over PTC; 0 = off
   bool firing_time_correction = false;
+  // The axes points are written in (PCD, MCAP): "hesai" (the sensor's: y at azimuth 0, x at 90°,
+  // z up) or "ros" (REP 103: x forward, y left, z up).
+  std::string frame = "hesai";
 };
 
 struct RingSection {
@@ -47,6 +50,7 @@ struct ArenaSection {
 struct OutputSection {
   std::string directory = "pandarcap-output";  // frames/, raw/, mcap/, health/ go under it
   bool frames = true;                          // write frames as PCD
+  std::string pcd_fields = "pcl";  // PCD field layout: "pcl", "pandarcap", "velodyne", "autoware"
   std::uint32_t frame_decimation = 1;          // write every Nth frame; >= 1
   // A partial frame covering less than this fraction of a revolution (in azimuth and in
   // single-return packets at rotation_speed) is a fragment: counted (frames_fragment), not

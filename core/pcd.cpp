@@ -2,14 +2,80 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <bit>
 #include <cassert>
+#include <cmath>
 #include <cstring>
+#include <ctime>
+#include <numbers>
 
 namespace pandarcap {
 
 static_assert(std::endian::native == std::endian::little,
               "PCD binary data is written in host order; readers assume little-endian");
+
+namespace {
+
+struct LayoutSpec {
+  std::string_view name;
+  std::size_t point_bytes;
+  std::string_view fields, sizes, types, counts;
+};
+
+// Indexed by PcdLayout.
+constexpr LayoutSpec kLayouts[] = {
+    {"pcl", 27, "x y z intensity ring return_type timestamp", "4 4 4 4 2 1 8", "F F F F U U F",
+     "1 1 1 1 1 1 1"},
+    {"pandarcap", 23, "x y z intensity channel return_type timestamp", "4 4 4 1 1 1 8",
+     "F F F U U U F", "1 1 1 1 1 1 1"},
+    {"velodyne", 22, "x y z intensity ring time", "4 4 4 4 2 4", "F F F F U F", "1 1 1 1 1 1"},
+    {"autoware", 32, "x y z intensity return_type channel azimuth elevation distance time_stamp",
+     "4 4 4 1 1 2 4 4 4 4", "F F F U U U F F F U", "1 1 1 1 1 1 1 1 1 1"},
+};
+
+const LayoutSpec& spec(PcdLayout layout) noexcept {
+  return kLayouts[static_cast<std::size_t>(layout)];
+}
+
+// Seconds since the epoch as a double, split before converting so it keeps all it can
+// (~0.24 µs at today's dates).
+double epoch_seconds(std::int64_t ns) noexcept {
+  return static_cast<double>(ns / 1'000'000'000) + static_cast<double>(ns % 1'000'000'000) * 1e-9;
+}
+
+template <typename T>
+std::uint8_t* put(std::uint8_t* p, T value) noexcept {
+  std::memcpy(p, &value, sizeof value);
+  return p + sizeof value;
+}
+
+}  // namespace
+
+std::string_view to_string(PcdLayout layout) noexcept {
+  return spec(layout).name;
+}
+
+std::optional<PcdLayout> parse_pcd_layout(std::string_view name) noexcept {
+  for (std::size_t i = 0; i < std::size(kLayouts); ++i) {
+    if (kLayouts[i].name == name) return static_cast<PcdLayout>(i);
+  }
+  return std::nullopt;
+}
+
+std::string_view to_string(Axes axes) noexcept {
+  return axes == Axes::kRos ? "ros" : "hesai";
+}
+
+std::optional<Axes> parse_axes(std::string_view name) noexcept {
+  if (name == "hesai") return Axes::kHesai;
+  if (name == "ros") return Axes::kRos;
+  return std::nullopt;
+}
+
+std::size_t pcd_point_bytes(PcdLayout layout) noexcept {
+  return spec(layout).point_bytes;
+}
 
 std::string pcd_header(std::size_t points) {
   std::string out;
@@ -17,38 +83,98 @@ std::string pcd_header(std::size_t points) {
   return out;
 }
 
-void append_pcd_header(std::string& out, std::size_t points) {
+void append_pcd_header(std::string& out, std::size_t points, PcdLayout layout,
+                       std::optional<std::int64_t> reference_ns) {
+  const LayoutSpec& s = spec(layout);
+  out += "# .PCD v0.7 - Point Cloud Data file format\n";
+  if (reference_ns) {
+    const std::int64_t ns = *reference_ns;
+    const std::int64_t whole =
+        ns >= 0 ? ns / 1'000'000'000 : -((-ns + 999'999'999) / 1'000'000'000);
+    const std::int64_t rest = ns - whole * 1'000'000'000;
+    const auto seconds = static_cast<std::time_t>(whole);
+    std::tm tm{};
+    gmtime_r(&seconds, &tm);
+    fmt::format_to(std::back_inserter(out),
+                   "# pandarcap frame_reference_time {}.{:09} {:04}-{:02}-{:02}T{:02}:{:02}:{:02}."
+                   "{:09}Z\n",
+                   whole, rest, tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min,
+                   tm.tm_sec, rest);
+  }
   fmt::format_to(std::back_inserter(out),
-                 "# .PCD v0.7 - Point Cloud Data file format\n"
                  "VERSION 0.7\n"
-                 "FIELDS x y z intensity channel return_type timestamp\n"
-                 "SIZE 4 4 4 1 1 1 8\n"
-                 "TYPE F F F U U U F\n"
-                 "COUNT 1 1 1 1 1 1 1\n"
+                 "FIELDS {}\n"
+                 "SIZE {}\n"
+                 "TYPE {}\n"
+                 "COUNT {}\n"
                  "WIDTH {}\n"
                  "HEIGHT 1\n"
                  "VIEWPOINT 0 0 0 1 0 0 0\n"
                  "POINTS {}\n"
                  "DATA binary\n",
-                 points, points);
+                 s.fields, s.sizes, s.types, s.counts, points, points);
 }
 
-std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint8_t> out) noexcept {
-  assert(out.size() >= points.size() * kPcdPointBytes);
+std::uint8_t nebula_return_type(ReturnType type, ReturnMode mode) noexcept {
+  // nebula's ReturnType: UNKNOWN 0, LAST 1, FIRST 2, STRONGEST 3, ..., IDENTICAL 6.
+  switch (type) {
+    case ReturnType::kSingle:
+      return mode == ReturnMode::kLast ? 1 : 3;
+    case ReturnType::kLast:
+      return 1;
+    case ReturnType::kStrongest:
+      return 3;
+    case ReturnType::kLastStrongest:
+      return 6;
+  }
+  return 0;
+}
+
+std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint8_t> out,
+                              PcdFormat format, PcdFrameContext frame) noexcept {
+  const std::size_t step = pcd_point_bytes(format.layout);
+  assert(out.size() >= points.size() * step);
+  (void)step;
+  const bool ros = format.axes == Axes::kRos;
   std::uint8_t* p = out.data();
   for (const Point& point : points) {
-    std::memcpy(p, &point.x, 4);
-    std::memcpy(p + 4, &point.y, 4);
-    std::memcpy(p + 8, &point.z, 4);
-    p[12] = point.intensity;
-    p[13] = point.channel;
-    p[14] = static_cast<std::uint8_t>(point.return_type);
-    // Split into whole seconds and the rest before converting, so the double keeps all it can.
-    const std::int64_t whole = point.timestamp_ns / 1'000'000'000;
-    const std::int64_t rest = point.timestamp_ns % 1'000'000'000;
-    const double seconds = static_cast<double>(whole) + static_cast<double>(rest) * 1e-9;
-    std::memcpy(p + 15, &seconds, 8);
-    p += kPcdPointBytes;
+    const float x = ros ? point.y : point.x;
+    const float y = ros ? -point.x : point.y;
+    p = put(p, x);
+    p = put(p, y);
+    p = put(p, point.z);
+    switch (format.layout) {
+      case PcdLayout::kPcl:
+        p = put(p, static_cast<float>(point.intensity));
+        p = put(p, static_cast<std::uint16_t>(point.channel));
+        p = put(p, static_cast<std::uint8_t>(point.return_type));
+        p = put(p, epoch_seconds(point.timestamp_ns));
+        break;
+      case PcdLayout::kPandarcap:
+        p = put(p, point.intensity);
+        p = put(p, point.channel);
+        p = put(p, static_cast<std::uint8_t>(point.return_type));
+        p = put(p, epoch_seconds(point.timestamp_ns));
+        break;
+      case PcdLayout::kVelodyne:
+        p = put(p, static_cast<float>(point.intensity));
+        p = put(p, static_cast<std::uint16_t>(point.channel));
+        p = put(p, static_cast<float>(static_cast<double>(point.timestamp_ns - frame.reference_ns) *
+                                      1e-9));
+        break;
+      case PcdLayout::kAutoware: {
+        p = put(p, point.intensity);
+        p = put(p, nebula_return_type(point.return_type, frame.return_mode));
+        p = put(p, static_cast<std::uint16_t>(point.channel));
+        p = put(p, static_cast<float>(point.azimuth_cdeg * (std::numbers::pi / 18000.0)));
+        const float horizontal = std::hypot(point.x, point.y);
+        p = put(p, std::atan2(point.z, horizontal));
+        p = put(p, point.distance_m);
+        const std::int64_t since = point.timestamp_ns - frame.reference_ns;
+        p = put(p, static_cast<std::uint32_t>(std::clamp<std::int64_t>(since, 0, UINT32_MAX)));
+        break;
+      }
+    }
   }
   return static_cast<std::size_t>(p - out.data());
 }

@@ -1,37 +1,94 @@
 // Frames as PCD v0.7 binary files, the Point Cloud Library's format (pcl_viewer, CloudCompare,
-// Open3D and ROS tools read it).
+// Open3D and ROS tools read it), in one of four field layouts (output.pcd_fields) so each
+// family of tools finds the fields it looks for, with the names, types and units it expects.
+// All little-endian, packed with no padding; x y z F4 metres in every layout, in the axes of
+// output frame convention (sensor.frame).
 //
-// Fields, packed with no padding (23 bytes a point, little-endian):
-//   x y z        F4  metres, sensor frame
-//   intensity    U1  reflectivity byte
-//   channel      U1  0..39
-//   return_type  U1  0 single, 1 last, 2 strongest, 3 last and strongest merged
-//   timestamp    F8  firing time, seconds since the Unix epoch (double: ~0.24 µs resolution)
+//   pcl (the default, 27 B): what PCL's PointXYZI readers and every viewer colouring by
+//       intensity want, losing nothing:
+//         x y z F4 | intensity F4 (the reflectivity byte, 0..255) | ring U2 (channel 0..39) |
+//         return_type U1 (codes below) | timestamp F8 (s since the Unix epoch)
+//   pandarcap (23 B): the compact layout, also the MCAP PointCloud2 messages' layout:
+//         x y z F4 | intensity U1 | channel U1 | return_type U1 | timestamp F8 (epoch s)
+//   velodyne (22 B): velodyne_pointcloud's PointXYZIRT, as LIO-SAM and similar tools read it:
+//         x y z F4 | intensity F4 | ring U2 (channel) | time F4 (s since the frame's reference)
+//   autoware (32 B): nebula's PointXYZIRCAEDT, names and codes as nebula publishes them:
+//         x y z F4 | intensity U1 | return_type U1 (nebula's codes) | channel U2 |
+//         azimuth F4 (rad) | elevation F4 (rad) | distance F4 (m) |
+//         time_stamp U4 (ns since the frame's reference)
+//
+// Return types. pandarcap's codes (pcl and pandarcap layouts): 0 single return (the frame's
+// return mode says strongest or last), 1 last, 2 strongest, 3 last and strongest merged (both
+// echoes of a dual-return firing were the same return: one point). nebula's (autoware layout):
+// single strongest 3 (STRONGEST), single last 1 (LAST), dual last 1, dual strongest 3, merged 6
+// (IDENTICAL).
+//
+// The frame's reference time is its earliest point's time. Every header written for a frame
+// states it in a comment line that PCL and Open3D skip:
+//   # pandarcap frame_reference_time 1795348800.123456789 2026-11-22T12:00:00.123456789Z
+// so the relative times of the velodyne and autoware layouts keep an absolute anchor.
 // The header keys come in the order PCL writes and expects them; an unordered cloud has
 // WIDTH = POINTS and HEIGHT = 1.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 
+#include "packet.hpp"
 #include "point.hpp"
 
 namespace pandarcap {
 
-inline constexpr std::size_t kPcdPointBytes = 3 * 4 + 3 * 1 + 8;  // 23
+enum class PcdLayout : std::uint8_t { kPcl, kPandarcap, kVelodyne, kAutoware };
+inline constexpr std::string_view kPcdLayoutNames = "pcl, pandarcap, velodyne, autoware";
+std::string_view to_string(PcdLayout layout) noexcept;  // "pcl", "pandarcap", ...
+std::optional<PcdLayout> parse_pcd_layout(std::string_view name) noexcept;
 
-// The ASCII header for `points` points, ending with "DATA binary\n".
+// The axes x y z are written in. hesai: the sensor's own (y towards azimuth 0, x towards 90°,
+// clockwise seen from above, z up). ros: REP 103 (x forward = the sensor's azimuth 0, y left,
+// z up), i.e. x_ros = y_hesai, y_ros = -x_hesai.
+enum class Axes : std::uint8_t { kHesai, kRos };
+std::string_view to_string(Axes axes) noexcept;  // "hesai", "ros"
+std::optional<Axes> parse_axes(std::string_view name) noexcept;
+
+struct PcdFormat {
+  PcdLayout layout = PcdLayout::kPcl;
+  Axes axes = Axes::kHesai;
+};
+
+// What a frame's points are encoded against: the reference of the relative times and the
+// return mode single-return points were taken in.
+struct PcdFrameContext {
+  std::int64_t reference_ns = 0;
+  ReturnMode return_mode = ReturnMode::kDual;
+};
+
+inline constexpr std::size_t kPcdPointBytes = 3 * 4 + 3 * 1 + 8;  // 23: the pandarcap layout
+inline constexpr std::size_t kMaxPcdPointBytes = 32;              // the autoware layout
+std::size_t pcd_point_bytes(PcdLayout layout) noexcept;
+
+// The pandarcap layout's ASCII header for `points` points, ending with "DATA binary\n".
 std::string pcd_header(std::size_t points);
-// The same, appended to `out` (no allocation once `out` has room for it).
-void append_pcd_header(std::string& out, std::size_t points);
+// A layout's header appended to `out` (no allocation once `out` has room), with the frame's
+// reference time in a comment when `reference_ns` is given.
+void append_pcd_header(std::string& out, std::size_t points,
+                       PcdLayout layout = PcdLayout::kPandarcap,
+                       std::optional<std::int64_t> reference_ns = std::nullopt);
 
-// Encodes points into `out` (which must hold points.size() * kPcdPointBytes bytes) and returns
-// the bytes written. No allocation.
-std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint8_t> out) noexcept;
+// Encodes points into `out` (which must hold points.size() * pcd_point_bytes(layout) bytes) and
+// returns the bytes written. No allocation. The default is the pandarcap layout in Hesai axes.
+std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint8_t> out,
+                              PcdFormat format = {PcdLayout::kPandarcap, Axes::kHesai},
+                              PcdFrameContext frame = {}) noexcept;
 
-// The fields of one encoded point, for tests and tools reading the files back.
+// nebula's return-type code for a point (autoware layout).
+std::uint8_t nebula_return_type(ReturnType type, ReturnMode mode) noexcept;
+
+// The fields of one point in the pandarcap layout, for tests and tools reading files back.
 struct PcdPoint {
   float x = 0, y = 0, z = 0;
   std::uint8_t intensity = 0, channel = 0, return_type = 0;

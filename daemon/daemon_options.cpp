@@ -31,6 +31,10 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.pcap_max_bytes = config.output.pcap_max_bytes;
   const OutputSection& o = config.output;
   wo.mcap = o.mcap;
+  // Both were checked when the configuration was read.
+  wo.pcd_format.layout = parse_pcd_layout(o.pcd_fields).value_or(PcdLayout::kPcl);
+  wo.pcd_format.axes = parse_axes(config.sensor.frame).value_or(Axes::kHesai);
+  wo.mcap_file.axes = wo.pcd_format.axes;
   wo.mcap_rotate_bytes = o.mcap_rotate_bytes;
   wo.mcap_rotate_seconds = o.mcap_rotate_seconds;
   wo.mcap_max_files = o.mcap_max_files;

@@ -22,7 +22,8 @@ FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& account
     : accounting_(accounting),
       dir_(options.output_dir / "frames"),
       retention_(options.frames_max_files, options.frames_max_bytes),
-      pcd_buffer_(kPcdChunkPoints * kPcdPointBytes) {}
+      format_(options.pcd_format),
+      pcd_buffer_(kPcdChunkPoints * pcd_point_bytes(options.pcd_format.layout)) {}
 
 void FrameOutput::adopt_earlier_files() {
   number_base_ = adopt_earlier_frames(dir_, retention_);
@@ -38,8 +39,10 @@ void FrameOutput::write(const FrameArena& arena) {
   const Frame& frame = arena.frame;
   const std::span<const Point> points = frame.used();
   pcd_header_.clear();
-  append_pcd_header(pcd_header_, points.size());
-  const std::uint64_t expected = pcd_header_.size() + points.size() * kPcdPointBytes;
+  append_pcd_header(pcd_header_, points.size(), format_.layout, frame.info.start_ns);
+  const std::uint64_t expected =
+      pcd_header_.size() + points.size() * pcd_point_bytes(format_.layout);
+  const PcdFrameContext context{frame.info.start_ns, frame.info.return_mode};
   // frames/frame_000123_20261122T120000.123Z[_partial].pcd, written as frames/.<name>.tmp.
   path_.assign(dir_.native());
   fmt::format_to(std::back_inserter(path_), "/frame_{:06}_", number_base_ + frame.info.sequence);
@@ -51,7 +54,7 @@ void FrameOutput::write(const FrameArena& arena) {
     file_.write(pcd_header_);
     for (std::size_t i = 0; i < points.size(); i += kPcdChunkPoints) {
       const auto chunk = points.subspan(i, std::min(kPcdChunkPoints, points.size() - i));
-      const std::size_t n = encode_pcd_points(chunk, pcd_buffer_);
+      const std::size_t n = encode_pcd_points(chunk, pcd_buffer_, format_, context);
       file_.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
     }
     file_.close();

@@ -47,6 +47,7 @@ class FrameOutput {
   OutputAccounting& accounting_;
   std::filesystem::path dir_;
   Retention retention_;
+  PcdFormat format_;
   std::uint64_t number_base_ = 0;  // + the frame's sequence = its file number
   std::uint64_t frames_written_ = 0, bytes_written_ = 0;
   LatencyHistogram latency_;

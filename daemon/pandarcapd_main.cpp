@@ -116,6 +116,10 @@ Overrides (same names as the configuration keys):
   --port N               sensor.data_port (default 2368); with --replay: only datagrams to N
   --sensor-ip IP         sensor.sensor_ip: drop (and count) datagrams from other sources
   --cut-angle DEG        sensor.cut_angle (default 0)
+  --frame AXES           sensor.frame: hesai (default; the sensor's axes, y at azimuth 0) or ros
+                         (REP 103: x forward, y left, z up)
+  --pcd-fields LAYOUT    output.pcd_fields: pcl (default: float intensity, PCL's PointXYZI),
+                         pandarcap, velodyne (PointXYZIRT) or autoware (nebula's PointXYZIRCAEDT)
   --min-range M          sensor.min_range (default 0.3)
   --max-range M          sensor.max_range (default 200)
   --dual-return-distance-threshold M

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/health.hpp"
+#include "core/pcd.hpp"
 #include "daemon/mcap/mcap_file_options.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
@@ -17,6 +18,7 @@ struct WriterOptions {
   std::filesystem::path health_dir;       // health.jsonl
   std::filesystem::path prometheus_file;  // the .prom textfile
   bool frames = true;
+  PcdFormat pcd_format;  // output.pcd_fields and sensor.frame (the MCAP takes the axes only)
   std::uint64_t frames_max_files = 0;
   std::uint64_t frames_max_bytes = 0;
   bool pcap = true;

@@ -29,7 +29,6 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/pcd.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "support/test_support.hpp"
 
@@ -63,15 +62,20 @@ std::set<fs::path> unfinished_files(const fs::path& dir) {
 bool pcd_is_whole(const fs::path& file) {
   std::ifstream in(file, std::ios::binary);
   std::string line;
-  std::uint64_t points = 0;
+  std::uint64_t points = 0, point_bytes = 0;
   bool data = false;
   while (!data && std::getline(in, line)) {
     if (line.rfind("POINTS ", 0) == 0) points = std::stoull(line.substr(7));
+    if (line.rfind("SIZE ", 0) == 0) {
+      std::istringstream sizes(line.substr(5));
+      for (std::uint64_t size = 0; sizes >> size;)
+        point_bytes += size;
+    }
     data = line == "DATA binary";
   }
   if (!data) return false;
   const auto header = static_cast<std::uint64_t>(in.tellg());
-  return fs::file_size(file) == header + points * kPcdPointBytes;
+  return point_bytes > 0 && fs::file_size(file) == header + points * point_bytes;
 }
 
 bool tcpdump_reads(const fs::path& file) {

@@ -30,12 +30,14 @@ std::string quoted(const fs::path& path) {
 }
 
 // Runs pandarcapd with `args` and a configuration of `toml`; returns its exit status and output.
+// The PCD files are written in the layout the MCAP messages carry (pandarcap's), so the two can
+// be compared point for point.
 test::CommandResult run_daemon(const test::ScratchDir& dir, const std::string& toml,
                                const std::string& args) {
   const fs::path config = dir / "pandarcap.toml";
   std::ofstream(config) << toml;
-  return test::run_command(test::pandarcapd_command() + " -c " + quoted(config) + " " + args +
-                           " 2>&1");
+  return test::run_command(test::pandarcapd_command() + " -c " + quoted(config) +
+                           " --pcd-fields pandarcap " + args + " 2>&1");
 }
 
 // A PCD file's points, decoded.

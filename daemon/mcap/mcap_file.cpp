@@ -136,7 +136,8 @@ void McapFile::add_frame(const Frame& frame, std::uint64_t log_time) {
                                  static_cast<std::uint32_t>(points.size()));
   const std::size_t at = chunk_.size();
   chunk_.resize(at + data);  // within the reserved capacity: no allocation
-  encode_pcd_points(points, std::span(chunk_.data() + at, data));
+  encode_pcd_points(points, std::span(chunk_.data() + at, data),
+                    PcdFormat{PcdLayout::kPandarcap, options_.axes});
   mcap::write_pointcloud2_suffix(w);
 }
 

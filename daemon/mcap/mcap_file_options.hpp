@@ -7,6 +7,8 @@
 #include <utility>
 #include <vector>
 
+#include "core/pcd.hpp"
+
 namespace pandarcap {
 
 struct McapFileOptions {
@@ -20,6 +22,7 @@ struct McapFileOptions {
   std::string health_topic = "/pandar/health";
   std::string packets_topic = "/pandar/packets";
   std::string frame_id = "pandar";
+  Axes axes = Axes::kHesai;  // sensor.frame: the points' axes (the layout is always pandarcap's)
   std::string library;                                        // the Header's, "pandarcap <version>"
   std::vector<std::pair<std::string, std::string>> metadata;  // the "pandarcap" record
   std::string calibration_csv;  // attached to every file as calibration.csv
