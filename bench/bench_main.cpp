@@ -1,5 +1,5 @@
 // pandarcap-bench: the benchmark harness. One subcommand per thing measured; each prints a short
-// table, or one JSON object with --json. Performance figures in the README come from here, never
+// table, or one JSON object with --json. Performance figures in docs/performance.md come from here, never
 // from timed unit tests.
 #include <cstdio>
 #include <filesystem>

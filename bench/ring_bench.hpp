@@ -18,7 +18,7 @@ struct RingBenchOptions {
   double idle_seconds = 2.0;              // length of the idle-CPU measurement
 };
 
-// Runs everything and returns the report (see README "Performance" for the keys).
+// Runs everything and returns the report (see docs/performance.md for the keys).
 nlohmann::ordered_json run_ring_bench(const RingBenchOptions& options);
 
 // Prints the report as a short table.

@@ -22,8 +22,8 @@ constexpr std::array<std::pair<DecoderTarget, std::string_view>, 7> kNames = {{
 }};
 
 // What "auto" prefers, best first. AVX-512 leaves 8 of its 48 lanes idle on a 40-channel block,
-// yet `pandarcap-bench decode` measured it 12-18 % faster than AVX2 on this workload (README
-// "Performance"), so it goes first.
+// yet `pandarcap-bench decode` measured it 12-18 % faster than AVX2 on this workload
+// (docs/performance.md), so it goes first.
 constexpr std::array kAutoPreference = {
     DecoderTarget::kAvx512, DecoderTarget::kAvx2, DecoderTarget::kSse4,  DecoderTarget::kSve2,
     DecoderTarget::kSve,    DecoderTarget::kNeon, DecoderTarget::kScalar};
@@ -39,7 +39,7 @@ std::size_t sve_vector_bytes() noexcept {
 }
 
 // ARM64: SVE and SVE2 only where their vectors are wider than NEON's 128 bits. Guest
-// instructions per packet counted under QEMU (README "Build for ARM64"): NEON 9 998; SVE 10 992
+// instructions per packet counted under QEMU (docs/arm64.md): NEON 9 998; SVE 10 992
 // at 128 bits, 7 057 at 256. At 128 bits (Neoverse N2/V2, Grace, Cortex-A710) the SVE kernels
 // do NEON's work with predicates on top, so NEON is preferred there.
 bool worth_it(DecoderTarget target) noexcept {

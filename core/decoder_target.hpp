@@ -3,7 +3,7 @@
 // One binary carries every SIMD target the compiler could build (Google Highway's runtime
 // dispatch); which of them can run is decided on the machine at start-up. "auto" picks the fastest
 // the CPU supports, in the order kAutoPreference gives (measured with `pandarcap-bench decode`,
-// see README "Performance"); a named target that the CPU cannot run is an error, never a silent
+// see docs/performance.md); a named target that the CPU cannot run is an error, never a silent
 // fallback to another decoder.
 #pragma once
 
@@ -38,8 +38,8 @@ std::vector<DecoderTarget> supported_decoder_targets();
 
 // The target "auto" resolves to on this machine: the first supported entry of a preference order
 // set from `pandarcap-bench decode` measurements (AVX-512, AVX2, SSE4, SVE2, SVE, NEON, scalar;
-// see README "Performance"), where SVE and SVE2 count only with vectors wider than 128 bits
-// (instruction counts under QEMU; README "Build for ARM64").
+// see docs/performance.md), where SVE and SVE2 count only with vectors wider than 128 bits
+// (instruction counts under QEMU; docs/arm64.md).
 DecoderTarget best_decoder_target();
 
 // Resolves a config/CLI value: "auto" or a target name. Returns the target, or an error message

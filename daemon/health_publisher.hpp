@@ -10,8 +10,8 @@
 //     health.jsonl.1 past jsonl_rotate_bytes; a line cut short by a failed write is taken back so
 //     it cannot glue itself to the next). A failure is counted (OutputAccounting), not thrown.
 //
-// Once warm nothing here allocates (names and rendered text are built in place; see README
-// "Latency and allocations"). Owned by the writer thread.
+// Once warm nothing here allocates (names and rendered text are built in place; see
+// docs/performance.md, "Zero allocations"). Owned by the writer thread.
 #pragma once
 
 #include <cstdint>

@@ -1,6 +1,6 @@
 // pandarcap-bench as a user runs it. Only the shape and the correctness of the report are checked
 // here (every key the acceptance checks read, no item out of order, consistent ratios); the
-// figures themselves are performance claims and belong to the README, not to a test.
+// figures themselves are performance claims and belong to docs/performance.md, not to a test.
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>

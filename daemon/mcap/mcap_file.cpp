@@ -10,7 +10,8 @@ namespace pandarcap {
 namespace {
 
 // The health record's shape for readers that show a schema (Foxglove): an object with the
-// state, its reason and the counters; the record itself documents every key (README).
+// state, its reason and the counters; the record itself documents every key
+// (docs/daemon.md).
 constexpr std::string_view kHealthSchema =
     R"({"type":"object","title":"pandarcap health record","properties":{)"
     R"("state":{"type":"string","enum":["starting","ok","no_data","degraded","error"]},)"
