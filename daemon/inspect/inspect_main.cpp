@@ -22,7 +22,9 @@
 #include "core/frame_collector.hpp"
 #include "core/packet.hpp"
 #include "core/stream_decoder.hpp"
+#include "core/topdown_render.hpp"
 #include "daemon/cli_args.hpp"
+#include "daemon/inspect/png_file.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
 namespace {
@@ -47,6 +49,12 @@ Options:
                          merge dual echoes closer than M metres (default 0.1)
   --firing-time-correction
                          correct each channel's azimuth for its firing time (default off)
+  --png FILE             also draw the largest complete frame (else the largest) seen from
+                         above as a PNG: azimuth 0 (+y) up, +x right, the sensor at the centre
+                         with its axes (+x red, +y green), a grid line every 5 m
+  --png-colour C         colour the points by height (default) or intensity
+  --png-range M          half the width of the picture, metres (default 30)
+  --png-size PX          the picture's width and height in pixels (default 800)
   -h, --help             this text
 
 Exit status: 0 read to the end (see capture_status: "end" or "truncated"), 1 the capture is
@@ -61,6 +69,8 @@ struct Options {
   std::optional<std::string> calibration;
   std::optional<std::uint16_t> port;
   StreamDecoderConfig decode;
+  std::optional<std::string> png;
+  TopDownOptions top_down;
 };
 
 // The options pandarcapd shares, which set the same configuration keys there: their types and
@@ -82,6 +92,21 @@ Options parse_options(int argc, char** argv) {
       options.json_output = true;
     } else if (arg == "--summary") {
       options.summary_only = true;
+    } else if (arg == "--png") {
+      options.png = std::string(args.value(arg));
+    } else if (arg == "--png-colour" || arg == "--png-color") {
+      const std::string_view colour = args.value(arg);
+      if (colour == "height") {
+        options.top_down.colour = TopDownOptions::Colour::kHeight;
+      } else if (colour == "intensity") {
+        options.top_down.colour = TopDownOptions::Colour::kIntensity;
+      } else {
+        args.usage_error(fmt::format("{}: \"{}\" is not one of height, intensity", arg, colour));
+      }
+    } else if (arg == "--png-range") {
+      options.top_down.half_width_m = args.number(arg, 1, 250);
+    } else if (arg == "--png-size") {
+      options.top_down.size_px = static_cast<int>(args.integer(arg, 64, 8192));
     } else if (arg == "--port") {
       options.port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
     } else if (std::find(kDecodeOptions.begin(), kDecodeOptions.end(), arg) !=
@@ -194,8 +219,17 @@ int run(const Options& options) {
   json frames = json::array();
   json points_per_complete_frame = json::array();
   json packets_per_frame = json::array();
+  // The frame --png draws: the largest complete one, else the largest.
+  std::vector<Point> picture;
+  bool picture_complete = false;
   FrameCollector collector(3, kDefaultFrameCapacityPoints, [&](const Frame& frame) {
     frames.push_back(frame_json(frame.info));
+    const bool complete = !frame.info.partial;
+    if (options.png && ((complete && !picture_complete) ||
+                        (complete == picture_complete && frame.size > picture.size()))) {
+      picture.assign(frame.used().begin(), frame.used().end());
+      picture_complete = complete;
+    }
     if (!frame.info.partial) points_per_complete_frame.push_back(frame.info.points);
     packets_per_frame.push_back(frame.info.packets);
   });
@@ -286,6 +320,14 @@ int run(const Options& options) {
         {"malformed", cs.malformed},
         {"snapped", snapped}}},
   };
+
+  if (options.png) {
+    write_png(*options.png, render_top_down(picture, options.top_down));
+    if (!options.json_output) {
+      fmt::print("drew a {} frame of {} points from above into {}\n",
+                 picture_complete ? "complete" : "partial", picture.size(), *options.png);
+    }
+  }
 
   if (options.json_output) {
     json out = {{"summary", summary}, {"frames", frames}};
