@@ -104,6 +104,7 @@ void DecodeWorker::record_raw(const PacketSlot& slot) {
   RawPacket& packet = raw_->packets[raw_->size++];
   packet.receive_time_ns = slot.receive_time_ns;
   packet.source = slot.source;
+  packet.destination = slot.destination;
   packet.length =
       static_cast<std::uint16_t>(std::min<std::size_t>(slot.length, sizeof packet.payload));
   std::memcpy(packet.payload, slot.payload, packet.length);

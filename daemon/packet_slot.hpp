@@ -39,6 +39,10 @@ struct alignas(ringbuf::kCacheLine) PacketSlot {
   std::int64_t receive_time_ns;
   // Sender, as recvmmsg wrote it (the daemon binds an IPv4 socket; the sensor speaks IPv4).
   sockaddr_in source;
+  // Where the datagram was sent: the address in its IP header (IP_PKTINFO: a unicast, broadcast
+  // or multicast address) and the port the socket is bound to; a replay's record's own. The
+  // recording writes it as the packet's destination, as the wire carried it.
+  sockaddr_in destination;
 };
 
 static_assert(sizeof(PacketSlot) % ringbuf::kCacheLine == 0);

@@ -22,10 +22,6 @@ PacketSource::PacketSource(const DaemonConfig& config, const RunSource& source) 
   }
 }
 
-std::uint16_t PacketSource::recorded_port(const DaemonConfig& config) const noexcept {
-  return receiver_ ? receiver_->bound_port() : config.sensor.data_port;
-}
-
 void PacketSource::run(Pipeline& pipe) {
   if (replay_) {
     replay_result_ =

@@ -24,8 +24,6 @@ class PacketSource {
   // CaptureError for a capture that cannot be read, std::exception for the rest.
   PacketSource(const DaemonConfig& config, const RunSource& source);
 
-  // The destination port the recordings give packets: the socket's, or the configured one.
-  std::uint16_t recorded_port(const DaemonConfig& config) const noexcept;
   const char* thread_name() const noexcept { return replay_ ? "pc-replay" : "pc-receive"; }
   bool simulated() const noexcept { return simulator_ != nullptr; }
 

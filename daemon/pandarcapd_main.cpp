@@ -563,7 +563,6 @@ int run(const Options& options) {
   wo.status_interval_seconds = config.sensor.status_interval_seconds;
   pipe.sensor_status.requests.store(sensor.ptc_requests);
   pipe.sensor_status.errors.store(sensor.ptc_errors);
-  wo.pcap_destination = Endpoint{0, source->recorded_port(config)};
   wo.mcap_replay_time = options.source.kind == RunSource::Kind::kReplay;
   const auto lock = claim_outputs(config.output.directory);
   Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live,

@@ -124,6 +124,10 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
     slot.source.sin_family = AF_INET;
     slot.source.sin_addr.s_addr = htonl(record.source.ip);
     slot.source.sin_port = htons(record.source.port);
+    slot.destination = sockaddr_in{};
+    slot.destination.sin_family = AF_INET;
+    slot.destination.sin_addr.s_addr = htonl(record.destination.ip);
+    slot.destination.sin_port = htons(record.destination.port);
     if (pending == slots.size()) publish();
   }
   publish();

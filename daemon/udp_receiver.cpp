@@ -27,9 +27,10 @@ namespace pandarcap {
 namespace {
 
 constexpr std::size_t kMaxBatch = 1024;
-// Room for SO_TIMESTAMPNS (a timespec), with header and alignment. (Kernel drops are read with
-// SO_MEMINFO on a timer, not from SO_RXQ_OVFL, whose count only arrives with the next packet.)
-constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec));
+// Room for SO_TIMESTAMPNS (a timespec) and IP_PKTINFO (the destination address), with headers and
+// alignment. (Kernel drops are read with SO_MEMINFO on a timer, not from SO_RXQ_OVFL, whose
+// count only arrives with the next packet.)
+constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(in_pktinfo));
 
 // The limit as text for the warning; a sandbox (systemd's ProtectKernelTunables=/ProcSubset=)
 // may hide /proc/sys.
@@ -105,6 +106,15 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
         "SO_TIMESTAMPNS: not available here (an emulator?): receive times are read when each "
         "batch is taken, so latencies are measured from then, not from arrival");
   }
+  // Each datagram's destination address, for the recording: the sensor may send to this host's
+  // address, a broadcast or a multicast group, and the file should say which.
+  if (::setsockopt(fd_, IPPROTO_IP, IP_PKTINFO, &on, sizeof on) != 0) {
+    if (errno != ENOPROTOOPT) io::throw_errno("IP_PKTINFO");
+    spdlog::warn(
+        "IP_PKTINFO: not available here (an emulator?): the recording gives {} as every "
+        "packet's destination",
+        options.host_ip);
+  }
   const timeval timeout{0, 100'000};
   if (::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout) != 0) {
     io::throw_errno("SO_RCVTIMEO");
@@ -123,6 +133,7 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
     io::throw_errno("getsockname");
   }
   bound_port_ = ntohs(bound.sin_port);
+  bound_ = bound;  // each datagram's destination until IP_PKTINFO says otherwise
 
   if (!options.multicast_ip.empty()) {
     ip_mreq membership{};
@@ -222,6 +233,7 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
     slot.truncated = (message.msg_hdr.msg_flags & MSG_TRUNC) != 0 || slot.length < message.msg_len;
     truncated += slot.truncated;
     slot.receive_time_ns = fallback_time;
+    slot.destination = bound_;
     for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;
          c = CMSG_NXTHDR(const_cast<msghdr*>(&message.msg_hdr), c)) {
       // The length is the kernel's to set, but it is checked before the copy all the same.
@@ -230,6 +242,11 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
         timespec ts{};
         std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
         slot.receive_time_ns = ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+      } else if (c->cmsg_level == IPPROTO_IP && c->cmsg_type == IP_PKTINFO &&
+                 c->cmsg_len >= CMSG_LEN(sizeof(in_pktinfo))) {
+        in_pktinfo info{};
+        std::memcpy(&info, CMSG_DATA(c), sizeof info);
+        slot.destination.sin_addr = info.ipi_addr;
       }
     }
     if (sensor_ip_ && slot.source.sin_addr.s_addr != *sensor_ip_) {

@@ -88,6 +88,7 @@ class UdpReceiver {
 
   int fd_ = -1;
   std::uint16_t bound_port_ = 0;
+  sockaddr_in bound_{};  // host_ip:port as bound
   std::uint64_t granted_rcvbuf_ = 0;
   std::optional<in_addr_t> sensor_ip_;  // network order
   std::size_t batch_;

@@ -44,7 +44,6 @@ struct WriterOptions {
   double max_sensor_clock_offset_seconds = 1.0;  // further off is degraded; 0 = not checked
   std::string expected_return_mode = "any";
   int expected_rpm = 600;
-  Endpoint pcap_destination;  // the synthesised destination of recorded packets
   std::string calibration_csv;
   // The sensor's identity and the calibration's source (pandarcap_sensor_info), and the
   // neighbour file raw/sensor.json saved beside the recordings (daemon/ptc/sensor_at_start.hpp).

@@ -2,6 +2,8 @@
 // real capture, live UDP from 127.0.0.1 with a foreign sender on 127.0.0.2, SIGTERM drain, SIGHUP
 // rotation, the simulated sensor, configuration errors, and sd_notify over a fake NOTIFY_SOCKET.
 // Every wait is a condition with a deadline (wait_until / wait_exit), never a bare sleep.
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -152,6 +154,10 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
   const auto tcpdump =
       test::run_command("tcpdump -nr '" + pcaps[0].string() + "' 2>/dev/null | wc -l");
   CHECK(std::stoul(tcpdump.out) == 1439);
+  // Each packet keeps the destination the capture gives it (the recording host, port 2368).
+  const auto to_host = test::run_command("tcpdump -nr '" + pcaps[0].string() +
+                                         "' 2>/dev/null | grep -c '> 192.168.1.10.2368: UDP'");
+  CHECK(std::stoul(to_host.out) == 1439);
   check_no_temporary_files(out);
   // A replayed packet's timestamp is its capture time: no latency is recorded.
   CHECK(h.at("latency").at("count") == 0);
@@ -197,6 +203,58 @@ TEST_CASE("the real capture's sensor clock (2017) is not ok: offset gauge, degra
   const auto [off, off_log] = replay("unchecked", {"--max-clock-offset", "0"});
   CHECK(off.at("reason").get<std::string>().find("sensor clock") == std::string::npos);
   CHECK(off.at("gauges").contains("sensor_clock_offset_seconds"));
+}
+
+TEST_CASE("the recording keeps each datagram's real destination address and port (IP_PKTINFO)",
+          "[daemon][pcap]") {
+  const auto capture = test::real_capture(kDualCapture);
+  if (!capture) return;
+  const auto payloads = payloads_of(*capture);
+  test::ScratchDir dir("daemon-destination");
+  const fs::path out = dir / "out";
+  const std::uint16_t port = harness::free_udp_port();
+  // Bound to every address: the datagrams sent to 127.0.0.1 and to 127.0.0.2 both arrive, and
+  // only the IP header says which address each was sent to.
+  harness::ChildProcess daemon(pandarcapd_path(),
+                               {"--allow-root", "--host-ip", "0.0.0.0", "--port",
+                                std::to_string(port), "--output-dir", out.string()},
+                               dir / "log.txt");
+  REQUIRE(
+      harness::wait_until([&] { return daemon.log().find("ready") != std::string::npos; }, 10s));
+  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
+  REQUIRE(fd >= 0);
+  const auto send_to = [&](const char* address, std::size_t count) {
+    sockaddr_in to{};
+    to.sin_family = AF_INET;
+    to.sin_port = htons(port);
+    REQUIRE(::inet_pton(AF_INET, address, &to.sin_addr) == 1);
+    for (std::size_t i = 0; i < count; ++i) {
+      REQUIRE(::sendto(fd, payloads[i].data(), payloads[i].size(), 0,
+                       reinterpret_cast<const sockaddr*>(&to),
+                       sizeof to) == static_cast<ssize_t>(payloads[i].size()));
+    }
+  };
+  send_to("127.0.0.1", 30);
+  send_to("127.0.0.2", 20);
+  ::close(fd);
+  REQUIRE(harness::wait_until(
+      [&] { return health_counter(last_health(out), "datagrams_received") == 50; }, 20s));
+  daemon.signal(SIGTERM);
+  INFO(daemon.log());
+  REQUIRE(daemon.wait_exit(10s) == 0);
+
+  // tcpdump, an independent reader, sees what the wire carried.
+  const auto pcaps = files_ending(out / "raw", ".pcap");
+  REQUIRE(pcaps.size() == 1);
+  const auto count = [&](const std::string& destination) {
+    const auto r =
+        test::run_command("tcpdump -nr '" + pcaps[0].string() + "' 2>/dev/null | grep -c '> " +
+                          destination + "." + std::to_string(port) + ": UDP'");
+    return std::stoi(r.out);
+  };
+  CHECK(count("127.0.0.1") == 30);
+  CHECK(count("127.0.0.2") == 20);
+  CHECK(count("0.0.0.0") == 0);
 }
 
 TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all accounted",
