@@ -251,7 +251,7 @@ int run_zero_loss(int argc, char** argv) {
     } else if (arg == "--from-report") {
       from_report = std::string(args.value(arg));
     } else {
-      args.usage_error(fmt::format("unknown option '{}'", arg));
+      args.unknown_option(arg);
     }
   }
   if (options.max_rate < options.min_rate) args.usage_error("--max-rate is below --min-rate");
@@ -309,7 +309,7 @@ int run_write(int argc, char** argv) {
     } else if (arg == "--dir") {
       options.directory = std::string(args.value(arg));
     } else {
-      args.usage_error(fmt::format("unknown option '{}'", arg));
+      args.unknown_option(arg);
     }
   }
   const auto report =
@@ -342,7 +342,7 @@ int run_decode(int argc, char** argv) {
     } else if (arg == "--passes") {
       options.passes = static_cast<int>(args.integer(arg, 1, 1'000'000));
     } else {
-      args.usage_error(fmt::format("unknown option '{}'", arg));
+      args.unknown_option(arg);
     }
   }
   const auto report =
@@ -377,7 +377,7 @@ int run_ring(int argc, char** argv) {
     } else if (arg == "--idle-seconds") {
       options.idle_seconds = args.number(arg, 0.1, 3600);
     } else {
-      args.usage_error(fmt::format("unknown option '{}'", arg));
+      args.unknown_option(arg);
     }
   }
   const nlohmann::ordered_json report = pandarcap::bench::run_ring_bench(options);
@@ -438,7 +438,7 @@ int run_send(int argc, char** argv) {
       options.first_sequence = static_cast<std::uint64_t>(args.integer(arg, 0, 0xFFFF'FFFF));
     } else if (parse_traffic_option(args, arg, options, sensor, capture)) {
     } else {
-      args.usage_error(fmt::format("unknown option '{}'", arg));
+      args.unknown_option(arg);
     }
   }
   // Checked before sending, so that a request the generator would refuse is a usage error.

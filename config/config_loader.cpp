@@ -9,18 +9,23 @@
 #include <fmt/format.h>
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <map>
 #include <optional>
 #include <set>
+#include <span>
 #include <variant>
+#include <vector>
 
+#include "config/suggest.hpp"
 #include "core/decoder_target.hpp"
 #include "core/ipv4.hpp"
 #include "core/text_file.hpp"
@@ -326,35 +331,82 @@ struct ValueChecker {
   }
 };
 
-void check_values(const DaemonConfig& c, const Reporter& report) {
-  for_each_key(c, ValueChecker{report});
+// One problem found in a file: where (for the order they are reported in) and its whole text.
+struct Problem {
+  toml::source_position at;
+  std::string text;
+};
+
+// Runs `check`, which reports through a throwing Reporter, and keeps what it throws: a file's
+// problems are reported all at once, in the order of the file, not one per run.
+template <typename Check>
+void collect(std::vector<Problem>& problems, const Positions& positions, std::string_view key,
+             Check&& check) {
+  try {
+    check();
+  } catch (const ConfigError& error) {
+    const auto it = positions.find(key);
+    problems.push_back(
+        Problem{it != positions.end() ? it->second : toml::source_position{}, error.what()});
+  }
+}
+
+// The checks between keys, each one reported against the key that must change.
+void check_between_keys(
+    const DaemonConfig& c, const Reporter& report,
+    const std::function<void(std::string_view, const std::function<void()>&)>& each) {
   const auto& s = c.sensor;
-  if (s.rotation_speed != 600 && s.rotation_speed != 1200) {
-    report.fail("sensor.rotation_speed", fmt::format("{} RPM is not a Pandar40P motor speed "
-                                                     "(600 or 1200)",
-                                                     s.rotation_speed));
-  }
-  if (!(s.max_range > s.min_range)) {
-    report.fail("sensor.max_range", fmt::format("{} must be greater than sensor.min_range ({})",
-                                                s.max_range, s.min_range));
-  }
-  if (s.calibration_source == "file" && s.calibration_file.empty()) {
-    report.fail("sensor.calibration_source",
-                "\"file\" needs sensor.calibration_file (the CSV to decode with)");
-  }
-  if (s.status_interval_seconds > 0 && s.status_interval_seconds < 0.1) {
-    report.fail(
-        "sensor.status_interval_seconds",
-        fmt::format("{} is too often (0 = off, or at least 0.1)", s.status_interval_seconds));
-  }
+  each("sensor.rotation_speed", [&] {
+    if (s.rotation_speed != 600 && s.rotation_speed != 1200) {
+      report.fail(
+          "sensor.rotation_speed",
+          fmt::format("{} RPM is not a Pandar40P motor speed (600 or 1200)", s.rotation_speed));
+    }
+  });
+  each("sensor.max_range", [&] {
+    if (!(s.max_range > s.min_range)) {
+      report.fail("sensor.max_range", fmt::format("{} must be greater than sensor.min_range ({})",
+                                                  s.max_range, s.min_range));
+    }
+  });
+  each("sensor.calibration_source", [&] {
+    if (s.calibration_source == "file" && s.calibration_file.empty()) {
+      report.fail("sensor.calibration_source",
+                  "\"file\" needs sensor.calibration_file (the CSV to decode with)");
+    }
+  });
+  each("sensor.status_interval_seconds", [&] {
+    if (s.status_interval_seconds > 0 && s.status_interval_seconds < 0.1) {
+      report.fail(
+          "sensor.status_interval_seconds",
+          fmt::format("{} is too often (0 = off, or at least 0.1)", s.status_interval_seconds));
+    }
+  });
   const auto slots = c.ring.slots;
-  if ((slots & (slots - 1)) != 0) {
-    report.fail("ring.slots", fmt::format("{} is not a power of two", slots));
-  }
-  if (c.ring.receive_batch > slots) {
-    report.fail("ring.receive_batch",
-                fmt::format("{} is more than ring.slots ({})", c.ring.receive_batch, slots));
-  }
+  each("ring.slots", [&] {
+    if ((slots & (slots - 1)) != 0) {
+      report.fail("ring.slots", fmt::format("{} is not a power of two", slots));
+    }
+  });
+  each("ring.receive_batch", [&] {
+    if (c.ring.receive_batch > slots) {
+      report.fail("ring.receive_batch",
+                  fmt::format("{} is more than ring.slots ({})", c.ring.receive_batch, slots));
+    }
+  });
+}
+
+// Every value check (each key's range, then the checks between keys), all problems kept.
+void check_values(const DaemonConfig& c, const Reporter& report, const Positions& positions,
+                  std::vector<Problem>& problems) {
+  for_each_key(
+      c, [&](std::string_view table, std::string_view key, const auto& value, const auto& check) {
+        collect(problems, positions, dotted(table, key),
+                [&] { ValueChecker{report}(table, key, value, check); });
+      });
+  check_between_keys(c, report, [&](std::string_view key, const std::function<void()>& check) {
+    collect(problems, positions, key, check);
+  });
 }
 
 // Reads each known key from the document into the configuration, checking its type and that
@@ -436,29 +488,48 @@ struct FileReader {
   }
 };
 
-// Every table and key in the document must be one the configuration has. Of several unknown
-// keys the first in the file is reported (the document's tables are sorted by name, not line).
-void reject_unknown(const toml::table& root, const Reporter& report) {
-  std::map<std::string, std::set<std::string>, std::less<>> known;
+// Every table and key in the document must be one the configuration has. Each that is not is a
+// problem, with the nearest known name when one is near ("did you mean data_port?"), or the
+// table a key belongs in when it was put in another.
+std::vector<Problem> unknown_keys(const toml::table& root, const std::string& source_name) {
+  std::map<std::string, std::vector<std::string_view>, std::less<>> known;
   DaemonConfig probe;
   for_each_key(probe, [&](std::string_view table, std::string_view key, auto&, auto) {
-    known[std::string(table)].insert(std::string(key));
+    known[std::string(table)].push_back(key);
   });
-  struct Problem {
-    toml::source_position at;
-    std::string key;
-    std::string message;
+  std::vector<std::string_view> top_names;  // tables and top-level keys
+  for (const auto& [table, keys] : known) {
+    if (table.empty()) {
+      top_names.insert(top_names.end(), keys.begin(), keys.end());
+    } else {
+      top_names.push_back(table);
+    }
+  }
+  const auto hint = [&](std::string_view name, std::span<const std::string_view> candidates,
+                        std::string_view table) -> std::string {
+    if (const auto near = nearest(name, candidates))
+      return fmt::format(" (did you mean {}?)", *near);
+    for (const auto& [other, keys] : known) {
+      if (other != table && std::find(keys.begin(), keys.end(), name) != keys.end()) {
+        return other.empty() ? fmt::format(" ({} is a top-level key, before any table)", name)
+                             : fmt::format(" ({} is a key of [{}])", name, other);
+      }
+    }
+    return "";
   };
-  std::optional<Problem> first;
-  auto note = [&](const toml::source_position& at, std::string key, std::string message) {
-    if (!first || at < first->at) first = Problem{at, std::move(key), std::move(message)};
+  std::vector<Problem> problems;
+  const auto note = [&](const toml::source_position& at, const std::string& key,
+                        const std::string& message) {
+    problems.push_back(Problem{
+        at, fmt::format("{}:{}:{}: {}: {}", source_name, at.line, at.column, key, message)});
   };
   const auto& top = known[""];
   for (const auto& [key, node] : root) {
     const std::string name(key.str());
     const auto table = known.find(name);
     if (table == known.end() || name.empty()) {
-      if (top.count(name) == 0) note(key.source().begin, name, "unknown key or table");
+      if (std::find(top.begin(), top.end(), name) == top.end())
+        note(key.source().begin, name, "unknown key or table" + hint(name, top_names, ""));
       continue;
     }
     if (!node.is_table()) {
@@ -467,12 +538,28 @@ void reject_unknown(const toml::table& root, const Reporter& report) {
       continue;
     }
     for (const auto& [inner, inner_node] : *node.as_table()) {
-      if (table->second.count(std::string(inner.str())) == 0) {
-        note(inner.source().begin, dotted(name, inner.str()), "unknown key");
+      const std::string_view inner_name = inner.str();
+      if (std::find(table->second.begin(), table->second.end(), inner_name) ==
+          table->second.end()) {
+        note(inner.source().begin, dotted(name, inner_name),
+             "unknown key" + hint(inner_name, table->second, name));
       }
     }
   }
-  if (first) report.fail_at(first->at, first->key, first->message);
+  return problems;
+}
+
+// All the problems of a file at once, in the file's order, one per line.
+void throw_if_any(std::vector<Problem>& problems) {
+  if (problems.empty()) return;
+  std::stable_sort(problems.begin(), problems.end(),
+                   [](const Problem& a, const Problem& b) { return a.at < b.at; });
+  std::string text;
+  for (const Problem& p : problems) {
+    if (!text.empty()) text += '\n';
+    text += p.text;
+  }
+  throw ConfigError(text);
 }
 
 std::string toml_string(const std::string& s) {
@@ -609,10 +696,16 @@ DaemonConfig parse_config(std::string_view toml_text, const std::string& source_
   }
   Positions positions;
   const Reporter report(source_name, &positions);
-  reject_unknown(root, report);
+  std::vector<Problem> problems = unknown_keys(root, source_name);
   DaemonConfig config;
-  for_each_key(config, FileReader{root, report, positions});
-  check_values(config, report);
+  const FileReader reader{root, report, positions};
+  for_each_key(
+      config, [&](std::string_view table, std::string_view key, auto& out, const auto& check) {
+        collect(problems, positions, dotted(table, key), [&] { reader(table, key, out, check); });
+      });
+  // A key that could not be read keeps its default, which passes; what was read is checked.
+  check_values(config, report, positions, problems);
+  throw_if_any(problems);
   return config;
 }
 
@@ -701,7 +794,9 @@ void set_config_value(DaemonConfig& config, std::string_view key, std::string_vi
 }
 
 void validate_config(const DaemonConfig& config, const std::string& source_name) {
-  check_values(config, Reporter(source_name, nullptr));
+  std::vector<Problem> problems;
+  check_values(config, Reporter(source_name, nullptr), Positions{}, problems);
+  throw_if_any(problems);
 }
 
 std::string to_toml(const DaemonConfig& config) {

@@ -51,7 +51,7 @@ struct OutputSection {
   std::string directory = "pandarcap-output";  // frames/, raw/, mcap/, health/ go under it
   bool frames = true;                          // write frames as PCD
   std::string pcd_fields = "pcl";  // PCD field layout: "pcl", "pandarcap", "velodyne", "autoware"
-  std::uint32_t frame_decimation = 1;          // write every Nth frame; >= 1
+  std::uint32_t frame_decimation = 1;  // write every Nth frame; >= 1
   // A partial frame covering less than this fraction of a revolution (in azimuth and in
   // single-return packets at rotation_speed) is a fragment: counted (frames_fragment), not
   // written. 0 = write every frame; 0..1.

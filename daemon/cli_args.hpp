@@ -5,12 +5,16 @@
 
 #include <fmt/format.h>
 
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <string_view>
+#include <vector>
+
+#include "config/suggest.hpp"
 
 namespace pandarcap {
 
@@ -65,6 +69,27 @@ class CliArgs {
       usage_error(fmt::format("{} takes a number from {} to {}, got '{}'", option, min, max, text));
     }
     return result;
+  }
+
+  // An argument that is no option of this program: said so, with the option the usage text
+  // lists that it most likely meant ("unknown option '--outptu-dir' (did you mean
+  // --output-dir?)").
+  [[noreturn]] void unknown_option(std::string_view arg) const {
+    std::vector<std::string_view> options;
+    for (std::size_t at = usage_.find("--"); at != std::string_view::npos;
+         at = usage_.find("--", at + 2)) {
+      if (at > 0 && usage_[at - 1] != ' ' && usage_[at - 1] != '[' && usage_[at - 1] != '|')
+        continue;
+      std::size_t end = at + 2;
+      while (end < usage_.size() &&
+             (std::isalnum(static_cast<unsigned char>(usage_[end])) != 0 || usage_[end] == '-'))
+        ++end;
+      if (end > at + 2) options.push_back(usage_.substr(at, end - at));
+    }
+    if (const auto near = nearest(arg, options)) {
+      usage_error(fmt::format("unknown option '{}' (did you mean {}?)", arg, *near));
+    }
+    usage_error(fmt::format("unknown option '{}'", arg));
   }
 
   [[noreturn]] void usage_error(const std::string& message) const {

@@ -226,7 +226,7 @@ Options parse_options(int argc, char** argv) {
       }
       o.overrides.emplace_back(key->key, text);
     } else {
-      args.usage_error(fmt::format("unknown option '{}'", arg));
+      args.unknown_option(arg);
     }
   }
   if (simulate && replay) args.usage_error("--simulate and --replay exclude each other");

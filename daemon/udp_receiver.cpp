@@ -14,6 +14,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <stdexcept>
 #include <string>
 #include <system_error>
 
@@ -21,6 +22,7 @@
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
+#include "daemon/udp_port_owner.hpp"
 #include "ringbuf/slot_ring.hpp"
 
 namespace pandarcap {
@@ -125,7 +127,16 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
   local.sin_port = htons(options.port);
   local.sin_addr = require_ipv4(options.host_ip, "host_ip");
   if (::bind(fd_, reinterpret_cast<const sockaddr*>(&local), sizeof local) != 0) {
-    io::throw_errno("cannot bind UDP " + options.host_ip + ":" + std::to_string(options.port));
+    const int error = errno;
+    const std::string what =
+        "cannot bind UDP " + options.host_ip + ":" + std::to_string(options.port);
+    // Who has the port, where /proc tells: the fix is usually to stop them, or to pick another.
+    if (error == EADDRINUSE) {
+      if (const std::string hint = port_in_use_hint(options.port); !hint.empty()) {
+        throw std::runtime_error(fmt::format("{}: {}. {}", what, std::strerror(error), hint));
+      }
+    }
+    io::throw_error(error, what);
   }
   sockaddr_in bound{};
   socklen_t bound_length = sizeof bound;

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "config/config_loader.hpp"
+#include "config/suggest.hpp"
 
 using namespace pandarcap;
 
@@ -112,14 +113,55 @@ TEST_CASE("Syntax errors name the line and column", "[config]") {
   CHECK(error_of("[sensor]\n[sensor]\n").rfind("t.toml:2:", 0) == 0);
 }
 
-TEST_CASE("Unknown keys and tables are errors at the first one in the file", "[config]") {
-  CHECK(error_of("[sensor]\ndata_prot = 2368\n") == "t.toml:2:1: sensor.data_prot: unknown key");
+TEST_CASE("Unknown keys and tables are errors, with the name that was probably meant", "[config]") {
+  CHECK(error_of("[sensor]\ndata_prot = 2368\n") ==
+        "t.toml:2:1: sensor.data_prot: unknown key (did you mean data_port?)");
   CHECK(error_of("verbose = true\n") == "t.toml:1:1: verbose: unknown key or table");
-  CHECK(error_of("[snesor]\n") == "t.toml:1:2: snesor: unknown key or table");
-  // "zz" sorts after "sensor" but comes first in the file.
-  CHECK(error_of("zz = 1\n[sensor]\nbad = 2\n") == "t.toml:1:1: zz: unknown key or table");
+  CHECK(error_of("[snesor]\n") ==
+        "t.toml:1:2: snesor: unknown key or table (did you mean sensor?)");
+  // A key in the wrong table: where it belongs.
+  CHECK(error_of("[output]\nsensor_ip = \"192.168.1.201\"\n") ==
+        "t.toml:2:1: output.sensor_ip: unknown key (sensor_ip is a key of [sensor])");
+  CHECK(
+      error_of("[sensor]\nlog_level = \"info\"\n") ==
+      "t.toml:2:1: sensor.log_level: unknown key (log_level is a top-level key, before any table)");
+  // Nothing near enough: no guess.
+  CHECK(error_of("[ring]\nspeed = 3\n") == "t.toml:2:1: ring.speed: unknown key");
   CHECK(error_of("[sensor.extra]\nx = 1\n").rfind("t.toml:1:", 0) == 0);
   CHECK(error_of("sensor = 3\n") == "t.toml:1:10: sensor: expected a table, found an integer");
+}
+
+TEST_CASE("Every problem in a file is reported at once, in the file's order", "[config]") {
+  // "zz" sorts after "sensor" in the document but comes first in the file; the unknown key,
+  // the wrong type, the value out of range and the check between keys all come out, one a line.
+  CHECK(error_of("zz = 1\n"
+                 "[sensor]\n"
+                 "bad = 2\n"
+                 "data_port = 70000\n"
+                 "min_range = 5.0\n"
+                 "max_range = 4.0\n"
+                 "[output]\n"
+                 "frames = \"yes\"\n"
+                 "pcd_fields = \"xyzi\"\n") ==
+        "t.toml:1:1: zz: unknown key or table\n"
+        "t.toml:3:1: sensor.bad: unknown key\n"
+        "t.toml:4:13: sensor.data_port: 70000 is out of range (1..65535)\n"
+        "t.toml:6:13: sensor.max_range: 4 must be greater than sensor.min_range (5)\n"
+        "t.toml:8:10: output.frames: expected true or false, found a string\n"
+        "t.toml:9:14: output.pcd_fields: \"xyzi\" is not one of pcl, pandarcap, velodyne, "
+        "autoware");
+}
+
+TEST_CASE("Did you mean: near names only, transpositions count one", "[config]") {
+  const std::vector<std::string_view> names{"data_port", "host_ip", "sensor_ip", "max_range"};
+  CHECK(edit_distance("data_prot", "data_port") == 1);
+  CHECK(edit_distance("", "abc") == 3);
+  CHECK(edit_distance("kitten", "sitting") == 3);
+  CHECK(nearest("data_prot", names) == "data_port");
+  CHECK(nearest("sensorip", names) == "sensor_ip");
+  CHECK(nearest("maxrange", names) == "max_range");
+  CHECK(nearest("port", names) == std::nullopt);  // 5 edits from data_port: another word
+  CHECK(nearest("zz", names) == std::nullopt);
 }
 
 TEST_CASE("Wrong types are errors naming what was expected", "[config]") {

@@ -134,7 +134,7 @@ int main(int argc, char** argv) {
     } else if (arg == "--timeout-ms") {
       options.timeout = std::chrono::milliseconds(args.integer(arg, 100, 60'000));
     } else if (arg.starts_with("-")) {
-      args.usage_error(fmt::format("unknown option '{}'", arg));
+      args.unknown_option(arg);
     } else if (address.empty()) {
       address = std::string(arg);
     } else if (command.empty()) {

@@ -116,7 +116,7 @@ Options parse_options(int argc, char** argv) {
       if (const auto problem = key_option_problem(key, text)) args.usage_error(*problem);
       set_config_value(config, key.key, text, "command line");
     } else if (!arg.empty() && arg[0] == '-') {
-      args.usage_error(fmt::format("unknown option '{}'", arg));
+      args.unknown_option(arg);
     } else if (options.file.empty()) {
       options.file = arg;
     } else {
