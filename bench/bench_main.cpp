@@ -1,6 +1,6 @@
 // pandarcap-bench: the benchmark harness. One subcommand per thing measured; each prints a short
-// table, or one JSON object with --json. Performance figures in docs/performance.md come from here, never
-// from timed unit tests.
+// table, or one JSON object with --json. Performance figures in docs/performance.md come from here,
+// never from timed unit tests.
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -163,6 +163,8 @@ Options:
   --min-rate PPS         lowest rate tried (default 1000)
   --max-rate PPS         highest rate tried (default 1000000)
   --steps N              bisections between them (default 7)
+  --max-gap F            then a trial between any two tested rates more than F times apart
+                         (default 2; 0 = none), so the plot joins only neighbouring trials
   --sensor-rate PPS      rate of the CPU/latency/RSS trial (default 3600: one dual-return sensor)
   --daemon FILE          pandarcapd to run (default: the one beside pandarcap-bench)
   --config FILE          daemon configuration (the harness sets address, port and output dir)
@@ -225,6 +227,8 @@ int run_zero_loss(int argc, char** argv) {
       options.max_rate = args.number(arg, 1, 1e8);
     } else if (arg == "--steps") {
       options.steps = static_cast<int>(args.integer(arg, 0, 30));
+    } else if (arg == "--max-gap") {
+      options.max_gap = args.number(arg, 0, 1000);
     } else if (arg == "--sensor-rate") {
       options.sensor_rate = args.number(arg, 1, 1e8);
     } else if (arg == "--daemon") {

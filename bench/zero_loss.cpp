@@ -450,12 +450,17 @@ struct SearchResult {
 // Highest rate in [lo, hi] whose trial passes: both ends first, then geometric bisection on the
 // offered rate. The result is the achieved rate of the best passing trial: on a 2-core machine
 // the generator itself may fall short of the offered rate, and then the result is a lower bound
-// (generator_limited). Every trial is appended to `trials`.
+// (generator_limited). Then, for the plot, rates between tested ones wherever two neighbours are
+// more than `max_gap` apart (at most 12 more trials): bisection crowds its trials near the limit,
+// and a straight line across a wide gap would draw a curve nobody measured. Every trial is
+// appended to `trials`.
 SearchResult search(const std::function<ordered_json(double)>& trial,
                     const std::function<bool(const ordered_json&)>& passes, double lo, double hi,
-                    int steps, ordered_json& trials) {
+                    int steps, double max_gap, ordered_json& trials) {
   SearchResult best;
+  std::vector<double> tested;
   auto run = [&](double rate) {
+    tested.push_back(rate);
     ordered_json t = trial(rate);
     const bool ok = passes(t);
     t["passed"] = ok;
@@ -467,11 +472,22 @@ SearchResult search(const std::function<ordered_json(double)>& trial,
     trials.push_back(t);
     return ok;
   };
-  if (!run(lo) || hi <= lo || run(hi)) return best;
-  for (int i = 0; i < steps; ++i) {
-    const double mid = std::round(std::sqrt(lo * hi));
-    if (mid <= lo || mid >= hi) break;
-    (run(mid) ? lo : hi) = mid;
+  if (run(lo) && hi > lo && !run(hi)) {
+    for (int i = 0; i < steps; ++i) {
+      const double mid = std::round(std::sqrt(lo * hi));
+      if (mid <= lo || mid >= hi) break;
+      (run(mid) ? lo : hi) = mid;
+    }
+  }
+  for (int extra = 0; max_gap > 1 && extra < 12; ++extra) {
+    std::sort(tested.begin(), tested.end());
+    std::optional<double> fill;
+    for (std::size_t i = 1; i < tested.size() && !fill; ++i) {
+      if (tested[i] > max_gap * tested[i - 1])
+        fill = std::round(std::sqrt(tested[i] * tested[i - 1]));
+    }
+    if (!fill) break;
+    run(*fill);
   }
   return best;
 }
@@ -528,14 +544,15 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
 
   SearchResult daemon_zero, daemon_within, daemon_zero_budget_0, daemon_zero_mcap;
   if (!o.sensor_rate_only) {
-    daemon_zero = search(daemon, zero, o.min_rate, o.max_rate, o.steps, trials["daemon"]);
+    daemon_zero =
+        search(daemon, zero, o.min_rate, o.max_rate, o.steps, o.max_gap, trials["daemon"]);
     daemon_within = search(daemon, within, std::max(daemon_zero.pps, o.min_rate), o.max_rate,
-                           o.steps, trials["daemon"]);
+                           o.steps, 0.0, trials["daemon"]);  // the first search filled gaps
     if (o.compare_budget_0) {
       trials["daemon_budget_0"] = ordered_json::array();
       daemon_zero_budget_0 =
           search([&](double rate) { return harness.daemon_trial(rate, o.trial_seconds, 0u); }, zero,
-                 o.min_rate, o.max_rate, o.steps, trials["daemon_budget_0"]);
+                 o.min_rate, o.max_rate, o.steps, o.max_gap, trials["daemon_budget_0"]);
     }
     if (o.compare_mcap) {
       trials["daemon_mcap"] = ordered_json::array();
@@ -543,7 +560,7 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
           [&](double rate) {
             return harness.daemon_trial(rate, o.trial_seconds, std::nullopt, mcap_on);
           },
-          zero, o.min_rate, o.max_rate, o.steps, trials["daemon_mcap"]);
+          zero, o.min_rate, o.max_rate, o.steps, o.max_gap, trials["daemon_mcap"]);
     }
   }
   SearchResult bare, recvfrom;
@@ -552,12 +569,12 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
         [&](double r) {
           return harness.reference_trial(ReferenceReceiver::Kind::kRecvmmsg, r, o.trial_seconds);
         },
-        zero, o.min_rate, o.max_rate, o.steps, trials["bare_recvmmsg"]);
+        zero, o.min_rate, o.max_rate, o.steps, o.max_gap, trials["bare_recvmmsg"]);
     recvfrom = search(
         [&](double r) {
           return harness.reference_trial(ReferenceReceiver::Kind::kRecvfrom, r, o.trial_seconds);
         },
-        zero, o.min_rate, o.max_rate, o.steps, trials["recvfrom"]);
+        zero, o.min_rate, o.max_rate, o.steps, o.max_gap, trials["recvfrom"]);
   }
 
   report["daemon_zero_loss_pps"] = daemon_zero.pps;
@@ -659,6 +676,7 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
       {"min_rate", o.min_rate},
       {"max_rate", o.max_rate},
       {"steps", o.steps},
+      {"max_gap", o.max_gap},
       {"loss_threshold", o.loss_threshold},
       {"search",
        "both ends, then geometric bisection; a trial passes with zero "

@@ -31,7 +31,9 @@ struct ZeroLossOptions {
   double trial_seconds = 10;     // RFC 2544 uses 60
   double min_rate = 1000;        // packets/s; the search starts by checking this rate
   double max_rate = 1'000'000;
-  int steps = 7;                  // bisections after the two end points (geometric)
+  int steps = 7;  // bisections after the two end points (geometric)
+  // Then trials between tested rates more than this factor apart, for the plot; 0 = none.
+  double max_gap = 2;
   double sensor_rate = 3600;      // one dual-return Pandar40P at 600 RPM
   double loss_threshold = 0.005;  // the second search: highest rate at <= 0.5 % loss
   std::uint64_t receive_buffer_bytes = 8u << 20;  // reference receivers, as the daemon's default

@@ -169,6 +169,20 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "
   CHECK_THAT(md.str(), Catch::Contains("zero-loss rate"));
   CHECK(svg.str().rfind("<svg ", 0) == 0);
   CHECK_THAT(svg.str(), Catch::Contains("</svg>") && Catch::Contains("<polyline"));
+  // The plot's x is what was sent; and no two neighbouring trials of a receiver are more than
+  // --max-gap (2) apart, so the lines join measured points only.
+  CHECK_THAT(svg.str(), Catch::Contains("sent packets/s (achieved)"));
+  CHECK(report["settings"]["max_gap"] == 2.0);
+  for (const char* who : {"daemon", "bare_recvmmsg", "recvfrom"}) {
+    std::vector<double> rates;
+    for (const json& t : report["trials"][who])
+      rates.push_back(t["offered_pps"].get<double>());
+    std::sort(rates.begin(), rates.end());
+    INFO(who << ": " << report["trials"][who].size() << " trials");
+    REQUIRE(rates.size() >= 2);  // 1000 and 3000 at least
+    for (std::size_t i = 1; i < rates.size(); ++i)
+      CHECK(rates[i] <= 2 * rates[i - 1] + 1);
+  }
 }
 
 TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-return traffic",
