@@ -1,7 +1,7 @@
 // Soak: pandarcapd at ten dual-return sensors' rate (36,000 packets/s) with every output on and
 // rotation active, for PANDARCAP_SOAK_SECONDS (default 60; docs/reliability.md gives the
-// 10-minute command). Zero loss at any stage, resident memory grows by less than 1 % after warm-up, the
-// same file descriptors at the end as after warm-up, and a health record for every second.
+// 10-minute command). Zero loss at any stage, resident memory grows by less than 1 % after warm-up,
+// the same file descriptors at the end as after warm-up, and a health record for every second.
 //
 // Hidden from a plain run ("[.soak]"); CI runs it once, alone, in the release build (tests/
 // CMakeLists.txt: soak_60s). Sanitizer builds are several times slower and would measure

@@ -23,7 +23,7 @@ struct McapFileOptions {
   std::string packets_topic = "/pandar/packets";
   std::string frame_id = "pandar";
   Axes axes = Axes::kHesai;  // sensor.frame: the points' axes (the layout is always pandarcap's)
-  std::string library;                                        // the Header's, "pandarcap <version>"
+  std::string library;       // the Header's, "pandarcap <version>"
   std::vector<std::pair<std::string, std::string>> metadata;  // the "pandarcap" record
   std::string calibration_csv;  // attached to every file as calibration.csv
 };
