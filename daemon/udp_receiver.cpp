@@ -143,8 +143,7 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
   if (::getsockname(fd_, reinterpret_cast<sockaddr*>(&bound), &bound_length) != 0) {
     io::throw_errno("getsockname");
   }
-  bound_port_ = ntohs(bound.sin_port);
-  bound_ = bound;  // each datagram's destination until IP_PKTINFO says otherwise
+  bound_ = bound;  // also each datagram's destination until IP_PKTINFO says otherwise
 
   if (!options.multicast_ip.empty()) {
     ip_mreq membership{};
@@ -171,7 +170,7 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
     }
   }
   spdlog::info(
-      "receiving UDP on {}:{}{}; {}", options.host_ip, bound_port_,
+      "receiving UDP on {}:{}{}; {}", options.host_ip, bound_port(),
       options.sensor_ip.empty() ? std::string(" from any source") : " from " + options.sensor_ip,
       budget_ns_ == 0 ? std::string("waking for every datagram (latency budget 0)")
                       : fmt::format("latency budget {} ms: the socket is drained in batches",

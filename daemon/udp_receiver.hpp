@@ -57,7 +57,7 @@ class UdpReceiver {
   UdpReceiver(const UdpReceiver&) = delete;
   UdpReceiver& operator=(const UdpReceiver&) = delete;
 
-  std::uint16_t bound_port() const noexcept { return bound_port_; }
+  std::uint16_t bound_port() const noexcept { return ntohs(bound_.sin_port); }
   std::uint64_t granted_receive_buffer_bytes() const noexcept { return granted_rcvbuf_; }
 
   // Receives until `stop` is set (checked at least every 100 ms).
@@ -87,7 +87,6 @@ class UdpReceiver {
                      std::atomic<std::uint64_t>& heartbeat);
 
   int fd_ = -1;
-  std::uint16_t bound_port_ = 0;
   sockaddr_in bound_{};  // host_ip:port as bound
   std::uint64_t granted_rcvbuf_ = 0;
   std::optional<in_addr_t> sensor_ip_;  // network order
