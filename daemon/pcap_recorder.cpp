@@ -136,11 +136,9 @@ void PcapRecorder::write(const RawBatch& batch) {
         close();
       }
       if (!pcap_) open(packet.receive_time_ns);
-      pcap_->write(
-          std::span<const std::uint8_t>(packet.payload, packet.length), packet.original_length,
-          packet.receive_time_ns,
-          Endpoint{ntohl(packet.source.sin_addr.s_addr), ntohs(packet.source.sin_port)},
-          Endpoint{ntohl(packet.destination.sin_addr.s_addr), ntohs(packet.destination.sin_port)});
+      pcap_->write(std::span<const std::uint8_t>(packet.payload, packet.length),
+                   packet.original_length, packet.receive_time_ns, to_endpoint(packet.source),
+                   to_endpoint(packet.destination));
       ++packets_written_;
     } catch (const std::invalid_argument& error) {
       // This packet cannot be recorded (a time outside what pcap can hold); the file is fine.

@@ -120,14 +120,8 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
     slot.truncated = record.udp_payload_length > sizeof slot.payload || record.snapped;
     if (slot.truncated) ReceiveCounters::add(counters.truncated, 1);
     slot.receive_time_ns = record.timestamp_ns;
-    slot.source = sockaddr_in{};
-    slot.source.sin_family = AF_INET;
-    slot.source.sin_addr.s_addr = htonl(record.source.ip);
-    slot.source.sin_port = htons(record.source.port);
-    slot.destination = sockaddr_in{};
-    slot.destination.sin_family = AF_INET;
-    slot.destination.sin_addr.s_addr = htonl(record.destination.ip);
-    slot.destination.sin_port = htons(record.destination.port);
+    slot.source = to_sockaddr(record.source);
+    slot.destination = to_sockaddr(record.destination);
     if (pending == slots.size()) publish();
   }
   publish();

@@ -147,6 +147,18 @@ std::string to_string(const Endpoint& endpoint) {
          std::to_string(endpoint.ip & 0xFF) + ':' + std::to_string(endpoint.port);
 }
 
+sockaddr_in to_sockaddr(const Endpoint& endpoint) noexcept {
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(endpoint.ip);
+  address.sin_port = htons(endpoint.port);
+  return address;
+}
+
+Endpoint to_endpoint(const sockaddr_in& address) noexcept {
+  return Endpoint{ntohl(address.sin_addr.s_addr), ntohs(address.sin_port)};
+}
+
 CaptureReader::CaptureReader(const std::string& path, Options options)
     : path_(path), options_(options) {
   char errbuf[PCAP_ERRBUF_SIZE] = {};

@@ -14,6 +14,8 @@
 // Not thread-safe; one reader per thread. A record's payload span is valid until the next call.
 #pragma once
 
+#include <netinet/in.h>
+
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -39,6 +41,10 @@ struct Endpoint {
 
 // "192.168.1.201:2368"
 std::string to_string(const Endpoint& endpoint);
+
+// The same endpoint as the socket API holds it (network byte order), and back.
+sockaddr_in to_sockaddr(const Endpoint& endpoint) noexcept;
+Endpoint to_endpoint(const sockaddr_in& address) noexcept;
 
 struct CaptureRecord {
   std::span<const std::uint8_t> payload;  // UDP payload bytes present in the file
