@@ -3,9 +3,9 @@
 #include <fmt/format.h>
 
 #include <cmath>
-#include <ctime>
 
 #include "core/ptc/ptc_messages.hpp"
+#include "core/utc_time.hpp"
 
 namespace pandarcap {
 
@@ -72,16 +72,6 @@ void family(std::string& out, std::string_view name, std::string_view type, std:
             std::string_view suffix = {}) {
   fmt::format_to(std::back_inserter(out), "# HELP pandarcap_{}{} {}\n# TYPE pandarcap_{}{} {}\n",
                  name, suffix, help, name, suffix, type);
-}
-
-void append_rfc3339(std::string& out, std::int64_t unix_ns) {
-  const std::time_t seconds = static_cast<std::time_t>(unix_ns / 1'000'000'000);
-  const auto millis = static_cast<int>((unix_ns % 1'000'000'000) / 1'000'000);
-  std::tm tm{};
-  gmtime_r(&seconds, &tm);
-  fmt::format_to(std::back_inserter(out), "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}.{:03}Z",
-                 tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec,
-                 millis);
 }
 
 // Appends `value` escaped as a Prometheus label value: to a std::string, or to the stack buffer
@@ -392,7 +382,7 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
     fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
   };
   out += "{\"time\":\"";
-  append_rfc3339(out, h.unix_time_ns);
+  append_rfc3339(out, h.unix_time_ns, 3);
   append("\",\"unix_time_ns\":{},\"sensor\":", h.unix_time_ns);
   append_json_string(out, h.sensor);
   out += ",\"version\":";

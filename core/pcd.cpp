@@ -7,8 +7,9 @@
 #include <cassert>
 #include <cmath>
 #include <cstring>
-#include <ctime>
 #include <numbers>
+
+#include "core/utc_time.hpp"
 
 namespace pandarcap {
 
@@ -88,18 +89,11 @@ void append_pcd_header(std::string& out, std::size_t points, PcdLayout layout,
   const LayoutSpec& s = spec(layout);
   out += "# .PCD v0.7 - Point Cloud Data file format\n";
   if (reference_ns) {
-    const std::int64_t ns = *reference_ns;
-    const std::int64_t whole =
-        ns >= 0 ? ns / 1'000'000'000 : -((-ns + 999'999'999) / 1'000'000'000);
-    const std::int64_t rest = ns - whole * 1'000'000'000;
-    const auto seconds = static_cast<std::time_t>(whole);
-    std::tm tm{};
-    gmtime_r(&seconds, &tm);
-    fmt::format_to(std::back_inserter(out),
-                   "# pandarcap frame_reference_time {}.{:09} {:04}-{:02}-{:02}T{:02}:{:02}:{:02}."
-                   "{:09}Z\n",
-                   whole, rest, tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min,
-                   tm.tm_sec, rest);
+    const UnixTime t = split_unix_ns(*reference_ns);
+    fmt::format_to(std::back_inserter(out), "# pandarcap frame_reference_time {}.{:09} ", t.seconds,
+                   t.nanoseconds);
+    append_rfc3339(out, *reference_ns, 9);
+    out += '\n';
   }
   fmt::format_to(std::back_inserter(out),
                  "VERSION 0.7\n"

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "core/health_format.hpp"
+#include "core/utc_time.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;
@@ -314,4 +315,18 @@ TEST_CASE("The sensor clock offset is a gauge and a JSON key once known, absent 
                               "-168035162.5\n") != std::string::npos);
   CHECK(nlohmann::json::parse(to_json_line(h)).at("gauges").at("sensor_clock_offset_seconds") ==
         -168035162.5);
+}
+
+TEST_CASE("UTC text: RFC 3339 to the digits asked, floored before 1970", "[health]") {
+  std::string out;
+  append_rfc3339(out, 1'795'348'800'123'456'789, 3);
+  CHECK(out == "2026-11-22T12:00:00.123Z");
+  out.clear();
+  append_rfc3339(out, 1'795'348'800'123'456'789, 9);
+  CHECK(out == "2026-11-22T12:00:00.123456789Z");
+  out.clear();
+  append_rfc3339(out, -1, 3);  // 1 ns before the epoch
+  CHECK(out == "1969-12-31T23:59:59.999Z");
+  CHECK(split_unix_ns(-1).seconds == -1);
+  CHECK(split_unix_ns(-1).nanoseconds == 999'999'999);
 }
