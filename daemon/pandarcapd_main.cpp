@@ -449,17 +449,16 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
       return;
     }
     if (signal == SIGHUP) pipe.rotate_generation.fetch_add(1, std::memory_order_relaxed);
-    if (duration_s &&
-        std::chrono::steady_clock::now() - start >= std::chrono::duration<double>(*duration_s)) {
+    const auto now = std::chrono::steady_clock::now();  // one clock read a tick
+    if (duration_s && now - start >= std::chrono::duration<double>(*duration_s)) {
       spdlog::info("{} s elapsed: stopping", *duration_s);
       return;
     }
     if (pipe.source_done.load(std::memory_order_acquire)) return;  // replay finished
+    const double since_start = std::chrono::duration<double>(now - start).count();
     StatusLine status;
     while (pipe.status.try_pop(status)) {
       systemd::status(status.text);
-      const double since_start =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
       if (auto line = state_log.update(status.state, status.reason, since_start)) {
         if (line->warning) {
           spdlog::warn("{}", line->text);
@@ -468,7 +467,6 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
         }
       }
     }
-    const auto now = std::chrono::steady_clock::now();
     if (watchdog && now >= next_watchdog) {
       // Only while all three loops are making progress (each bumps its counter even when idle).
       const std::uint64_t beats[3] = {pipe.heartbeats.receive.load(), pipe.heartbeats.decode.load(),
