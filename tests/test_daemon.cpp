@@ -194,8 +194,7 @@ TEST_CASE("the real capture's sensor clock (2017) is not ok: offset gauge, degra
   CHECK(reason.find("sensor clock off by 1686853") != std::string::npos);
   CHECK(reason.find(" s (behind the host): not synchronised?") != std::string::npos);
   CHECK(log.find("[warning] health: degraded: ") != std::string::npos);
-  std::ifstream prom_file(dir / "default" / "health" / "pandarcap.prom");
-  const std::string prom{std::istreambuf_iterator<char>(prom_file), {}};
+  const std::string prom = harness::read_file(dir / "default" / "health" / "pandarcap.prom");
   CHECK(prom.find("pandarcap_sensor_clock_offset_seconds{sensor=\"pandar40p\"} -16868536") !=
         std::string::npos);
 

@@ -40,21 +40,6 @@ test::CommandResult run_daemon(const test::ScratchDir& dir, const std::string& t
                            " --pcd-fields pandarcap " + args + " 2>&1");
 }
 
-// A PCD file's points, decoded.
-std::vector<PcdPoint> pcd_points(const fs::path& file) {
-  const std::string bytes = harness::read_file(file);
-  const std::size_t data = bytes.find("DATA binary\n");
-  REQUIRE(data != std::string::npos);
-  const std::size_t begin = data + 12;
-  REQUIRE((bytes.size() - begin) % kPcdPointBytes == 0);
-  std::vector<PcdPoint> points;
-  for (std::size_t at = begin; at < bytes.size(); at += kPcdPointBytes) {
-    points.push_back(decode_pcd_point(std::span<const std::uint8_t, kPcdPointBytes>(
-        reinterpret_cast<const std::uint8_t*>(bytes.data() + at), kPcdPointBytes)));
-  }
-  return points;
-}
-
 // The reader's view of one point against a PCD point: the same bytes, so exactly equal.
 void check_point(const json& m, const PcdPoint& p) {
   CHECK(m["x"].get<float>() == p.x);
@@ -73,7 +58,7 @@ void check_frames_equal_pcd(const json& file, const std::vector<fs::path>& pcds)
   REQUIRE(messages.size() == pcds.size());
   for (std::size_t i = 0; i < pcds.size(); ++i) {
     INFO("frame " << i << ": " << pcds[i].filename().string());
-    const std::vector<PcdPoint> points = pcd_points(pcds[i]);
+    const std::vector<PcdPoint> points = test::pandarcap_pcd_points(pcds[i]);
     const json& m = messages[i];
     REQUIRE(m["points"] == points.size());
     if (points.empty()) continue;

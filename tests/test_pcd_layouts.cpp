@@ -145,11 +145,13 @@ TEST_CASE("PCD layouts: the header names the fields and anchors relative times",
 
 namespace {
 
-// Replays the real capture into `out` with `layout`; the largest frame written.
-fs::path replay_frame(const fs::path& capture, const fs::path& out, const std::string& layout) {
+// Replays the real capture into `out` with `layout` (and `extra` options); the largest frame
+// written.
+fs::path replay_frame(const fs::path& capture, const fs::path& out, const std::string& layout,
+                      const std::string& extra = "") {
   const auto r = test::run_command(test::pandarcapd_command() + " --replay '" + capture.string() +
                                    "' --top-speed --max-clock-offset 0 --pcd-fields " + layout +
-                                   " --output-dir '" + out.string() + "' 2>&1");
+                                   " " + extra + " --output-dir '" + out.string() + "' 2>&1");
   INFO(r.out);
   REQUIRE(r.exit_code == 0);
   fs::path largest;
@@ -158,17 +160,6 @@ fs::path replay_frame(const fs::path& capture, const fs::path& out, const std::s
   }
   REQUIRE_FALSE(largest.empty());
   return largest;
-}
-
-std::vector<PcdPoint> pandarcap_points(const fs::path& file) {
-  const std::string bytes = harness::read_file(file);
-  const std::size_t begin = bytes.find("DATA binary\n") + 12;
-  std::vector<PcdPoint> points;
-  for (std::size_t i = begin; i + kPcdPointBytes <= bytes.size(); i += kPcdPointBytes) {
-    points.push_back(decode_pcd_point(std::span<const std::uint8_t, kPcdPointBytes>(
-        reinterpret_cast<const std::uint8_t*>(bytes.data() + i), kPcdPointBytes)));
-  }
-  return points;
 }
 
 double reference_time(const fs::path& file) {
@@ -241,7 +232,7 @@ TEST_CASE("PCD layouts load in PCL and Open3D with the fields, types and values 
   if (!capture) return;
   test::ScratchDir dir("pcd-layouts");
   const fs::path reference_file = replay_frame(*capture, dir / "pandarcap", "pandarcap");
-  const std::vector<PcdPoint> truth = pandarcap_points(reference_file);
+  const std::vector<PcdPoint> truth = test::pandarcap_pcd_points(reference_file);
   REQUIRE(truth.size() > 50'000);
   const std::size_t n = truth.size();
 
@@ -322,14 +313,9 @@ TEST_CASE("PCD layouts load in PCL and Open3D with the fields, types and values 
   }
 
   SECTION("ros axes: the same points, x forward (the sensor's y) and y left (its -x)") {
-    const auto r =
-        test::run_command(test::pandarcapd_command() + " --replay '" + capture->string() +
-                          "' --top-speed --max-clock-offset 0 --pcd-fields pandarcap "
-                          "--frame ros --output-dir '" +
-                          (dir / "ros").string() + "' 2>&1");
-    REQUIRE(r.exit_code == 0);
-    const std::vector<PcdPoint> ros =
-        pandarcap_points(dir / "ros" / "frames" / reference_file.filename());
+    const fs::path file = replay_frame(*capture, dir / "ros", "pandarcap", "--frame ros");
+    CHECK(file.filename() == reference_file.filename());
+    const std::vector<PcdPoint> ros = test::pandarcap_pcd_points(file);
     REQUIRE(ros.size() == n);
     for (std::size_t i = 0; i < n; i += 101) {
       CHECK(ros[i].x == truth[i].y);

@@ -11,6 +11,8 @@
 #include <fstream>
 #include <random>
 
+#include "bench/child_process.hpp"
+
 namespace pandarcap::test {
 
 std::optional<std::filesystem::path> real_capture(const std::string& name) {
@@ -93,6 +95,20 @@ void check_record_spacing(const std::vector<nlohmann::json>& records, double min
     CHECK(gap > min_gap_s);
     CHECK(gap <= 1.5);
   }
+}
+
+std::vector<PcdPoint> pandarcap_pcd_points(const std::filesystem::path& file) {
+  const std::string bytes = harness::read_file(file);
+  const std::size_t data = bytes.find("DATA binary\n");
+  REQUIRE(data != std::string::npos);
+  const std::size_t begin = data + 12;
+  REQUIRE((bytes.size() - begin) % kPcdPointBytes == 0);
+  std::vector<PcdPoint> points;
+  for (std::size_t at = begin; at < bytes.size(); at += kPcdPointBytes) {
+    points.push_back(decode_pcd_point(std::span<const std::uint8_t, kPcdPointBytes>(
+        reinterpret_cast<const std::uint8_t*>(bytes.data() + at), kPcdPointBytes)));
+  }
+  return points;
 }
 
 std::vector<std::filesystem::path> files_ending(const std::filesystem::path& dir,

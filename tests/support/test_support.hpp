@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/pcd.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap::test {
@@ -90,6 +91,10 @@ std::uint64_t health_counter(const nlohmann::json& record, std::string_view name
 // 1.5 s apart by their monotonic uptime. The final record (written at shutdown) may follow the
 // one before it sooner, so its gap is not checked.
 void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s);
+
+// The points of a PCD file in the pandarcap layout (--pcd-fields pandarcap, the MCAP messages'
+// layout), decoded. Fails the test when the file has no data section or a partial point.
+std::vector<PcdPoint> pandarcap_pcd_points(const std::filesystem::path& file);
 
 // The files directly in `dir` whose names end in `suffix` (".pcd", ".pcap"), sorted. No
 // directory: none.
