@@ -5,19 +5,13 @@
 #include <unistd.h>
 
 #include <charconv>
-#include <fstream>
 #include <sstream>
+
+#include "core/text_file.hpp"
 
 namespace pandarcap {
 
 namespace {
-
-std::string read_all(const std::string& path) {
-  std::ifstream in(path);
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
 
 template <typename T>
 bool parse_hex(std::string_view text, T& out) {
@@ -60,7 +54,9 @@ std::vector<UdpSocketEntry> parse_proc_net_udp(std::string_view text) {
 
 std::optional<PortOwner> udp_port_owner(std::uint16_t port) {
   std::optional<UdpSocketEntry> held;
-  for (const UdpSocketEntry& e : parse_proc_net_udp(read_all("/proc/net/udp"))) {
+  // One line of ~130 bytes a socket: 16 MiB is over 100 000 sockets.
+  const TextFile table = read_text_file("/proc/net/udp", 16u << 20);
+  for (const UdpSocketEntry& e : parse_proc_net_udp(table.text)) {
     if (e.port == port) {
       held = e;
       break;
@@ -93,7 +89,7 @@ std::optional<PortOwner> udp_port_owner(std::uint16_t port) {
     ::closedir(fds);
     if (found) {
       owner.pid = pid;
-      owner.command = read_all(fmt::format("/proc/{}/comm", pid));
+      owner.command = read_text_file(fmt::format("/proc/{}/comm", pid)).text;
       while (!owner.command.empty() && owner.command.back() == '\n')
         owner.command.pop_back();
       break;
