@@ -266,7 +266,19 @@ int run_zero_loss(int argc, char** argv) {
     if (from_report.empty()) return pandarcap::bench::run_zero_loss(options);
     std::ifstream saved(from_report);
     if (!saved) throw std::runtime_error(fmt::format("cannot read '{}'", from_report));
-    return nlohmann::ordered_json::parse(saved);
+    // Rendered once here, so that a report without a key the renderers read (one written by an
+    // older pandarcap-bench, or edited) is an error naming the file before anything is written.
+    try {
+      auto report = nlohmann::ordered_json::parse(saved);
+      (void)pandarcap::bench::zero_loss_markdown(report);
+      (void)pandarcap::bench::zero_loss_svg(report);
+      return report;
+    } catch (const nlohmann::ordered_json::parse_error& e) {
+      throw std::runtime_error(fmt::format("'{}' is not JSON: {}", from_report, e.what()));
+    } catch (const nlohmann::ordered_json::exception& e) {
+      throw std::runtime_error(fmt::format(
+          "'{}' is not a zero-loss report this version can render: {}", from_report, e.what()));
+    }
   });
   if (!result) return 1;
   const nlohmann::ordered_json& report = *result;

@@ -34,15 +34,15 @@ struct Series {
 
 // A trial's x: what was sent (reports from before achieved_pps was kept: what was offered).
 double sent_rate(const ordered_json& t) {
-  return t.contains("achieved_pps") ? t["achieved_pps"].get<double>()
-                                    : t["offered_pps"].get<double>();
+  return t.contains("achieved_pps") ? t.at("achieved_pps").get<double>()
+                                    : t.at("offered_pps").get<double>();
 }
 
 Series series(const ordered_json& trials, const std::string& name, const std::string& colour,
               const std::string& y_key) {
   Series s{name, colour, {}};
   for (const auto& t : trials) {
-    if (t.contains(y_key)) s.points.emplace_back(sent_rate(t), t[y_key].get<double>());
+    if (t.contains(y_key)) s.points.emplace_back(sent_rate(t), t.at(y_key).get<double>());
   }
   std::sort(s.points.begin(), s.points.end());
   return s;
@@ -158,12 +158,12 @@ std::string cores(double fraction) {
 std::string not_done(const ordered_json& t) {
   std::string out;
   if (t.contains("loss_by_stage")) {
-    for (const auto& [stage, n] : t["loss_by_stage"].items()) {
+    for (const auto& [stage, n] : t.at("loss_by_stage").items()) {
       if (n.get<std::uint64_t>() > 0)
         out += fmt::format("{}{} {}", out.empty() ? "" : ", ", stage, n.dump());
     }
   } else if (t.value("kernel_drops", std::uint64_t{0}) > 0) {
-    out = "kernel_drops " + t["kernel_drops"].dump();
+    out = "kernel_drops " + t.at("kernel_drops").dump();
   }
   return out.empty() ? "-" : out;
 }
@@ -173,65 +173,70 @@ std::string not_done(const ordered_json& t) {
 // shares, this is the budget the daemon ran out of.
 std::string cpu_budget(const ordered_json& r) {
   const ordered_json* lowest_failed = nullptr;
-  for (const auto& t : r["trials"]["daemon"]) {
+  for (const auto& t : r.at("trials").at("daemon")) {
     if (t.value("passed", true) || !t.contains("generator_cpu_fraction_of_one_core")) continue;
-    if (!lowest_failed || t["offered_pps"] < (*lowest_failed)["offered_pps"]) lowest_failed = &t;
+    if (!lowest_failed || t.at("offered_pps") < (*lowest_failed).at("offered_pps"))
+      lowest_failed = &t;
   }
   if (!lowest_failed) return {};
   const ordered_json& t = *lowest_failed;
   std::string threads;
-  for (const auto& [name, u] : t["cpu_by_thread"].items()) {
-    const double f = u["cpu_fraction_of_one_core"].get<double>();
+  for (const auto& [name, u] : t.at("cpu_by_thread").items()) {
+    const double f = u.at("cpu_fraction_of_one_core").get<double>();
     if (f >= 0.005) threads += fmt::format("{}{} {:.2f}", threads.empty() ? "" : ", ", name, f);
   }
-  const double generator = t["generator_cpu_fraction_of_one_core"].get<double>();
-  const double daemon = t["cpu_fraction_of_one_core"].get<double>();
+  const double generator = t.at("generator_cpu_fraction_of_one_core").get<double>();
+  const double daemon = t.at("cpu_fraction_of_one_core").get<double>();
   return fmt::format(
       "CPU at the lowest rate the daemon failed ({} packets/s; {}): the generator used {:.2f} "
       "of a core (sending, and the kernel's loopback delivery, which runs in the sender), the "
       "daemon {:.2f} ({}): {:.2f} of the {} cores, before the kernel's own writeback of the "
       "files.\n\n",
-      rate(t["offered_pps"].get<double>()), not_done(t), generator, daemon, threads,
-      generator + daemon, r["environment"].value("cores", 0));
+      rate(t.at("offered_pps").get<double>()), not_done(t), generator, daemon, threads,
+      generator + daemon, r.at("environment").value("cores", 0));
 }
 
 }  // namespace
 
 std::string zero_loss_markdown(const ordered_json& r) {
-  const auto& s = r["at_sensor_rate"];
-  const auto& g = r["goals"];
-  const auto& env = r["environment"];
+  const auto& s = r.at("at_sensor_rate");
+  const auto& g = r.at("goals");
+  const auto& env = r.at("environment");
   std::string md = "# pandarcap zero-loss benchmark\n\n";
-  md += fmt::format("Machine: {} ({} cores), {}, rmem_max {}; commit {}, {} build.\n\n",
-                    env["cpu_model"].get<std::string>(), env["cores"].get<int>(),
-                    env["kernel"].get<std::string>(), env["rmem_max"].get<std::uint64_t>(),
-                    env["git_commit"].get<std::string>(), env["build_type"].get<std::string>());
-  md += fmt::format(
-      "Traffic: {}; trials of {} s; search {}..{} packets/s.\n\n",
-      r["settings"]["traffic"].get<std::string>(), r["settings"]["trial_seconds"].get<double>(),
-      rate(r["settings"]["min_rate"].get<double>()), rate(r["settings"]["max_rate"].get<double>()));
-  if (r["settings"].value("sensor_rate_only", false)) {
+  md +=
+      fmt::format("Machine: {} ({} cores), {}, rmem_max {}; commit {}, {} build.\n\n",
+                  env.at("cpu_model").get<std::string>(), env.at("cores").get<int>(),
+                  env.at("kernel").get<std::string>(), env.at("rmem_max").get<std::uint64_t>(),
+                  env.at("git_commit").get<std::string>(), env.at("build_type").get<std::string>());
+  md += fmt::format("Traffic: {}; trials of {} s; search {}..{} packets/s.\n\n",
+                    r.at("settings").at("traffic").get<std::string>(),
+                    r.at("settings").at("trial_seconds").get<double>(),
+                    rate(r.at("settings").at("min_rate").get<double>()),
+                    rate(r.at("settings").at("max_rate").get<double>()));
+  if (r.at("settings").value("sensor_rate_only", false)) {
     md += "No rate search in this run (`--sensor-rate-only`).\n\n";
   } else {
     md += "| receiver | zero-loss rate (packets/s) |\n|---|---:|\n";
-    md += fmt::format("| pandarcapd (config: {}) | {} |\n", env["daemon_config"].get<std::string>(),
-                      rate(r["daemon_zero_loss_pps"].get<double>()));
-    if (r.contains("mcap_comparison") && r["mcap_comparison"].contains("daemon_zero_loss_pps_on")) {
+    md += fmt::format("| pandarcapd (config: {}) | {} |\n",
+                      env.at("daemon_config").get<std::string>(),
+                      rate(r.at("daemon_zero_loss_pps").get<double>()));
+    if (r.contains("mcap_comparison") &&
+        r.at("mcap_comparison").contains("daemon_zero_loss_pps_on")) {
       md += fmt::format("| pandarcapd, MCAP on (frames and packets) | {} |\n",
-                        rate(r["mcap_comparison"]["daemon_zero_loss_pps_on"].get<double>()));
+                        rate(r.at("mcap_comparison").at("daemon_zero_loss_pps_on").get<double>()));
     }
     if (r.contains("daemon_zero_loss_pps_budget_0")) {
       md += fmt::format("| pandarcapd, latency budget 0 | {} |\n",
-                        rate(r["daemon_zero_loss_pps_budget_0"].get<double>()));
+                        rate(r.at("daemon_zero_loss_pps_budget_0").get<double>()));
     }
     md += fmt::format("| pandarcapd at <= 0.5 % loss | {} |\n",
-                      rate(r["daemon_loss_at_most_0_5_percent_pps"].get<double>()));
+                      rate(r.at("daemon_loss_at_most_0_5_percent_pps").get<double>()));
     md += fmt::format("| bare recvmmsg loop | {} |\n",
-                      rate(r["bare_recvmmsg_zero_loss_pps"].get<double>()));
+                      rate(r.at("bare_recvmmsg_zero_loss_pps").get<double>()));
     md += fmt::format("| recvfrom, one packet per call | {} |\n\n",
-                      rate(r["recvfrom_zero_loss_pps"].get<double>()));
+                      rate(r.at("recvfrom_zero_loss_pps").get<double>()));
     std::string limited;
-    for (const auto& [who, flag] : r["generator_limited"].items()) {
+    for (const auto& [who, flag] : r.at("generator_limited").items()) {
       if (flag.get<bool>()) limited += (limited.empty() ? "" : ", ") + who;
     }
     if (!limited.empty()) {
@@ -241,26 +246,26 @@ std::string zero_loss_markdown(const ordered_json& r) {
     }
     md += fmt::format(
         "Daemon vs bare recvmmsg: **{:.2f}** (goal >= 0.90: {}); above recvfrom: {}.\n\n",
-        r["daemon_vs_bare"].get<double>(), yes_no(g["daemon_vs_bare_at_least_0_9"]),
-        yes_no(g["daemon_above_recvfrom"]));
+        r.at("daemon_vs_bare").get<double>(), yes_no(g.at("daemon_vs_bare_at_least_0_9")),
+        yes_no(g.at("daemon_above_recvfrom")));
   }
   md += fmt::format("At a dual-return sensor's rate ({} packets/s), in the same run:\n\n",
-                    s["offered_pps"].get<double>());
+                    s.at("offered_pps").get<double>());
   const double bare = s.value("bare_recvmmsg_cpu_fraction_of_one_core", 0.0);
   md +=
       "| receiver | latency budget | CPU (% of a core) | µs/packet | vs bare loop | wake-ups/s "
       "(receive, decode, writer) | frame latency p99 | receive→decoded p99 | lost |\n"
       "|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
-  for (const ordered_json* t : {&s, &s["budget_0"]}) {
-    const auto& w = (*t)["wakeups_per_second"];
+  for (const ordered_json* t : {&s, &s.at("budget_0")}) {
+    const auto& w = (*t).at("wakeups_per_second");
     md += fmt::format(
         "| pandarcapd | {} ms | {:.2f} | {:.2f} | {:.2f}x | {:.0f}, {:.0f}, {:.0f} | {:.1f} ms | "
         "{:.2f} ms | {} |\n",
-        (*t)["budget_ms"].dump(), 100 * (*t)["cpu_fraction_of_one_core"].get<double>(),
-        (*t)["cpu_us_per_packet"].get<double>(), (*t)["daemon_vs_bare_cpu"].get<double>(),
+        (*t).at("budget_ms").dump(), 100 * (*t).at("cpu_fraction_of_one_core").get<double>(),
+        (*t).at("cpu_us_per_packet").get<double>(), (*t).at("daemon_vs_bare_cpu").get<double>(),
         w.value("receive", 0.0), w.value("decode", 0.0), w.value("writer", 0.0),
-        (*t)["frame_latency_p99_ms"].get<double>(), (*t)["latency_p99_us"].get<double>() / 1e3,
-        (*t)["lost"].dump());
+        (*t).at("frame_latency_p99_ms").get<double>(),
+        (*t).at("latency_p99_us").get<double>() / 1e3, (*t).at("lost").dump());
   }
   if (bare > 0) {
     md += fmt::format(
@@ -269,92 +274,96 @@ std::string zero_loss_markdown(const ordered_json& r) {
         100 * bare);
   }
   if (s.contains("mcap_on")) {
-    const auto& t = s["mcap_on"];
-    const auto& w = t["wakeups_per_second"];
+    const auto& t = s.at("mcap_on");
+    const auto& w = t.at("wakeups_per_second");
     md += fmt::format(
         "| pandarcapd, MCAP on (frames and packets) | {} ms | {:.2f} | {:.2f} | {:.2f}x | "
         "{:.0f}, {:.0f}, {:.0f} | {:.1f} ms | {:.2f} ms | {} |\n",
-        t["budget_ms"].dump(), 100 * t["cpu_fraction_of_one_core"].get<double>(),
-        t["cpu_us_per_packet"].get<double>(), t["daemon_vs_bare_cpu"].get<double>(),
+        t.at("budget_ms").dump(), 100 * t.at("cpu_fraction_of_one_core").get<double>(),
+        t.at("cpu_us_per_packet").get<double>(), t.at("daemon_vs_bare_cpu").get<double>(),
         w.value("receive", 0.0), w.value("decode", 0.0), w.value("writer", 0.0),
-        t["frame_latency_p99_ms"].get<double>(), t["latency_p99_us"].get<double>() / 1e3,
-        t["lost"].dump());
+        t.at("frame_latency_p99_ms").get<double>(), t.at("latency_p99_us").get<double>() / 1e3,
+        t.at("lost").dump());
   }
   if (s.contains("other_receiver")) {
-    const auto& o = s["other_receiver"];
+    const auto& o = s.at("other_receiver");
     md += fmt::format(
-        "| `{}` | - | {:.2f} | {:.2f} | {} | - | - | - | {} |\n", o["command"].get<std::string>(),
-        100 * o["cpu_fraction_of_one_core"].get<double>(), o["cpu_us_per_packet"].get<double>(),
-        bare > 0 ? fmt::format("{:.2f}x", o["cpu_fraction_of_one_core"].get<double>() / bare)
+        "| `{}` | - | {:.2f} | {:.2f} | {} | - | - | - | {} |\n",
+        o.at("command").get<std::string>(), 100 * o.at("cpu_fraction_of_one_core").get<double>(),
+        o.at("cpu_us_per_packet").get<double>(),
+        bare > 0 ? fmt::format("{:.2f}x", o.at("cpu_fraction_of_one_core").get<double>() / bare)
                  : std::string("-"),
-        o["lost"].dump());
+        o.at("lost").dump());
   }
   md += "\n";
   if (r.contains("mcap_comparison")) {
-    const auto& m = r["mcap_comparison"];
+    const auto& m = r.at("mcap_comparison");
     md += fmt::format(
         "MCAP on vs off (same run): CPU **{:.2f}x** ({:.2f} % -> {:.2f} % of a core); written "
         "{:.1f} -> {:.1f} MB/s ({:.1f} MB/s of MCAP); the extra CPU is {:.0f} µs per extra MB, "
         "against {:.0f} µs per MB the writer spends on PCD and pcap with MCAP off (goal <= 2x: "
         "{}); zero loss with MCAP on: {}",
-        m["cpu_on_vs_off"].get<double>(), 100 * m["cpu_fraction_of_one_core_off"].get<double>(),
-        100 * m["cpu_fraction_of_one_core_on"].get<double>(),
-        m["written_mb_per_second_off"].get<double>(), m["written_mb_per_second_on"].get<double>(),
-        m["mcap_mb_per_second"].get<double>(), m["extra_cpu_us_per_extra_mb"].get<double>(),
-        m["writer_cpu_us_per_written_mb_off"].get<double>(),
-        yes_no(g["mcap_extra_cpu_per_mb_within_2x_writer_cpu_per_mb"]),
-        yes_no(g["mcap_zero_loss_at_sensor_rate"]));
+        m.at("cpu_on_vs_off").get<double>(),
+        100 * m.at("cpu_fraction_of_one_core_off").get<double>(),
+        100 * m.at("cpu_fraction_of_one_core_on").get<double>(),
+        m.at("written_mb_per_second_off").get<double>(),
+        m.at("written_mb_per_second_on").get<double>(), m.at("mcap_mb_per_second").get<double>(),
+        m.at("extra_cpu_us_per_extra_mb").get<double>(),
+        m.at("writer_cpu_us_per_written_mb_off").get<double>(),
+        yes_no(g.at("mcap_extra_cpu_per_mb_within_2x_writer_cpu_per_mb")),
+        yes_no(g.at("mcap_zero_loss_at_sensor_rate")));
     if (m.contains("zero_loss_pps_on_vs_off")) {
       md += fmt::format("; zero-loss rate on/off {:.2f} (goal >= 0.90: {})",
-                        m["zero_loss_pps_on_vs_off"].get<double>(),
-                        yes_no(g["mcap_zero_loss_rate_at_least_0_9_of_off"]));
+                        m.at("zero_loss_pps_on_vs_off").get<double>(),
+                        yes_no(g.at("mcap_zero_loss_rate_at_least_0_9_of_off")));
     }
     md += ".\n\n";
   }
   md += fmt::format(
       "- CPU with the budget: **{:.2f} %** of one core (goal <= the bare loop's: {}; <= 2 %: {})",
-      100 * s["cpu_fraction_of_one_core"].get<double>(),
-      yes_no(g["cpu_at_sensor_rate_at_most_bare_loop"]),
-      yes_no(g["cpu_at_sensor_rate_at_most_2_percent"]));
+      100 * s.at("cpu_fraction_of_one_core").get<double>(),
+      yes_no(g.at("cpu_at_sensor_rate_at_most_bare_loop")),
+      yes_no(g.at("cpu_at_sensor_rate_at_most_2_percent")));
   std::string threads;
-  for (const auto& [name, t] : s["cpu_by_thread"].items()) {
+  for (const auto& [name, t] : s.at("cpu_by_thread").items()) {
     threads += fmt::format("{}{} {:.2f} % ({:.1f} µs/packet)", threads.empty() ? "" : ", ", name,
-                           100 * t["cpu_fraction_of_one_core"].get<double>(),
-                           t["cpu_us_per_packet"].get<double>());
+                           100 * t.at("cpu_fraction_of_one_core").get<double>(),
+                           t.at("cpu_us_per_packet").get<double>());
   }
   md += ": " + threads + ".\n";
   md += fmt::format(
       "- Frame latency (the packet that completes a frame -> its PCD in place): p50 {:.1f} ms, "
       "**p99 {:.1f} ms** (goal <= budget + 30 ms: {}).\n",
-      s["frame_latency_p50_ms"].get<double>(), s["frame_latency_p99_ms"].get<double>(),
-      yes_no(g["frame_latency_p99_within_budget_plus_30_ms"]));
+      s.at("frame_latency_p50_ms").get<double>(), s.at("frame_latency_p99_ms").get<double>(),
+      yes_no(g.at("frame_latency_p99_within_budget_plus_30_ms")));
   md += fmt::format(
       "- Receive-to-decoded latency: p50 {:.0f} µs, **p99 {:.0f} µs** (goal <= budget + 1 ms: "
       "{}), p99.9 {:.0f} µs, max {:.0f} µs.\n",
-      s["latency_p50_us"].get<double>(), s["latency_p99_us"].get<double>(),
-      yes_no(g["receive_to_decoded_p99_within_budget_plus_1_ms"]),
-      s["latency_p999_us"].get<double>(), s["latency_max_us"].get<double>());
+      s.at("latency_p50_us").get<double>(), s.at("latency_p99_us").get<double>(),
+      yes_no(g.at("receive_to_decoded_p99_within_budget_plus_1_ms")),
+      s.at("latency_p999_us").get<double>(), s.at("latency_max_us").get<double>());
   md += fmt::format("- Peak RSS: **{:.1f} MiB** (goal <= 64 MiB: {}).\n",
-                    static_cast<double>(s["peak_rss_bytes"].get<std::uint64_t>()) / (1 << 20),
-                    yes_no(g["peak_rss_at_most_64_mib"]));
+                    static_cast<double>(s.at("peak_rss_bytes").get<std::uint64_t>()) / (1 << 20),
+                    yes_no(g.at("peak_rss_at_most_64_mib")));
   md += fmt::format(
       "- Heap allocations in the receive, decode and writer loops after warm-up: "
       "**{}** (goal 0: {}).\n\n",
-      s["hot_path_allocations"].dump(), yes_no(g["zero_hot_path_allocations"]));
+      s.at("hot_path_allocations").dump(), yes_no(g.at("zero_hot_path_allocations")));
   md += cpu_budget(r);
   for (const char* who : {"daemon", "daemon_budget_0", "bare_recvmmsg", "recvfrom"}) {
-    if (!r["trials"].contains(who) || r["trials"][who].empty()) continue;
+    if (!r.at("trials").contains(who) || r.at("trials")[who].empty()) continue;
     md += fmt::format(
         "Trials, {}:\n\n| offered | achieved | delivered | lost | not done, by stage | CPU: "
         "generator | CPU: receiver | passed |\n|---:|---:|---:|---:|---|---:|---:|:---:|\n",
         who);
-    for (const auto& t : r["trials"][who]) {
-      md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n",
-                        rate(t["offered_pps"].get<double>()), rate(t["achieved_pps"].get<double>()),
-                        rate(t["delivered_pps"].get<double>()), t["lost"].get<std::uint64_t>(),
-                        not_done(t), cores(t.value("generator_cpu_fraction_of_one_core", -1.0)),
-                        cores(t.value("cpu_fraction_of_one_core", -1.0)),
-                        t.value("passed", false) ? "yes" : "no");
+    for (const auto& t : r.at("trials")[who]) {
+      md += fmt::format(
+          "| {} | {} | {} | {} | {} | {} | {} | {} |\n", rate(t.at("offered_pps").get<double>()),
+          rate(t.at("achieved_pps").get<double>()), rate(t.at("delivered_pps").get<double>()),
+          t.at("lost").get<std::uint64_t>(), not_done(t),
+          cores(t.value("generator_cpu_fraction_of_one_core", -1.0)),
+          cores(t.value("cpu_fraction_of_one_core", -1.0)),
+          t.value("passed", false) ? "yes" : "no");
     }
     md += "\n";
   }
@@ -362,13 +371,13 @@ std::string zero_loss_markdown(const ordered_json& r) {
 }
 
 std::string zero_loss_svg(const ordered_json& r) {
-  double lo = r["settings"]["min_rate"].get<double>() / 1.5;
-  double hi = r["settings"]["max_rate"].get<double>() * 1.5;
-  const auto& t = r["trials"];
+  double lo = r.at("settings").at("min_rate").get<double>() / 1.5;
+  double hi = r.at("settings").at("max_rate").get<double>() * 1.5;
+  const auto& t = r.at("trials");
   std::vector<Series> delivered = {
-      series(t["daemon"], "pandarcapd", "#1f77b4", "delivered_pps"),
-      series(t["bare_recvmmsg"], "bare recvmmsg", "#2ca02c", "delivered_pps"),
-      series(t["recvfrom"], "recvfrom", "#ff7f0e", "delivered_pps")};
+      series(t.at("daemon"), "pandarcapd", "#1f77b4", "delivered_pps"),
+      series(t.at("bare_recvmmsg"), "bare recvmmsg", "#2ca02c", "delivered_pps"),
+      series(t.at("recvfrom"), "recvfrom", "#ff7f0e", "delivered_pps")};
   std::string svg =
       R"(<svg xmlns="http://www.w3.org/2000/svg" width="1000" height="440" font-family="sans-serif">)"
       "\n<rect width=\"1000\" height=\"440\" fill=\"white\"/>\n";
@@ -390,9 +399,9 @@ std::string zero_loss_svg(const ordered_json& r) {
   double top = 1;
   for (const auto& [stage, colour] : names) {
     Series s{stage, colour, {}};
-    for (const auto& trial : t["daemon"]) {
-      const double sent = std::max(1.0, trial["sent"].get<double>());
-      const double pct = 100 * trial["loss_by_stage"][stage].get<double>() / sent;
+    for (const auto& trial : t.at("daemon")) {
+      const double sent = std::max(1.0, trial.at("sent").get<double>());
+      const double pct = 100 * trial.at("loss_by_stage").at(stage).get<double>() / sent;
       s.points.emplace_back(sent_rate(trial), pct);
       top = std::max(top, pct);
     }

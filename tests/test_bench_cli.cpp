@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <catch2/catch.hpp>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -183,6 +184,45 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "
     for (std::size_t i = 1; i < rates.size(); ++i)
       CHECK(rates[i] <= 2 * rates[i - 1] + 1);
   }
+}
+
+TEST_CASE(
+    "pandarcap-bench zero-loss --from-report renders a saved report, refuses an incomplete one",
+    "[bench][cli]") {
+  test::ScratchDir dir("from-report");
+  const auto saved =
+      std::filesystem::path(PANDARCAP_SOURCE_DIR) / "bench/results/zero-loss/report.json";
+  const auto rendered = test::run_command(bench() + " zero-loss --from-report '" + saved.string() +
+                                          "' --report-dir '" + (dir / "ok").string() + "' 2>&1");
+  INFO(rendered.out);
+  REQUIRE(rendered.exit_code == 0);
+  CHECK_THAT(rendered.out, Catch::Contains("zero-loss rate"));
+  CHECK(std::filesystem::file_size(dir / "ok" / "plot.svg") > 0);
+
+  // The same report without a key the renderers read: an error naming the file and the key,
+  // and nothing written.
+  json report = json::parse(std::ifstream(saved));
+  report["at_sensor_rate"].erase("frame_latency_p99_ms");
+  const auto incomplete = dir / "incomplete.json";
+  std::ofstream(incomplete) << report.dump();
+  const auto refused =
+      test::run_command(bench() + " zero-loss --from-report '" + incomplete.string() +
+                        "' --report-dir '" + (dir / "bad").string() + "' 2>&1");
+  INFO(refused.out);
+  CHECK(refused.exit_code == 1);
+  CHECK_THAT(refused.out,
+             Catch::Contains(incomplete.string()) && Catch::Contains("frame_latency_p99_ms"));
+  CHECK_FALSE(std::filesystem::exists(dir / "bad"));
+
+  // Not JSON at all: the file and the parser's line and column.
+  const auto cut = dir / "cut.json";
+  std::ofstream(cut) << "{\"trials\":\n";
+  const auto unparsed =
+      test::run_command(bench() + " zero-loss --from-report '" + cut.string() + "' 2>&1");
+  INFO(unparsed.out);
+  CHECK(unparsed.exit_code == 1);
+  CHECK_THAT(unparsed.out, Catch::Contains(cut.string() + "' is not JSON") &&
+                               Catch::Contains("line 2, column 1"));
 }
 
 TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-return traffic",
