@@ -266,33 +266,36 @@ int run_zero_loss(int argc, char** argv) {
     if (from_report.empty()) return pandarcap::bench::run_zero_loss(options);
     std::ifstream saved(from_report);
     if (!saved) throw std::runtime_error(fmt::format("cannot read '{}'", from_report));
-    // Rendered once here, so that a report without a key the renderers read (one written by an
-    // older pandarcap-bench, or edited) is an error naming the file before anything is written.
     try {
-      auto report = nlohmann::ordered_json::parse(saved);
-      (void)pandarcap::bench::zero_loss_markdown(report);
-      (void)pandarcap::bench::zero_loss_svg(report);
-      return report;
+      return nlohmann::ordered_json::parse(saved);
     } catch (const nlohmann::ordered_json::parse_error& e) {
       throw std::runtime_error(fmt::format("'{}' is not JSON: {}", from_report, e.what()));
-    } catch (const nlohmann::ordered_json::exception& e) {
-      throw std::runtime_error(fmt::format(
-          "'{}' is not a zero-loss report this version can render: {}", from_report, e.what()));
     }
   });
   if (!result) return 1;
   const nlohmann::ordered_json& report = *result;
+  // Rendered once each, before anything is written: a saved report without a key the renderers
+  // read (one written by an older pandarcap-bench, or edited) is an error naming the file.
+  std::string markdown, svg;
+  try {
+    markdown = pandarcap::bench::zero_loss_markdown(report);
+    svg = pandarcap::bench::zero_loss_svg(report);
+  } catch (const nlohmann::ordered_json::exception& e) {
+    const std::string source = from_report.empty() ? "this run's report" : "'" + from_report + "'";
+    fmt::print(stderr,
+               "pandarcap-bench zero-loss: {} is not a zero-loss report this version can render: "
+               "{}\n",
+               source, e.what());
+    return 1;
+  }
   if (!report_dir.empty()) {
     std::filesystem::create_directories(report_dir);
     std::ofstream(std::filesystem::path(report_dir) / "report.json") << report.dump(2) << "\n";
-    std::ofstream(std::filesystem::path(report_dir) / "summary.md")
-        << pandarcap::bench::zero_loss_markdown(report);
-    std::ofstream(std::filesystem::path(report_dir) / "plot.svg")
-        << pandarcap::bench::zero_loss_svg(report);
+    std::ofstream(std::filesystem::path(report_dir) / "summary.md") << markdown;
+    std::ofstream(std::filesystem::path(report_dir) / "plot.svg") << svg;
   }
-  print_report(report, json, [](const nlohmann::ordered_json& r) {
-    std::fputs(pandarcap::bench::zero_loss_markdown(r).c_str(), stdout);
-  });
+  print_report(report, json,
+               [&](const nlohmann::ordered_json&) { std::fputs(markdown.c_str(), stdout); });
   return 0;
 }
 
