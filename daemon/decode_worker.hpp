@@ -49,10 +49,6 @@ inline constexpr std::size_t kMaxArenas = 64;
 
 class DecodeWorker final : public FrameSink {
  public:
-  using ArenaQueue = ringbuf::SpscQueue<FrameArena*>;
-  using RawQueue = ringbuf::SpscQueue<RawBatch*>;
-  using WriterQueue = ringbuf::SpscQueue<WriterMessage>;
-
   DecodeWorker(const Calibration& calibration, const DecodeWorkerOptions& options, PacketRing& ring,
                WriterQueue& to_writer, ArenaQueue& free_arenas, RawQueue& free_raw);
 

@@ -2,35 +2,39 @@
 
 #include <spdlog/spdlog.h>
 
-#include "daemon/clocks.hpp"
-
 namespace pandarcap {
 
-PacketSource::PacketSource(const DaemonConfig& config, const RunSource& source) {
-  if (source.kind == RunSource::Kind::kReplay) {
-    replay_ = std::make_unique<ReplaySource>(replay_options(config, source));
-    return;
-  }
-  receiver_ = std::make_unique<UdpReceiver>(receiver_options(config, source));
-  if (source.kind == RunSource::Kind::kSimulated) {
-    const SyntheticSensorConfig sc = simulated_sensor_config(source, realtime_ns());
-    simulator_ =
-        std::make_unique<SimulatedSender>(sc, "127.0.0.1", "127.0.0.1", receiver_->bound_port());
-    spdlog::info("simulated sensor: {} RPM, {} return{}, sending to 127.0.0.1:{}", sc.rpm,
-                 to_string(sc.return_mode), sc.udp_sequence ? ", UDP sequence" : "",
-                 receiver_->bound_port());
-  }
+std::unique_ptr<PacketSource> PacketSource::live(const UdpReceiverOptions& options) {
+  std::unique_ptr<PacketSource> source(new PacketSource);
+  source->receiver_ = std::make_unique<UdpReceiver>(options);
+  return source;
 }
 
-void PacketSource::run(Pipeline& pipe) {
+std::unique_ptr<PacketSource> PacketSource::simulated(const UdpReceiverOptions& options,
+                                                      const SyntheticSensorConfig& sensor) {
+  std::unique_ptr<PacketSource> source = live(options);
+  const std::uint16_t port = source->receiver_->bound_port();
+  source->simulator_ = std::make_unique<SimulatedSender>(sensor, "127.0.0.1", "127.0.0.1", port);
+  spdlog::info("simulated sensor: {} RPM, {} return{}, sending to 127.0.0.1:{}", sensor.rpm,
+               to_string(sensor.return_mode), sensor.udp_sequence ? ", UDP sequence" : "", port);
+  return source;
+}
+
+std::unique_ptr<PacketSource> PacketSource::replay(const ReplayOptions& options) {
+  std::unique_ptr<PacketSource> source(new PacketSource);
+  source->replay_ = std::make_unique<ReplaySource>(options);
+  return source;
+}
+
+void PacketSource::run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+                       std::atomic<std::uint64_t>& heartbeat, std::atomic<bool>& done) {
   if (replay_) {
-    replay_result_ =
-        replay_->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive);
+    replay_result_ = replay_->run(ring, stop, counters, heartbeat);
   } else {
-    receiver_->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive);
+    receiver_->run(ring, stop, counters, heartbeat);
   }
   // release: everything the source published happens before the decoder sees "done".
-  pipe.source_done.store(true, std::memory_order_release);
+  done.store(true, std::memory_order_release);
 }
 
 void PacketSource::run_simulator(const std::atomic<bool>& stop) {

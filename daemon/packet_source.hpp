@@ -2,16 +2,18 @@
 // built-in simulated sensor sends to, or a capture file replayed.
 //
 // Opening is where a source fails (a port in use, a missing file): before any thread starts, so
-// the start can report it with an exit status. run() is the source thread's body.
+// the start can report it with an exit status. run() is the source thread's body. Which source a
+// run uses, and its options, are the lifecycle's choice (pandarcapd's open_source(), with
+// daemon_options.hpp); this side knows nothing of the configuration.
 #pragma once
 
 #include <atomic>
 #include <cstdint>
 #include <memory>
 
-#include "config/daemon_config.hpp"
-#include "daemon/daemon_options.hpp"
-#include "daemon/pipeline.hpp"
+#include "core/sim/synthetic_sensor.hpp"
+#include "daemon/packet_slot.hpp"
+#include "daemon/pipeline_types.hpp"
 #include "daemon/replay_source.hpp"
 #include "daemon/simulated_sender.hpp"
 #include "daemon/udp_receiver.hpp"
@@ -20,16 +22,22 @@ namespace pandarcap {
 
 class PacketSource {
  public:
-  // Binds the socket (and, simulated, the simulator's), or opens the capture file. Throws
-  // CaptureError for a capture that cannot be read, std::exception for the rest.
-  PacketSource(const DaemonConfig& config, const RunSource& source);
+  // The sensor's packets on a socket bound as `options` says. Throws std::exception (a port in
+  // use, an address this host does not have).
+  static std::unique_ptr<PacketSource> live(const UdpReceiverOptions& options);
+  // A socket as live, and the built-in simulated sensor `sensor` sending to it over loopback.
+  static std::unique_ptr<PacketSource> simulated(const UdpReceiverOptions& options,
+                                                 const SyntheticSensorConfig& sensor);
+  // A capture file. Throws CaptureError for a capture that cannot be read.
+  static std::unique_ptr<PacketSource> replay(const ReplayOptions& options);
 
   const char* thread_name() const noexcept { return replay_ ? "pc-replay" : "pc-receive"; }
   bool simulated() const noexcept { return simulator_ != nullptr; }
 
-  // The source thread: receives (or replays) into the ring until `pipe.stop_source`, or the end
-  // of the file; then sets `pipe.source_done`.
-  void run(Pipeline& pipe);
+  // The source thread: receives (or replays) into `ring` until `stop`, or the end of the file;
+  // then sets `done`.
+  void run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+           std::atomic<std::uint64_t>& heartbeat, std::atomic<bool>& done);
   // The simulator thread (simulated() only): sends until `stop`.
   void run_simulator(const std::atomic<bool>& stop);
 
@@ -38,6 +46,8 @@ class PacketSource {
   const ReplayResult& replay_result() const noexcept { return replay_result_; }
 
  private:
+  PacketSource() = default;
+
   std::unique_ptr<UdpReceiver> receiver_;
   std::unique_ptr<ReplaySource> replay_;
   std::unique_ptr<SimulatedSender> simulator_;

@@ -400,7 +400,16 @@ DecoderTarget choose_decoder(const DaemonConfig& config) {
 
 std::unique_ptr<PacketSource> open_source(const DaemonConfig& config, const RunSource& source) {
   try {
-    return std::make_unique<PacketSource>(config, source);
+    switch (source.kind) {
+      case RunSource::Kind::kReplay:
+        return PacketSource::replay(replay_options(config, source));
+      case RunSource::Kind::kSimulated:
+        return PacketSource::simulated(receiver_options(config, source),
+                                       simulated_sensor_config(source, realtime_ns()));
+      case RunSource::Kind::kLive:
+        break;
+    }
+    return PacketSource::live(receiver_options(config, source));
   } catch (const CaptureError& error) {
     throw StartupError{kExitNoInput, error.what()};
   } catch (const std::exception& error) {
@@ -593,7 +602,11 @@ int run(const Options& options) {
       [&] {
         place_this_thread("receive", {placement.receive_cpu, placement.receive_priority});
       },
-      [&] { source->run(pipe); }, [&] { pipe.stop_source.store(true, std::memory_order_relaxed); });
+      [&] {
+        source->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive,
+                    pipe.source_done);
+      },
+      [&] { pipe.stop_source.store(true, std::memory_order_relaxed); });
   if (source->simulated()) {
     threads.start(
         "pc-simsensor", {}, [&] { source->run_simulator(stop_simulator); },

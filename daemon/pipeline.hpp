@@ -35,9 +35,9 @@ struct Pipeline {
   PacketRing ring;
   std::vector<std::unique_ptr<FrameArena>> arenas;
   std::vector<std::unique_ptr<RawBatch>> raw;
-  DecodeWorker::ArenaQueue free_arenas;
-  DecodeWorker::RawQueue free_raw;
-  DecodeWorker::WriterQueue to_writer;
+  ArenaQueue free_arenas;
+  RawQueue free_raw;
+  WriterQueue to_writer;
   ringbuf::SpscQueue<StatusLine> status;  // the writer's STATUS= lines for the main thread
   ReceiveCounters receive;
   SensorStatusChannel sensor_status;  // the status poller's answers, for the health record

@@ -25,6 +25,7 @@
 #include "core/point.hpp"
 #include "core/stream_decoder.hpp"
 #include "daemon/packet_slot.hpp"
+#include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {
 
@@ -85,6 +86,11 @@ struct WriterMessage {
   RawBatch* raw = nullptr;      // kRaw
   DecodeSnapshot snapshot;      // kSnapshot and kEnd (the final counts)
 };
+
+// The queues between the decode worker and the writer, sized from the configuration at start-up.
+using WriterQueue = ringbuf::SpscQueue<WriterMessage>;  // frames, raw batches, snapshots, the end
+using ArenaQueue = ringbuf::SpscQueue<FrameArena*>;     // empty arenas, back to the decoder
+using RawQueue = ringbuf::SpscQueue<RawBatch*>;         // empty raw batches, back to the decoder
 
 // Per-loop progress counters for the systemd watchdog: each loop bumps its own every iteration,
 // including idle wake-ups, so "not advancing" means stuck, not "no packets".

@@ -29,9 +29,8 @@ void probe_writable(const std::filesystem::path& dir) {
 
 }  // namespace
 
-Writer::Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_decoder,
-               DecodeWorker::ArenaQueue& arenas_back, DecodeWorker::RawQueue& raw_back,
-               const ReceiveCounters& receive, const LiveClock& live,
+Writer::Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQueue& arenas_back,
+               RawQueue& raw_back, const ReceiveCounters& receive, const LiveClock& live,
                SensorStatusChannel& sensor_status)
     : options_(options),
       from_decoder_(from_decoder),

@@ -26,7 +26,6 @@
 #include <cstdint>
 
 #include "core/health.hpp"
-#include "daemon/decode_worker.hpp"
 #include "daemon/frame_output.hpp"
 #include "daemon/health_publisher.hpp"
 #include "daemon/mcap_recorder.hpp"
@@ -48,9 +47,9 @@ struct StatusLine {
 
 class Writer {
  public:
-  Writer(const WriterOptions& options, DecodeWorker::WriterQueue& from_decoder,
-         DecodeWorker::ArenaQueue& arenas_back, DecodeWorker::RawQueue& raw_back,
-         const ReceiveCounters& receive, const LiveClock& live, SensorStatusChannel& sensor_status);
+  Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQueue& arenas_back,
+         RawQueue& raw_back, const ReceiveCounters& receive, const LiveClock& live,
+         SensorStatusChannel& sensor_status);
   ~Writer();
 
   // Creates the output directories and proves they are writable (writes calibration.csv and a
@@ -78,9 +77,9 @@ class Writer {
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
 
   WriterOptions options_;
-  DecodeWorker::WriterQueue& from_decoder_;
-  DecodeWorker::ArenaQueue& arenas_back_;
-  DecodeWorker::RawQueue& raw_back_;
+  WriterQueue& from_decoder_;
+  ArenaQueue& arenas_back_;
+  RawQueue& raw_back_;
   const ReceiveCounters& receive_;
   const LiveClock& live_;
   // The parts, which count their failures in accounting_ and read options_ (declared first).
