@@ -14,8 +14,8 @@
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/ptc/ptc_client.hpp"
-#include "daemon/replay_source.hpp"
-#include "daemon/udp_receiver.hpp"
+#include "daemon/source/replay_source.hpp"
+#include "daemon/source/udp_receiver.hpp"
 #include "daemon/writer.hpp"
 
 namespace pandarcap {

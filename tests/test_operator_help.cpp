@@ -7,7 +7,7 @@
 #include <catch2/catch.hpp>
 #include <string>
 
-#include "daemon/udp_port_owner.hpp"
+#include "daemon/source/udp_port_owner.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

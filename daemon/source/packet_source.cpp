@@ -1,4 +1,4 @@
-#include "daemon/packet_source.hpp"
+#include "daemon/source/packet_source.hpp"
 
 #include <spdlog/spdlog.h>
 

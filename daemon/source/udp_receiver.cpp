@@ -1,4 +1,4 @@
-#include "daemon/udp_receiver.hpp"
+#include "daemon/source/udp_receiver.hpp"
 
 #include <arpa/inet.h>
 #include <fmt/format.h>
@@ -22,7 +22,7 @@
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
-#include "daemon/udp_port_owner.hpp"
+#include "daemon/source/udp_port_owner.hpp"
 #include "ringbuf/slot_ring.hpp"
 
 namespace pandarcap {

@@ -1,4 +1,4 @@
-#include "daemon/simulated_sender.hpp"
+#include "daemon/source/simulated_sender.hpp"
 
 #include <arpa/inet.h>
 #include <netinet/in.h>

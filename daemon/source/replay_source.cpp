@@ -1,4 +1,4 @@
-#include "daemon/replay_source.hpp"
+#include "daemon/source/replay_source.hpp"
 
 #include <arpa/inet.h>
 #include <time.h>

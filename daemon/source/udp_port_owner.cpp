@@ -1,4 +1,4 @@
-#include "daemon/udp_port_owner.hpp"
+#include "daemon/source/udp_port_owner.hpp"
 
 #include <dirent.h>
 #include <fmt/format.h>

@@ -14,9 +14,9 @@
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pipeline_types.hpp"
-#include "daemon/replay_source.hpp"
-#include "daemon/simulated_sender.hpp"
-#include "daemon/udp_receiver.hpp"
+#include "daemon/source/replay_source.hpp"
+#include "daemon/source/simulated_sender.hpp"
+#include "daemon/source/udp_receiver.hpp"
 
 namespace pandarcap {
 
