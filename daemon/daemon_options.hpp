@@ -16,7 +16,7 @@
 #include "daemon/ptc/ptc_client.hpp"
 #include "daemon/source/replay_source.hpp"
 #include "daemon/source/udp_receiver.hpp"
-#include "daemon/writer.hpp"
+#include "daemon/output/writer.hpp"
 
 namespace pandarcap {
 

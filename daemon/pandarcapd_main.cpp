@@ -48,7 +48,7 @@
 #include "daemon/clocks.hpp"
 #include "daemon/daemon_options.hpp"
 #include "daemon/decode_worker.hpp"
-#include "daemon/output_directories.hpp"
+#include "daemon/output/output_directories.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/source/packet_source.hpp"
 #include "daemon/pcap/capture_reader.hpp"
@@ -62,7 +62,7 @@
 #include "daemon/source/simulated_sender.hpp"
 #include "daemon/thread_tuning.hpp"
 #include "daemon/source/udp_receiver.hpp"
-#include "daemon/writer.hpp"
+#include "daemon/output/writer.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace {

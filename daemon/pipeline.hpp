@@ -21,7 +21,7 @@
 #include "daemon/packet_slot.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/ptc/sensor_status_channel.hpp"
-#include "daemon/writer.hpp"
+#include "daemon/output/writer.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {

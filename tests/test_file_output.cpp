@@ -9,7 +9,7 @@
 
 #include "bench/child_process.hpp"
 #include "daemon/io/file_output.hpp"
-#include "daemon/output_directories.hpp"
+#include "daemon/output/output_directories.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

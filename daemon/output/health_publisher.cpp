@@ -1,4 +1,4 @@
-#include "daemon/health_publisher.hpp"
+#include "daemon/output/health_publisher.hpp"
 
 #include <cerrno>
 #include <cstdio>

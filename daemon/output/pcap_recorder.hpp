@@ -25,11 +25,11 @@
 #include <string_view>
 #include <vector>
 
-#include "daemon/output_accounting.hpp"
+#include "daemon/output/output_accounting.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
 #include "daemon/pipeline_types.hpp"
-#include "daemon/retention.hpp"
-#include "daemon/writer_options.hpp"
+#include "daemon/output/retention.hpp"
+#include "daemon/output/writer_options.hpp"
 
 namespace pandarcap {
 

@@ -1,4 +1,4 @@
-#include "daemon/output_leftovers.hpp"
+#include "daemon/output/output_leftovers.hpp"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>

@@ -18,10 +18,10 @@
 
 #include "core/latency_histogram.hpp"
 #include "daemon/io/file_output.hpp"
-#include "daemon/output_accounting.hpp"
+#include "daemon/output/output_accounting.hpp"
 #include "daemon/pipeline_types.hpp"
-#include "daemon/retention.hpp"
-#include "daemon/writer_options.hpp"
+#include "daemon/output/retention.hpp"
+#include "daemon/output/writer_options.hpp"
 
 namespace pandarcap {
 

@@ -1,4 +1,4 @@
-#include "daemon/mcap_recorder.hpp"
+#include "daemon/output/mcap_recorder.hpp"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -10,8 +10,8 @@
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
-#include "daemon/output_leftovers.hpp"
-#include "daemon/rotation.hpp"
+#include "daemon/output/output_leftovers.hpp"
+#include "daemon/output/rotation.hpp"
 
 namespace pandarcap {
 

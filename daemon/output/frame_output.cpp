@@ -1,4 +1,4 @@
-#include "daemon/frame_output.hpp"
+#include "daemon/output/frame_output.hpp"
 
 #include <fmt/format.h>
 #include <unistd.h>
@@ -9,7 +9,7 @@
 
 #include "core/pcd.hpp"
 #include "daemon/clocks.hpp"
-#include "daemon/output_leftovers.hpp"
+#include "daemon/output/output_leftovers.hpp"
 
 namespace pandarcap {
 namespace {

@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "daemon/io/unique_fd.hpp"
-#include "daemon/writer.hpp"
+#include "daemon/output/writer.hpp"
 
 namespace pandarcap {
 

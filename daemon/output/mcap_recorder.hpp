@@ -28,10 +28,10 @@
 #include <string_view>
 
 #include "daemon/mcap/mcap_file.hpp"
-#include "daemon/output_accounting.hpp"
+#include "daemon/output/output_accounting.hpp"
 #include "daemon/pipeline_types.hpp"
-#include "daemon/retention.hpp"
-#include "daemon/writer_options.hpp"
+#include "daemon/output/retention.hpp"
+#include "daemon/output/writer_options.hpp"
 
 namespace pandarcap {
 

@@ -1,4 +1,4 @@
-#include "daemon/output_accounting.hpp"
+#include "daemon/output/output_accounting.hpp"
 
 #include <spdlog/spdlog.h>
 

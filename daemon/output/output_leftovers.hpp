@@ -20,8 +20,8 @@
 #include <filesystem>
 #include <string>
 
-#include "daemon/output_accounting.hpp"
-#include "daemon/retention.hpp"
+#include "daemon/output/output_accounting.hpp"
+#include "daemon/output/retention.hpp"
 
 namespace pandarcap {
 

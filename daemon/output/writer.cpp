@@ -1,4 +1,4 @@
-#include "daemon/writer.hpp"
+#include "daemon/output/writer.hpp"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -13,7 +13,7 @@
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
-#include "daemon/output_leftovers.hpp"
+#include "daemon/output/output_leftovers.hpp"
 
 namespace pandarcap {
 namespace {

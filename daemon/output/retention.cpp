@@ -1,4 +1,4 @@
-#include "daemon/retention.hpp"
+#include "daemon/output/retention.hpp"
 
 #include <system_error>
 

@@ -18,14 +18,14 @@
 #include <string>
 
 #include "core/health.hpp"
-#include "daemon/frame_output.hpp"
+#include "daemon/output/frame_output.hpp"
 #include "daemon/io/file_output.hpp"
-#include "daemon/mcap_recorder.hpp"
-#include "daemon/output_accounting.hpp"
-#include "daemon/pcap_recorder.hpp"
+#include "daemon/output/mcap_recorder.hpp"
+#include "daemon/output/output_accounting.hpp"
+#include "daemon/output/pcap_recorder.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/ptc/sensor_status_channel.hpp"
-#include "daemon/writer_options.hpp"
+#include "daemon/output/writer_options.hpp"
 
 namespace pandarcap {
 

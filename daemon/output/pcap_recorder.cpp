@@ -1,4 +1,4 @@
-#include "daemon/pcap_recorder.hpp"
+#include "daemon/output/pcap_recorder.hpp"
 
 #include <arpa/inet.h>
 #include <fmt/format.h>
@@ -11,8 +11,8 @@
 #include "core/text_file.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
-#include "daemon/output_leftovers.hpp"
-#include "daemon/rotation.hpp"
+#include "daemon/output/output_leftovers.hpp"
+#include "daemon/output/rotation.hpp"
 
 namespace pandarcap {
 PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting)

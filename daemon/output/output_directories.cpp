@@ -1,4 +1,4 @@
-#include "daemon/output_directories.hpp"
+#include "daemon/output/output_directories.hpp"
 
 #include <fcntl.h>
 #include <fmt/format.h>
