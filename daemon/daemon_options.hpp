@@ -13,30 +13,13 @@
 #include "core/packet.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/decode_worker.hpp"
+#include "daemon/output/writer.hpp"
 #include "daemon/ptc/ptc_client.hpp"
+#include "daemon/run_source.hpp"
 #include "daemon/source/replay_source.hpp"
 #include "daemon/source/udp_receiver.hpp"
-#include "daemon/output/writer.hpp"
 
 namespace pandarcap {
-
-// Where the packets come from, and what only the command line says about it.
-struct RunSource {
-  enum class Kind { kLive, kSimulated, kReplay };
-  Kind kind = Kind::kLive;
-  std::string replay_path;     // kReplay
-  std::optional<double> rate;  // kReplay: times real time; empty = top speed
-  // --port was given: a replay keeps only datagrams to that port; the simulator sends to it
-  // (else to a free port the daemon's socket picked).
-  bool port_given = false;
-  // --ptc-port was given: the simulated sensor's PTC is asked there instead of the built-in
-  // server's free port (tests point it at a misbehaving server).
-  bool ptc_port_given = false;
-  // kSimulated: the sensor the simulator plays.
-  int simulated_rpm = 600;
-  ReturnMode simulated_mode = ReturnMode::kDual;
-  bool simulated_udp_sequence = false;
-};
 
 // The writer's options. The decoder's name, the calibration and the recorded destination port
 // are known only at start (the caller fills them in); the test hook only in builds with

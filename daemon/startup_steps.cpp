@@ -1,0 +1,180 @@
+#include "daemon/startup_steps.hpp"
+
+#include <fmt/format.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <exception>
+#include <vector>
+
+#include "config/config_loader.hpp"
+#include "core/calibration.hpp"
+#include "core/sim/simulated_unit.hpp"
+#include "daemon/clocks.hpp"
+#include "daemon/daemon_options.hpp"
+#include "daemon/pcap/capture_reader.hpp"
+
+namespace pandarcap {
+
+void setup_logging(const std::string& level) {
+  auto logger = spdlog::stderr_color_mt("pandarcapd");
+  // Under systemd, journald timestamps every line itself.
+  if (std::getenv("JOURNAL_STREAM") != nullptr) {
+    logger->set_pattern("[%l] %v");
+  } else {
+    logger->set_pattern("%Y-%m-%dT%H:%M:%S.%e [%l] %v");
+  }
+  logger->set_level(spdlog::level::from_str(level));
+  spdlog::set_default_logger(logger);
+}
+
+int check_config(const DaemonConfig& config, const std::string& source_name) {
+  try {
+    // The file the start would read; the sensor is not asked (no network here).
+    const SensorSection& s = config.sensor;
+    if (s.calibration_source != "nominal" && !s.calibration_file.empty())
+      Calibration::load(s.calibration_file);
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "pandarcapd: %s\n", error.what());
+    return kExitConfig;
+  }
+  const DecoderChoice decoder = choose_decoder_target(config.decoder);
+  if (!decoder.target) {
+    std::fprintf(stderr, "pandarcapd: %s: decoder: %s\n", source_name.c_str(),
+                 decoder.error.c_str());
+    return kExitConfig;
+  }
+  const std::vector<std::string> problems = output_problems(writer_options(config));
+  for (const std::string& problem : problems)
+    std::fprintf(stderr, "pandarcapd: %s: outputs: %s\n", source_name.c_str(), problem.c_str());
+  if (!problems.empty()) return kExitCantCreate;
+  fmt::print("{}: configuration OK\n", source_name);
+  return 0;
+}
+
+DaemonConfig load_configuration(const CommandLine& options, const std::string& source_name) {
+  try {
+    DaemonConfig config;
+    if (options.config_path) config = load_config_file(*options.config_path);
+    for (const auto& [key, text] : options.overrides)
+      set_config_value(config, key, text, source_name);
+    validate_config(config, source_name);
+    return config;
+  } catch (const ConfigError& error) {
+    throw StartupError{kExitConfig, error.what()};
+  }
+}
+
+void refuse_root_unless_allowed(const CommandLine& options) {
+  if (::geteuid() != 0) return;
+  if (!options.allow_root) {
+    throw StartupError{
+        kExitNoPermission,
+        "refusing to run as root: pandarcapd needs no privilege (UDP on any port it is given, "
+        "files it owns). Run it as an unprivileged user (the systemd unit uses 'pandarcap'), or "
+        "pass --allow-root to accept the risk (containers, CI)"};
+  }
+  spdlog::warn("running as root (--allow-root)");
+}
+
+void log_sensor(const SensorAtStart& sensor, const DaemonConfig& config, const RunSource& source) {
+  if (sensor.calibration_source == "nominal") {
+    spdlog::warn(
+        "calibration: nominal Pandar40P table in use (no sensor answer, no calibration_file); "
+        "per-unit elevations differ by up to ~0.45 degrees");
+  } else {
+    spdlog::info("calibration: {}", sensor.describe());
+  }
+  if (sensor.settings) {
+    const ptc::SensorSettings& s = *sensor.settings;
+    spdlog::info("sensor config: {} RPM, clock source {}, destination {}:{}{}", s.spin_rate_rpm,
+                 ptc::clock_source_name(s.clock_source), ptc::ipv4_text(s.destination_ip),
+                 s.data_port, s.udp_sequence != 0 ? ", UDP sequence on" : "");
+    // What the sensor says it does against what this daemon expects: a mismatch found now is
+    // an afternoon saved (the simulated sensor sends where the daemon's socket is, whatever
+    // its configuration says).
+    if (source.kind == RunSource::Kind::kLive && s.data_port != config.sensor.data_port) {
+      spdlog::warn("sensor config: the sensor sends to port {}, pandarcapd listens on {}",
+                   s.data_port, config.sensor.data_port);
+    }
+    if (s.spin_rate_rpm != config.sensor.rotation_speed) {
+      spdlog::warn("sensor config: the sensor spins at {} RPM, rotation_speed expects {}",
+                   s.spin_rate_rpm, config.sensor.rotation_speed);
+    }
+  }
+}
+
+SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
+                           std::unique_ptr<SimulatedPtcServer>& simulated_ptc,
+                           std::optional<PtcClientOptions>& ptc) {
+  try {
+    if (source.kind == RunSource::Kind::kSimulated && !source.ptc_port_given) {
+      simulated_ptc = std::make_unique<SimulatedPtcServer>(
+          simulated_unit(source.simulated_rpm, static_cast<std::uint8_t>(source.simulated_mode),
+                         source.simulated_udp_sequence, config.sensor.data_port));
+    }
+    ptc = ptc_client_options(config, source, simulated_ptc ? simulated_ptc->port() : 0);
+    return resolve_sensor_at_start(config.sensor.calibration_source, config.sensor.calibration_file,
+                                   ptc);
+  } catch (const SensorUnavailable& error) {
+    throw StartupError{kExitUnavailable, error.what()};
+  } catch (const CalibrationError& error) {
+    throw StartupError{kExitConfig, error.what()};
+  } catch (const std::exception& error) {
+    throw StartupError{1, error.what()};
+  }
+}
+
+DecoderTarget choose_decoder(const DaemonConfig& config) {
+  const DecoderChoice choice = choose_decoder_target(config.decoder);
+  if (!choice.target) throw StartupError{kExitConfig, choice.error};
+  spdlog::info("decoder: {}{}", to_string(*choice.target),
+               config.decoder == "auto" ? " (auto)" : "");
+  return *choice.target;
+}
+
+std::unique_ptr<PacketSource> open_source(const DaemonConfig& config, const RunSource& source) {
+  try {
+    switch (source.kind) {
+      case RunSource::Kind::kReplay:
+        return PacketSource::replay(replay_options(config, source));
+      case RunSource::Kind::kSimulated:
+        return PacketSource::simulated(receiver_options(config, source),
+                                       simulated_sensor_config(source, realtime_ns()));
+      case RunSource::Kind::kLive:
+        break;
+    }
+    return PacketSource::live(receiver_options(config, source));
+  } catch (const CaptureError& error) {
+    throw StartupError{kExitNoInput, error.what()};
+  } catch (const std::exception& error) {
+    throw StartupError{1, error.what()};
+  }
+}
+
+std::unique_ptr<OutputDirectoryLock> claim_outputs(const std::filesystem::path& directory) {
+  try {
+    return std::make_unique<OutputDirectoryLock>(directory);
+  } catch (const OutputDirectoryBusy& error) {
+    throw StartupError{kExitCantCreate, error.what()};
+  } catch (const std::exception& error) {
+    throw StartupError{kExitCantCreate, fmt::format("outputs: {}", error.what())};
+  }
+}
+
+std::string describe(const RunSource& source) {
+  switch (source.kind) {
+    case RunSource::Kind::kSimulated:
+      return "simulated sensor";
+    case RunSource::Kind::kReplay:
+      return "replay of " + source.replay_path;
+    case RunSource::Kind::kLive:
+      break;
+  }
+  return "live capture";
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,78 @@
+// pandarcapd's start-up steps, in the order run() takes them (pandarcapd_main.cpp): each does one
+// thing, and a step that cannot go on throws StartupError with the exit status and the message,
+// which run() reports once. Nothing here starts a pipeline thread; the simulated sensor's PTC
+// server (learn_sensor) is the one thread a step may start, before the signals matter.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "config/daemon_config.hpp"
+#include "core/decoder_target.hpp"
+#include "daemon/output/output_directories.hpp"
+#include "daemon/pandarcapd_command_line.hpp"
+#include "daemon/ptc/ptc_client.hpp"
+#include "daemon/ptc/sensor_at_start.hpp"
+#include "daemon/ptc/simulated_ptc_server.hpp"
+#include "daemon/run_source.hpp"
+#include "daemon/source/packet_source.hpp"
+
+namespace pandarcap {
+
+// pandarcapd's exit statuses (sysexits.h's numbers; --help lists them).
+inline constexpr int kExitUsage = 64;  // taken by CliArgs itself
+inline constexpr int kExitNoInput = 66;
+inline constexpr int kExitUnavailable = 69;
+inline constexpr int kExitCantCreate = 73;
+inline constexpr int kExitNoPermission = 77;
+inline constexpr int kExitConfig = 78;
+
+// A start-up step that cannot go on: the exit status and what to say. Thrown by the steps below,
+// reported once by run().
+struct StartupError {
+  int exit_status;
+  std::string message;
+};
+
+// The log: stderr, with the time unless journald adds its own (JOURNAL_STREAM).
+void setup_logging(const std::string& level);
+
+// 1. The configuration: the file, then the command line's keys, checked as a whole.
+DaemonConfig load_configuration(const CommandLine& options, const std::string& source_name);
+
+// --check-config: what the start would refuse, short of opening the socket or the capture.
+// Returns the exit status, having printed the result.
+int check_config(const DaemonConfig& config, const std::string& source_name);
+
+// 2. The sensor: its calibration (by calibration_source), identity and configuration. A
+// simulated run first starts the simulated sensor's PTC server (`simulated_ptc`), to be asked as
+// a real sensor is; `ptc` is where the sensor is asked, if anywhere.
+SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
+                           std::unique_ptr<SimulatedPtcServer>& simulated_ptc,
+                           std::optional<PtcClientOptions>& ptc);
+
+// Checked before any socket or output file is opened. Reading the configuration and printing
+// tables is harmless as root; parsing what arrives from the network is not.
+void refuse_root_unless_allowed(const CommandLine& options);
+
+// What the sensor said at start, and where it disagrees with what this daemon expects.
+void log_sensor(const SensorAtStart& sensor, const DaemonConfig& config, const RunSource& source);
+
+// The decoder is chosen once, here; a named target this CPU cannot run is a configuration
+// error, not a reason to quietly run another.
+DecoderTarget choose_decoder(const DaemonConfig& config);
+
+// The source the command line names, opened (socket bound, file open): 66 for a capture that
+// cannot be read.
+std::unique_ptr<PacketSource> open_source(const DaemonConfig& config, const RunSource& source);
+
+// One daemon per output directory, claimed before anything in it is touched (crash recovery,
+// numbering and retention all assume the files are this process's or a finished run's).
+std::unique_ptr<OutputDirectoryLock> claim_outputs(const std::filesystem::path& directory);
+
+// "live capture", "simulated sensor", "replay of FILE": for the log.
+std::string describe(const RunSource& source);
+
+}  // namespace pandarcap
