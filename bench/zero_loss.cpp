@@ -1,23 +1,19 @@
 #include "bench/zero_loss.hpp"
 
 #include <fmt/format.h>
-#include <signal.h>
 #include <sys/utsname.h>
 #include <unistd.h>
 
-#include <chrono>
-#include <cmath>
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <functional>
-#include <map>
 #include <sstream>
-#include <stdexcept>
 #include <thread>
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
+#include "bench/zero_loss_search.hpp"
+#include "bench/zero_loss_trials.hpp"
 
 namespace pandarcap::bench {
 
@@ -25,122 +21,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::ordered_json;
-using namespace std::chrono_literals;
 
 using harness::read_file;
-
-// a / b, 0 when b is 0.
-double ratio(double a, std::uint64_t b) {
-  return b == 0 ? 0.0 : a / static_cast<double>(b);
-}
-
-std::string trim(std::string s) {
-  while (!s.empty() && (s.back() == '\n' || s.back() == ' '))
-    s.pop_back();
-  return s;
-}
-
-// CPU ticks (utime + stime) per thread name, from /proc/PID/task/*/stat.
-std::map<std::string, std::uint64_t> thread_ticks(int pid) {
-  std::map<std::string, std::uint64_t> ticks;
-  std::error_code ec;
-  for (const auto& task : fs::directory_iterator(fmt::format("/proc/{}/task", pid), ec)) {
-    const std::string stat = read_file(task.path() / "stat");
-    const auto close = stat.rfind(')');  // the name may hold spaces; fields follow the last ')'
-    if (close == std::string::npos) continue;
-    std::istringstream fields(stat.substr(close + 2));
-    std::string field;
-    std::uint64_t utime = 0, stime = 0;
-    for (int i = 3; i <= 15 && fields >> field; ++i) {
-      if (i == 14) utime = std::stoull(field);
-      if (i == 15) stime = std::stoull(field);
-    }
-    ticks[trim(read_file(task.path() / "comm"))] += utime + stime;
-  }
-  return ticks;
-}
-
-// The daemon's CPU between two thread_ticks() readings `seconds` apart, in total and per thread.
-ordered_json cpu_use(const std::map<std::string, std::uint64_t>& before,
-                     const std::map<std::string, std::uint64_t>& after, double seconds,
-                     std::uint64_t packets) {
-  const double tick = static_cast<double>(::sysconf(_SC_CLK_TCK));
-  double total = 0;
-  ordered_json per_thread;
-  for (const auto& [name, ticks] : after) {
-    const auto start = before.count(name) ? before.at(name) : 0;
-    const double cpu_s = static_cast<double>(ticks - start) / tick;
-    total += cpu_s;
-    per_thread[name] = {{"cpu_fraction_of_one_core", cpu_s / seconds},
-                        {"cpu_us_per_packet", ratio(cpu_s * 1e6, packets)}};
-  }
-  return {{"cpu_fraction_of_one_core", total / seconds},
-          {"cpu_by_thread", per_thread},
-          {"cpu_resolution_s", 1.0 / tick}};
-}
-
-std::optional<ordered_json> last_health(const fs::path& out) {
-  std::ifstream in(out / "health" / "health.jsonl");
-  std::string line, last;
-  while (std::getline(in, line)) {
-    if (!line.empty()) last = line;
-  }
-  if (last.empty()) return std::nullopt;
-  try {
-    return ordered_json::parse(last);
-  } catch (const std::exception&) {
-    return std::nullopt;  // a line being appended right now
-  }
-}
-
-std::uint64_t counter(const ordered_json& health, const char* name) {
-  return health["counters"].value(name, std::uint64_t{0});
-}
-
-// The budget the daemon says it runs with ("latency budget 5 ms", or "latency budget 0").
-ordered_json effective_budget_ms(const std::string& log) {
-  if (log.find("latency budget 0)") != std::string::npos) return 0;
-  const auto at = log.find("latency budget ");
-  if (at == std::string::npos) return nullptr;
-  return std::strtod(log.c_str() + at + 15, nullptr);
-}
-
-// Whether a UDP socket is bound to `port` on this machine (/proc/net/udp and udp6).
-bool udp_port_bound(std::uint16_t port) {
-  const std::string needle = fmt::format(":{:04X} ", port);
-  for (const char* table : {"/proc/net/udp", "/proc/net/udp6"}) {
-    std::istringstream lines(read_file(table));
-    std::string line;
-    while (std::getline(lines, line)) {
-      // "  sl  local_address rem_address ...": the local address is the second field.
-      std::istringstream fields(line);
-      std::string slot, local;
-      if (fields >> slot >> local && (local + " ").find(needle) != std::string::npos) return true;
-    }
-  }
-  return false;
-}
-
-// N of the last line "received N" a receiver printed.
-std::optional<std::uint64_t> last_received_line(const std::string& log) {
-  std::optional<std::uint64_t> n;
-  std::istringstream lines(log);
-  std::string line;
-  while (std::getline(lines, line)) {
-    const auto at = line.find("received ");
-    if (at == std::string::npos) continue;
-    const char* digits = line.c_str() + at + 9;
-    if (*digits < '0' || *digits > '9') continue;
-    n = std::strtoull(digits, nullptr, 10);
-  }
-  return n;
-}
-
-fs::path default_daemon() {
-  std::error_code ec;
-  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? fs::path("pandarcapd") : self.parent_path() / "pandarcapd";
-}
 
 std::string command_output(const std::string& command) {
   std::string out;
@@ -184,219 +66,6 @@ ordered_json environment(const ZeroLossOptions& o, const fs::path& daemon) {
   env["daemon_config"] = o.daemon_config.empty() ? "defaults (all outputs on)" : o.daemon_config;
   return env;
 }
-
-class Harness {
- public:
-  Harness(const ZeroLossOptions& options, const TrafficSource& source, fs::path work)
-      : o_(options),
-        source_(source),
-        work_(std::move(work)),
-        daemon_(options.daemon.empty() ? default_daemon() : fs::path(options.daemon)) {}
-
-  const fs::path& daemon() const { return daemon_; }
-  std::string daemon_socket_buffer;
-
-  // One trial of the real daemon at `rate`; its outputs are removed afterwards (a fast trial
-  // writes gigabytes of pcap).
-  ordered_json daemon_trial(double rate, double seconds,
-                            std::optional<std::uint32_t> budget_ms = std::nullopt,
-                            const std::vector<std::string>& extra_args = {}) {
-    const fs::path dir = work_ / fmt::format("daemon_{:03d}", trials_++);
-    fs::create_directories(dir);
-    const fs::path out = dir / "out";
-    const std::uint16_t port = harness::free_udp_port();
-    std::vector<std::string> args;
-    if (!o_.daemon_config.empty()) args = {"-c", o_.daemon_config};
-    // Whoever runs the harness as root has chosen to; the daemon would refuse otherwise.
-    if (::geteuid() == 0) args.emplace_back("--allow-root");
-    if (!budget_ms) budget_ms = o_.latency_budget_ms;
-    if (budget_ms) {
-      args.emplace_back("--latency-budget-ms");
-      args.push_back(std::to_string(*budget_ms));
-    }
-    for (const std::string& a :
-         {std::string("--host-ip"), std::string("127.0.0.1"), std::string("--port"),
-          std::to_string(port), std::string("--output-dir"), out.string()}) {
-      args.push_back(a);
-    }
-    args.insert(args.end(), extra_args.begin(), extra_args.end());
-    harness::ChildProcess process(daemon_, args, dir / "daemon.log");
-    if (!harness::wait_until([&] { return process.log().find("ready:") != std::string::npos; },
-                             15s)) {
-      throw std::runtime_error("pandarcapd did not become ready:\n" + process.log());
-    }
-    if (daemon_socket_buffer.empty()) {
-      const std::string log = process.log();
-      const auto at = log.find("socket receive buffer: ");
-      if (at != std::string::npos) {
-        daemon_socket_buffer = log.substr(at + 23, log.find('\n', at) - at - 23);
-      }
-    }
-    const auto cpu_before = thread_ticks(process.pid());
-    GeneratorOptions g = o_.traffic;
-    g.port = port;
-    g.rate_pps = rate;
-    g.seconds = seconds;
-    const GeneratorResult sent = run_generator(source_, g);
-    const auto cpu_after = thread_ticks(process.pid());
-    const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
-    // A health record written in the traffic's last half second or after it: its per-second
-    // wake-up rates cover the traffic. (The latest record on disk may be older on a slow machine:
-    // the one written at once when packets began, whose rates are the idle second's before.)
-    const auto traffic_end = std::chrono::system_clock::now();
-    const auto since_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                              traffic_end.time_since_epoch() - std::chrono::milliseconds(500))
-                              .count();
-    std::optional<ordered_json> during;
-    harness::wait_until(
-        [&] {
-          during = last_health(out);
-          return during && during->value("unix_time_ns", std::int64_t{0}) >= since_ns;
-        },
-        3s);
-    // Let the daemon count everything (it reads kernel drops once a second), then stop it.
-    harness::wait_until(
-        [&] {
-          const auto h = last_health(out);
-          return h && counter(*h, "datagrams_received") + counter(*h, "kernel_drops") >= sent.sent;
-        },
-        3s);
-    process.signal(SIGTERM);
-    const std::optional<int> status = process.wait_exit(30s);
-    const auto health = last_health(out);
-    if (!status || *status != 0 || !health) {
-      throw std::runtime_error(fmt::format("pandarcapd trial at {:.0f} packets/s ended badly:\n{}",
-                                           rate, process.log()));
-    }
-    const ordered_json& h = *health;
-    const std::uint64_t received = counter(h, "datagrams_received");
-    const std::uint64_t accepted = counter(h, "packets_accepted");
-    ordered_json stages = {{"kernel_drops", counter(h, "kernel_drops")},
-                           {"ring_overruns", counter(h, "ring_overruns")},
-                           {"rejected", counter(h, "packets_rejected")},
-                           {"frames_dropped", counter(h, "frames_dropped_no_arena")},
-                           {"pcap_packets_not_recorded", counter(h, "pcap_packets_not_recorded")},
-                           {"write_errors", counter(h, "write_errors")},
-                           {"mcap_messages_not_written", counter(h, "mcap_messages_not_written")},
-                           {"unaccounted", sent.sent > received + counter(h, "kernel_drops")
-                                               ? sent.sent - received - counter(h, "kernel_drops")
-                                               : 0}};
-    const std::uint64_t lost = sent.sent > accepted ? sent.sent - accepted : 0;
-    // Packets the daemon failed to do its whole job on: not decoded, or not recorded to pcap.
-    const std::uint64_t failed =
-        std::min(sent.sent, lost + counter(h, "pcap_packets_not_recorded"));
-    bool clean = lost == 0;
-    for (const auto& [stage, n] : stages.items())
-      clean = clean && n.get<std::uint64_t>() == 0;
-    ordered_json wakeups = ordered_json::object();
-    for (const char* thread : {"receive", "decode", "writer"}) {
-      wakeups[thread] =
-          during ? (*during)["gauges"].value(std::string(thread) + "_wakeups_per_second", 0.0)
-                 : 0.0;
-    }
-    ordered_json t = {
-        {"offered_pps", rate},
-        {"budget_ms", effective_budget_ms(process.log())},
-        {"achieved_pps", sent.achieved_pps},
-        {"generator_cpu_fraction_of_one_core", sent.cpu_seconds / sent.seconds},
-        {"sent", sent.sent},
-        {"received", received},
-        {"accepted", accepted},
-        {"delivered_pps", static_cast<double>(accepted) / sent.seconds},
-        {"lost", lost},
-        {"loss_fraction", ratio(static_cast<double>(failed), sent.sent)},
-        {"zero_loss", clean},
-        {"loss_by_stage", stages},
-        {"sequence_lost", counter(h, "sequence_lost")},
-        {"latency", h["latency"]},
-        {"frame_latency", h.contains("frame_latency") ? h["frame_latency"] : ordered_json()},
-        {"wakeups_per_second", wakeups},
-        {"peak_rss_bytes", rss},
-        {"written_bytes",
-         {{"pcd", counter(h, "pcd_bytes_written")},
-          {"pcap", counter(h, "pcap_bytes_written")},
-          {"mcap", counter(h, "mcap_bytes_written")}}},
-        {"hot_path_allocations", h["counters"].contains("hot_path_allocations")
-                                     ? ordered_json(counter(h, "hot_path_allocations"))
-                                     : ordered_json(nullptr)}};
-    t.update(cpu_use(cpu_before, cpu_after, sent.seconds, sent.sent));
-    std::error_code ec;
-    fs::remove_all(out, ec);
-    return t;
-  }
-
-  // Any receiver the user names, under the same traffic: its CPU (all threads), peak RSS and,
-  // when it prints "received N", its loss.
-  ordered_json other_receiver_trial(double rate, double seconds) {
-    const fs::path log = work_ / "other_receiver.log";
-    harness::ChildProcess process("/bin/sh", {"-c", "exec " + o_.receiver_command}, log);
-    if (!harness::wait_until([&] { return udp_port_bound(o_.receiver_port); }, 15s)) {
-      throw std::runtime_error(fmt::format("'{}' did not bind UDP port {} within 15 s:\n{}",
-                                           o_.receiver_command, o_.receiver_port, process.log()));
-    }
-    const auto cpu_before = thread_ticks(process.pid());
-    GeneratorOptions g = o_.traffic;
-    g.port = o_.receiver_port;
-    g.rate_pps = rate;
-    g.seconds = seconds;
-    const GeneratorResult sent = run_generator(source_, g);
-    const auto cpu_after = thread_ticks(process.pid());
-    const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
-    process.signal(SIGTERM);
-    const std::optional<int> status = process.wait_exit(10s);
-    const std::optional<std::uint64_t> received = last_received_line(process.log());
-    ordered_json t = {{"command", o_.receiver_command},
-                      {"port", o_.receiver_port},
-                      {"offered_pps", rate},
-                      {"achieved_pps", sent.achieved_pps},
-                      {"sent", sent.sent},
-                      {"exit_status", status ? ordered_json(*status) : ordered_json(nullptr)},
-                      {"peak_rss_bytes", rss}};
-    t.update(cpu_use(cpu_before, cpu_after, sent.seconds, sent.sent));
-    t["cpu_us_per_packet"] =
-        ratio(t["cpu_fraction_of_one_core"].get<double>() * sent.seconds * 1e6, sent.sent);
-    if (received) {
-      t["received"] = *received;
-      t["lost"] = sent.sent > *received ? sent.sent - *received : 0;
-    } else {
-      t["received"] = nullptr;  // it printed no "received N" line
-      t["lost"] = nullptr;
-    }
-    return t;
-  }
-
-  ordered_json reference_trial(ReferenceReceiver::Kind kind, double rate, double seconds) {
-    ReferenceReceiver receiver(kind, o_.receive_buffer_bytes);
-    GeneratorOptions g = o_.traffic;
-    g.port = receiver.port();
-    g.rate_pps = rate;
-    g.seconds = seconds;
-    const GeneratorResult sent = run_generator(source_, g);
-    receiver.drain_and_stop(200);
-    const std::uint64_t received = std::min(receiver.received(), sent.sent);
-    const std::uint64_t lost = sent.sent - received;
-    return {{"offered_pps", rate},
-            {"achieved_pps", sent.achieved_pps},
-            {"generator_cpu_fraction_of_one_core", sent.cpu_seconds / sent.seconds},
-            {"sent", sent.sent},
-            {"received", received},
-            {"delivered_pps", static_cast<double>(received) / sent.seconds},
-            {"lost", lost},
-            {"loss_fraction", ratio(static_cast<double>(lost), sent.sent)},
-            {"zero_loss", lost == 0},
-            {"kernel_drops", receiver.kernel_drops()},
-            {"receive_buffer_granted", receiver.receive_buffer_granted()},
-            {"cpu_us_per_packet", ratio(receiver.cpu_seconds() * 1e6, received)},
-            {"cpu_fraction_of_one_core", receiver.cpu_seconds() / sent.seconds}};
-  }
-
- private:
-  const ZeroLossOptions& o_;
-  const TrafficSource& source_;
-  fs::path work_;
-  fs::path daemon_;
-  int trials_ = 0;
-};
 
 // MCAP on against off at the sensor's rate (and the two zero-loss rates when searched): what
 // MCAP adds in CPU and in bytes, and the extra CPU per extra megabyte set against what the writer
@@ -442,56 +111,6 @@ ordered_json mcap_comparison(const ordered_json& off, const ordered_json& on, do
   return m;
 }
 
-struct SearchResult {
-  double pps = 0;  // the rate actually sent in the best passing trial (0: even the lowest failed)
-  bool generator_limited = false;  // that trial could not send its offered rate
-};
-
-// Highest rate in [lo, hi] whose trial passes: both ends first, then geometric bisection on the
-// offered rate. The result is the achieved rate of the best passing trial: on a 2-core machine
-// the generator itself may fall short of the offered rate, and then the result is a lower bound
-// (generator_limited). Then, for the plot, rates between tested ones wherever two neighbours are
-// more than `max_gap` apart (at most 12 more trials): bisection crowds its trials near the limit,
-// and a straight line across a wide gap would draw a curve nobody measured. Every trial is
-// appended to `trials`.
-SearchResult search(const std::function<ordered_json(double)>& trial,
-                    const std::function<bool(const ordered_json&)>& passes, double lo, double hi,
-                    int steps, double max_gap, ordered_json& trials) {
-  SearchResult best;
-  std::vector<double> tested;
-  auto run = [&](double rate) {
-    tested.push_back(rate);
-    ordered_json t = trial(rate);
-    const bool ok = passes(t);
-    t["passed"] = ok;
-    const double achieved = t["achieved_pps"].get<double>();
-    if (ok && achieved > best.pps) {
-      best.pps = achieved;
-      best.generator_limited = achieved < 0.97 * rate;
-    }
-    trials.push_back(t);
-    return ok;
-  };
-  if (run(lo) && hi > lo && !run(hi)) {
-    for (int i = 0; i < steps; ++i) {
-      const double mid = std::round(std::sqrt(lo * hi));
-      if (mid <= lo || mid >= hi) break;
-      (run(mid) ? lo : hi) = mid;
-    }
-  }
-  for (int extra = 0; max_gap > 1 && extra < 12; ++extra) {
-    std::sort(tested.begin(), tested.end());
-    std::optional<double> fill;
-    for (std::size_t i = 1; i < tested.size() && !fill; ++i) {
-      if (tested[i] > max_gap * tested[i - 1])
-        fill = std::round(std::sqrt(tested[i] * tested[i - 1]));
-    }
-    if (!fill) break;
-    run(*fill);
-  }
-  return best;
-}
-
 }  // namespace
 
 ordered_json run_zero_loss(const ZeroLossOptions& o) {
@@ -502,7 +121,7 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
       temporary ? fs::temp_directory_path() / fmt::format("pandarcap-bench-{}", ::getpid())
                 : fs::path(o.work_dir);
   fs::create_directories(work);
-  Harness harness(o, source, work);
+  ZeroLossTrials harness(o, source, work);
 
   ordered_json report;
   ordered_json trials = {{"daemon", ordered_json::array()},

@@ -1,0 +1,59 @@
+// The trials of `pandarcap-bench zero-loss`: one measured run of a receiver under paced loopback
+// traffic. The real pandarcapd (its loss per stage from its own final health record, its CPU per
+// thread, wake-ups, latency, peak RSS and bytes written), the reference receivers (a bare
+// recvmmsg loop and a recvfrom loop, in this process), or any other receiver a command starts.
+// The search (zero_loss_search.hpp) decides which rates to try; zero_loss.cpp assembles the
+// report.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "bench/udp_traffic.hpp"
+#include "bench/zero_loss.hpp"
+
+namespace pandarcap::bench {
+
+// a / b, 0 when b is 0.
+double ratio(double a, std::uint64_t b);
+
+// `s` without its trailing newlines and spaces.
+std::string trim(std::string s);
+
+class ZeroLossTrials {
+ public:
+  // `work`: where each daemon trial's outputs and log go (removed after the trial).
+  ZeroLossTrials(const ZeroLossOptions& options, const TrafficSource& source,
+                 std::filesystem::path work);
+
+  // The pandarcapd the trials start.
+  const std::filesystem::path& daemon() const { return daemon_; }
+  // The receive buffer the daemon said it was granted, from its first trial's log.
+  std::string daemon_socket_buffer;
+
+  // One trial of the real daemon at `rate`; its outputs are removed afterwards (a fast trial
+  // writes gigabytes of pcap).
+  nlohmann::ordered_json daemon_trial(double rate, double seconds,
+                                      std::optional<std::uint32_t> budget_ms = std::nullopt,
+                                      const std::vector<std::string>& extra_args = {});
+
+  // Any receiver the user names, under the same traffic: its CPU (all threads), peak RSS and,
+  // when it prints "received N", its loss.
+  nlohmann::ordered_json other_receiver_trial(double rate, double seconds);
+
+  // One of the reference receivers, in this process, at `rate`.
+  nlohmann::ordered_json reference_trial(ReferenceReceiver::Kind kind, double rate, double seconds);
+
+ private:
+  const ZeroLossOptions& o_;
+  const TrafficSource& source_;
+  std::filesystem::path work_;
+  std::filesystem::path daemon_;
+  int trials_ = 0;
+};
+
+}  // namespace pandarcap::bench
