@@ -29,7 +29,8 @@ std::string bench() {
 
 }  // namespace
 
-TEST_CASE("pandarcap-bench ring --json reports every figure from one run", "[bench][cli]") {
+TEST_CASE("pandarcap-bench ring --json reports every figure from one run",
+          "[bench][cli][threads]") {
   const auto result =
       test::run_command(bench() +
                         " ring --json --items 20000 --mutex-items 2000 --round-trips 200 --repeat 1"
@@ -121,7 +122,8 @@ std::string md_text(const std::filesystem::path& report_dir) {
 }
 }  // namespace
 
-TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness", "[bench][cli]") {
+TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness",
+          "[bench][cli][threads]") {
   test::ScratchDir dir("zero-loss");
   const auto report_dir = dir / "report";
   const auto result = test::run_command(
@@ -226,7 +228,7 @@ TEST_CASE(
 }
 
 TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-return traffic",
-          "[bench][cli]") {
+          "[bench][cli][threads]") {
   const auto result = test::run_command(
       bench() + " zero-loss --json --daemon-only --trial-seconds 0.5 --min-rate 1000" +
       " --max-rate 2000 --steps 0 --sensor-rate 1000 --rpm 1200 --return-mode single 2>&1");
@@ -250,7 +252,7 @@ TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-
 TEST_CASE(
     "pandarcap-bench zero-loss at the sensor's rate: both budgets, the bare loop and "
     "another receiver in one run",
-    "[bench][cli]") {
+    "[bench][cli][threads]") {
   test::ScratchDir dir("zero-loss-budget");
   // Any receiver a user wants to compare: here a few lines of Python that count datagrams and
   // print "received N" when stopped, the line the harness reads for loss.

@@ -72,7 +72,7 @@ TEST_CASE("inspect --json on the real single 1266-byte packet", "[cli][real]") {
 }
 
 TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
-          "[cli][simulate][realtime]") {
+          "[cli][simulate][realtime][threads]") {
   test::ScratchDir dir("simulate");
   const auto result = test::run_command(quoted(test::binary("pandarcapd")) + " --allow-root" +
                                         " --simulate --duration 1 --rpm 1200 --return-mode last "
@@ -129,7 +129,7 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
   }
 }
 
-TEST_CASE("bad command lines and bad files give clear errors and exit codes", "[cli]") {
+TEST_CASE("bad command lines and bad files give clear errors and exit codes", "[cli][threads]") {
   const std::string inspect = quoted(test::binary("pandarcap-inspect"));
   const std::string daemon = quoted(test::binary("pandarcapd"));
   CHECK(test::run_command(inspect + " 2>/dev/null").exit_code == 64);

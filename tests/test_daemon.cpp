@@ -108,7 +108,7 @@ std::string pandarcapd_path() {
 
 }  // namespace
 
-TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daemon]") {
+TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daemon][threads]") {
   const auto capture = test::real_capture(kDualCapture);
   const auto calibration = test::real_capture(kCalibration);
   if (!capture || !calibration) return;
@@ -164,7 +164,7 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
 }
 
 TEST_CASE("the real capture's sensor clock (2017) is not ok: offset gauge, degraded, journal",
-          "[daemon][health][journal]") {
+          "[daemon][health][journal][threads]") {
   const auto capture = test::real_capture(kDualCapture);
   if (!capture) return;
   test::ScratchDir dir("daemon-clock-offset");
@@ -205,7 +205,7 @@ TEST_CASE("the real capture's sensor clock (2017) is not ok: offset gauge, degra
 }
 
 TEST_CASE("the recording keeps each datagram's real destination address and port (IP_PKTINFO)",
-          "[daemon][pcap]") {
+          "[daemon][pcap][threads]") {
   const auto capture = test::real_capture(kDualCapture);
   if (!capture) return;
   const auto payloads = payloads_of(*capture);
@@ -257,7 +257,7 @@ TEST_CASE("the recording keeps each datagram's real destination address and port
 }
 
 TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all accounted",
-          "[daemon]") {
+          "[daemon][threads]") {
   const auto capture = test::real_capture(kDualCapture);
   if (!capture) return;
   const auto payloads = payloads_of(*capture);
@@ -312,7 +312,7 @@ TEST_CASE("live UDP on loopback: foreign sender rejected, SIGTERM drains, all ac
   check_no_temporary_files(out);
 }
 
-TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
+TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon][threads]") {
   const auto capture = test::real_capture(kDualCapture);
   if (!capture) return;
   const auto payloads = payloads_of(*capture);
@@ -351,7 +351,8 @@ TEST_CASE("SIGHUP starts a new pcap without losing a packet", "[daemon]") {
   check_no_temporary_files(out);
 }
 
-TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon][realtime]") {
+TEST_CASE("pandarcapd --simulate runs the live path with no sensor",
+          "[daemon][realtime][threads]") {
   test::ScratchDir dir("daemon-simulate");
   const fs::path out = dir / "out";
   harness::ChildProcess daemon(
@@ -398,7 +399,7 @@ TEST_CASE("pandarcapd --simulate runs the live path with no sensor", "[daemon][r
 }
 
 TEST_CASE("pandarcapd --decoder: every target this CPU runs writes the scalar reference's frames",
-          "[daemon][simd]") {
+          "[daemon][simd][threads]") {
   const auto capture = test::real_capture(kDualCapture);
   const auto calibration = test::real_capture(kCalibration);
   if (!capture || !calibration) return;
@@ -437,7 +438,7 @@ TEST_CASE("pandarcapd --decoder: every target this CPU runs writes the scalar re
 }
 
 TEST_CASE("replay waits for free arenas: two arenas at top speed still write every frame",
-          "[daemon]") {
+          "[daemon][threads]") {
   const auto capture = test::real_capture(kDualCapture);
   if (!capture) return;
   test::ScratchDir dir("daemon-replay-arenas");
@@ -459,7 +460,7 @@ TEST_CASE("replay waits for free arenas: two arenas at top speed still write eve
 }
 
 TEST_CASE("pandarcapd --decoder naming a target this machine cannot run exits 78, no fallback",
-          "[daemon][simd][config]") {
+          "[daemon][simd][config][threads]") {
   const std::vector<DecoderTarget> supported = supported_decoder_targets();
   for (const char* name : {"sse4", "avx2", "avx512", "neon", "sve", "sve2"}) {
     const DecoderTarget target = *decoder_target_from_string(name);
@@ -519,7 +520,7 @@ fs::path write_capture(const fs::path& path, const std::vector<std::int64_t>& ti
 }  // namespace
 
 TEST_CASE("replay: a datagram the file holds only part of is rejected, not decoded as shorter",
-          "[daemon][replay]") {
+          "[daemon][replay][threads]") {
   test::ScratchDir dir("daemon-snapped");
   const fs::path capture = write_capture(
       dir / "snapped.pcap",
@@ -546,7 +547,7 @@ TEST_CASE("replay: a datagram the file holds only part of is rejected, not decod
 }
 
 TEST_CASE("replay --rate: timestamps decades apart neither overflow nor hold SIGTERM",
-          "[daemon][replay]") {
+          "[daemon][replay][threads]") {
   test::ScratchDir dir("daemon-rate-gap");
   // 1970, then 2036: at --rate 0.001 the wait would be 2.1e21 ns, far past int64. (Classic pcap
   // times past 2038 come back from libpcap as negative: its seconds field is signed.)
@@ -570,7 +571,7 @@ TEST_CASE("replay --rate: timestamps decades apart neither overflow nor hold SIG
 }
 
 TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blocks, RSS flat",
-          "[daemon][reliability][realtime]") {
+          "[daemon][reliability][realtime][threads]") {
   test::ScratchDir dir("daemon-slow-writer");
   const fs::path out = dir / "out";
   const fs::path stall = dir / "stall-writer";

@@ -117,7 +117,7 @@ bool logged(const harness::ChildProcess& daemon, const std::string& text) {
 TEST_CASE(
     "SIGKILL at random moments, 50 times: health parses, recordings readable, leftovers "
     "finished at the next start, no temporary-file or descriptor growth",
-    "[daemon][reliability][crash]") {
+    "[daemon][reliability][crash][threads]") {
   test::ScratchDir dir("daemon-crash");
   const fs::path out = dir / "out";
   const fs::path config = dir / "crash.toml";
@@ -227,7 +227,7 @@ TEST_CASE(
 TEST_CASE(
     "disk full: capture goes on, errors and bytes not written counted, degraded with the "
     "reason - space back: writing resumes within 2 s - closed files stay readable",
-    "[daemon][reliability][disk]") {
+    "[daemon][reliability][disk][threads]") {
   // A private mount namespace for the tmpfs: as root directly, otherwise in a user namespace
   // where this user is root (then the daemon is "root" there too, hence --allow-root).
   const std::string userns = ::geteuid() == 0 ? "" : "--user --map-root-user ";

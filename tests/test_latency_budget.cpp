@@ -92,7 +92,7 @@ Run paced_stream(const test::ScratchDir& dir, const std::string& extra,
 TEST_CASE(
     "latency budget: a paced stream arrives whole and in order, the decoder woken about "
     "once per budget - budget 0 wakes per datagram",
-    "[daemon][latency]") {
+    "[daemon][latency][threads]") {
   bench::GeneratorOptions traffic;  // one dual-return sensor, 2 s
   traffic.rate_pps = 3600;
   traffic.seconds = 2;
@@ -149,7 +149,7 @@ TEST_CASE(
 TEST_CASE(
     "latency budget: a burst that would overflow the socket within the budget is drained "
     "early, without a kernel drop",
-    "[daemon][latency][realtime]") {
+    "[daemon][latency][realtime][threads]") {
   test::ScratchDir dir("latency-burst");
   // The socket holds about 170 datagrams (200 000 bytes, doubled by the kernel, ~2.3 kB of
   // memory each). The budget is a second: a receiver that slept it whole would overflow during
@@ -181,7 +181,8 @@ TEST_CASE(
   CHECK(receive > 3);
 }
 
-TEST_CASE("latency budget: SIGTERM still takes everything the socket holds", "[daemon][latency]") {
+TEST_CASE("latency budget: SIGTERM still takes everything the socket holds",
+          "[daemon][latency][threads]") {
   test::ScratchDir dir("latency-sigterm");
   LiveDaemon daemon(dir, "[latency]\nbudget_ms = 100\n");
   INFO(daemon.process->log());

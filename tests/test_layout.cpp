@@ -116,8 +116,7 @@ std::size_t line_count(const std::string& file) {
 
 }  // namespace
 
-TEST_CASE("every include goes the way docs/architecture.md's dependency table allows",
-          "[layout]") {
+TEST_CASE("every include goes the way docs/architecture.md's dependency table allows", "[layout]") {
   const auto rows = dependency_table();
   // The table has the folders the page's other sections name; a sanity floor, so an emptied or
   // renamed table cannot pass by allowing nothing to be checked.
@@ -125,8 +124,8 @@ TEST_CASE("every include goes the way docs/architecture.md's dependency table al
   REQUIRE(rows.count("daemon/source/") == 1);
   REQUIRE(rows.count("daemon/output/") == 1);
   std::size_t checked = 0;
-  for (const std::string& file : sources_under({"ringbuf", "core", "config", "daemon", "bench",
-                                                "tests"})) {
+  for (const std::string& file :
+       sources_under({"ringbuf", "core", "config", "daemon", "bench", "tests"})) {
     const auto from = owner(rows, file);
     INFO(file);
     REQUIRE(from);  // every folder with code has a row
@@ -174,17 +173,18 @@ TEST_CASE("no source file outside tests/ is over 600 lines", "[layout]") {
   CHECK(files > 100);
 }
 
-TEST_CASE("daemon/'s root holds the lifecycle; where packets come from and where results go "
-          "have their folders",
-          "[layout]") {
+TEST_CASE(
+    "daemon/'s root holds the lifecycle, and where packets come from and where results go "
+    "have their folders",
+    "[layout]") {
   std::vector<std::string> root_sources;
   for (const auto& entry : fs::directory_iterator(kSourceDir / "daemon")) {
     if (entry.path().extension() == ".cpp") root_sources.push_back(entry.path().filename());
   }
   INFO(root_sources.size() << " .cpp files in daemon/");
   CHECK(root_sources.size() <= 10);
-  for (const char* moved : {"udp_receiver.cpp", "replay_source.cpp", "simulated_sender.cpp",
-                            "packet_source.cpp"}) {
+  for (const char* moved :
+       {"udp_receiver.cpp", "replay_source.cpp", "simulated_sender.cpp", "packet_source.cpp"}) {
     CHECK_FALSE(fs::exists(kSourceDir / "daemon" / moved));
     CHECK(fs::exists(kSourceDir / "daemon" / "source" / moved));
   }

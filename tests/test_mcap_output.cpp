@@ -92,7 +92,7 @@ json read_or_fail(const fs::path& file) {
 
 TEST_CASE(
     "a simulated run with MCAP: frames, packets, health and calibration, as the other outputs",
-    "[daemon][mcap][realtime]") {
+    "[daemon][mcap][realtime][threads]") {
   test::ScratchDir dir("mcap-simulate");
   const fs::path out = dir / "out";
   const auto r =
@@ -162,7 +162,7 @@ TEST_CASE(
 }
 
 TEST_CASE("a replay with --mcap-only converts the real capture: the same frames as its PCDs",
-          "[daemon][mcap][real]") {
+          "[daemon][mcap][real][threads]") {
   const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
   if (!capture) return;
   test::ScratchDir dir("mcap-convert");
@@ -201,7 +201,7 @@ TEST_CASE("a replay with --mcap-only converts the real capture: the same frames 
 }
 
 TEST_CASE("a killed run's MCAP, cut anywhere, is finished at the next start for the reader",
-          "[daemon][mcap][recovery]") {
+          "[daemon][mcap][recovery][threads]") {
   test::ScratchDir dir("mcap-killed");
   const fs::path out = dir / "out";
   const fs::path config = dir / "pandarcap.toml";
@@ -250,7 +250,7 @@ TEST_CASE("a killed run's MCAP, cut anywhere, is finished at the next start for 
 }
 
 TEST_CASE("MCAP files rotate by size and are kept to mcap_max_files across runs",
-          "[daemon][mcap][outputs]") {
+          "[daemon][mcap][outputs][threads]") {
   test::ScratchDir dir("mcap-rotate");
   const fs::path out = dir / "out";
   const std::string toml =
@@ -292,7 +292,7 @@ TEST_CASE("MCAP configuration errors name the key and its place", "[daemon][mcap
 }
 
 TEST_CASE("a full disk under MCAP: what was written is finished for the reader, losses counted",
-          "[daemon][mcap][outputs]") {
+          "[daemon][mcap][outputs][threads]") {
   if (test::run_command("command -v prlimit").exit_code != 0)
     FAIL("prlimit (util-linux) is needed");
   test::ScratchDir dir("mcap-full");
@@ -328,7 +328,8 @@ TEST_CASE("a full disk under MCAP: what was written is finished for the reader, 
   }
 }
 
-TEST_CASE("every compression setting gives files the reader accepts", "[daemon][mcap][realtime]") {
+TEST_CASE("every compression setting gives files the reader accepts",
+          "[daemon][mcap][realtime][threads]") {
   for (const std::string setting : {"mcap_compression = \"none\"", "mcap_compression_level = -7",
                                     "mcap_compression_level = 19"}) {
     test::ScratchDir dir("mcap-compression");

@@ -81,7 +81,7 @@ TEST_CASE("the Grafana dashboard imports: panels, targets, the sensor variable",
 }
 
 TEST_CASE("the dashboard's and the alert rules' metrics are in a real .prom file",
-          "[monitoring][daemon]") {
+          "[monitoring][daemon][threads]") {
   test::ScratchDir dir("monitoring-metrics");
   // A simulated sensor answering PTC: the sensor's status gauges are in the file too.
   const auto r = test::run_command(test::pandarcapd_command() +

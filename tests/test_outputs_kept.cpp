@@ -111,7 +111,7 @@ std::size_t occurrences(const std::string& text, const std::string& what) {
 }  // namespace
 
 TEST_CASE("restarts within one second never replace a finished frame or recording",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-restart");
   const fs::path out = dir / "out";
   const fs::path capture = sensor_capture(dir / "sensor.pcap", 1200);
@@ -158,7 +158,8 @@ TEST_CASE("restarts within one second never replace a finished frame or recordin
   }
 }
 
-TEST_CASE("retention counts the frames and recordings of earlier runs", "[daemon][outputs]") {
+TEST_CASE("retention counts the frames and recordings of earlier runs",
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-retention");
   const fs::path out = dir / "out";
   const fs::path capture = sensor_capture(dir / "sensor.pcap", 2400);  // ~6.7 revolutions
@@ -232,7 +233,7 @@ TEST_CASE("retention counts the frames and recordings of earlier runs", "[daemon
 }
 
 TEST_CASE("a recovered recording whose name is taken is kept beside it, never over it",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-recovered");
   const fs::path out = dir / "out";
   const fs::path capture = sensor_capture(dir / "sensor.pcap", 300);
@@ -259,7 +260,8 @@ TEST_CASE("a recovered recording whose name is taken is kept beside it, never ov
   CHECK(files_ending(out / "raw", ".part").empty());
 }
 
-TEST_CASE("a stream of discontinuities cannot turn packets into files", "[daemon][outputs]") {
+TEST_CASE("a stream of discontinuities cannot turn packets into files",
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-fragments");
   // Valid-looking packets at random azimuths: nearly every packet is a discontinuity.
   const fs::path capture = dir / "hostile.pcap";
@@ -307,7 +309,7 @@ TEST_CASE("a stream of discontinuities cannot turn packets into files", "[daemon
 }
 
 TEST_CASE("a datagram the socket cut is recorded with its true length, not as whole",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-cut-live");
   const fs::path out = dir / "out";
   const std::uint16_t port = harness::free_udp_port();
@@ -364,7 +366,7 @@ TEST_CASE("a datagram the socket cut is recorded with its true length, not as wh
 }
 
 TEST_CASE("a replayed record cut by the snap length stays cut in the recording and in inspect",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-cut-replay");
   const fs::path capture = sensor_capture(dir / "snapped.pcap", 3);
   // The second record keeps 1262 of its 1266 payload bytes (snaplen); its headers still say 1266.
@@ -404,7 +406,7 @@ TEST_CASE("a replayed record cut by the snap length stays cut in the recording a
 }
 
 TEST_CASE("two daemons on one output directory: the second refuses with exit 73",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-lock");
   const fs::path out = dir / "out";
   auto first = std::make_unique<harness::ChildProcess>(
@@ -437,7 +439,8 @@ TEST_CASE("two daemons on one output directory: the second refuses with exit 73"
   CHECK(third.exit_code == 0);
 }
 
-TEST_CASE("crash recovery never follows a symbolic link out of raw/", "[daemon][outputs]") {
+TEST_CASE("crash recovery never follows a symbolic link out of raw/",
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-symlink");
   const fs::path out = dir / "out";
   // Elsewhere: a recording that recovery would cut (it ends inside a record).
@@ -459,7 +462,8 @@ TEST_CASE("crash recovery never follows a symbolic link out of raw/", "[daemon][
   CHECK(r.out.find("not a regular file; left as it is") != std::string::npos);
 }
 
-TEST_CASE("pandarcapd --check-config refuses exactly what the start refuses", "[daemon][outputs]") {
+TEST_CASE("pandarcapd --check-config refuses exactly what the start refuses",
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-check-config");
   const auto both = [&](const std::string& toml) {
     const fs::path config = dir / "c.toml";
@@ -501,7 +505,7 @@ TEST_CASE("pandarcapd --check-config refuses exactly what the start refuses", "[
 }
 
 TEST_CASE("an unwritable frames/ is refused before READY, and by --check-config",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-frames-readonly");
   const fs::path out = dir / "out";
   fs::create_directories(out / "frames");
@@ -529,7 +533,7 @@ TEST_CASE("an unwritable frames/ is refused before READY, and by --check-config"
 }
 
 TEST_CASE("the exit summary is the run's real end, even when health.jsonl could not take it",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   if (test::run_command("command -v prlimit").exit_code != 0) {
     FAIL("prlimit (util-linux) is needed");
   }
@@ -557,7 +561,7 @@ TEST_CASE("the exit summary is the run's real end, even when health.jsonl could 
 }
 
 TEST_CASE("a health line an interrupted run cut short is removed at start, the lines before kept",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-health-cut");
   const fs::path out = dir / "out";
   fs::create_directories(out / "health");
@@ -581,7 +585,7 @@ TEST_CASE("a health line an interrupted run cut short is removed at start, the l
 }
 
 TEST_CASE("a run with another calibration keeps the earlier recordings' table beside them",
-          "[daemon][outputs]") {
+          "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-calibration");
   const fs::path out = dir / "out";
   const fs::path capture = sensor_capture(dir / "sensor.pcap", 100);

@@ -65,7 +65,7 @@ void check_per_second_records(const std::vector<json>& records, const json& fina
 TEST_CASE(
     "overload: sent = kernel drops + rejects + ring overruns + accepted, gaps agree, "
     "per-second records add up",
-    "[daemon][reliability][overload][realtime]") {
+    "[daemon][reliability][overload][realtime][threads]") {
   test::ScratchDir dir("daemon-overload");
   // A socket buffer of a few dozen datagrams and the smallest ring: bursts must overflow.
   LiveDaemon daemon(dir,
@@ -119,7 +119,7 @@ TEST_CASE(
 TEST_CASE(
     "hostile flood: random datagrams and a foreign sender at loopback's top rate, mixed "
     "with the stream: no crash, everything counted",
-    "[daemon][reliability][overload]") {
+    "[daemon][reliability][overload][threads]") {
   test::ScratchDir dir("daemon-flood");
   LiveDaemon daemon(dir, "");
   INFO(daemon.process->log());

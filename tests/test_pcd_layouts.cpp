@@ -227,7 +227,7 @@ double flat(const json& values, std::size_t i) {
 }  // namespace
 
 TEST_CASE("PCD layouts load in PCL and Open3D with the fields, types and values documented",
-          "[pcd][tools][real]") {
+          "[pcd][tools][real][threads]") {
   const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
   if (!capture) return;
   test::ScratchDir dir("pcd-layouts");

@@ -41,7 +41,7 @@ std::string status_field(int pid, const std::string& field) {
 }  // namespace
 
 TEST_CASE("as root without --allow-root: refused with 77 before any socket or file",
-          "[daemon][privileges]") {
+          "[daemon][privileges][threads]") {
   test::ScratchDir dir("privileges-root");
   const fs::path out = dir / "out";
   const std::string daemon = test::binary("pandarcapd").string();
@@ -70,7 +70,8 @@ TEST_CASE("as root without --allow-root: refused with 77 before any socket or fi
   CHECK(test::run_command(as_root + daemon + " --check-config").exit_code == 0);
 }
 
-TEST_CASE("an unprivileged user captures with no capability (CapEff 0)", "[daemon][privileges]") {
+TEST_CASE("an unprivileged user captures with no capability (CapEff 0)",
+          "[daemon][privileges][threads]") {
   test::ScratchDir dir("privileges-user");
   const fs::path out = dir / "out";
   std::vector<std::string> args = {"--simulate", "--output-dir", out.string()};

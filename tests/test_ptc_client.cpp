@@ -32,7 +32,8 @@ struct Stopwatch {
 
 }  // namespace
 
-TEST_CASE("PTC client reads every command from the simulated sensor on one connection", "[ptc]") {
+TEST_CASE("PTC client reads every command from the simulated sensor on one connection",
+          "[ptc][threads]") {
   const SimulatedUnit unit = simulated_unit(600, 0x39, true, 2368);
   SimulatedPtcServer server(unit);
   PtcClient client(local(server.port()));
@@ -98,7 +99,7 @@ TEST_CASE("PTC client: a refused connection is a connect failure at once", "[ptc
 }
 
 TEST_CASE("PTC client: a server that accepts and never answers times out at the deadline",
-          "[ptc]") {
+          "[ptc][threads]") {
   HostilePtcServer server(Hostile::kSilent);
   PtcClient client(local(server.port(), 500ms));
   const Stopwatch watch;
@@ -110,7 +111,8 @@ TEST_CASE("PTC client: a server that accepts and never answers times out at the 
   CHECK(watch.seconds() < 5);
 }
 
-TEST_CASE("PTC client: a server trickling a byte at a time is given up at the deadline", "[ptc]") {
+TEST_CASE("PTC client: a server trickling a byte at a time is given up at the deadline",
+          "[ptc][threads]") {
   // 62 bytes at one per 200 ms would take 12 s: the deadline is the whole answer's, 1 s.
   HostilePtcServer server(Hostile::kTrickle, 200);
   PtcClient client(local(server.port(), 1000ms));
@@ -121,7 +123,7 @@ TEST_CASE("PTC client: a server trickling a byte at a time is given up at the de
   CHECK(watch.seconds() < 6);
 }
 
-TEST_CASE("PTC client: a patient client reads a trickled answer whole", "[ptc]") {
+TEST_CASE("PTC client: a patient client reads a trickled answer whole", "[ptc][threads]") {
   HostilePtcServer server(Hostile::kTrickle, 1);
   PtcClient client(local(server.port(), 20'000ms));
   const auto status = fetch_status(client);
@@ -129,7 +131,7 @@ TEST_CASE("PTC client: a patient client reads a trickled answer whole", "[ptc]")
   CHECK(status.value->uptime_s == 100);
 }
 
-TEST_CASE("PTC client: every malformed answer is a named, counted failure", "[ptc]") {
+TEST_CASE("PTC client: every malformed answer is a named, counted failure", "[ptc][threads]") {
   struct Case {
     Hostile behaviour;
     ptc::ErrorKind kind;
@@ -168,7 +170,7 @@ TEST_CASE("PTC client: every malformed answer is a named, counted failure", "[pt
 }
 
 TEST_CASE("PTC client: a longer status (newer firmware) parses with the extra bytes counted",
-          "[ptc]") {
+          "[ptc][threads]") {
   HostilePtcServer server(Hostile::kLongStatus);
   PtcClient client(local(server.port()));
   const auto status = fetch_status(client);
@@ -178,7 +180,7 @@ TEST_CASE("PTC client: a longer status (newer firmware) parses with the extra by
 }
 
 TEST_CASE("PTC client: a calibration answer that is not a 40-channel table is refused",
-          "[ptc][calibration]") {
+          "[ptc][calibration][threads]") {
   HostilePtcServer server(Hostile::kBadCalibration);
   PtcClient client(local(server.port()));
   const auto calibration = fetch_calibration(client);
@@ -192,7 +194,7 @@ TEST_CASE("PTC client: an address that is not IPv4 is refused before any connect
   CHECK_THROWS_AS(PtcClient(PtcClientOptions{.address = "sensor.local"}), std::invalid_argument);
 }
 
-TEST_CASE("PTC client reads the PTP offset from a sensor that answers 0x06", "[ptc]") {
+TEST_CASE("PTC client reads the PTP offset from a sensor that answers 0x06", "[ptc][threads]") {
   SimulatedUnit unit = simulated_unit();
   unit.answers_ptp_diagnostics = true;
   unit.ptp_offset_ns = -1234;

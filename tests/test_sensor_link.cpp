@@ -103,7 +103,7 @@ TEST_CASE("decoding with the sensor's table differs from nominal exactly as the 
 }
 
 TEST_CASE("pandarcapd --simulate decodes with the simulated sensor's own calibration",
-          "[ptc][daemon]") {
+          "[ptc][daemon][threads]") {
   test::ScratchDir dir("ptc-simulate");
   const std::filesystem::path out = dir / "out";
   const test::CommandResult run = test::run_command(
@@ -148,7 +148,7 @@ TEST_CASE("pandarcapd --simulate decodes with the simulated sensor's own calibra
 }
 
 TEST_CASE("calibration_source = nominal and file are used as told, the sensor not asked",
-          "[ptc][daemon]") {
+          "[ptc][daemon][threads]") {
   test::ScratchDir dir("ptc-sources");
   const std::filesystem::path table = dir / "front.csv";
   Calibration file_table = Calibration::nominal();
@@ -176,7 +176,7 @@ TEST_CASE("calibration_source = nominal and file are used as told, the sensor no
 TEST_CASE(
     "a sensor that accepts and never answers: the daemon falls back to the file and "
     "captures everything",
-    "[ptc][daemon]") {
+    "[ptc][daemon][threads]") {
   test::ScratchDir dir("ptc-silent");
   test::HostilePtcServer silent(test::Hostile::kSilent);
   const std::filesystem::path table = dir / "front.csv";
@@ -217,7 +217,7 @@ TEST_CASE(
 }
 
 TEST_CASE("calibration_source = sensor with no answer stops the start (exit 69), naming why",
-          "[ptc][daemon]") {
+          "[ptc][daemon][threads]") {
   test::ScratchDir dir("ptc-required");
   test::RefusingPort refusing;
   const test::CommandResult run = test::run_command(
@@ -248,7 +248,7 @@ TEST_CASE("calibration_source = sensor with no answer stops the start (exit 69),
   CHECK_THAT(replay.out, Catch::Contains("needs sensor.sensor_ip"));
 }
 
-TEST_CASE("PTP not locked degrades the state, a status gone stale too", "[ptc][daemon]") {
+TEST_CASE("PTP not locked degrades the state, a status gone stale too", "[ptc][daemon][threads]") {
   test::ScratchDir dir("ptc-ptp");
   SimulatedUnit unit = simulated_unit();
   unit.ptp_state = static_cast<std::uint8_t>(ptc::PtpState::kTracking);
@@ -322,7 +322,7 @@ TEST_CASE("sensor keys in the configuration are checked with their position", "[
 }
 
 TEST_CASE("pandarcap-ctl reads the sensor's calibration, inventory, config and status",
-          "[ptc][ctl]") {
+          "[ptc][ctl][threads]") {
   SimulatedPtcServer sensor(simulated_unit(1200, 0x37, false, 2368));
   const std::string ctl =
       quoted(test::binary("pandarcap-ctl")) + " 127.0.0.1 --port " + std::to_string(sensor.port());
@@ -351,7 +351,8 @@ TEST_CASE("pandarcap-ctl reads the sensor's calibration, inventory, config and s
   CHECK(sensor.requests() == 4);
 }
 
-TEST_CASE("pandarcap-ctl fails clearly: usage 64, no answer 69, protocol 76", "[ptc][ctl]") {
+TEST_CASE("pandarcap-ctl fails clearly: usage 64, no answer 69, protocol 76",
+          "[ptc][ctl][threads]") {
   const std::string ctl = quoted(test::binary("pandarcap-ctl"));
   CHECK(test::run_command(ctl + " --help").exit_code == 0);
   CHECK(test::run_command(ctl + " 2>/dev/null").exit_code == 64);

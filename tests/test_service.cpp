@@ -101,7 +101,7 @@ class NotifyListener {
 }  // namespace
 
 TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, resumes, STOPPING",
-          "[daemon][systemd]") {
+          "[daemon][systemd][threads]") {
   test::ScratchDir dir("daemon-watchdog");
   NotifyListener notify(dir / "notify.sock");
   const fs::path stall_file = dir / "stall-writer";
@@ -180,7 +180,7 @@ std::map<std::string, ThreadState> threads_of(int pid) {
 }  // namespace
 
 TEST_CASE("[threads]: pinning and SCHED_FIFO as granted, refusals logged, health paths honoured",
-          "[daemon][systemd]") {
+          "[daemon][systemd][threads]") {
   test::ScratchDir dir("daemon-threads");
   const fs::path config = dir / "threads.toml";
   std::ofstream(config) << "[health]\n"
@@ -279,7 +279,7 @@ class PacedSensor {
 TEST_CASE(
     "no data: within 1.5 s health says no_data, keeps updating, the watchdog pings - "
     "back to ok within 1 s of the first packet",
-    "[daemon][systemd][reliability]") {
+    "[daemon][systemd][reliability][threads]") {
   test::ScratchDir dir("daemon-no-data");
   NotifyListener notify(dir / "notify.sock");
   const fs::path out = dir / "out";
