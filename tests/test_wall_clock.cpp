@@ -34,11 +34,15 @@ double shift_seen_s(const fs::path& out) {
   return records.back()["unix_time_ns"].get<double>() / 1e9 - ours;
 }
 
-// What this process already preloads (the thread census, in the release job), kept for the
-// daemon after the clock shim.
-std::string preloaded_too() {
-  const char* preload = std::getenv("LD_PRELOAD");
-  return preload != nullptr && *preload != '\0' ? std::string(":") + preload : std::string();
+// LD_PRELOAD for the daemon: the clock shim, then what this process already preloads (the thread
+// census, in the release job).
+std::string daemon_preload() {
+  std::string preload = PANDARCAP_CLOCK_SHIFT_PRELOAD;
+  if (const char* ours = std::getenv("LD_PRELOAD"); ours != nullptr && *ours != '\0') {
+    preload += ':';
+    preload += ours;
+  }
+  return preload;
 }
 
 }  // namespace
@@ -61,8 +65,7 @@ TEST_CASE("a wall-clock jump on the host disturbs neither pcap rotation nor per-
       test::binary("pandarcapd"),
       {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
       dir / "log.txt",
-      {std::string("LD_PRELOAD=") + PANDARCAP_CLOCK_SHIFT_PRELOAD + preloaded_too(),
-       "PANDARCAP_TEST_CLOCK_SHIFT_FILE=" + shift.string()});
+      {"LD_PRELOAD=" + daemon_preload(), "PANDARCAP_TEST_CLOCK_SHIFT_FILE=" + shift.string()});
   INFO(daemon.log());
   const auto lines = [&] { return health_records(out).size(); };
   REQUIRE(harness::wait_until([&] { return lines() >= 2; }, 20s));
