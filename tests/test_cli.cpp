@@ -111,17 +111,19 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
   CHECK(s.at("rejected") == 0);
   CHECK(s.at("return_mode") == "last");
   CHECK(s.at("sequence_present") == true);
-  CHECK(s.at("sequence_gaps") == 0);
+  // A packet the daemon did not record leaves a gap in the recording's sequence, and a frame it
+  // dropped a hole in its revolutions: counted losses a sanitizer build on a busy machine may
+  // have (kSanitizerBuild). Otherwise the recording is gapless and its frames whole.
+  const bool lossless = not_recorded == 0 && frames_dropped == 0;
+  if (lossless) CHECK(s.at("sequence_gaps") == 0);
   CHECK(s.at("rpm_min").get<int>() >= 1198);
   CHECK(s.at("rpm_max").get<int>() <= 1202);
   // About 1 s at 20 Hz: 20 revolutions, of which the first and last are partial (channels with
   // a positive azimuth offset crossed the cut before the stream began; channels with a negative
   // one have not reached it when the stream ends).
-  CHECK(s.at("frames_complete").get<int>() >= 15);
+  if (lossless) CHECK(s.at("frames_complete").get<int>() >= 15);
   CHECK(s.at("frames_complete").get<int>() <= 20);
-  if (not_recorded == 0 && frames_dropped == 0) {
-    CHECK(s.at("frames_complete") == counters.at("frames_complete"));
-  }
+  if (lossless) CHECK(s.at("frames_complete") == counters.at("frames_complete"));
   for (const json& points : s.at("points_per_complete_frame")) {
     // 900 firing rounds per revolution at 1200 RPM, 40 channels, minus the doorway's no-returns.
     CHECK(points.get<int>() > 30000);

@@ -364,8 +364,10 @@ TEST_CASE("pandarcapd --simulate runs the live path with no sensor",
   REQUIRE(status == 0);
   const json h = last_health(out);
   INFO(h.dump());
-  // 4 s of dual return at 600 RPM is ~14400 packets; allow for start-up and scheduling.
-  CHECK(health_counter(h, "packets_accepted") > 10000);
+  // 4 s of dual return at 600 RPM is ~14400 packets; allow for start-up and scheduling. Under a
+  // sanitizer on a busy machine the simulated sensor itself (a thread of the daemon, instrumented
+  // too) may send fewer: then what counts is that every one is accounted for (below).
+  CHECK(health_counter(h, "packets_accepted") > (test::kSanitizerBuild ? 1000u : 10000u));
   CHECK(health_counter(h, "packets_rejected") == 0);
   check_accounting(h);
   CHECK(health_counter(h, "frames_complete") >= 10);
@@ -382,7 +384,7 @@ TEST_CASE("pandarcapd --simulate runs the live path with no sensor",
   CHECK(latency.at("p50_us").get<double>() > 0);
   CHECK(latency.at("p50_us").get<double>() <= latency.at("p99_us").get<double>());
   CHECK(latency.at("p99_us").get<double>() <= latency.at("max_us").get<double>());
-  CHECK(latency.at("max_us").get<double>() < 1e6);
+  if (!test::kSanitizerBuild) CHECK(latency.at("max_us").get<double>() < 1e6);
   // The receive, decode and writer loops allocate nothing once warm (2 s), with frames, pcap
   // and both health files being written. Sanitizer builds keep their own allocator, and then the
   // daemon does not report the count at all.
