@@ -112,6 +112,8 @@ constexpr std::string_view kTrafficOptions =
   --foreign-fraction F   also send F x the valid packets from 127.0.0.2 (a daemon drops them as
                          foreign when its config sets sensor_ip); 127.x.x.x destinations only
   --malformed-fraction F also send F x the valid packets as random-length random bytes
+  --clock-start T        the first packet's sensor time, Unix seconds (default: now). Every
+                         packet carries its own time from there: the stream's clock runs
 )";
 
 // The traffic options `zero-loss` and `send` share. Returns false when `arg` is not one of them.
@@ -143,6 +145,10 @@ bool parse_traffic_option(pandarcap::CliArgs& args, std::string_view arg,
     traffic.foreign_fraction = args.number(arg, 0, 10);
   } else if (arg == "--malformed-fraction") {
     traffic.malformed_fraction = args.number(arg, 0, 10);
+  } else if (arg == "--clock-start") {
+    // 2000-01-01 .. 2099: what the tail's date can carry.
+    traffic.clock_start_unix_ns =
+        static_cast<std::int64_t>(args.number(arg, 946'684'800, 4'102'444'799) * 1e9);
   } else {
     return false;
   }

@@ -8,16 +8,20 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <random>
 #include <stdexcept>
 
 #include "core/ipv4.hpp"
+#include "core/packet_time.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "core/timing.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
 #include "daemon/pcap/capture_reader.hpp"
@@ -30,6 +34,26 @@ int udp_socket() {
   const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
   if (fd < 0) io::throw_errno("socket");
   return fd;
+}
+
+// The tail's time fields: the µs timestamp at tail offset 10 (packet 1250) to the UTC date-time's
+// last byte at tail offset 21 (packet 1261), return mode and factory bytes between them.
+constexpr std::size_t kTimeTailOffset = kBodyBytes + 10;
+constexpr std::size_t kTimeTailBytes = kPacketBytes - kTimeTailOffset;  // 12
+
+// `out` := the body's bytes 1250-1261 with the time `unix_ns` written in (µs within the second,
+// UTC date-time).
+void write_time_tail(const std::vector<std::uint8_t>& body, std::int64_t unix_ns,
+                     std::array<std::uint8_t, kTimeTailBytes>& out) {
+  std::memcpy(out.data(), body.data() + kTimeTailOffset, kTimeTailBytes);
+  const std::int64_t seconds = unix_ns / 1'000'000'000;
+  const auto micros = static_cast<std::uint32_t>((unix_ns % 1'000'000'000) / 1000);
+  for (int b = 0; b < 4; ++b)
+    out[static_cast<std::size_t>(b)] = static_cast<std::uint8_t>(micros >> (8 * b));
+  const TailDateTime utc = tail_datetime_from_unix(seconds);
+  const std::uint8_t fields[6] = {utc.year_since_2000, utc.month, utc.day, utc.hour,
+                                  utc.minute,          utc.second};
+  std::memcpy(out.data() + 6, fields, sizeof fields);
 }
 
 // Whether the options ask for bursts at all.
@@ -58,10 +82,13 @@ TrafficSource TrafficSource::synthetic(const SyntheticSensorConfig& sensor_confi
   const std::size_t count = config.return_mode == ReturnMode::kDual ? 3600 : 1800;
   SyntheticSensor sensor(config);
   std::array<std::uint8_t, kMaxPacketBytes> buffer{};
+  const std::int64_t period = packet_period_ns(config.return_mode);
   for (std::size_t i = 0; i < count; ++i) {
     const std::size_t size = sensor.next(buffer);
     source.bodies.emplace_back(buffer.begin(), buffer.begin() + static_cast<long>(size));
+    source.offsets_ns.push_back(static_cast<std::int64_t>(i) * period);
   }
+  source.loop_ns = static_cast<std::int64_t>(count) * period;
   source.description = "simulated Pandar40P, " + std::string(to_string(config.return_mode)) +
                        " return, " + std::to_string(config.rpm) + " RPM";
   return source;
@@ -71,11 +98,24 @@ TrafficSource TrafficSource::from_capture(const std::string& path) {
   TrafficSource source;
   CaptureReader reader(path);
   CaptureRecord record;
+  PacketClock clock;
+  std::optional<std::int64_t> first_ns;
   while (reader.next(record) == CaptureStatus::kRecord) {
     if (validate(record.payload) != RejectReason::kNone) continue;
     source.bodies.emplace_back(record.payload.begin(), record.payload.begin() + kPacketBytes);
+    const PacketView packet = PacketView::assume_valid(record.payload);
+    const PacketTime time = clock.convert(packet.utc(), packet.timestamp_us());
+    const std::int64_t t = time.valid() ? time.t0_ns : record.timestamp_ns;
+    if (!first_ns) first_ns = t;
+    // Never before the previous one: the offsets must rise for the clock to run.
+    const std::int64_t previous = source.offsets_ns.empty() ? 0 : source.offsets_ns.back();
+    source.offsets_ns.push_back(std::max(previous, t - *first_ns));
   }
   if (source.bodies.empty()) throw std::runtime_error(path + ": no valid Pandar40P packets");
+  // The cycle lasts its span and one more packet's step (the mean step: a capture is one mode).
+  const std::int64_t span = source.offsets_ns.back();
+  const auto n = static_cast<std::int64_t>(source.offsets_ns.size());
+  source.loop_ns = span + (n > 1 ? std::max<std::int64_t>(span / (n - 1), 1) : 1'000'000);
   source.description = path;
   return source;
 }
@@ -106,8 +146,13 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
   }
   const int batch = std::max(1, o.batch);
   std::vector<mmsghdr> messages(static_cast<std::size_t>(batch));
-  std::vector<std::array<iovec, 2>> iovecs(static_cast<std::size_t>(batch));
+  std::vector<std::array<iovec, 3>> iovecs(static_cast<std::size_t>(batch));
   std::vector<std::uint32_t> sequences(static_cast<std::size_t>(batch));
+  // Each packet's tail from its µs timestamp to the end of its UTC date-time (bytes 1250-1261),
+  // written per packet: the clock that runs. The body's bytes around it go out as they are.
+  std::vector<std::array<std::uint8_t, kTimeTailBytes>> times(static_cast<std::size_t>(batch));
+  const std::int64_t clock_start =
+      o.clock_start_unix_ns != 0 ? o.clock_start_unix_ns : realtime_ns();
   std::mt19937 rng(1);
   std::array<std::uint8_t, 2048> junk{};
 
@@ -148,15 +193,20 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
     const auto n = static_cast<unsigned>(std::min<std::uint64_t>(due - result.sent, batch));
     for (unsigned i = 0; i < n; ++i) {
       const std::uint64_t k = o.first_sequence + result.sent + i;
-      const auto& body = source.bodies[k % source.bodies.size()];
+      const std::size_t index = k % source.bodies.size();
+      const auto& body = source.bodies[index];
+      const auto loops = static_cast<std::int64_t>(k / source.bodies.size());
+      write_time_tail(body, clock_start + loops * source.loop_ns + source.offsets_ns[index],
+                      times[i]);
       sequences[i] = static_cast<std::uint32_t>(k);  // little-endian on the wire, as the sensor
-      iovecs[i][0] = {const_cast<std::uint8_t*>(body.data()), kPacketBytes};
-      iovecs[i][1] = {&sequences[i], sizeof(std::uint32_t)};
+      iovecs[i][0] = {const_cast<std::uint8_t*>(body.data()), kTimeTailOffset};
+      iovecs[i][1] = {times[i].data(), kTimeTailBytes};
+      iovecs[i][2] = {&sequences[i], sizeof(std::uint32_t)};
       messages[i] = {};
       messages[i].msg_hdr.msg_name = const_cast<sockaddr_in*>(&destination);
       messages[i].msg_hdr.msg_namelen = sizeof destination;
       messages[i].msg_hdr.msg_iov = iovecs[i].data();
-      messages[i].msg_hdr.msg_iovlen = o.udp_sequence ? 2 : 1;
+      messages[i].msg_hdr.msg_iovlen = o.udp_sequence ? 3 : 2;
     }
     const int sent = ::sendmmsg(fd, messages.data(), n, 0);
     if (sent < 0) {

@@ -19,16 +19,24 @@
 
 namespace pandarcap::bench {
 
-// Packet bodies to send (the 1262 bytes before the sequence), cycled in order.
+// Packet bodies to send (the 1262 bytes before the sequence), cycled in order, and when each is
+// due in the sensor's time: body k at offsets_ns[k] from the first, the cycle repeating every
+// loop_ns. The generator writes every packet's tail time from these (a clock that runs), so the
+// cycle is one continuous rotation whose packet times keep rising.
 struct TrafficSource {
   std::vector<std::vector<std::uint8_t>> bodies;
+  std::vector<std::int64_t> offsets_ns;
+  std::int64_t loop_ns = 0;
   std::string description;
 
   // One second of the simulated sensor (`sensor.rpm`, `sensor.return_mode`): 3600 packets in
   // dual return, 1800 in single, whatever the RPM (the firing rate is fixed; the azimuth step
-  // per block grows with the RPM). Its sequence settings are ignored: the generator writes them.
+  // per block grows with the RPM). A second is a whole number of revolutions at 600 and 1200
+  // RPM, so the cycle's azimuths join. Its sequence settings are ignored: the generator writes
+  // them.
   static TrafficSource synthetic(const SyntheticSensorConfig& sensor);
-  // Every valid Pandar40P packet of a pcap/pcapng file (its own sequence, if any, is replaced).
+  // Every valid Pandar40P packet of a pcap/pcapng file (its own sequence, if any, is replaced),
+  // at its tail time's offset from the first's (its record time where the tail's is not valid).
   // Throws std::runtime_error when the file has none.
   static TrafficSource from_capture(const std::string& path);
 };
@@ -43,6 +51,10 @@ struct GeneratorOptions {
   // continues a first one's stream starts at the first one's `sent`.
   std::uint64_t first_sequence = 0;
   bool udp_sequence = true;  // false: 1262-byte packets, loss only from the receiver's count
+  // The sensor time of the first packet (Unix ns); 0: the host's clock when sending starts. Every
+  // packet's tail carries its own time from there (TrafficSource's offsets), so the stream's
+  // clock runs and agrees with the host's.
+  std::int64_t clock_start_unix_ns = 0;
   // Bursts: every `burst_every_s`, `burst_ms` at `burst_factor` x the rate.
   double burst_factor = 1;
   double burst_ms = 0;

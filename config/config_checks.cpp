@@ -70,12 +70,11 @@ void throw_if_any(std::vector<Problem>& problems) {
   if (problems.empty()) return;
   std::stable_sort(problems.begin(), problems.end(),
                    [](const Problem& a, const Problem& b) { return a.at < b.at; });
-  std::string text;
-  for (const Problem& p : problems) {
-    if (!text.empty()) text += '\n';
-    text += p.text;
-  }
-  throw ConfigError(text);
+  std::vector<std::string> lines;
+  lines.reserve(problems.size());
+  for (const Problem& p : problems)
+    lines.push_back(p.text);
+  throw ConfigError::lines(lines);
 }
 
 }  // namespace pandarcap::config_detail

@@ -24,11 +24,24 @@
 #include "config/nesting_limit.hpp"
 #include "config/suggest.hpp"
 #include "config/value_checks.hpp"
+#include "core/log_text.hpp"
 #include "core/text_file.hpp"
 
 namespace pandarcap {
 
 using namespace config_detail;
+
+ConfigError::ConfigError(const std::string& message)
+    : std::runtime_error(escaped_control(message)) {}
+
+ConfigError ConfigError::lines(const std::vector<std::string>& problems) {
+  std::string joined;
+  for (const std::string& problem : problems) {
+    if (!joined.empty()) joined += '\n';
+    append_escaped_control(problem, joined);
+  }
+  return ConfigError(Joined{}, joined);
+}
 
 namespace {
 
@@ -232,6 +245,11 @@ DaemonConfig load_config_file(const std::filesystem::path& path) {
     case TextFile::Status::kCannotRead:
       throw ConfigError(
           fmt::format("{}: cannot read: {}", path.string(), std::strerror(file.error_number)));
+    case TextFile::Status::kNotRegular:
+      throw ConfigError(fmt::format(
+          "{}: not a regular file (a FIFO, socket, device or directory): not a pandarcapd "
+          "configuration",
+          path.string()));
     case TextFile::Status::kTooLarge:
       throw ConfigError(fmt::format("{}:1:1: larger than {} bytes: not a pandarcapd configuration",
                                     path.string(), kMaxOperatorFileBytes));

@@ -10,14 +10,24 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "daemon_config.hpp"
 
 namespace pandarcap {
 
+// Its message holds no control character: a file name, a key or a value with a newline in it
+// cannot forge a line of its own (core/log_text.hpp escapes them). A file's problems come one
+// line each, joined by newlines.
 class ConfigError : public std::runtime_error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit ConfigError(const std::string& message);
+  // Several problems, one line each (each escaped, then joined).
+  static ConfigError lines(const std::vector<std::string>& problems);
+
+ private:
+  struct Joined {};
+  ConfigError(Joined, const std::string& joined) : std::runtime_error(joined) {}
 };
 
 // Parses TOML text. `source_name` is the file name used in messages. Keys that are absent keep

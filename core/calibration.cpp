@@ -167,6 +167,11 @@ Calibration Calibration::load(const std::string& path) {
       break;
     case TextFile::Status::kCannotOpen:
       throw CalibrationError(fmt::format("{}: cannot open calibration file", path));
+    case TextFile::Status::kNotRegular:
+      throw CalibrationError(
+          fmt::format("{}: not a regular file (a FIFO, socket, device or directory): not a "
+                      "calibration table",
+                      path));
     case TextFile::Status::kCannotRead:
       throw CalibrationError(fmt::format("{}: cannot read calibration file", path));
     case TextFile::Status::kTooLarge:

@@ -34,6 +34,8 @@ std::string_view to_string(FilterReason reason) noexcept {
       return "dual_duplicate";
     case FilterReason::kDualTooClose:
       return "dual_too_close";
+    case FilterReason::kOutlier:
+      return "outlier";
   }
   return "unknown";
 }

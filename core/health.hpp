@@ -3,7 +3,8 @@
 // line (core/health_format.hpp). Pure data: no I/O here.
 //
 // Accounting identity (checked by the tests):
-//   datagrams_received = packets_accepted + packets_rejected + foreign_datagrams + ring_overruns
+//   datagrams_received = packets_accepted + packets_rejected + duplicate_packets
+//                        + foreign_datagrams + ring_overruns
 // where packets_rejected = sum(rejects) and truncated datagrams are rejected as bad_length.
 #pragma once
 
@@ -33,7 +34,8 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
 // added in exactly one place. The help text is the field's documentation. Counters that feed the
 // health state: receive_errors makes it "error"; kernel_drops, ring_overruns,
 // frames_dropped_no_arena, pcap_packets_not_recorded, sequence_lost, azimuth_gaps,
-// packets_rejected, the timestamp counters and write_errors make it "degraded" while they grow
+// packets_rejected, duplicate_packets, outlier_packets, the timestamp counters and write_errors
+// make it "degraded" while they grow
 // (core/health_policy.hpp).
 // clang-format off
 #define PANDARCAP_HEALTH_COUNTERS(X)                                                               \
@@ -49,6 +51,11 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(ring_overruns, "ring_overruns",                                                                \
     "Datagrams dropped by the receive thread because the ring was full")                           \
   X(packets_accepted, "packets_accepted", "Packets that passed validation and were decoded")       \
+  X(duplicate_packets, "duplicate_packets",                                                        \
+    "Copies of a recent packet (same bytes, or a UDP sequence already arrived): not decoded again") \
+  X(outlier_packets, "outlier_packets",                                                            \
+    "Isolated packets out of the rotation's order: placed by azimuth with their time fixed, or "   \
+    "left out of the frames when their azimuth is out of order (points filtered: outlier)")       \
   X(sequence_gaps, "sequence_gaps", "Jumps forward in the UDP sequence number")                    \
   X(sequence_lost, "sequence_lost_packets",                                                        \
     "Packets missing from the UDP sequence (late arrivals forgiven)")                              \
@@ -80,21 +87,31 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(frames_fragment, "frames_fragment",                                                            \
     "Partial frames covering less than output.frames_min_fraction of a revolution: not written")   \
   X(frames_written, "frames_written", "PCD files completed")                                       \
-  X(pcap_packets_written, "pcap_packets_written", "Packets recorded in pcap files")                \
+  X(pcap_packets_written, "pcap_packets_written",                                                  \
+    "Packets written to pcap files (those since lost with their file: pcap_packets_lost)")        \
   X(pcap_packets_not_recorded, "pcap_packets_not_recorded",                                        \
     "Packets left out of the pcap because the writer was behind")                                  \
   X(pcap_packets_not_written, "pcap_packets_not_written",                                          \
-    "Packets lost from the pcap to failed writes")                                                 \
+    "Packets lost from the pcap to failed writes, or not written to keep space for health")       \
+  X(pcap_packets_lost, "pcap_packets_lost",                                                        \
+    "Packets written to a recording that vanished (removed while running)")                       \
+  X(packets_not_recorded, "packets_not_recorded",                                                  \
+    "Packets received but not in a recording on disk: pcap_packets_not_recorded + "                \
+    "pcap_packets_not_written + pcap_packets_lost (0 without output.pcap)")                        \
   X(pcap_bytes_written, "pcap_written_bytes", "Bytes written to pcap files")                       \
   X(pcd_bytes_written, "pcd_written_bytes", "Bytes written to PCD files")                          \
   X(mcap_messages_written, "mcap_messages_written", "Messages written to MCAP files")             \
   X(mcap_messages_not_written, "mcap_messages_not_written",                                        \
-    "Messages lost from MCAP files to failed writes")                                              \
+    "Messages lost from MCAP files to failed writes, or not written to keep space for health")    \
+  X(mcap_messages_lost, "mcap_messages_lost",                                                      \
+    "Messages written to an MCAP file that vanished (removed while running)")                     \
   X(mcap_bytes_written, "mcap_written_bytes", "Bytes written to MCAP files")                       \
   X(ptc_requests, "ptc_requests",                                                                  \
     "Requests to the sensor's control port (PTC): calibration, inventory, config, status")         \
   X(ptc_errors, "ptc_errors",                                                                      \
     "PTC requests that failed: refused, timed out, cut short, malformed, or an error code")        \
+  X(sensor_status_implausible, "sensor_status_implausible",                                        \
+    "Sensor statuses with a field outside its physical range (the field left out)")               \
   X(receive_errors, "receive_errors", "Failed receive calls on the socket")                        \
   X(write_errors, "write_errors", "Failed writes")                                                 \
   X(bytes_not_written, "not_written_bytes", "Bytes lost to failed writes")                         \
@@ -144,6 +161,10 @@ struct SensorStatusGauges {
   std::uint8_t ptp_state = 0;     // ptc::PtpState: 0 free run, 1 tracking, 2 locked, 3 frozen
   bool ptp_offset_known = false;  // the sensor answers PTP diagnostics (0x06)
   double ptp_offset_seconds = 0;  // its offset from the PTP master
+  // The last status's fields outside their physical range (core/ptc/status_plausibility.hpp):
+  // left out of the record, and said in `implausible_reason`.
+  std::uint32_t implausible = 0;
+  std::string implausible_reason;
 };
 
 // Who the sensor is and where the angles come from: found at start-up, constant after. Empty

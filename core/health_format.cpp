@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "core/ptc/ptc_messages.hpp"
+#include "core/ptc/status_plausibility.hpp"
 #include "core/utc_time.hpp"
 
 namespace pandarcap {
@@ -228,23 +229,34 @@ void sensor_prometheus(std::string& out, std::string_view sensor, const HealthSn
          "1 when the last status is older than 3 polling intervals (its values are not reported)");
   append("pandarcap_sensor_status_stale{{{}}} {}\n", sensor, st.stale ? 1 : 0);
   if (!st.available || st.stale) return;
-  family(out, "sensor_uptime_seconds", "gauge", "The sensor's own uptime (PTC status)");
-  append("pandarcap_sensor_uptime_seconds{{{}}} {}\n", sensor, st.uptime_seconds);
-  family(out, "sensor_motor_speed_rpm", "gauge", "Motor speed the sensor reports (PTC status)");
-  append("pandarcap_sensor_motor_speed_rpm{{{}}} {}\n", sensor, st.motor_rpm);
+  // A field outside its physical range is left out (core/ptc/status_plausibility.hpp).
+  const auto plausible = [&](std::uint32_t bit) { return (st.implausible >> bit & 1u) == 0; };
+  if (plausible(ptc::kUptimeBit)) {
+    family(out, "sensor_uptime_seconds", "gauge", "The sensor's own uptime (PTC status)");
+    append("pandarcap_sensor_uptime_seconds{{{}}} {}\n", sensor, st.uptime_seconds);
+  }
+  if (plausible(ptc::kMotorBit)) {
+    family(out, "sensor_motor_speed_rpm", "gauge", "Motor speed the sensor reports (PTC status)");
+    append("pandarcap_sensor_motor_speed_rpm{{{}}} {}\n", sensor, st.motor_rpm);
+  }
   family(out, "sensor_temperature_celsius", "gauge",
          "The sensor's board temperatures (PTC status), by board and sensor");
   for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i) {
+    if (!plausible(ptc::kTemperatureBit0 + static_cast<std::uint32_t>(i))) continue;
     append("pandarcap_sensor_temperature_celsius{{{},board=\"{}\"}} {}\n", sensor,
            ptc::kTemperatureNames[i], st.temperatures_celsius[i]);
   }
-  family(out, "sensor_gps_pps_locked", "gauge", "1 when the sensor reports its GPS PPS locked");
-  append("pandarcap_sensor_gps_pps_locked{{{}}} {}\n", sensor, st.gps_pps_locked ? 1 : 0);
-  family(out, "sensor_ptp_state", "gauge",
-         "1 for the sensor's PTP clock state (free_run, tracking, locked, frozen)");
-  for (std::uint8_t i = 0; i < ptc::kPtpStateCount; ++i) {
-    append("pandarcap_sensor_ptp_state{{{},state=\"{}\"}} {}\n", sensor, ptc::ptp_state_name(i),
-           st.ptp_state == i ? 1 : 0);
+  if (plausible(ptc::kGpsPpsBit)) {
+    family(out, "sensor_gps_pps_locked", "gauge", "1 when the sensor reports its GPS PPS locked");
+    append("pandarcap_sensor_gps_pps_locked{{{}}} {}\n", sensor, st.gps_pps_locked ? 1 : 0);
+  }
+  if (plausible(ptc::kPtpStateBit)) {
+    family(out, "sensor_ptp_state", "gauge",
+           "1 for the sensor's PTP clock state (free_run, tracking, locked, frozen)");
+    for (std::uint8_t i = 0; i < ptc::kPtpStateCount; ++i) {
+      append("pandarcap_sensor_ptp_state{{{},state=\"{}\"}} {}\n", sensor, ptc::ptp_state_name(i),
+             st.ptp_state == i ? 1 : 0);
+    }
   }
   if (st.ptp_offset_known) {
     family(out, "sensor_ptp_offset_seconds", "gauge",
@@ -278,17 +290,41 @@ void sensor_json(std::string& out, const HealthSnapshot& h) {
          st.polled, st.available, st.stale);
   append_json_number(out, st.age_seconds);
   if (st.polled && st.available && !st.stale) {
-    out += ",\"uptime_seconds\":";
-    append_json_number(out, st.uptime_seconds);
-    out += ",\"motor_rpm\":";
-    append_json_number(out, st.motor_rpm);
-    out += ",\"temperatures_celsius\":{";
-    for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i) {
-      append("{}\"{}\":", i == 0 ? "" : ",", ptc::kTemperatureNames[i]);
-      append_json_number(out, st.temperatures_celsius[i]);
+    // A field outside its physical range is left out, and named in "implausible".
+    const auto plausible = [&](std::uint32_t bit) { return (st.implausible >> bit & 1u) == 0; };
+    if (plausible(ptc::kUptimeBit)) {
+      out += ",\"uptime_seconds\":";
+      append_json_number(out, st.uptime_seconds);
     }
-    append("}},\"gps_pps_locked\":{},\"gps_nmea_locked\":{},\"ptp_state\":\"{}\"",
-           st.gps_pps_locked, st.gps_nmea_locked, ptc::ptp_state_name(st.ptp_state));
+    if (plausible(ptc::kMotorBit)) {
+      out += ",\"motor_rpm\":";
+      append_json_number(out, st.motor_rpm);
+    }
+    out += ",\"temperatures_celsius\":{";
+    bool first = true;
+    for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i) {
+      if (!plausible(ptc::kTemperatureBit0 + static_cast<std::uint32_t>(i))) continue;
+      append("{}\"{}\":", first ? "" : ",", ptc::kTemperatureNames[i]);
+      append_json_number(out, st.temperatures_celsius[i]);
+      first = false;
+    }
+    out += '}';
+    if (plausible(ptc::kGpsPpsBit)) append(",\"gps_pps_locked\":{}", st.gps_pps_locked);
+    if (plausible(ptc::kGpsNmeaBit)) append(",\"gps_nmea_locked\":{}", st.gps_nmea_locked);
+    if (plausible(ptc::kPtpStateBit))
+      append(",\"ptp_state\":\"{}\"", ptc::ptp_state_name(st.ptp_state));
+    if (st.implausible != 0) {
+      out += ",\"implausible\":[";
+      bool first_name = true;
+      for (std::uint32_t bit = 0; bit <= ptc::kPtpStateBit; ++bit) {
+        if (plausible(bit)) continue;
+        out += first_name ? "\"" : ",\"";
+        ptc::append_field_name(bit, out);
+        out += '"';
+        first_name = false;
+      }
+      out += ']';
+    }
     if (st.ptp_offset_known) {
       out += ",\"ptp_offset_seconds\":";
       append_json_number(out, st.ptp_offset_seconds);

@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "core/ptc/ptc_messages.hpp"
+#include "core/ptc/status_plausibility.hpp"
 
 namespace pandarcap {
 
@@ -36,9 +37,13 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   grew(c.ring_overruns, p.ring_overruns, "ring overruns");
   grew(c.frames_dropped_no_arena, p.frames_dropped_no_arena, "frames dropped (no free arena)");
   grew(c.pcap_packets_not_recorded, p.pcap_packets_not_recorded, "packets not recorded");
+  grew(c.pcap_packets_lost, p.pcap_packets_lost, "recorded packets lost (recording removed)");
+  grew(c.mcap_messages_lost, p.mcap_messages_lost, "MCAP messages lost (file removed)");
   grew(c.sequence_lost, p.sequence_lost, "packets lost (sequence)");
   grew(c.azimuth_gaps, p.azimuth_gaps, "azimuth gaps");
   grew(c.packets_rejected, p.packets_rejected, "packets rejected");
+  grew(c.duplicate_packets, p.duplicate_packets, "duplicate packets");
+  grew(c.outlier_packets, p.outlier_packets, "isolated outlier packets");
   grew(c.static_timestamp_packets, p.static_timestamp_packets, "static timestamps");
   grew(c.backward_timestamp_packets, p.backward_timestamp_packets, "timestamps going back");
   grew(c.timestamp_jump_packets, p.timestamp_jump_packets, "timestamp jumps");
@@ -60,10 +65,21 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   const SensorStatusGauges& sensor = g.sensor_status;
   if (sensor.polled && sensor.available && sensor.stale) {
     problem("sensor status stale: no answer over PTC for {:.0f} s", sensor.age_seconds);
-  } else if (sensor.polled && sensor.available && sensor.clock_source_known &&
-             sensor.clock_source_ptp && sensor.ptp_state != kPtpLocked) {
-    problem("sensor clock source is PTP but PTP is {} (not locked)",
-            ptc::ptp_state_name(sensor.ptp_state));
+  } else if (sensor.polled && sensor.available) {
+    // What the sensor says is believed only within physical ranges; the rest is a problem.
+    if (sensor.implausible != 0)
+      problem("sensor status implausible: {}", sensor.implausible_reason);
+    const bool ptp_known = (sensor.implausible >> ptc::kPtpStateBit & 1u) == 0;
+    if (ptp_known && sensor.clock_source_known && sensor.clock_source_ptp &&
+        sensor.ptp_state != kPtpLocked) {
+      problem("sensor clock source is PTP but PTP is {} (not locked)",
+              ptc::ptp_state_name(sensor.ptp_state));
+    }
+    // The status's motor speed, checked as the packets' is.
+    const bool motor_known = (sensor.implausible >> ptc::kMotorBit & 1u) == 0;
+    if (motor_known && std::abs(sensor.motor_rpm - expected.rpm) > 0.1 * expected.rpm) {
+      problem("sensor status: motor at {:.0f} RPM (expected {})", sensor.motor_rpm, expected.rpm);
+    }
   }
   // Failing writes degrade (capture goes on, and every byte not written is counted; they lead
   // the reason). A failing socket is an error: the daemon is not capturing.

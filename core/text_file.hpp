@@ -1,6 +1,6 @@
 // Reading the operator's small text files (configuration, calibration) whole, with a bound: they
-// are a few kB, and a wrong path such as /dev/zero or a huge file must be an error with a
-// location, not memory exhausted before the parser could say what is wrong.
+// are a few kB, and a wrong path such as /dev/zero, a FIFO or a huge file must be an error with
+// a location, not memory exhausted or a wait before the parser could say what is wrong.
 #pragma once
 
 #include <cstddef>
@@ -11,7 +11,9 @@ namespace pandarcap {
 inline constexpr std::size_t kMaxOperatorFileBytes = 1 << 20;
 
 struct TextFile {
-  enum class Status { kOk, kCannotOpen, kCannotRead, kTooLarge } status = Status::kOk;
+  // kNotRegular: a FIFO, socket, device or directory, refused without reading (a FIFO with no
+  // writer would never end).
+  enum class Status { kOk, kCannotOpen, kNotRegular, kCannotRead, kTooLarge } status = Status::kOk;
   int error_number = 0;  // errno for kCannotOpen / kCannotRead
   std::string text;      // the whole file for kOk
 };

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "config/suggest.hpp"
+#include "core/log_text.hpp"
 
 namespace pandarcap {
 
@@ -93,9 +94,10 @@ class CliArgs {
   }
 
   [[noreturn]] void usage_error(const std::string& message) const {
+    // The message quotes the command line, which may hold control characters: escaped.
     std::fprintf(stderr, "%.*s: %s\nTry '%.*s --help'.\n", static_cast<int>(program_.size()),
-                 program_.data(), message.c_str(), static_cast<int>(program_.size()),
-                 program_.data());
+                 program_.data(), escaped_control(message).c_str(),
+                 static_cast<int>(program_.size()), program_.data());
     std::exit(64);
   }
 

@@ -137,10 +137,12 @@ void DecodeWorker::process(const PacketSlot& slot) {
   // kept length: an empty payload is exactly that reject. The kept length never exceeds the slot.
   const std::size_t length =
       slot.truncated ? 0 : std::min<std::size_t>(slot.length, sizeof slot.payload);
-  const RejectReason verdict =
-      decoder_.process(std::span<const std::uint8_t>(slot.payload, length));
+  const std::uint64_t accepted_before = decoder_.stats().accepted;
+  decoder_.process(std::span<const std::uint8_t>(slot.payload, length));
+  // The sensor's clock against this datagram's arrival: for an accepted packet only (a copy
+  // arrives later than its original did).
   const StreamStats& stats = decoder_.stats();
-  if (verdict == RejectReason::kNone && stats.last_time_valid && slot.receive_time_ns > 0)
+  if (stats.accepted != accepted_before && stats.last_time_valid && slot.receive_time_ns > 0)
     clock_offset_ns_ = stats.last_t0_ns - slot.receive_time_ns;
 }
 

@@ -37,6 +37,7 @@
 #include "config/config_loader.hpp"
 #include "config/daemon_config.hpp"
 #include "core/health_state_log.hpp"
+#include "core/log_text.hpp"
 #include "daemon/daemon_options.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/output/writer.hpp"
@@ -70,28 +71,28 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
   fmt::print(
       "final health: state {}{}; {} datagrams received, {} accepted, {} rejected, {} foreign, "
       "{} ring overruns, {} kernel drops; frames {} complete, {} partial, {} dropped, {} "
-      "fragments, {} written; {} packets recorded; {} write errors\n",
+      "fragments, {} written; {} packets recorded{}; {} write errors\n",
       to_string(h.gauges.state), h.gauges.reason.empty() ? "" : " (" + h.gauges.reason + ")",
       c.datagrams_received, c.packets_accepted, c.packets_rejected, c.foreign_datagrams,
       c.ring_overruns, c.kernel_drops, c.frames_complete, c.frames_partial,
-      c.frames_dropped_no_arena, c.frames_fragment, c.frames_written, c.pcap_packets_written,
+      c.frames_dropped_no_arena, c.frames_fragment, c.frames_written,
+      // What is in the recordings on disk: written, less what vanished with its file.
+      c.pcap_packets_written - c.pcap_packets_lost,
+      c.packets_not_recorded > 0 ? fmt::format(" ({} not recorded)", c.packets_not_recorded)
+                                 : std::string(),
       c.write_errors);
-  if (wo.mcap) {
-    fmt::print("mcap: {} messages written, {} not written, {} bytes\n", c.mcap_messages_written,
-               c.mcap_messages_not_written, c.mcap_bytes_written);
+  if (c.duplicate_packets > 0 || c.outlier_packets > 0) {
+    fmt::print("{} duplicate packets (not decoded again), {} outliers left out of frames\n",
+               c.duplicate_packets, c.outlier_packets);
   }
-}
-
-// Signals are blocked before the threads start, so every thread inherits the mask and only the
-// main thread takes them, synchronously, with sigtimedwait.
-sigset_t block_signals() {
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGTERM);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGHUP);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  return signals;
+  if (wo.mcap) {
+    fmt::print("mcap: {} messages written, {} not written, {} bytes{}\n",
+               c.mcap_messages_written - c.mcap_messages_lost, c.mcap_messages_not_written,
+               c.mcap_bytes_written,
+               c.mcap_messages_lost > 0
+                   ? fmt::format("; {} more lost with their file", c.mcap_messages_lost)
+                   : std::string());
+  }
 }
 
 // The main thread while the pipeline runs: signals, --duration, the end of a replay, STATUS and
@@ -164,6 +165,8 @@ int report_replay(const PacketSource& source, const RunSource& run_source) {
 
 // The daemon's life, in order; shutdown is the reverse (PipelineThreads).
 int run(const CommandLine& options) {
+  // A stop asked for from here on ends the start within a second, at whatever step it is.
+  take_signals_for_startup();
   const std::string source_name = options.config_path.value_or("command line");
   const DaemonConfig config = load_configuration(options, source_name);
   if (options.check_config) return check_config(config, source_name);
@@ -176,13 +179,10 @@ int run(const CommandLine& options) {
   if (!options.print_calibration) {
     spdlog::info("pandarcapd {} starting ({})", kVersion, describe(options.source));
   }
-  // Signals are blocked before the first thread starts (the simulated sensor's PTC server is
-  // one): a SIGTERM delivered to a thread that has it unblocked would kill the process instead
-  // of reaching supervise().
-  const sigset_t signals = block_signals();
   std::unique_ptr<SimulatedPtcServer> simulated_ptc;  // outlives every thread that asks it
   std::optional<PtcClientOptions> ptc;
   const SensorAtStart sensor = learn_sensor(config, options.source, simulated_ptc, ptc);
+  stop_if_requested("asking the sensor");
   const Calibration& calibration = sensor.calibration;
   if (options.print_calibration) {
     fmt::print("{}", calibration.to_csv());
@@ -198,6 +198,7 @@ int run(const CommandLine& options) {
       "packets",
       config.ring.slots, sizeof(PacketSlot), config.arenas.count, config.arenas.points_per_frame,
       Pipeline::raw_batches(config), config.arenas.packets_per_frame);
+  stop_if_requested("allocating memory");
 
   const std::unique_ptr<PacketSource> source = open_source(config, options.source);
   WriterOptions wo = writer_options(config);
@@ -222,6 +223,10 @@ int run(const CommandLine& options) {
   }
   DecodeWorker worker(calibration, decode_worker_options(config, decoder, options.source),
                       pipe.ring, pipe.to_writer, pipe.free_arenas, pipe.free_raw);
+  // From here the signals are supervise()'s: blocked before the first pipeline thread starts,
+  // so every thread inherits the mask (a SIGTERM taken by another thread would be lost to it).
+  const sigset_t signals = block_signals();
+  stop_if_requested("preparing the outputs");
 
   const ThreadsSection& placement = config.threads;
   std::atomic<bool> stop_simulator{false};
@@ -290,13 +295,18 @@ int main(int argc, char** argv) {
   } catch (const StartupError& error) {
     // Before logging is set up (the configuration), plain stderr; after it, the log.
     if (spdlog::get("pandarcapd") != nullptr) {
-      spdlog::critical("{}", error.message);
+      if (error.exit_status == 0) {
+        spdlog::info("{}", error.message);  // a stop asked for during the start
+      } else {
+        spdlog::critical("{}", error.message);
+      }
     } else {
-      std::fprintf(stderr, "pandarcapd: %s\n", error.message.c_str());
+      const std::string text = error.lines ? error.message : escaped_control(error.message);
+      std::fprintf(stderr, "pandarcapd: %s\n", text.c_str());
     }
     return error.exit_status;
   } catch (const std::exception& error) {
-    std::fprintf(stderr, "pandarcapd: %s\n", error.what());
+    std::fprintf(stderr, "pandarcapd: %s\n", escaped_control(error.what()).c_str());
     return 1;
   }
 }

@@ -1,6 +1,9 @@
 #include "daemon/startup_steps.hpp"
 
 #include <fmt/format.h>
+#include <pthread.h>
+#include <signal.h>
+#include <spdlog/pattern_formatter.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
@@ -12,6 +15,7 @@
 
 #include "config/config_loader.hpp"
 #include "core/calibration.hpp"
+#include "core/log_text.hpp"
 #include "core/sim/simulated_unit.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/daemon_options.hpp"
@@ -19,14 +23,92 @@
 
 namespace pandarcap {
 
+namespace {
+
+std::atomic<bool> stop_flag{false};
+static_assert(std::atomic<bool>::is_always_lock_free, "set from a signal handler");
+
+extern "C" void on_stop_signal(int) {
+  stop_flag.store(true, std::memory_order_relaxed);
+}
+extern "C" void on_hangup_during_startup(int) {}
+
+sigset_t the_three() {
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGHUP);
+  return signals;
+}
+
+}  // namespace
+
+void take_signals_for_startup() {
+  struct sigaction action {};
+  sigemptyset(&action.sa_mask);
+  action.sa_flags = 0;  // no SA_RESTART: a wait in progress returns EINTR and checks the flag
+  action.sa_handler = on_stop_signal;
+  sigaction(SIGTERM, &action, nullptr);
+  sigaction(SIGINT, &action, nullptr);
+  // A handler, not SIG_IGN: an ignored signal is discarded even while blocked, and supervise()
+  // waits for SIGHUP later.
+  action.sa_handler = on_hangup_during_startup;
+  sigaction(SIGHUP, &action, nullptr);
+  const sigset_t signals = the_three();
+  pthread_sigmask(SIG_UNBLOCK, &signals, nullptr);
+}
+
+const std::atomic<bool>& stop_requested() {
+  return stop_flag;
+}
+
+void stop_if_requested(std::string_view step) {
+  if (stop_flag.load(std::memory_order_relaxed)) {
+    throw StartupError{0,
+                       fmt::format("stop requested while starting ({}): nothing to finish", step)};
+  }
+}
+
+sigset_t block_signals() {
+  const sigset_t signals = the_three();
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  return signals;
+}
+
+SignalsBlocked::SignalsBlocked() {
+  const sigset_t signals = the_three();
+  pthread_sigmask(SIG_BLOCK, &signals, &previous_);
+}
+
+SignalsBlocked::~SignalsBlocked() {
+  pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
+}
+
+namespace {
+
+// A log line's message with its control characters escaped (core/log_text.hpp): any line may
+// carry a configured path, a file name or what the network sent, and none may forge a line.
+class EscapedMessage final : public spdlog::custom_flag_formatter {
+ public:
+  void format(const spdlog::details::log_msg& message, const std::tm&,
+              spdlog::memory_buf_t& out) override {
+    append_escaped_control(std::string_view(message.payload.data(), message.payload.size()), out);
+  }
+  std::unique_ptr<custom_flag_formatter> clone() const override {
+    return std::make_unique<EscapedMessage>();
+  }
+};
+
+}  // namespace
+
 void setup_logging(const std::string& level) {
   auto logger = spdlog::stderr_color_mt("pandarcapd");
+  auto formatter = std::make_unique<spdlog::pattern_formatter>();
   // Under systemd, journald timestamps every line itself.
-  if (std::getenv("JOURNAL_STREAM") != nullptr) {
-    logger->set_pattern("[%l] %v");
-  } else {
-    logger->set_pattern("%Y-%m-%dT%H:%M:%S.%e [%l] %v");
-  }
+  formatter->add_flag<EscapedMessage>('*').set_pattern(
+      std::getenv("JOURNAL_STREAM") != nullptr ? "[%l] %*" : "%Y-%m-%dT%H:%M:%S.%e [%l] %*");
+  logger->set_formatter(std::move(formatter));
   logger->set_level(spdlog::level::from_str(level));
   spdlog::set_default_logger(logger);
 }
@@ -38,20 +120,27 @@ int check_config(const DaemonConfig& config, const std::string& source_name) {
     if (s.calibration_source != "nominal" && !s.calibration_file.empty())
       Calibration::load(s.calibration_file);
   } catch (const std::exception& error) {
-    std::fprintf(stderr, "pandarcapd: %s\n", error.what());
+    std::fprintf(stderr, "pandarcapd: %s\n", escaped_control(error.what()).c_str());
     return kExitConfig;
   }
   const DecoderChoice decoder = choose_decoder_target(config.decoder);
   if (!decoder.target) {
-    std::fprintf(stderr, "pandarcapd: %s: decoder: %s\n", source_name.c_str(),
-                 decoder.error.c_str());
+    std::fprintf(stderr, "pandarcapd: %s: decoder: %s\n", escaped_control(source_name).c_str(),
+                 escaped_control(decoder.error).c_str());
     return kExitConfig;
   }
-  const std::vector<std::string> problems = output_problems(writer_options(config));
+  const WriterOptions outputs = writer_options(config);
+  std::vector<std::string> problems = output_problems(outputs);
+  std::vector<std::string> space;
+  for (std::string& problem : space_problems(outputs, space))
+    problems.push_back(std::move(problem));
+  for (const std::string& line : space)
+    fmt::print("free space: {}\n", escaped_control(line));
   for (const std::string& problem : problems)
-    std::fprintf(stderr, "pandarcapd: %s: outputs: %s\n", source_name.c_str(), problem.c_str());
+    std::fprintf(stderr, "pandarcapd: %s: outputs: %s\n", escaped_control(source_name).c_str(),
+                 escaped_control(problem).c_str());
   if (!problems.empty()) return kExitCantCreate;
-  fmt::print("{}: configuration OK\n", source_name);
+  fmt::print("{}: configuration OK\n", escaped_control(source_name));
   return 0;
 }
 
@@ -64,7 +153,7 @@ DaemonConfig load_configuration(const CommandLine& options, const std::string& s
     validate_config(config, source_name);
     return config;
   } catch (const ConfigError& error) {
-    throw StartupError{kExitConfig, error.what()};
+    throw StartupError{kExitConfig, error.what(), true};
   }
 }
 
@@ -112,11 +201,13 @@ SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
                            std::optional<PtcClientOptions>& ptc) {
   try {
     if (source.kind == RunSource::Kind::kSimulated && !source.ptc_port_given) {
+      const SignalsBlocked blocked;  // its thread must never take the daemon's signals
       simulated_ptc = std::make_unique<SimulatedPtcServer>(
           simulated_unit(source.simulated_rpm, static_cast<std::uint8_t>(source.simulated_mode),
                          source.simulated_udp_sequence, config.sensor.data_port));
     }
     ptc = ptc_client_options(config, source, simulated_ptc ? simulated_ptc->port() : 0);
+    if (ptc) ptc->cancel = &stop_requested();
     return resolve_sensor_at_start(config.sensor.calibration_source, config.sensor.calibration_file,
                                    ptc);
   } catch (const SensorUnavailable& error) {

@@ -4,10 +4,14 @@
 // server (learn_sensor) is the one thread a step may start, before the signals matter.
 #pragma once
 
+#include <signal.h>
+
+#include <atomic>
 #include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include "config/daemon_config.hpp"
 #include "core/decoder_target.hpp"
@@ -34,6 +38,36 @@ inline constexpr int kExitConfig = 78;
 struct StartupError {
   int exit_status;
   std::string message;
+  // One problem a line, each escaped already (a configuration's, ConfigError); otherwise the
+  // message is escaped whole when printed (core/log_text.hpp).
+  bool lines = false;
+};
+
+// Signals while pandarcapd starts. Until the pipeline's threads start, SIGTERM and SIGINT go to
+// a handler that only raises the stop flag and interrupts the main thread's wait (a sensor's
+// answer over PTC): each step checks the flag, so a stop ends the start within a second, at any
+// step. SIGHUP is taken and ignored until then (there is nothing to rotate). A thread started
+// meanwhile (the simulated sensor's PTC server) starts inside a SignalsBlocked scope and never
+// takes them. block_signals() then hands all three to supervise()'s sigtimedwait; one that came
+// in between stays pending for it.
+void take_signals_for_startup();
+// Set by SIGTERM or SIGINT during the start; async-signal-safe to set (lock-free).
+const std::atomic<bool>& stop_requested();
+// Throws StartupError (exit 0: a stop asked for, not a failure) when the stop flag is up.
+void stop_if_requested(std::string_view step);
+// Blocks SIGTERM, SIGINT and SIGHUP in the calling thread, for good; the set, for sigtimedwait.
+sigset_t block_signals();
+
+// Blocks the three in the calling thread for its lifetime (threads started inside inherit it).
+class SignalsBlocked {
+ public:
+  SignalsBlocked();
+  ~SignalsBlocked();
+  SignalsBlocked(const SignalsBlocked&) = delete;
+  SignalsBlocked& operator=(const SignalsBlocked&) = delete;
+
+ private:
+  sigset_t previous_;
 };
 
 // The log: stderr, with the time unless journald adds its own (JOURNAL_STREAM).

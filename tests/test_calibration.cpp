@@ -1,6 +1,9 @@
 // Calibration CSV loader: good files in every accepted dialect, and each kind of bad file with
 // the file:line:col it must point at.
+#include <sys/stat.h>
+
 #include <catch2/catch.hpp>
+#include <filesystem>
 #include <fstream>
 #include <string>
 
@@ -100,9 +103,22 @@ TEST_CASE("each kind of bad calibration file names its line and column", "[calib
   require_error("", "1:1", "40 of 40 channels missing");
 }
 
-TEST_CASE("an endless or huge calibration file is refused after a bounded read", "[calibration]") {
-  CHECK_THROWS_WITH(Calibration::load("/dev/zero"),
-                    "/dev/zero:1:1: larger than 1048576 bytes: not a calibration table");
+TEST_CASE("an endless, huge or non-regular calibration file is refused at once", "[calibration]") {
+  const test::ScratchDir dir("calibration-files");
+  // A huge regular file: refused after a bounded read (one byte past the limit).
+  const auto huge = dir / "huge.csv";
+  std::ofstream(huge).close();
+  std::filesystem::resize_file(huge, 4u << 20);
+  CHECK_THROWS_WITH(Calibration::load(huge.string()),
+                    huge.string() + ":1:1: larger than 1048576 bytes: not a calibration table");
+  // A device (endless) and a FIFO with no writer (an open would wait for one, a read forever):
+  // refused before anything is read.
+  const std::string not_regular =
+      ": not a regular file (a FIFO, socket, device or directory): not a calibration table";
+  CHECK_THROWS_WITH(Calibration::load("/dev/zero"), "/dev/zero" + not_regular);
+  const auto fifo = dir / "fifo.csv";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  CHECK_THROWS_WITH(Calibration::load(fifo.string()), fifo.string() + not_regular);
 }
 
 TEST_CASE("loading a missing file is a clear error naming it", "[calibration]") {

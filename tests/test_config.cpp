@@ -1,5 +1,6 @@
 // The TOML configuration: defaults, the documented example, round trips through --print-config,
 // and an error with a file:line:col location for every kind of bad input.
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
@@ -275,10 +276,22 @@ TEST_CASE("Files: an unreadable file is named, a readable one is parsed with its
   std::ofstream(bad) << "# comment\n[arenas]\ncount = 100\n";
   CHECK_THROWS_WITH(load_config_file(bad),
                     bad.string() + ":3:9: arenas.count: 100 is out of range (2..64)");
+  // A huge file is refused after a bounded read, not loaded into memory.
+  const auto huge = dir / "huge.toml";
+  std::ofstream(huge).close();
+  std::filesystem::resize_file(huge, 4u << 20);
+  CHECK_THROWS_WITH(
+      load_config_file(huge),
+      huge.string() + ":1:1: larger than 1048576 bytes: not a pandarcapd configuration");
+  // An endless device and a FIFO with no writer are refused at once, nothing read (a FIFO's open
+  // would wait for a writer, with the daemon's signals blocked).
+  const std::string not_regular =
+      ": not a regular file (a FIFO, socket, device or directory): not a pandarcapd configuration";
+  CHECK_THROWS_WITH(load_config_file("/dev/zero"), "/dev/zero" + not_regular);
+  const auto fifo = dir / "fifo.toml";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  CHECK_THROWS_WITH(load_config_file(fifo), fifo.string() + not_regular);
   std::filesystem::remove_all(dir);
-  // An endless or huge file is refused after a bounded read, not loaded into memory.
-  CHECK_THROWS_WITH(load_config_file("/dev/zero"),
-                    "/dev/zero:1:1: larger than 1048576 bytes: not a pandarcapd configuration");
 }
 
 TEST_CASE("Nesting past 32 levels is refused before parsing, where the limit is crossed",

@@ -186,6 +186,7 @@ TEST_CASE("Health: the sensor's PTP not locked degrades when PTP is its clock so
   st.polled = st.available = true;
   st.interval_seconds = 5;
   st.age_seconds = 1;
+  st.motor_rpm = 600;  // turning as expected: the PTP state is the only problem
   st.clock_source_known = st.clock_source_ptp = true;
   for (const auto& [state, name] : {std::pair{0, "free_run"}, std::pair{1, "tracking"},
                                     std::pair{3, "frozen"}, std::pair{9, "unknown"}}) {

@@ -263,16 +263,20 @@ TEST_CASE("a recovered recording whose name is taken is kept beside it, never ov
 TEST_CASE("a stream of discontinuities cannot turn packets into files",
           "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-fragments");
-  // Valid-looking packets at random azimuths: nearly every packet is a discontinuity.
+  // Valid-looking packets in pairs at random azimuths: each pair follows on in itself (so it is
+  // not a lone outlier, see core/stream_decoder.hpp), and each is a discontinuity from the last.
   const fs::path capture = dir / "hostile.pcap";
   {
     SyntheticSensor sensor(SyntheticSensorConfig{});
     std::mt19937 rng(17);
     std::array<std::uint8_t, kMaxPacketBytes> packet{};
     PcapWriter pcap(capture.string());
+    std::uint16_t base = 0;
     for (int i = 0; i < 3000; ++i) {
       PacketContents contents = sensor.next_contents();
-      const auto base = static_cast<std::uint16_t>(rng() % 36000);
+      // Dual return at 600 RPM: a packet takes 1°, and so the next in a pair starts 1° on; the
+      // next pair starts more than 90° away (a discontinuity to the frame assembler).
+      base = static_cast<std::uint16_t>((base + (i % 2 == 0 ? 9100 + rng() % 17800 : 100)) % 36000);
       for (int b = 0; b < kBlocks; ++b)
         contents.azimuth_cdeg[b] = static_cast<std::uint16_t>((base + b / 2 * 20) % 36000);
       const std::size_t size = encode(contents, packet);

@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <stdio.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -45,6 +46,16 @@ void OutputFile::write(std::span<const std::uint8_t> bytes) {
     bytes = bytes.subspan(static_cast<std::size_t>(n));
     size_ += static_cast<std::uint64_t>(n);
   }
+}
+
+bool OutputFile::at_its_path() const noexcept {
+  if (fd_ < 0) return true;
+  struct stat open_file {
+  }, named{};
+  if (::fstat(fd_, &open_file) != 0) return true;  // cannot tell: the next write will say
+  if (open_file.st_nlink == 0) return false;
+  if (::stat(path_.c_str(), &named) != 0) return false;
+  return named.st_ino == open_file.st_ino && named.st_dev == open_file.st_dev;
 }
 
 void OutputFile::truncate(std::uint64_t size) noexcept {

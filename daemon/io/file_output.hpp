@@ -36,6 +36,10 @@ class OutputFile {
   void truncate(std::uint64_t size) noexcept;
   std::uint64_t size() const noexcept { return size_; }
   const std::string& path() const noexcept { return path_; }
+  // Whether the open file is still the one its path names: false once it was removed (with its
+  // directory, say) or its directory replaced (a remount), when what is written here reaches no
+  // reader. True for a closed file.
+  bool at_its_path() const noexcept;
 
  private:
   std::string path_;

@@ -42,6 +42,8 @@ class McapFile {
   // Creates `path` and writes the header, schemas, channels, metadata and calibration.
   void open(std::string_view path, std::uint64_t create_time_ns);
   bool is_open() const noexcept { return file_.is_open(); }
+  // The open file is still where its path says (see OutputFile::at_its_path).
+  bool at_its_path() const noexcept { return file_.at_its_path(); }
   bool full() const noexcept { return summary_.chunks.size() + 1 >= options_.max_chunks; }
 
   void add_frame(const Frame& frame, std::uint64_t log_time);

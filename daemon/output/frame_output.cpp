@@ -9,6 +9,7 @@
 
 #include "core/pcd.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 
 namespace pandarcap {
@@ -18,9 +19,12 @@ constexpr std::size_t kPcdChunkPoints = 4096;
 
 }  // namespace
 
-FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& accounting)
+FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& accounting,
+                         SpaceGuard& space)
     : accounting_(accounting),
+      space_(space),
       dir_(options.output_dir / "frames"),
+      volume_(space.watch(dir_)),
       retention_(options.frames_max_files, options.frames_max_bytes),
       format_(options.pcd_format),
       pcd_buffer_(kPcdChunkPoints * pcd_point_bytes(options.pcd_format.layout)) {}
@@ -49,8 +53,12 @@ void FrameOutput::write(const FrameArena& arena) {
   append_utc_file_stamp(path_, frame.info.start_ns, true);
   path_ += frame.info.partial ? "_partial.pcd" : ".pcd";
   assign_temporary_name(temporary_path_, path_);
+  if (!space_.allows(volume_, expected, refusal_)) {
+    accounting_.write_failed(refusal_, expected);
+    return;
+  }
   try {
-    file_.open(temporary_path_, OutputFile::Mode::kCreate);
+    open_in_directory(file_, temporary_path_, OutputFile::Mode::kCreate, dir_);
     file_.write(pcd_header_);
     for (std::size_t i = 0; i < points.size(); i += kPcdChunkPoints) {
       const auto chunk = points.subspan(i, std::min(kPcdChunkPoints, points.size() - i));

@@ -2,10 +2,12 @@
 //
 // Each frame is written as frames/.<name>.tmp and renamed into place without replacing anything
 // (a taken name becomes "_dupN", counted), so a reader never sees half a frame; a failed write
-// removes the temporary file and is counted (OutputAccounting). N continues across runs: it
-// starts after the highest number found at start-up (adopt_earlier_files), and is that base plus
-// the frame's sequence number. Retention (frames_max_files / frames_max_bytes) counts earlier
-// runs' frames too.
+// removes the temporary file and is counted (OutputAccounting). A frame is not written while its
+// file system is down to the space kept for the health files (SpaceGuard: counted as a failed
+// write, said in the health), and a frames/ removed while running is made again. N continues across
+// runs: it starts after the highest number found at start-up (adopt_earlier_files), and is that
+// base plus the frame's sequence number. Retention (frames_max_files / frames_max_bytes) counts
+// earlier runs' frames too.
 //
 // Once warm, writing a frame allocates nothing: the names, header and encode buffer are reused
 // (retention, when on, lists one name per file). Owned by the writer thread.
@@ -19,15 +21,16 @@
 #include "core/latency_histogram.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/output/output_accounting.hpp"
-#include "daemon/pipeline_types.hpp"
 #include "daemon/output/retention.hpp"
+#include "daemon/output/space_guard.hpp"
 #include "daemon/output/writer_options.hpp"
+#include "daemon/pipeline_types.hpp"
 
 namespace pandarcap {
 
 class FrameOutput {
  public:
-  FrameOutput(const WriterOptions& options, OutputAccounting& accounting);
+  FrameOutput(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space);
 
   const std::filesystem::path& directory() const noexcept { return dir_; }
   // At start-up, after the leftovers are cleaned: earlier runs' frames numbered and listed for
@@ -45,14 +48,16 @@ class FrameOutput {
 
  private:
   OutputAccounting& accounting_;
+  SpaceGuard& space_;
   std::filesystem::path dir_;
+  int volume_;  // dir_'s file system, for space_
   Retention retention_;
   PcdFormat format_;
   std::uint64_t number_base_ = 0;  // + the frame's sequence = its file number
   std::uint64_t frames_written_ = 0, bytes_written_ = 0;
   LatencyHistogram latency_;
   std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
-  std::string path_, temporary_path_, pcd_header_;
+  std::string path_, temporary_path_, pcd_header_, refusal_;
   OutputFile file_;
 };
 

@@ -2,17 +2,21 @@
 
 #include <cerrno>
 #include <cstdio>
+#include <filesystem>
 #include <system_error>
 
 #include "core/health_format.hpp"
 #include "core/health_policy.hpp"
+#include "core/ptc/status_plausibility.hpp"
 #include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/output/output_directories.hpp"
 
 namespace pandarcap {
-HealthPublisher::HealthPublisher(const WriterOptions& options, OutputAccounting& accounting)
-    : options_(options), accounting_(accounting) {}
+HealthPublisher::HealthPublisher(const WriterOptions& options, OutputAccounting& accounting,
+                                 SpaceGuard& space)
+    : options_(options), accounting_(accounting), space_(space) {}
 
 void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
   start_monotonic_ns_ = start_monotonic_ns;
@@ -50,6 +54,9 @@ void fill_sensor_status(const SensorStatusSample* latest, std::int64_t now, Sens
   st.gps_pps_locked = s.gps_pps_locked == 1;
   st.gps_nmea_locked = s.gps_nmea_locked == 1;
   st.ptp_state = s.ptp_state;
+  st.implausible = ptc::implausible_fields(s);
+  st.implausible_reason.clear();  // its capacity kept
+  ptc::describe_implausible(s, st.implausible, st.implausible_reason);
   st.ptp_offset_known = latest->ptp_offset_ns.has_value();
   st.ptp_offset_seconds = static_cast<double>(latest->ptp_offset_ns.value_or(0)) / 1e9;
   st.clock_source_known = latest->clock_source.has_value();
@@ -84,6 +91,8 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.receive_errors = receive.receive_errors.load(std::memory_order_relaxed);
   const StreamStats& s = decode.stream;
   c.packets_accepted = s.accepted;
+  c.duplicate_packets = s.duplicates;
+  c.outlier_packets = s.outliers;
   c.rejects = s.rejects;
   c.packets_rejected = s.rejected();
   c.sequence_gaps = decode.sequence.gaps;
@@ -110,6 +119,10 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.pcap_packets_written = sources.pcap.packets_written();
   c.pcap_packets_not_recorded = decode.raw_packets_dropped;
   c.pcap_packets_not_written = sources.pcap.packets_not_written();
+  c.pcap_packets_lost = sources.pcap.packets_lost();
+  c.packets_not_recorded =
+      options_.pcap ? c.pcap_packets_not_recorded + c.pcap_packets_not_written + c.pcap_packets_lost
+                    : 0;
   c.pcap_bytes_written = sources.pcap.bytes_written();
   count_mcap(sources.mcap);
   c.pcd_bytes_written = sources.frames.bytes_written();
@@ -157,6 +170,7 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
 
   c.ptc_requests = sources.ptc_requests;
   c.ptc_errors = sources.ptc_errors;
+  c.sensor_status_implausible = sources.sensor_status_implausible;
   fill_sensor_status(sources.sensor_status, now, g.sensor_status, options_.status_polled,
                      options_.status_interval_seconds);
 
@@ -181,11 +195,32 @@ void HealthPublisher::write_first() {
 }
 
 void HealthPublisher::write() {
-  try {
-    if (options_.prometheus) write_prometheus();
-    if (options_.jsonl) write_jsonl_line();
-  } catch (const std::exception& error) {
-    accounting_.write_failed(error, 0);
+  bool prometheus_done = !options_.prometheus, jsonl_done = !options_.jsonl;
+  // A few attempts: a piece of the reserve given back, a removed directory made again.
+  for (int attempt = 0; attempt < 4; ++attempt) {
+    const bool at_prometheus = !prometheus_done;
+    try {
+      if (!prometheus_done) {
+        write_prometheus();
+        prometheus_done = true;
+      }
+      if (!jsonl_done) {
+        write_jsonl_line();
+        jsonl_done = true;
+      }
+      return;
+    } catch (const std::system_error& error) {
+      const int code = error.code().value();
+      if ((code == ENOSPC || code == EDQUOT) && space_.release_piece()) continue;
+      const std::filesystem::path& dir =
+          at_prometheus ? options_.prometheus_file.parent_path() : options_.health_dir;
+      if (code == ENOENT && make_again_if_removed(dir)) continue;
+      accounting_.write_failed(error, 0);
+      return;
+    } catch (const std::exception& error) {
+      accounting_.write_failed(error, 0);
+      return;
+    }
   }
 }
 
@@ -204,7 +239,9 @@ const std::string& HealthPublisher::json_line() {
 
 void HealthPublisher::write_jsonl_line() {
   json_line();
-  // Kept open between ticks (appending); reopened after rotation or a failed write.
+  // Kept open between ticks (appending); reopened after rotation, a failed write, or when it is
+  // no longer at its path (removed with its directory: lines written there would reach nobody).
+  if (jsonl_file_.is_open() && !jsonl_file_.at_its_path()) jsonl_file_.close();
   if (!jsonl_file_.is_open()) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
   if (options_.jsonl_rotate_bytes != 0 &&
       jsonl_file_.size() + json_text_.size() > options_.jsonl_rotate_bytes) {
@@ -228,6 +265,7 @@ void HealthPublisher::count_mcap(const McapRecorder& mcap) noexcept {
   HealthCounters& c = health_.counters;
   c.mcap_messages_written = mcap.messages_written();
   c.mcap_messages_not_written = mcap.messages_not_written();
+  c.mcap_messages_lost = mcap.messages_lost();
   c.mcap_bytes_written = mcap.bytes_written();
 }
 

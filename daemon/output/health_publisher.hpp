@@ -9,6 +9,9 @@
 //     reads half a file), one line appended to health.jsonl (kept open; rotated to
 //     health.jsonl.1 past jsonl_rotate_bytes; a line cut short by a failed write is taken back so
 //     it cannot glue itself to the next). A failure is counted (OutputAccounting), not thrown.
+//     Neither may freeze (docs/reliability.md): a write that fails for want of space takes a
+//     piece of the health reserve (SpaceGuard) and is tried again; a health directory removed
+//     while running is made again; health.jsonl is reopened when it is no longer at its path.
 //
 // Once warm nothing here allocates (names and rendered text are built in place; see
 // docs/performance.md, "Zero allocations"). Owned by the writer thread.
@@ -18,14 +21,15 @@
 #include <string>
 
 #include "core/health.hpp"
-#include "daemon/output/frame_output.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/output/frame_output.hpp"
 #include "daemon/output/mcap_recorder.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/pcap_recorder.hpp"
+#include "daemon/output/space_guard.hpp"
+#include "daemon/output/writer_options.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/ptc/sensor_status_channel.hpp"
-#include "daemon/output/writer_options.hpp"
 
 namespace pandarcap {
 
@@ -43,12 +47,13 @@ struct HealthSources {
   const SensorStatusSample* sensor_status;  // the sensor's latest status over PTC; null: none
   std::uint64_t ptc_requests;
   std::uint64_t ptc_errors;
+  std::uint64_t sensor_status_implausible;
 };
 
 class HealthPublisher {
  public:
   // `options` must outlive the publisher.
-  HealthPublisher(const WriterOptions& options, OutputAccounting& accounting);
+  HealthPublisher(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space);
 
   // At start-up: the file names, the clock the uptime and rates count from, and the buffers.
   void prepare(std::int64_t start_monotonic_ns);
@@ -80,6 +85,7 @@ class HealthPublisher {
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
+  SpaceGuard& space_;
   HealthSnapshot health_;
   std::int64_t start_monotonic_ns_ = 0;
   std::int64_t last_tick_ns_ = 0;

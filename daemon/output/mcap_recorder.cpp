@@ -10,15 +10,27 @@
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
+#include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 #include "daemon/output/rotation.hpp"
 
 namespace pandarcap {
+namespace {
 
-McapRecorder::McapRecorder(const WriterOptions& options, OutputAccounting& accounting)
+// For the space a message asks for: a PointCloud2 point (the pandarcap layout, 23 bytes) and a
+// message's record, chunk and index bytes besides its data, generously.
+constexpr std::uint64_t kMcapPointBytes = 23;
+constexpr std::uint64_t kMcapMessageOverheadBytes = 128;
+
+}  // namespace
+
+McapRecorder::McapRecorder(const WriterOptions& options, OutputAccounting& accounting,
+                           SpaceGuard& space)
     : options_(options),
       accounting_(accounting),
+      space_(space),
       dir_(options.output_dir / "mcap"),
+      volume_(space.watch(dir_)),
       retention_(options.mcap_max_files, options.mcap_max_bytes) {}
 
 McapRecorder::~McapRecorder() = default;
@@ -50,7 +62,11 @@ std::uint64_t McapRecorder::bytes_written() const noexcept {
   return bytes_closed_ + (file_ ? file_->bytes() : 0);
 }
 
-bool McapRecorder::ready(std::uint64_t log_time) {
+bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
+  if (bytes > 0 && !space_.allows(volume_, bytes, refusal_)) {
+    accounting_.write_failed(refusal_, bytes);
+    return false;
+  }
   if (file_->is_open() &&
       (file_->full() || rotation_due(file_->bytes(), opened_monotonic_ns_,
                                      options_.mcap_rotate_bytes, options_.mcap_rotate_seconds))) {
@@ -63,7 +79,13 @@ bool McapRecorder::ready(std::uint64_t log_time) {
   part_path_.assign(final_path_);
   part_path_ += ".part";
   try {
-    file_->open(part_path_, static_cast<std::uint64_t>(realtime_ns()));
+    try {
+      file_->open(part_path_, static_cast<std::uint64_t>(realtime_ns()));
+    } catch (const std::system_error& error) {
+      if (error.code().value() != ENOENT || !make_again_if_removed(dir_)) throw;
+      file_->abandon();
+      file_->open(part_path_, static_cast<std::uint64_t>(realtime_ns()));
+    }
   } catch (const std::exception& error) {
     // Created but not even its header written (a full disk): not left behind.
     file_->abandon();
@@ -95,7 +117,7 @@ void McapRecorder::write_frame(const FrameArena& arena) {
   const auto log_time = static_cast<std::uint64_t>(
       arena.completed_log_ns > 0 ? arena.completed_log_ns : info.start_ns);
   last_log_time_ = log_time;
-  if (!ready(log_time)) {
+  if (!ready(log_time, arena.frame.size * kMcapPointBytes)) {
     ++messages_not_written_;
     return;
   }
@@ -111,11 +133,22 @@ void McapRecorder::write_frame(const FrameArena& arena) {
 }
 
 void McapRecorder::write_packets(const RawBatch& batch) {
+  if (batch.size == 0) return;
+  // Space is asked for once for the whole batch (a refusal counts one failed write).
+  std::uint64_t batch_bytes = 0;
+  for (std::size_t i = 0; i < batch.size; ++i)
+    batch_bytes += batch.packets[i].length + kMcapMessageOverheadBytes;
+  if (!space_.allows(volume_, batch_bytes, refusal_)) {
+    accounting_.write_failed(refusal_, batch_bytes);
+    messages_not_written_ += batch.size;
+    last_log_time_ = static_cast<std::uint64_t>(batch.packets[batch.size - 1].receive_time_ns);
+    return;
+  }
   for (std::size_t i = 0; i < batch.size; ++i) {
     const RawPacket& packet = batch.packets[i];
     const auto log_time = static_cast<std::uint64_t>(packet.receive_time_ns);
     last_log_time_ = log_time;
-    if (!ready(log_time)) {
+    if (!ready(log_time, 0)) {
       messages_not_written_ += batch.size - i;  // the disk is failing: not tried per packet
       return;
     }
@@ -136,7 +169,7 @@ void McapRecorder::write_health(std::string_view json_line, std::int64_t realtim
   if (options_.mcap_replay_time && last_log_time_ == 0) return;
   const std::uint64_t log_time =
       options_.mcap_replay_time ? last_log_time_ : static_cast<std::uint64_t>(realtime);
-  if (!ready(log_time)) {
+  if (!ready(log_time, json_line.size() + kMcapMessageOverheadBytes)) {
     ++messages_not_written_;
     return;
   }
@@ -148,8 +181,41 @@ void McapRecorder::write_health(std::string_view json_line, std::int64_t realtim
   }
 }
 
+void McapRecorder::lose_open_file() {
+  const std::uint64_t messages = file_->messages();
+  file_->abandon();
+  messages_closed_ += messages;  // written, and lost with the file: messages_written stays
+  messages_lost_ += messages;
+  spdlog::warn(
+      "{} is gone (removed, or its directory replaced): its {} messages are lost; the "
+      "next message starts a new file",
+      part_path_, messages);
+}
+
+void McapRecorder::verify_on_disk() {
+  std::uint64_t lost = 0;
+  std::size_t files = 0;
+  for (const auto& [path, messages] : recorded_) {
+    std::error_code error;
+    if (std::filesystem::exists(path, error) || error) continue;
+    lost += messages;
+    ++files;
+  }
+  recorded_.clear();
+  if (files == 0) return;
+  messages_lost_ += lost;
+  spdlog::warn(
+      "{} of this run's MCAP files are gone from {} (removed while running): their {} "
+      "messages are not counted as recorded",
+      files, dir_.string(), lost);
+}
+
 void McapRecorder::flush() {
   if (!file_ || !file_->is_open()) return;
+  if (!file_->at_its_path()) {
+    lose_open_file();
+    return;
+  }
   try {
     file_->flush();
   } catch (const std::exception& error) {
@@ -159,6 +225,10 @@ void McapRecorder::flush() {
 
 void McapRecorder::close() {
   if (!file_ || !file_->is_open()) return;
+  if (!file_->at_its_path()) {
+    lose_open_file();
+    return;
+  }
   try {
     file_->close();
   } catch (const std::exception& error) {
@@ -186,6 +256,11 @@ void McapRecorder::place_finished(std::uint64_t messages) {
   messages_closed_ += messages;
   bytes_closed_ += bytes;
   retention_.add(final_path_, bytes);
+  recorded_.emplace_back(final_path_, messages);
+  if (retention_.limited()) {  // the oldest leave first, as in PcapRecorder
+    while (recorded_.size() > retention_.size())
+      recorded_.pop_front();
+  }
 }
 
 void McapRecorder::rotate() {

@@ -18,27 +18,35 @@
 // next message starts a new file. Owned by the writer thread; buffers are allocated in prepare(),
 // so recording a message allocates nothing; starting a file allocates only its name's time stamp
 // (as the pcap's does) and, with retention on, its entry in the retention list.
+//
+// As the pcap's: nothing is written while mcap/'s file system is down to the space kept for the
+// health files (SpaceGuard; counted as not written), mcap/ removed while running is made again,
+// and messages in a file that vanished are counted as lost (messages_lost), the open file's at
+// every flush, this run's finished files' at the end (verify_on_disk).
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <exception>
 #include <filesystem>
 #include <memory>
 #include <string>
 #include <string_view>
+#include <utility>
 
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/output/output_accounting.hpp"
-#include "daemon/pipeline_types.hpp"
 #include "daemon/output/retention.hpp"
+#include "daemon/output/space_guard.hpp"
 #include "daemon/output/writer_options.hpp"
+#include "daemon/pipeline_types.hpp"
 
 namespace pandarcap {
 
 class McapRecorder {
  public:
   // `options` must outlive the recorder.
-  McapRecorder(const WriterOptions& options, OutputAccounting& accounting);
+  McapRecorder(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space);
   ~McapRecorder();
 
   const std::filesystem::path& directory() const noexcept { return dir_; }
@@ -58,13 +66,22 @@ class McapRecorder {
   // SIGHUP: the open file finished.
   void rotate();
 
+  // This run's finished files no longer on disk: their messages counted as lost. At the end.
+  void verify_on_disk();
+
+  // Every message written (monotonic); those on disk are messages_written() - messages_lost().
   std::uint64_t messages_written() const noexcept;
   std::uint64_t messages_not_written() const noexcept { return messages_not_written_; }
+  std::uint64_t messages_lost() const noexcept { return messages_lost_; }
   std::uint64_t bytes_written() const noexcept;
 
  private:
   // The file to write a message of `log_time` to: rotated when due, opened when none is.
-  bool ready(std::uint64_t log_time);
+  // The file to write a message of `log_time` and about `bytes` to: rotated when due, opened when
+  // none is; false (counted by the caller) when none can be, or space is short.
+  bool ready(std::uint64_t log_time, std::uint64_t bytes);
+  // The open file is no longer at its path: its messages are lost, the file let go.
+  void lose_open_file();
   void failed(const std::exception& error);
   void finish_file();
   // The finished .part holding `messages`: put in place under its final name, counted and listed
@@ -73,14 +90,19 @@ class McapRecorder {
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
+  SpaceGuard& space_;
   std::filesystem::path dir_;
+  int volume_;  // dir_'s file system, for space_
   Retention retention_;
+  std::deque<std::pair<std::string, std::uint64_t>> recorded_;  // as PcapRecorder's
+  std::string refusal_;
   std::unique_ptr<McapFile> file_;
   std::string final_path_, part_path_;
   std::int64_t opened_monotonic_ns_ = 0;
   std::uint64_t next_index_ = 0;
   std::uint64_t last_log_time_ = 0;  // of the latest frame or packet: replays' health times
-  std::uint64_t messages_closed_ = 0, messages_not_written_ = 0, bytes_closed_ = 0;
+  std::uint64_t messages_closed_ = 0, messages_not_written_ = 0, messages_lost_ = 0;
+  std::uint64_t bytes_closed_ = 0;
 };
 
 }  // namespace pandarcap

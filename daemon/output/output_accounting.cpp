@@ -7,10 +7,10 @@
 
 namespace pandarcap {
 
-void OutputAccounting::write_failed(const std::exception& error, std::uint64_t bytes) {
+void OutputAccounting::write_failed(std::string_view reason, std::uint64_t bytes) {
   ++write_errors_;
   bytes_not_written_ += bytes;
-  last_error_ = error.what();
+  last_error_.assign(reason);
   const std::int64_t now = monotonic_ns();
   if (last_error_log_ns_ < 0 || now - last_error_log_ns_ >= 10'000'000'000) {
     spdlog::error("write failed: {} ({} write errors so far)", last_error_, write_errors_);

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <exception>
 #include <string>
+#include <string_view>
 
 namespace pandarcap {
 
@@ -16,7 +17,11 @@ class OutputAccounting {
  public:
   // A write failed: one write error, `bytes` not written, logged unless one was within 10 s.
   // The error's text is kept for the health reason (its capacity reused).
-  void write_failed(const std::exception& error, std::uint64_t bytes);
+  void write_failed(const std::exception& error, std::uint64_t bytes) {
+    write_failed(std::string_view(error.what()), bytes);
+  }
+  // The same with the reason in words (a write refused to keep space for health).
+  void write_failed(std::string_view reason, std::uint64_t bytes);
   // Bytes given up without trying to write them (the rest of a batch after the disk failed).
   void not_written(std::uint64_t bytes) noexcept { bytes_not_written_ += bytes; }
 

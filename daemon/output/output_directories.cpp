@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -12,6 +13,7 @@
 #include <system_error>
 
 #include "daemon/io/errors.hpp"
+#include "daemon/output/space_guard.hpp"
 
 namespace pandarcap {
 namespace {
@@ -97,6 +99,53 @@ OutputDirectoryLock::OutputDirectoryLock(const fs::path& directory) {
   if (::ftruncate(fd_.get(), 0) != 0 ||
       ::pwrite(fd_.get(), pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
     // The lock holds without the pid; only the message would lack it.
+  }
+}
+
+std::vector<std::string> space_problems(const WriterOptions& o, std::vector<std::string>& report) {
+  std::vector<std::string> problems;
+  std::vector<dev_t> seen;  // one line per file system
+  const std::uint64_t needed = kOutputFloorBytes + kHealthReserveBytes;
+  const auto check = [&](const char* what, const fs::path& dir) {
+    // The nearest existing directory tells the file system (the rest is made at start).
+    fs::path at = dir;
+    struct stat info {};
+    while (::stat(at.c_str(), &info) != 0 && at.has_parent_path() && at.parent_path() != at)
+      at = at.parent_path();
+    if (std::find(seen.begin(), seen.end(), info.st_dev) != seen.end()) return;
+    seen.push_back(info.st_dev);
+    const auto free = free_bytes_at(dir);
+    if (!free) return;
+    const std::string line = fmt::format("{} '{}': {} MiB free, {} MiB needed", what, dir.string(),
+                                         *free >> 20, needed >> 20);
+    report.push_back(line);
+    if (*free < needed) problems.push_back(line + " (the rest is kept for the health files)");
+  };
+  if (o.frames) check("frames directory", o.output_dir / "frames");
+  if (o.pcap) check("recording directory", o.output_dir / "raw");
+  if (o.mcap) check("MCAP directory", o.output_dir / "mcap");
+  if (o.jsonl || o.prometheus) check("health directory", o.health_dir);
+  if (o.prometheus && o.prometheus_file.has_parent_path())
+    check("textfile directory", o.prometheus_file.parent_path());
+  return problems;
+}
+
+bool make_again_if_removed(const std::filesystem::path& directory) noexcept {
+  std::error_code error;
+  if (std::filesystem::is_directory(directory, error)) return false;
+  std::filesystem::create_directories(directory, error);
+  if (error) return false;
+  spdlog::warn("{} was removed while running: made again", directory.string());
+  return true;
+}
+
+void open_in_directory(OutputFile& file, std::string_view path, OutputFile::Mode mode,
+                       const std::filesystem::path& directory) {
+  try {
+    file.open(path, mode);
+  } catch (const std::system_error& error) {
+    if (error.code().value() != ENOENT || !make_again_if_removed(directory)) throw;
+    file.open(path, mode);
   }
 }
 

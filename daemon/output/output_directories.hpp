@@ -17,8 +17,10 @@
 #include <filesystem>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "daemon/io/file_output.hpp"
 #include "daemon/io/unique_fd.hpp"
 #include "daemon/output/writer.hpp"
 
@@ -26,6 +28,24 @@ namespace pandarcap {
 
 // One line per problem ("frames directory '/x/frames': '/x' is not a directory"); empty: fine.
 std::vector<std::string> output_problems(const WriterOptions& options);
+
+// The free space on each output's file system against what the start needs to begin writing:
+// kOutputFloorBytes + kHealthReserveBytes (space_guard.hpp). One line per file system in
+// `report` ("frames directory '/x/frames': 812 MiB free, 40 MiB needed"); returns the problems
+// (the same line, for each file system short of it). `--check-config` prints both; the start
+// refuses with the problems (exit 73).
+std::vector<std::string> space_problems(const WriterOptions& options,
+                                        std::vector<std::string>& report);
+
+// A directory of ours removed while the daemon runs (a USB disk pulled, a clean-up script): made
+// again and said in the log. True when it was missing and exists now; false when it was there
+// (the failure was something else) or cannot be made.
+bool make_again_if_removed(const std::filesystem::path& directory) noexcept;
+
+// Opens `file` at `path`, which is in `directory`: when the open fails because the directory
+// was removed, it is made again and the open tried once more. Throws std::system_error.
+void open_in_directory(OutputFile& file, std::string_view path, OutputFile::Mode mode,
+                       const std::filesystem::path& directory);
 
 class OutputDirectoryBusy : public std::runtime_error {
  public:

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <cerrno>
 #include <span>
 #include <stdexcept>
 #include <system_error>
@@ -11,14 +12,18 @@
 #include "core/text_file.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 #include "daemon/output/rotation.hpp"
 
 namespace pandarcap {
-PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting)
+PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting,
+                           SpaceGuard& space)
     : options_(options),
       accounting_(accounting),
+      space_(space),
       dir_(options.output_dir / "raw"),
+      volume_(space.watch(dir_)),
       retention_(options.pcap_max_files, options.pcap_max_bytes),
       record_buffer_(kPcapBufferBytes) {}
 
@@ -55,7 +60,12 @@ void PcapRecorder::open(std::int64_t first_packet_ns) {
                     .native();
   const std::filesystem::path part = final_path_ + ".part";
   try {
-    pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_);
+    try {
+      pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_);
+    } catch (const std::system_error& error) {
+      if (error.code().value() != ENOENT || !make_again_if_removed(dir_)) throw;
+      pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_);
+    }
   } catch (...) {
     // Created but not even its header written (a full disk): not left behind, one per attempt.
     std::error_code ignored;
@@ -67,6 +77,10 @@ void PcapRecorder::open(std::int64_t first_packet_ns) {
 
 void PcapRecorder::close() {
   if (!pcap_) return;
+  if (!pcap_->at_its_path()) {
+    lose_open_file();
+    return;
+  }
   try {
     // close() flushes first; a failing flush leaves the file open, to be cut back to whole
     // records by abandon().
@@ -87,11 +101,46 @@ void PcapRecorder::rotate() {
 
 void PcapRecorder::flush() {
   if (!pcap_) return;
+  if (!pcap_->at_its_path()) {
+    lose_open_file();
+    return;
+  }
   try {
     pcap_->flush();
   } catch (const std::exception& error) {
     abandon(error, 0);
   }
+}
+
+void PcapRecorder::lose_open_file() {
+  // Whatever it holds, and what waits in its buffer, reaches no reader.
+  const std::uint64_t flushed = pcap_->flushed_records();
+  const PcapWriter::Dropped dropped = pcap_->abandon();
+  packets_lost_ += flushed + dropped.records;
+  bytes_closed_ += pcap_->flushed_bytes();
+  spdlog::warn(
+      "{} is gone (removed, or its directory replaced): its {} packets are lost; the "
+      "next packets start a new recording",
+      pcap_->path(), flushed + dropped.records);
+  pcap_.reset();
+}
+
+void PcapRecorder::verify_on_disk() {
+  std::uint64_t lost = 0;
+  std::size_t files = 0;
+  for (const auto& [path, packets] : recorded_) {
+    std::error_code error;
+    if (std::filesystem::exists(path, error) || error) continue;
+    lost += packets;
+    ++files;
+  }
+  recorded_.clear();
+  if (files == 0) return;
+  packets_lost_ += lost;
+  spdlog::warn(
+      "{} of this run's recordings are gone from {} (removed while running): their {} "
+      "packets are not counted as recorded",
+      files, dir_.string(), lost);
 }
 
 void PcapRecorder::abandon(const std::exception& error, std::uint64_t failed_bytes) {
@@ -114,6 +163,12 @@ void PcapRecorder::finish_file() {
       accounting_.put_in_place(part, final_path_);
       bytes_closed_ += pcap_->flushed_bytes();
       retention_.add(final_path_, pcap_->flushed_bytes());
+      recorded_.emplace_back(final_path_, pcap_->flushed_records());
+      // Retention removes the oldest first; this run's kept files are the newest it lists.
+      if (retention_.limited()) {
+        while (recorded_.size() > retention_.size())
+          recorded_.pop_front();
+      }
     }
   } catch (const std::exception& error) {
     accounting_.write_failed(error, 0);
@@ -122,6 +177,15 @@ void PcapRecorder::finish_file() {
 }
 
 void PcapRecorder::write(const RawBatch& batch) {
+  // The batch as the file would take it: a record header and synthesised headers per packet.
+  std::uint64_t batch_bytes = 0;
+  for (std::size_t i = 0; i < batch.size; ++i)
+    batch_bytes += batch.packets[i].length + kPcapRecordOverheadBytes;
+  if (batch.size > 0 && !space_.allows(volume_, batch_bytes, refusal_)) {
+    packets_not_written_ += batch.size;
+    accounting_.write_failed(refusal_, batch_bytes);
+    return;
+  }
   bool failed = false;  // the disk failed on this batch: the rest is not tried (counted)
   for (std::size_t i = 0; i < batch.size; ++i) {
     const RawPacket& packet = batch.packets[i];

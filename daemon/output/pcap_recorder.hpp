@@ -10,7 +10,15 @@
 // write (a full disk) cuts the file back to the last flush, which ends on a whole record, and
 // closes it (readers never choke on a cut record); the records taken back and the rest of the
 // batch are counted as not written, and the next batch tries a new file. Each batch is flushed
-// whole, so a crash loses at most the batch being written.
+// whole, so a crash loses at most the batch being written. A batch is not written while raw/'s
+// file system is down to the space kept for the health files (SpaceGuard): counted as not
+// written.
+//
+// Recordings that vanish (raw/ removed while running, a remount over it): raw/ is made again at
+// the next file. The open recording is checked at every flush; once it is no longer at its path
+// its packets are lost (packets_lost(), no longer counted as on disk) and the next batch starts a
+// new file. This run's finished recordings are checked again at the end (verify_on_disk), so the
+// exit summary's "packets recorded" is what is on disk, less what retention removed on purpose.
 //
 // The calibration the recordings are decoded with is saved beside them (save_calibration).
 // Owned by the writer thread; once warm, recording a batch allocates nothing but a new file's
@@ -18,25 +26,28 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <exception>
 #include <filesystem>
 #include <memory>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "daemon/output/output_accounting.hpp"
+#include "daemon/output/retention.hpp"
+#include "daemon/output/space_guard.hpp"
+#include "daemon/output/writer_options.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
 #include "daemon/pipeline_types.hpp"
-#include "daemon/output/retention.hpp"
-#include "daemon/output/writer_options.hpp"
 
 namespace pandarcap {
 
 class PcapRecorder {
  public:
   // `options` must outlive the recorder.
-  PcapRecorder(const WriterOptions& options, OutputAccounting& accounting);
+  PcapRecorder(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space);
   ~PcapRecorder();
 
   const std::filesystem::path& directory() const noexcept { return dir_; }
@@ -60,27 +71,42 @@ class PcapRecorder {
   // SIGHUP: logged, and the open recording finished.
   void rotate();
 
+  // This run's finished recordings that are no longer on disk (removed by someone else): their
+  // packets counted as lost. At the end, after close().
+  void verify_on_disk();
+
+  // Every packet written to a recording (monotonic, as a Prometheus counter must be): those on
+  // disk are packets_written() - packets_lost().
   std::uint64_t packets_written() const noexcept { return packets_written_; }
   std::uint64_t packets_not_written() const noexcept { return packets_not_written_; }
+  std::uint64_t packets_lost() const noexcept { return packets_lost_; }
   // In finished recordings and in the open one.
   std::uint64_t bytes_written() const noexcept;
 
  private:
   void open(std::int64_t first_packet_ns);
+  // The open recording is no longer at its path: its packets are lost, the file let go.
+  void lose_open_file();
   // After a failed write: cut the file back to whole records, count what was lost, close it.
   void abandon(const std::exception& error, std::uint64_t failed_bytes);
   void finish_file();  // rename .part (or remove it if it holds no record)
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
+  SpaceGuard& space_;
   std::filesystem::path dir_;
+  int volume_;  // dir_'s file system, for space_
   Retention retention_;
+  // This run's finished recordings still kept (retention removes the oldest first: they leave
+  // the front), with their packets.
+  std::deque<std::pair<std::string, std::uint64_t>> recorded_;
+  std::string refusal_;
   std::vector<char> record_buffer_;  // the open recording's buffer, allocated once
   std::unique_ptr<PcapWriter> pcap_;
   std::string final_path_;
   std::int64_t opened_monotonic_ns_ = 0;
   std::uint64_t next_index_ = 0;  // the next recording's number (continues across runs)
-  std::uint64_t packets_written_ = 0, packets_not_written_ = 0;
+  std::uint64_t packets_written_ = 0, packets_not_written_ = 0, packets_lost_ = 0;
   std::uint64_t bytes_closed_ = 0;  // in finished files; the open one adds its own
 };
 

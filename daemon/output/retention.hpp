@@ -23,6 +23,8 @@ class Retention {
       : max_files_(max_files), max_bytes_(max_bytes) {}
 
   bool limited() const noexcept { return max_files_ != 0 || max_bytes_ != 0; }
+  // Files listed (kept); the newest are the last added.
+  std::size_t size() const noexcept { return files_.size(); }
 
   // A file just finished (the newest): listed, then the oldest removed while over a limit.
   void add(std::string_view path, std::uint64_t bytes) {

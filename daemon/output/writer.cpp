@@ -13,6 +13,7 @@
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 
 namespace pandarcap {
@@ -38,10 +39,11 @@ Writer::Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQue
       raw_back_(raw_back),
       receive_(receive),
       live_(live),
-      frames_(options_, accounting_),
-      pcap_(options_, accounting_),
-      mcap_(options_, accounting_),
-      health_(options_, accounting_),
+      space_(options_.prometheus || options_.jsonl ? options_.health_dir : std::filesystem::path()),
+      frames_(options_, accounting_, space_),
+      pcap_(options_, accounting_, space_),
+      mcap_(options_, accounting_, space_),
+      health_(options_, accounting_, space_),
       sensor_status_(sensor_status) {}
 
 Writer::~Writer() = default;
@@ -51,6 +53,12 @@ void Writer::prepare() {
   decode_.monotonic_ns = start;
   health_.prepare(start);
   std::filesystem::create_directories(options_.health_dir);
+  // Room to write, and the health files' room, first: a disk short of them fails the start (73),
+  // as --check-config says it would.
+  std::vector<std::string> space;
+  const std::vector<std::string> short_of_space = space_problems(options_, space);
+  if (!short_of_space.empty()) throw std::runtime_error(short_of_space.front());
+  space_.prepare();
   if (options_.prometheus && options_.prometheus_file.has_parent_path()) {
     std::filesystem::create_directories(options_.prometheus_file.parent_path());
   }
@@ -86,18 +94,20 @@ void Writer::prepare() {
 }
 
 HealthSources Writer::sources(std::int64_t now) const noexcept {
-  return HealthSources{.receive = receive_,
-                       .decode = decode_,
-                       .frames = frames_,
-                       .pcap = pcap_,
-                       .mcap = mcap_,
-                       .accounting = accounting_,
-                       .writer_wakeups = wakeups_,
-                       .seconds_since_last_packet = seconds_since_last_packet(now),
-                       .silent = silent(now),
-                       .sensor_status = latest_sensor_status_ ? &*latest_sensor_status_ : nullptr,
-                       .ptc_requests = sensor_status_.requests.load(std::memory_order_relaxed),
-                       .ptc_errors = sensor_status_.errors.load(std::memory_order_relaxed)};
+  return HealthSources{
+      .receive = receive_,
+      .decode = decode_,
+      .frames = frames_,
+      .pcap = pcap_,
+      .mcap = mcap_,
+      .accounting = accounting_,
+      .writer_wakeups = wakeups_,
+      .seconds_since_last_packet = seconds_since_last_packet(now),
+      .silent = silent(now),
+      .sensor_status = latest_sensor_status_ ? &*latest_sensor_status_ : nullptr,
+      .ptc_requests = sensor_status_.requests.load(std::memory_order_relaxed),
+      .ptc_errors = sensor_status_.errors.load(std::memory_order_relaxed),
+      .sensor_status_implausible = sensor_status_.implausible.load(std::memory_order_relaxed)};
 }
 
 void Writer::take_sensor_status() noexcept {
@@ -115,6 +125,7 @@ void Writer::write_health() {
   health_.remember(decode_, now);
   log_fragments(now);
   reported_silent_ = silent(now);
+  space_.tend();
   health_.write();
   if (options_.mcap) {
     mcap_.write_health(health_.json_line(), realtime_ns());
@@ -225,11 +236,16 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
   }
   alloc::mark_this_thread_cold();
   pcap_.close();
+  // What the recordings hold on disk now, not what was written to them: files of this run
+  // removed while it ran are counted as lost.
+  pcap_.verify_on_disk();
   write_health();  // the final record goes into the MCAP file too, before it is closed
   mcap_.close();
+  mcap_.verify_on_disk();
   // The exit summary (final_health) counts that last message too; health.jsonl's last line,
   // written before it, cannot.
   health_.count_mcap(mcap_);
+  space_.remove();  // a clean end: the health files' room is not needed any more
 }
 
 }  // namespace pandarcap

@@ -8,17 +8,18 @@
 //   - with output.mcap, frames, health and (output.mcap_packets) raw packets as MCAP files in
 //     DIR/mcap/ (daemon/output/mcap_recorder.hpp);
 //   - every second the health record, as DIR/health/pandarcap.prom and a line of
-//     DIR/health/health.jsonl (daemon/output/health_publisher.hpp); and at once, outside that schedule,
-//     when packets stop for longer than the no-data timeout or start again (checked at every
-//     wake-up, at least every 100 ms), the schedule restarting from there.
-// At start-up (prepare()) it deals with what an interrupted run left (daemon/output/output_leftovers.hpp)
-// and adopts earlier runs' files: numbers continue across runs and retention counts them, so
-// restarts and crash loops can neither repeat a name nor fill the disk. Nothing is ever replaced.
+//     DIR/health/health.jsonl (daemon/output/health_publisher.hpp); and at once, outside that
+//     schedule, when packets stop for longer than the no-data timeout or start again (checked at
+//     every wake-up, at least every 100 ms), the schedule restarting from there.
+// At start-up (prepare()) it deals with what an interrupted run left
+// (daemon/output/output_leftovers.hpp) and adopts earlier runs' files: numbers continue across runs
+// and retention counts them, so restarts and crash loops can neither repeat a name nor fill the
+// disk. Nothing is ever replaced.
 //
 // Arenas and batches go back to the decoder as soon as they are written. A write error is
-// counted (write_errors, bytes_not_written; daemon/output/output_accounting.hpp), logged at most every
-// 10 s, and makes the state "degraded" with the error as the reason; the thread carries on with
-// the next file. A slow disk holds arenas longer, so the decoder runs out and drops frames
+// counted (write_errors, bytes_not_written; daemon/output/output_accounting.hpp), logged at most
+// every 10 s, and makes the state "degraded" with the error as the reason; the thread carries on
+// with the next file. A slow disk holds arenas longer, so the decoder runs out and drops frames
 // (counted) — the receive thread never waits for the disk. Once warm, the loop allocates nothing.
 #pragma once
 
@@ -31,9 +32,10 @@
 #include "daemon/output/mcap_recorder.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/pcap_recorder.hpp"
+#include "daemon/output/space_guard.hpp"
+#include "daemon/output/writer_options.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/ptc/sensor_status_channel.hpp"
-#include "daemon/output/writer_options.hpp"
 
 namespace pandarcap {
 
@@ -84,6 +86,7 @@ class Writer {
   const LiveClock& live_;
   // The parts, which count their failures in accounting_ and read options_ (declared first).
   OutputAccounting accounting_;
+  SpaceGuard space_;  // the health files' room, whatever fills their disk
   FrameOutput frames_;
   PcapRecorder pcap_;
   McapRecorder mcap_;

@@ -1,8 +1,14 @@
 #include "daemon/pcap/capture_reader.hpp"
 
+#include <fcntl.h>
 #include <pcap/pcap.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 #include <limits>
 
 #include "core/units.hpp"
@@ -161,11 +167,31 @@ Endpoint to_endpoint(const sockaddr_in& address) noexcept {
 
 CaptureReader::CaptureReader(const std::string& path, Options options)
     : path_(path), options_(options) {
+  // Opened here rather than by libpcap: O_NONBLOCK so that a FIFO with no writer cannot hold
+  // the start (the daemon's signals are blocked by then), and anything but a regular file is
+  // refused before it is read.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) {
+    throw CaptureError("cannot open capture '" + path + "': " + std::strerror(errno));
+  }
+  struct stat info {};
+  if (::fstat(fd, &info) != 0 || !S_ISREG(info.st_mode)) {
+    ::close(fd);
+    throw CaptureError("cannot open capture '" + path +
+                       "': not a regular file (a FIFO, socket, device or directory)");
+  }
+  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+  FILE* file = ::fdopen(fd, "rb");
+  if (file == nullptr) {
+    ::close(fd);
+    throw CaptureError("cannot open capture '" + path + "': " + std::strerror(errno));
+  }
   char errbuf[PCAP_ERRBUF_SIZE] = {};
   // Nanosecond precision: libpcap scales microsecond files up, and keeps pcapng's finer units.
-  handle_ =
-      pcap_open_offline_with_tstamp_precision(path.c_str(), PCAP_TSTAMP_PRECISION_NANO, errbuf);
+  // Once open, libpcap owns the FILE (pcap_close closes it); a failed open leaves it ours.
+  handle_ = pcap_fopen_offline_with_tstamp_precision(file, PCAP_TSTAMP_PRECISION_NANO, errbuf);
   if (handle_ == nullptr) {
+    std::fclose(file);
     throw CaptureError("cannot open capture '" + path + "': " + errbuf);
   }
   // Always nano with libpcap >= 1.5 (the open fails otherwise); checked so that a microsecond

@@ -28,6 +28,9 @@ namespace pandarcap {
 // The classic-pcap layout PcapWriter writes; core/pcap_recovery.cpp reads it back.
 inline constexpr std::size_t kPcapGlobalHeaderBytes = 24;
 inline constexpr std::size_t kPcapRecordHeaderBytes = 16;
+// A record's bytes besides the UDP payload: its header and the Ethernet, IPv4 and UDP headers
+// written in front of the payload (14 + 20 + 8).
+inline constexpr std::size_t kPcapRecordOverheadBytes = kPcapRecordHeaderBytes + 42;
 // Not 65535: the largest record (a 65507-byte payload) is a 65549-byte frame, and readers cut
 // records to the file's snaplen. 262144 is libpcap's maximum and tcpdump's default.
 inline constexpr std::uint32_t kPcapSnaplen = 262144;
@@ -84,6 +87,8 @@ class PcapWriter {
   std::uint64_t flushed_records() const noexcept { return flushed_records_; }
   std::uint64_t flushed_bytes() const noexcept { return flushed_bytes_; }
   const std::string& path() const noexcept { return path_; }
+  // The file is still where its path says (see OutputFile::at_its_path).
+  bool at_its_path() const noexcept { return file_.at_its_path(); }
 
  private:
   // Appends to the buffer, or straight to the file when there is none (or `bytes` is larger).

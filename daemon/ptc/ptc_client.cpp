@@ -25,9 +25,11 @@ int remaining_ms(Clock::time_point deadline) {
   return left <= 0 ? 0 : static_cast<int>(std::min<long long>(left, 60'000));
 }
 
-// Waits for `events` on `fd` until `deadline`: true when ready, false at the deadline.
-bool wait_for(int fd, short events, Clock::time_point deadline) {
+// Waits for `events` on `fd` until `deadline`: true when ready, false at the deadline or when
+// `cancel` is raised (a signal's EINTR brings the wait back to look).
+bool wait_for(int fd, short events, Clock::time_point deadline, const std::atomic<bool>* cancel) {
   for (;;) {
+    if (cancel != nullptr && cancel->load(std::memory_order_relaxed)) return false;
     pollfd p{fd, events, 0};
     const int n = ::poll(&p, 1, remaining_ms(deadline));
     if (n > 0) return true;
@@ -68,7 +70,7 @@ std::optional<PtcError> PtcClient::connect(ptc::Command command) {
       return fail(command, ptc::ErrorKind::kConnectFailed,
                   fmt::format("cannot connect: {}", std::strerror(errno)));
     }
-    if (!wait_for(fd.get(), POLLOUT, deadline)) {
+    if (!wait_for(fd.get(), POLLOUT, deadline, options_.cancel)) {
       return fail(command, ptc::ErrorKind::kTimeout,
                   fmt::format("no connection within {} ms (sensor off, or another address?)",
                               options_.timeout.count()));
@@ -112,7 +114,7 @@ PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> 
     if (n > 0) {
       sent += static_cast<std::size_t>(n);
     } else if (n < 0 && (errno == EAGAIN || errno == EINTR)) {
-      if (!wait_for(fd_.get(), POLLOUT, deadline)) {
+      if (!wait_for(fd_.get(), POLLOUT, deadline, options_.cancel)) {
         reply.error = timed_out("sending the request", sent, out.size());
         return reply;
       }
@@ -135,7 +137,8 @@ PtcReply PtcClient::request(ptc::Command command, std::span<const std::uint8_t> 
             command, ptc::ErrorKind::kIncomplete,
             fmt::format("the sensor closed the connection {} ({} of {} bytes)", stage, got, size));
       } else if (errno == EAGAIN || errno == EINTR) {
-        if (!wait_for(fd_.get(), POLLIN, deadline)) return timed_out(stage, got, size);
+        if (!wait_for(fd_.get(), POLLIN, deadline, options_.cancel))
+          return timed_out(stage, got, size);
       } else {
         return fail(command, ptc::ErrorKind::kIncomplete,
                     fmt::format("connection failed {}: {}", stage, std::strerror(errno)));

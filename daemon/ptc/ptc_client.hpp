@@ -16,6 +16,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <span>
@@ -32,6 +33,9 @@ struct PtcClientOptions {
   std::uint16_t port = ptc::kDefaultPort;
   std::chrono::milliseconds timeout{2000};      // to connect, and then for the whole response
   std::uint32_t max_payload_bytes = 64 * 1024;  // a calibration table is ~1.5 kB
+  // When set and raised (by a signal handler, which also interrupts the wait), a request in
+  // progress gives up at once, as at its deadline.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 struct PtcError {

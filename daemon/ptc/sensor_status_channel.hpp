@@ -25,6 +25,8 @@ struct SensorStatusChannel {
   ringbuf::SpscQueue<SensorStatusSample> samples{8};
   std::atomic<std::uint64_t> requests{0};  // PTC requests since start-up (start-up's included)
   std::atomic<std::uint64_t> errors{0};
+  // Statuses with a field outside its physical range (core/ptc/status_plausibility.hpp).
+  std::atomic<std::uint64_t> implausible{0};
 };
 
 }  // namespace pandarcap

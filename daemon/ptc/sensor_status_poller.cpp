@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/ptc/status_plausibility.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/ptc/sensor_queries.hpp"
 
@@ -60,6 +61,19 @@ void SensorStatusPoller::poll_once(std::uint64_t round) {
                    status.extra_bytes);
     }
     answering_ = true;
+    const std::uint32_t implausible = ptc::implausible_fields(*status.value);
+    if (implausible != 0) channel_.implausible.fetch_add(1, std::memory_order_relaxed);
+    if (implausible != implausible_) {
+      // Once per change, not per answer: the health says it every second.
+      if (implausible != 0) {
+        std::string what;
+        ptc::describe_implausible(*status.value, implausible, what);
+        spdlog::warn("sensor status: implausible values left out: {}", what);
+      } else {
+        spdlog::info("sensor status: every value plausible again");
+      }
+      implausible_ = implausible;
+    }
     channel_.samples.try_push(
         SensorStatusSample{monotonic_ns(), *status.value, clock_source_, ptp_offset_ns});
     return;

@@ -47,6 +47,7 @@ class SensorStatusPoller {
   // The last status request was answered, or none failed yet: a failure after an answer is
   // warned about once, an answer after a failure said once.
   bool answering_ = true;
+  std::uint32_t implausible_ = 0;  // the last status's implausible fields, logged when they change
   std::mutex mutex_;
   std::condition_variable wake_;
   bool stop_ = false;

@@ -1,0 +1,303 @@
+// A glitch costs a packet, not a revolution (core/stream_decoder.hpp): the rule that tells an
+// isolated outlier from a real change, at its boundaries; duplicates decoded once; and streams
+// with a glitch every few hundred packets cut into as many whole revolutions as clean ones.
+#include <array>
+#include <catch2/catch.hpp>
+#include <cstdint>
+#include <functional>
+#include <random>
+#include <vector>
+
+#include "core/calibration.hpp"
+#include "core/frame_collector.hpp"
+#include "core/packet_time.hpp"
+#include "core/sim/packet_builder.hpp"
+#include "core/sim/synthetic_sensor.hpp"
+#include "core/stream_decoder.hpp"
+
+using namespace pandarcap;
+
+namespace {
+
+constexpr std::int64_t kMs = 1'000'000;
+// 600 RPM: 36000 cdeg per 100 ms, 0.36 cdeg per µs.
+constexpr std::int64_t kRevolutionNs = 100 * kMs;
+
+RotationPoint at(int azimuth_cdeg, std::int64_t t0_ns, bool valid = true, int rpm = 600) {
+  return {static_cast<std::uint16_t>(((azimuth_cdeg % 36000) + 36000) % 36000), t0_ns, valid,
+          static_cast<std::uint16_t>(rpm)};
+}
+
+// A stream of the simulated sensor whose packets `alter` may change (their contents) or drop
+// (return false), fed to a StreamDecoder: its counters and whole frames.
+struct Outcome {
+  StreamStats stats;
+  AssemblerStats frames;
+  std::uint64_t points_in_frames = 0;
+};
+Outcome run(int packets, const std::function<bool(int, PacketContents&)>& alter,
+            SyntheticSensorConfig config = {}) {
+  SyntheticSensor sensor(config);
+  std::uint64_t points = 0;
+  FrameCollector frames(3, kDefaultFrameCapacityPoints,
+                        [&](const Frame& frame) { points += frame.size; });
+  StreamDecoder decoder(Calibration::nominal(), {}, frames);
+  std::array<std::uint8_t, kMaxPacketBytes> buffer{};
+  for (int k = 0; k < packets; ++k) {
+    PacketContents contents = sensor.next_contents();
+    if (!alter(k, contents)) continue;
+    const std::size_t size = encode(contents, buffer);
+    REQUIRE(decoder.process(std::span(buffer).first(size)) == RejectReason::kNone);
+  }
+  decoder.flush();
+  return {decoder.stats(), decoder.frames(), points};
+}
+
+// Moves the packet's tail time by `shift_ns` (its UTC date-time and µs field).
+void shift_time(PacketContents& contents, std::int64_t shift_ns) {
+  PacketClock clock;
+  const PacketTime time = clock.convert(contents.tail.utc, contents.tail.timestamp_us);
+  const std::int64_t t = time.t0_ns + shift_ns;
+  contents.tail.utc = tail_datetime_from_unix(t / 1'000'000'000);
+  contents.tail.timestamp_us = static_cast<std::uint32_t>((t % 1'000'000'000) / 1000);
+}
+
+void shift_azimuth(PacketContents& contents, int shift_cdeg) {
+  for (auto& azimuth : contents.azimuth_cdeg)
+    azimuth = static_cast<std::uint16_t>((azimuth + shift_cdeg + 36000) % 36000);
+}
+
+const auto kClean = [](int, PacketContents&) { return true; };
+
+}  // namespace
+
+TEST_CASE("follows: a packet follows when its azimuth advanced as its time did, within 2° + 2 %",
+          "[stream][glitch]") {
+  const RotationPoint last = at(10000, 0);
+  // 10 ms at 600 RPM is 36°: 3600 cdeg, tolerance 200 + 72 cdeg.
+  CHECK(follows(last, at(10000 + 3600, 10 * kMs)));
+  CHECK(follows(last, at(10000 + 3600 + 272, 10 * kMs)));
+  CHECK_FALSE(follows(last, at(10000 + 3600 + 273, 10 * kMs)));
+  CHECK(follows(last, at(10000 + 3600 - 272, 10 * kMs)));
+  CHECK_FALSE(follows(last, at(10000 + 3600 - 273, 10 * kMs)));
+  // A swapped pair: time and azimuth both a packet back.
+  CHECK(follows(last, at(10000 - 100, -277'800)));
+  // Half a revolution of time, even with the azimuth that goes with it, is a gap.
+  CHECK(follows(last, at(10000 + 18000 - 36, kRevolutionNs / 2 - 100'000)));
+  CHECK_FALSE(follows(last, at(10000 + 18000, kRevolutionNs / 2 + 1)));
+  CHECK_FALSE(follows(last, at(10000, kRevolutionNs)));  // a whole revolution lost
+  // The speed is the last packet's: at 1200 RPM 10 ms is 72°.
+  CHECK(follows(at(0, 0, true, 1200), at(7200, 10 * kMs)));
+  CHECK_FALSE(follows(at(0, 0, true, 600), at(7200, 10 * kMs)));
+}
+
+TEST_CASE("follows: without usable times, a step of at most 90° either way", "[stream][glitch]") {
+  for (const auto& [last, name] : {std::pair{at(5000, 0, false), "invalid time"},
+                                   std::pair{at(5000, 0, true, 0), "no speed"}}) {
+    INFO(name);
+    CHECK(follows(last, at(5000 + 9000, 0, false)));
+    CHECK_FALSE(follows(last, at(5000 + 9001, 0, false)));
+    CHECK(follows(last, at(5000 - 9000, 0, false)));
+    CHECK_FALSE(follows(last, at(5000 - 9001, 0, false)));
+  }
+  // A frozen clock (the same time): the azimuth alone, too.
+  CHECK(follows(at(5000, 7 * kMs), at(5000 + 4000, 7 * kMs)));
+  CHECK_FALSE(follows(at(5000, 7 * kMs), at(5000 + 9500, 7 * kMs)));
+}
+
+TEST_CASE("an isolated time glitch is placed at its azimuth's time: no frame or point lost",
+          "[stream][glitch]") {
+  const Outcome clean = run(7200, kClean);
+  REQUIRE(clean.frames.frames_complete >= 18);
+  for (const std::int64_t shift : {-5 * kMs, -2000 * kMs, 60'000 * kMs, 20 * kMs}) {
+    INFO("packet 3000's time moved by " << shift / kMs << " ms");
+    const Outcome glitch = run(7200, [&](int k, PacketContents& c) {
+      if (k == 3000) shift_time(c, shift);
+      return true;
+    });
+    CHECK(glitch.stats.outliers == 1);
+    CHECK(glitch.frames.discontinuities == 0);
+    CHECK(glitch.frames.frames_complete == clean.frames.frames_complete);
+    CHECK(glitch.frames.frames_partial == clean.frames.frames_partial);
+    CHECK(glitch.stats.points == clean.stats.points);
+    CHECK(glitch.points_in_frames == clean.points_in_frames);
+    CHECK(glitch.stats.filtered[FilterReason::kOutlier] == 0);
+  }
+}
+
+TEST_CASE("an isolated azimuth glitch is left out: its slots counted, the revolution whole",
+          "[stream][glitch]") {
+  const Outcome clean = run(7200, kClean);
+  for (const int shift : {18000, 9500, -12000, 3000}) {
+    INFO("packet 3000's azimuths moved by " << shift << " cdeg");
+    const Outcome glitch = run(7200, [&](int k, PacketContents& c) {
+      if (k == 3000) shift_azimuth(c, shift);
+      return true;
+    });
+    CHECK(glitch.stats.outliers == 1);
+    CHECK(glitch.stats.filtered[FilterReason::kOutlier] == kBlocks * kChannels);
+    CHECK(glitch.frames.discontinuities == 0);
+    CHECK(glitch.frames.frames_complete == clean.frames.frames_complete);
+    // Every slot of every accepted packet is a point or a filtered count.
+    CHECK(glitch.stats.points + glitch.stats.filtered.total() ==
+          glitch.stats.accepted * kBlocks * kChannels);
+  }
+}
+
+TEST_CASE("two glitches in a row are two outliers, and a real change still cuts",
+          "[stream][glitch]") {
+  const Outcome clean = run(7200, kClean);
+  const Outcome twice = run(7200, [](int k, PacketContents& c) {
+    if (k == 3000) shift_azimuth(c, 18000);
+    if (k == 3001) shift_azimuth(c, 9000);
+    return true;
+  });
+  CHECK(twice.stats.outliers == 2);
+  CHECK(twice.frames.discontinuities == 0);
+  CHECK(twice.frames.frames_complete == clean.frames.frames_complete);
+
+  // A restart: from packet 3000 on, the sensor is 137° and 3 s further on. It cuts once, and
+  // nothing is taken for an outlier.
+  const Outcome restart = run(7200, [](int k, PacketContents& c) {
+    if (k >= 3000) {
+      shift_azimuth(c, 13700);
+      shift_time(c, 3000 * kMs);
+    }
+    return true;
+  });
+  CHECK(restart.stats.outliers == 0);
+  CHECK(restart.frames.discontinuities == 1);
+  CHECK(restart.stats.points == clean.stats.points);
+
+  // A gap: a revolution and a half of packets missing. The azimuth follows the time, but the time
+  // is more than half a revolution: it cuts.
+  const Outcome gap = run(7200, [](int k, PacketContents&) { return k < 3000 || k >= 3540; });
+  CHECK(gap.stats.outliers == 0);
+  CHECK(gap.frames.discontinuities == 1);
+
+  // A real change of speed: 600 RPM, then the same stream at 1200 RPM from where it was.
+  SyntheticSensor slow(SyntheticSensorConfig{});
+  FrameCollector frames(3, kDefaultFrameCapacityPoints, [](const Frame&) {});
+  StreamDecoder decoder(Calibration::nominal(), {}, frames);
+  std::array<std::uint8_t, kMaxPacketBytes> buffer{};
+  for (int k = 0; k < 3600; ++k)
+    decoder.process(std::span(buffer).first(slow.next(buffer)));
+  SyntheticSensorConfig fast_config;
+  fast_config.rpm = 1200;
+  fast_config.start_unix_ns = slow.last_packet_time_ns() + slow.packet_period_ns();
+  // The next packet's first azimuth at 600 RPM: where the slow stream's next one would start.
+  fast_config.start_azimuth_deg =
+      (PacketView::assume_valid(std::span(buffer).first(kPacketBytes)).azimuth_cdeg(0) + 100) /
+      100.0;
+  SyntheticSensor fast(fast_config);
+  for (int k = 0; k < 3600; ++k)
+    decoder.process(std::span(buffer).first(fast.next(buffer)));
+  decoder.flush();
+  CHECK(decoder.stats().outliers == 0);
+  CHECK(decoder.frames().discontinuities == 0);
+}
+
+TEST_CASE("duplicates: a copy of a recent packet, or a repeated sequence, is decoded once",
+          "[stream][glitch][duplicate]") {
+  SyntheticSensorConfig config;
+  config.udp_sequence = true;
+  const Outcome clean = run(3600, kClean, config);
+
+  SyntheticSensor sensor(config);
+  FrameCollector frames(3, kDefaultFrameCapacityPoints, [](const Frame&) {});
+  StreamDecoder decoder(Calibration::nominal(), {}, frames);
+  std::vector<std::vector<std::uint8_t>> sent;
+  std::array<std::uint8_t, kMaxPacketBytes> buffer{};
+  std::uint64_t copies = 0;
+  for (int k = 0; k < 3600; ++k) {
+    const std::size_t size = sensor.next(buffer);
+    sent.emplace_back(buffer.begin(), buffer.begin() + static_cast<long>(size));
+    REQUIRE(decoder.process(sent.back()) == RejectReason::kNone);
+    // A switch loop: every 100th packet twice, at once.
+    if (k % 100 == 50) {
+      decoder.process(sent.back());
+      ++copies;
+    }
+    // A mirror port's late copy, 40 packets later (inside the window).
+    if (k % 500 == 499) {
+      decoder.process(sent[sent.size() - 41]);
+      ++copies;
+    }
+    // A repeated sequence number with other bytes (another sender, a firmware bug).
+    if (k == 2000) {
+      std::vector<std::uint8_t> other = sent[sent.size() - 3];
+      other[100] ^= 0x5A;  // a distance byte
+      decoder.process(other);
+      ++copies;
+    }
+  }
+  decoder.flush();
+  const StreamStats& s = decoder.stats();
+  CHECK(s.duplicates == copies);
+  CHECK(s.accepted == 3600);
+  CHECK(s.packets == s.accepted + s.rejected() + s.duplicates);
+  CHECK(s.points == clean.stats.points);
+  CHECK(decoder.frames().frames_complete == clean.frames.frames_complete);
+  CHECK(s.static_timestamps == 0);  // a copy is not taken for a clock that stood still
+  CHECK(s.outliers == 0);
+
+  // Without a sequence, a copy older than the window is a packet like any other: decoded, a late
+  // packet to the frame assembler (its time and azimuth agree: not an outlier).
+  SyntheticSensor plain(SyntheticSensorConfig{});
+  StreamDecoder late_decoder(Calibration::nominal(), {}, frames);
+  std::vector<std::vector<std::uint8_t>> plain_sent;
+  for (int k = 0; k < 200; ++k) {
+    const std::size_t size = plain.next(buffer);
+    plain_sent.emplace_back(buffer.begin(), buffer.begin() + static_cast<long>(size));
+    late_decoder.process(plain_sent.back());
+  }
+  late_decoder.process(plain_sent[200 - kDuplicateWindow - 1]);
+  late_decoder.process(plain_sent[199]);  // inside the window: a duplicate
+  late_decoder.flush();
+  CHECK(late_decoder.stats().duplicates == 1);
+  CHECK(late_decoder.stats().accepted == 201);
+  CHECK(late_decoder.stats().outliers == 0);
+  CHECK(late_decoder.frames().azimuth_backward_steps >= 1);
+}
+
+TEST_CASE("a glitch every few hundred packets leaves at least 95 % of revolutions whole",
+          "[stream][glitch]") {
+  for (const ReturnMode mode : {ReturnMode::kDual, ReturnMode::kLast}) {
+    SyntheticSensorConfig config;
+    config.return_mode = mode;
+    const int packets = mode == ReturnMode::kDual ? 14400 : 7200;  // 4 s, 40 revolutions
+    const Outcome clean = run(packets, kClean, config);
+    for (const int every : {200, 500}) {
+      INFO("one packet in " << every << ", " << to_string(mode));
+      std::mt19937 rng(static_cast<unsigned>(every));
+      std::uint64_t glitches = 0;
+      const Outcome glitched = run(
+          packets,
+          [&](int k, PacketContents& c) {
+            if (k % every != every / 2) return true;
+            ++glitches;
+            switch (rng() % 4) {
+              case 0:
+                shift_time(c, -static_cast<std::int64_t>(1 + rng() % 5000) * kMs);  // back
+                break;
+              case 1:
+                shift_time(c, static_cast<std::int64_t>(60 + rng() % 5000) * kMs);  // leap
+                break;
+              case 2:
+                shift_azimuth(c, static_cast<int>(9100 + rng() % 17800));  // out of order
+                break;
+              default:
+                shift_azimuth(c, 1000 + static_cast<int>(rng() % 3000));  // ahead
+                shift_time(c, -static_cast<std::int64_t>(rng() % 3) * kMs);
+                break;
+            }
+            return true;
+          },
+          config);
+      CHECK(glitched.stats.outliers == glitches);
+      CHECK(glitched.frames.discontinuities == 0);
+      CHECK(static_cast<double>(glitched.frames.frames_complete) >=
+            0.95 * static_cast<double>(clean.frames.frames_complete));
+    }
+  }
+}
