@@ -112,6 +112,10 @@ constexpr std::string_view kTrafficOptions =
   --foreign-fraction F   also send F x the valid packets from 127.0.0.2 (a daemon drops them as
                          foreign when its config sets sensor_ip); 127.x.x.x destinations only
   --malformed-fraction F also send F x the valid packets as random-length random bytes
+  --duplicate-fraction F also send a copy of F x the valid packets, right after them (a switch
+                         loop; a daemon counts duplicate_packets)
+  --glitch-fraction F    give F x the valid packets a tail time minutes off (an isolated clock
+                         glitch; a daemon counts outlier_packets)
   --clock-start T        the first packet's sensor time, Unix seconds (default: now). Every
                          packet carries its own time from there: the stream's clock runs
 )";
@@ -145,6 +149,10 @@ bool parse_traffic_option(pandarcap::CliArgs& args, std::string_view arg,
     traffic.foreign_fraction = args.number(arg, 0, 10);
   } else if (arg == "--malformed-fraction") {
     traffic.malformed_fraction = args.number(arg, 0, 10);
+  } else if (arg == "--duplicate-fraction") {
+    traffic.duplicate_fraction = args.number(arg, 0, 1);
+  } else if (arg == "--glitch-fraction") {
+    traffic.glitch_fraction = args.number(arg, 0, 1);
   } else if (arg == "--clock-start") {
     // 2000-01-01 .. 2099: what the tail's date can carry.
     traffic.clock_start_unix_ns =
@@ -430,7 +438,8 @@ Options:
 constexpr std::string_view kSendUsageTail = R"(  -h, --help             this text
 
 JSON keys: destination, port, traffic, packet_bytes, offered_pps, achieved_pps, seconds, sent,
-first_sequence, last_sequence, foreign_sent, malformed_sent, send_errors,
+first_sequence, last_sequence, foreign_sent, malformed_sent, duplicates_sent, glitches_sent,
+send_errors,
 cpu_fraction_of_one_core.
 Exit status: 0, 1 if the socket could not be used or a send failed (other than a full buffer,
 which is waited out), 64 for a usage error.
@@ -489,6 +498,8 @@ int run_send(int argc, char** argv) {
                                      : nlohmann::ordered_json(nullptr)},
         {"foreign_sent", r.foreign_sent},
         {"malformed_sent", r.malformed_sent},
+        {"duplicates_sent", r.duplicates_sent},
+        {"glitches_sent", r.glitches_sent},
         {"send_errors", r.send_errors},
         {"cpu_fraction_of_one_core", r.seconds > 0 ? r.cpu_seconds / r.seconds : 0.0}};
   });

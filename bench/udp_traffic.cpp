@@ -157,7 +157,7 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
   std::array<std::uint8_t, 2048> junk{};
 
   GeneratorResult result;
-  double foreign_credit = 0, malformed_credit = 0;
+  double foreign_credit = 0, malformed_credit = 0, duplicate_credit = 0, glitch_credit = 0;
   const bool bursting = has_bursts(o);
   // Sleeps end within a microsecond of their deadline instead of the default 50 µs slack, so a
   // packet leaves when it is due (restored on return: the caller's thread is borrowed).
@@ -196,8 +196,16 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
       const std::size_t index = k % source.bodies.size();
       const auto& body = source.bodies[index];
       const auto loops = static_cast<std::int64_t>(k / source.bodies.size());
-      write_time_tail(body, clock_start + loops * source.loop_ns + source.offsets_ns[index],
-                      times[i]);
+      std::int64_t packet_time = clock_start + loops * source.loop_ns + source.offsets_ns[index];
+      glitch_credit += o.glitch_fraction;
+      if (glitch_credit >= 1) {
+        // A clock glitch: this one packet says it is 1 to 5 minutes back or ahead.
+        glitch_credit -= 1;
+        const std::int64_t minutes = 1 + static_cast<std::int64_t>(rng() % 5);
+        packet_time += (rng() % 2 == 0 ? -1 : 1) * minutes * 60'000'000'000LL;
+        ++result.glitches_sent;
+      }
+      write_time_tail(body, packet_time, times[i]);
       sequences[i] = static_cast<std::uint32_t>(k);  // little-endian on the wire, as the sensor
       iovecs[i][0] = {const_cast<std::uint8_t*>(body.data()), kTimeTailOffset};
       iovecs[i][1] = {times[i].data(), kTimeTailBytes};
@@ -214,6 +222,13 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
       continue;
     }
     result.sent += static_cast<std::uint64_t>(sent);
+    // Copies of packets just sent, each right after the batch (a switch loop's echo).
+    duplicate_credit += o.duplicate_fraction * sent;
+    for (int i = 0; duplicate_credit >= 1 && i < sent; ++i, duplicate_credit -= 1) {
+      if (::sendmsg(fd, &messages[static_cast<std::size_t>(i)].msg_hdr, 0) > 0) {
+        ++result.duplicates_sent;
+      }
+    }
     // The extra traffic, sent one datagram at a time beside the valid stream.
     foreign_credit += o.foreign_fraction * sent;
     malformed_credit += o.malformed_fraction * sent;

@@ -63,13 +63,21 @@ struct GeneratorOptions {
   // and random-length random bytes (malformed).
   double foreign_fraction = 0;
   double malformed_fraction = 0;
+  // Faults of a vehicle day, as fractions of the valid packets: a copy of the packet just sent
+  // (a switch loop, a mirror port), and a packet whose tail time is wrong (minutes back or
+  // ahead: an isolated clock glitch). Both are still valid packets; a daemon counts them as
+  // duplicate_packets and outlier_packets.
+  double duplicate_fraction = 0;
+  double glitch_fraction = 0;
 };
 
 struct GeneratorResult {
   std::uint64_t sent = 0;  // valid packets, sequences first_sequence .. first_sequence+sent-1
   std::uint64_t foreign_sent = 0;
   std::uint64_t malformed_sent = 0;
-  std::uint64_t send_errors = 0;  // sendmmsg failures other than a full socket buffer
+  std::uint64_t duplicates_sent = 0;  // copies, besides `sent`
+  std::uint64_t glitches_sent = 0;    // among `sent`
+  std::uint64_t send_errors = 0;      // sendmmsg failures other than a full socket buffer
   double seconds = 0;
   double achieved_pps = 0;  // valid packets per second actually sent
   double cpu_seconds = 0;   // the sending thread's CPU time (CLOCK_THREAD_CPUTIME_ID)

@@ -60,19 +60,24 @@ constexpr std::string_view kVersion = PANDARCAP_VERSION;
 // From the writer's final health in memory, not from health.jsonl: when the disk is full the
 // file's last line is an older one, and the summary must say how the run really ended.
 void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
+  // Configured paths, escaped: a control character in one cannot forge a line.
+  const auto shown = [](const std::filesystem::path& path) {
+    return escaped_control(path.native());
+  };
   const std::filesystem::path& dir = wo.output_dir;
-  fmt::print("outputs in {}:\n", dir.string());
-  if (wo.frames) fmt::print("  frames  {}\n", (dir / "frames").string());
-  if (wo.pcap) fmt::print("  raw     {}\n", (dir / "raw").string());
-  if (wo.mcap) fmt::print("  mcap    {}\n", (dir / "mcap").string());
-  fmt::print("  health  {} and {}\n", wo.prometheus_file.string(),
-             (wo.health_dir / "health.jsonl").string());
+  fmt::print("outputs in {}:\n", shown(dir));
+  if (wo.frames) fmt::print("  frames  {}\n", shown(dir / "frames"));
+  if (wo.pcap) fmt::print("  raw     {}\n", shown(dir / "raw"));
+  if (wo.mcap) fmt::print("  mcap    {}\n", shown(dir / "mcap"));
+  fmt::print("  health  {} and {}\n", shown(wo.prometheus_file),
+             shown(wo.health_dir / "health.jsonl"));
   const HealthCounters& c = h.counters;
   fmt::print(
       "final health: state {}{}; {} datagrams received, {} accepted, {} rejected, {} foreign, "
       "{} ring overruns, {} kernel drops; frames {} complete, {} partial, {} dropped, {} "
       "fragments, {} written; {} packets recorded{}; {} write errors\n",
-      to_string(h.gauges.state), h.gauges.reason.empty() ? "" : " (" + h.gauges.reason + ")",
+      to_string(h.gauges.state),
+      h.gauges.reason.empty() ? "" : " (" + escaped_control(h.gauges.reason) + ")",
       c.datagrams_received, c.packets_accepted, c.packets_rejected, c.foreign_datagrams,
       c.ring_overruns, c.kernel_drops, c.frames_complete, c.frames_partial,
       c.frames_dropped_no_arena, c.frames_fragment, c.frames_written,

@@ -211,6 +211,7 @@ SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
     return resolve_sensor_at_start(config.sensor.calibration_source, config.sensor.calibration_file,
                                    ptc);
   } catch (const SensorUnavailable& error) {
+    stop_if_requested("asking the sensor");  // it did not answer because the wait was cut short
     throw StartupError{kExitUnavailable, error.what()};
   } catch (const CalibrationError& error) {
     throw StartupError{kExitConfig, error.what()};

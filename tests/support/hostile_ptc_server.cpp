@@ -154,6 +154,30 @@ void HostilePtcServer::answer(int fd) {
         status_bytes.resize(60, 0xAB);
         send_all(fd, response(command, 0, status_bytes));
         break;
+      case Hostile::kGarbageStatus:
+      case Hostile::kFlapping: {
+        if (command != ptc::Command::kGetStatus) {
+          send_all(fd, response(command, 0x05, {}));  // unsupported: the daemon goes without
+          break;
+        }
+        const std::uint64_t turn = status_answers_++;
+        if (behaviour_ == Hostile::kFlapping && turn % 3 == 0) {
+          send_all(fd, response(command, 0, status_bytes));
+          break;
+        }
+        if (behaviour_ == Hostile::kFlapping && turn % 3 == 2) return;  // closes: no answer
+        // What a corrupt answer of the right length can say: 53 029 RPM, ±17 million °C, an
+        // uptime of 117 years, a PTP state that does not exist.
+        ptc::SensorStatus garbage = status;
+        garbage.motor_rpm = 53029;
+        garbage.uptime_s = 117u * 365 * 24 * 3600;
+        garbage.temperature_centi_c[0] = 1'717'171'717;
+        garbage.temperature_centi_c[3] = -1'717'171'717;
+        garbage.gps_pps_locked = 7;
+        garbage.ptp_state = 9;
+        send_all(fd, response(command, 0, ptc::encode_status(garbage)));
+        break;
+      }
       case Hostile::kBadCalibration: {
         std::string csv = Calibration::nominal().to_csv();
         csv.resize(csv.rfind('\n', csv.size() - 2) + 1);  // the last channel's row cut off

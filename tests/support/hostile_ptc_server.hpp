@@ -29,6 +29,8 @@ enum class Hostile {
   kShortStatus,       // a status payload of 40 bytes
   kLongStatus,        // a status payload of 60 bytes (54 + 6 newer-firmware bytes)
   kBadCalibration,    // a calibration answer with 39 channels
+  kGarbageStatus,     // a well-formed status of impossible values; other commands: unsupported
+  kFlapping,          // status answers in turn: right, garbage, none (the connection closed)
 };
 
 class HostilePtcServer {
@@ -52,6 +54,7 @@ class HostilePtcServer {
   std::uint16_t port_ = 0;  // before listen_fd_: set while it is initialised
   io::UniqueFd listen_fd_, stop_fd_;
   std::atomic<std::uint64_t> connections_{0};
+  std::uint64_t status_answers_ = 0;  // the serving thread's own
   std::thread thread_;
 };
 

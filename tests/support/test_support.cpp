@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <catch2/catch.hpp>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -92,7 +93,10 @@ void check_record_spacing(const std::vector<nlohmann::json>& records, double min
     const double gap = records[i]["gauges"]["uptime_seconds"].get<double>() -
                        records[i - 1]["gauges"]["uptime_seconds"].get<double>();
     INFO("records " << i - 1 << " and " << i << " are " << gap << " s apart");
-    CHECK(gap > min_gap_s);
+    // The writer says at once when packets stop or start again (a new state), without waiting
+    // for the second's tick: such a record may follow the one before it sooner.
+    const bool state_changed = records[i].value("state", "") != records[i - 1].value("state", "");
+    if (!state_changed) CHECK(gap > min_gap_s);
     CHECK(gap <= 1.5);
   }
 }
@@ -139,6 +143,46 @@ std::pair<CaptureStatus, std::size_t> read_capture(const std::filesystem::path& 
   while ((status = reader.next(record)) == CaptureStatus::kRecord)
     ++records;
   return {status, records};
+}
+
+std::vector<std::string> tmpfs_run_args(const std::filesystem::path& mount_point,
+                                        const std::string& size,
+                                        const std::filesystem::path& program,
+                                        const std::vector<std::string>& args, bool keep_after) {
+  const std::string userns = ::geteuid() == 0 ? "" : "--user --map-root-user ";
+  if (run_command("unshare " + userns + "--mount true 2>/dev/null").exit_code != 0) return {};
+  std::vector<std::string> out;
+  if (::geteuid() != 0) out = {"--user", "--map-root-user"};
+  for (const std::string& arg :
+       {std::string("--mount"), std::string("--propagation"), std::string("private"),
+        std::string("--"), std::string("/bin/sh"), std::string("-c"),
+        "mount -t tmpfs -o size=" + size + " pandarcap-test \"$0\" && " +
+            (keep_after ? std::string("{ \"$@\" & pid=$!; echo $pid >\"$0.pid\"; wait $pid; "
+                                      "status=$?; mkdir -p \"$0.after\"; "
+                                      "cp -r \"$0/health\" \"$0/raw\" \"$0.after/\" 2>/dev/null; "
+                                      "exit $status; }")
+                        : std::string("exec \"$@\"")),
+        mount_point.string(), program.string()})
+    out.push_back(arg);
+  out.insert(out.end(), args.begin(), args.end());
+  return out;
+}
+
+int tmpfs_program_pid(const std::filesystem::path& mount_point) {
+  const std::filesystem::path file = mount_point.string() + ".pid";
+  int pid = 0;
+  harness::wait_until(
+      [&] {
+        std::ifstream in(file);
+        return static_cast<bool>(in >> pid) && pid > 0;
+      },
+      std::chrono::seconds(10));
+  return pid;
+}
+
+std::filesystem::path tmpfs_view(int pid, const std::filesystem::path& mount_point) {
+  return std::filesystem::path("/proc") / std::to_string(pid) / "root" /
+         mount_point.relative_path();
 }
 
 }  // namespace pandarcap::test

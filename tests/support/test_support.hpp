@@ -89,7 +89,8 @@ std::uint64_t health_counter(const nlohmann::json& record, std::string_view name
 
 // Health records come once a second: consecutive ones are more than `min_gap_s` and at most
 // 1.5 s apart by their monotonic uptime. The final record (written at shutdown) may follow the
-// one before it sooner, so its gap is not checked.
+// one before it sooner, so its gap is not checked; so may a record whose state differs from the
+// one before (the writer reports packets stopping or starting again at once).
 void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s);
 
 // The points of a PCD file in the pandarcap layout (--pcd-fields pandarcap, the MCAP messages'
@@ -106,5 +107,23 @@ std::size_t open_descriptors(int pid);
 
 // Reads a capture to its end: how the read ended and how many records it held.
 std::pair<CaptureStatus, std::size_t> read_capture(const std::filesystem::path& file);
+
+// A small file system for a test alone: the arguments for /usr/bin/unshare that mount a tmpfs of
+// `size` ("48m") at `mount_point` in a private mount namespace (as root directly, otherwise in a
+// user namespace where this user is root) and run `program args...` there. Empty when this
+// machine cannot make a mount namespace (the caller says so, WARN, and returns). From outside,
+// the mount is seen at /proc/PID/root/MOUNT_POINT (tmpfs_view) while PID runs.
+//   - plain: `program` is exec'd: one process, one pid (the ChildProcess's);
+//   - `keep_after`: a shell runs it, writes its pid to MOUNT_POINT.pid (tmpfs_program_pid), and
+//     when it ends copies MOUNT_POINT/health and MOUNT_POINT/raw into MOUNT_POINT.after/ (the
+//     mount goes with the namespace) and exits with its status.
+std::vector<std::string> tmpfs_run_args(const std::filesystem::path& mount_point,
+                                        const std::string& size,
+                                        const std::filesystem::path& program,
+                                        const std::vector<std::string>& args,
+                                        bool keep_after = false);
+std::filesystem::path tmpfs_view(int pid, const std::filesystem::path& mount_point);
+// The pid of a keep_after run's program, once its shell has written it (0 after 10 s without).
+int tmpfs_program_pid(const std::filesystem::path& mount_point);
 
 }  // namespace pandarcap::test
