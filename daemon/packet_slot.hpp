@@ -13,9 +13,32 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "daemon/pcap/endpoint.hpp"
 #include "ringbuf/slot_ring.hpp"
 
 namespace pandarcap {
+
+// A datagram's address as the socket API holds it: IPv4 from the live socket (the daemon binds
+// an IPv4 socket; the sensor speaks IPv4), IPv4 or IPv6 from a replayed capture. The family
+// field, first in both (their common initial sequence), says which.
+union SlotAddress {
+  sockaddr_in v4;
+  sockaddr_in6 v6;
+};
+
+inline SlotAddress to_slot_address(const Endpoint& endpoint) noexcept {
+  SlotAddress address{};
+  if (endpoint.ipv6) {
+    address.v6 = to_sockaddr6(endpoint);
+  } else {
+    address.v4 = to_sockaddr(endpoint);
+  }
+  return address;
+}
+
+inline Endpoint to_endpoint(const SlotAddress& address) noexcept {
+  return address.v4.sin_family == AF_INET6 ? to_endpoint(address.v6) : to_endpoint(address.v4);
+}
 
 // Largest datagram the decoder accepts (spec §1: 1262 bytes, or 1266 with the UDP sequence).
 inline constexpr std::size_t kMaxAcceptedDatagram = 1266;
@@ -37,12 +60,12 @@ struct alignas(ringbuf::kCacheLine) PacketSlot {
   // Kernel receive time (SO_TIMESTAMPNS, CLOCK_REALTIME ns), or the time recvmmsg returned when
   // the kernel gave none; 0 for replayed packets that had no capture time.
   std::int64_t receive_time_ns;
-  // Sender, as recvmmsg wrote it (the daemon binds an IPv4 socket; the sensor speaks IPv4).
-  sockaddr_in source;
+  // Sender, as recvmmsg wrote it (IPv4), or a replayed record's (IPv4 or IPv6).
+  SlotAddress source;
   // Where the datagram was sent: the address in its IP header (IP_PKTINFO: a unicast, broadcast
   // or multicast address) and the port the socket is bound to; a replay's record's own. The
   // recording writes it as the packet's destination, as the wire carried it.
-  sockaddr_in destination;
+  SlotAddress destination;
 };
 
 static_assert(sizeof(PacketSlot) % ringbuf::kCacheLine == 0);

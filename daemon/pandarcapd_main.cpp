@@ -153,11 +153,19 @@ int report_replay(const PacketSource& source, const RunSource& run_source) {
   if (!source.replayed()) return 0;
   const ReplayResult& result = source.replay_result();
   const auto& capture = result.capture;
-  spdlog::info(
-      "replay: {} records, {} UDP datagrams ({} other ports, {} non-IPv4, {} non-UDP, "
-      "{} fragments, {} malformed)",
-      capture.records, capture.udp_datagrams, capture.port_filtered, capture.non_ipv4,
-      capture.non_udp, capture.ip_fragments, capture.malformed);
+  // In the exit summary, whatever it says: a record the replay could not use is never silent.
+  fmt::print(
+      "replay: {} records, {} UDP datagrams ({} IPv6), {} to other ports; {} skipped ({} not IP, "
+      "{} not UDP, {} IP fragments, {} malformed)\n",
+      capture.records, capture.udp_datagrams, capture.ipv6_datagrams, capture.port_filtered,
+      capture.skipped(), capture.non_ip, capture.non_udp, capture.ip_fragments, capture.malformed);
+  if (capture.skipped() > 0) {
+    spdlog::warn(
+        "{}: {} of {} records skipped: {} not IP, {} not UDP, {} IP fragments (not reassembled), "
+        "{} malformed",
+        run_source.replay_path, capture.skipped(), capture.records, capture.non_ip, capture.non_udp,
+        capture.ip_fragments, capture.malformed);
+  }
   if (result.status == CaptureStatus::kTruncated) {
     spdlog::warn("{}: the file ends in the middle of a record (cut off while recording)",
                  run_source.replay_path);

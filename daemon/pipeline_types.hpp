@@ -48,8 +48,8 @@ struct FrameArena {
 
 struct RawPacket {
   std::int64_t receive_time_ns = 0;
-  sockaddr_in source{};
-  sockaddr_in destination{};          // as the wire carried it (PacketSlot::destination)
+  SlotAddress source{};
+  SlotAddress destination{};          // as the wire carried it (PacketSlot::destination)
   std::uint16_t length = 0;           // bytes in payload (a truncated datagram keeps what fit)
   std::uint32_t original_length = 0;  // bytes the datagram had (more than length: it was cut)
   std::uint8_t payload[PacketSlot::kPayloadCapacity];

@@ -16,6 +16,7 @@
 
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
+#include "support/capture_bytes.hpp"
 #include "support/test_support.hpp"
 
 using pandarcap::CaptureReader;
@@ -28,15 +29,28 @@ using pandarcap::test::ScratchDir;
 
 namespace {
 
-using Bytes = std::vector<std::uint8_t>;
+using pandarcap::test::append;
+using pandarcap::test::Bytes;
+using pandarcap::test::get_be16;
+using pandarcap::test::pcapng_header;
+using pandarcap::test::pcapng_packet;
+using pandarcap::test::put_be16;
+using pandarcap::test::put_be32;
+using pandarcap::test::put_le16;
+using pandarcap::test::put_le32;
 namespace fs = std::filesystem;
 
 constexpr Endpoint kLidar{0xC0A801C9, 2368};  // 192.168.1.201:2368
 constexpr Endpoint kHost{0xC0A8010A, 2368};   // 192.168.1.10:2368
+// [fd00::201]:2368 and [fd00::10]:2368
+constexpr Endpoint kLidar6{
+    0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x02, 0x01}};
+constexpr Endpoint kHost6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x10}};
 
 constexpr std::uint32_t kLinktypeEthernet = 1;
 constexpr std::uint32_t kLinktypeRaw = 101;
 constexpr std::uint32_t kLinktypeIpv4 = 228;
+constexpr std::uint32_t kLinktypeIpv6 = 229;
 constexpr std::uint32_t kLinktypeLinuxSll = 113;
 constexpr std::uint32_t kLinktypeLinuxSll2 = 276;
 constexpr std::uint32_t kLinktypePpp = 9;
@@ -48,29 +62,6 @@ constexpr std::uint16_t kEthertypeIpv6 = 0x86DD;
 constexpr std::size_t kGlobalHeaderBytes = 24;
 constexpr std::size_t kRecordHeaderBytes = 16;
 constexpr std::size_t kFrameHeadersBytes = 14 + 20 + 8;  // Ethernet + IPv4 + UDP
-
-void put_be16(Bytes& out, std::uint16_t v) {
-  out.push_back(static_cast<std::uint8_t>(v >> 8));
-  out.push_back(static_cast<std::uint8_t>(v));
-}
-void put_be32(Bytes& out, std::uint32_t v) {
-  put_be16(out, static_cast<std::uint16_t>(v >> 16));
-  put_be16(out, static_cast<std::uint16_t>(v));
-}
-void put_le16(Bytes& out, std::uint16_t v) {
-  out.push_back(static_cast<std::uint8_t>(v));
-  out.push_back(static_cast<std::uint8_t>(v >> 8));
-}
-void put_le32(Bytes& out, std::uint32_t v) {
-  put_le16(out, static_cast<std::uint16_t>(v));
-  put_le16(out, static_cast<std::uint16_t>(v >> 16));
-}
-std::uint16_t get_be16(const Bytes& in, std::size_t offset) {
-  return static_cast<std::uint16_t>((in[offset] << 8) | in[offset + 1]);
-}
-void append(Bytes& out, const Bytes& tail) {
-  out.insert(out.end(), tail.begin(), tail.end());
-}
 
 Bytes pattern(std::size_t size, std::uint8_t seed) {
   Bytes bytes(size);
@@ -119,6 +110,33 @@ Bytes ipv4(const Datagram& d) {
   put_be16(out, 0);  // the reader does not check the header checksum
   put_be32(out, d.source.ip);
   put_be32(out, d.destination.ip);
+  put_be16(out, d.source.port);
+  put_be16(out, d.destination.port);
+  put_be16(out, static_cast<std::uint16_t>(8 + d.payload.size() + d.udp_length_delta));
+  put_be16(out, 0);
+  append(out, d.payload);
+  return out;
+}
+
+// An IPv6 / UDP datagram (RFC 8200) from `d` (its IPv6 endpoints; protocol and the length deltas
+// as for IPv4), behind `extensions`: pairs of (next-header value of the extension, its bytes), in
+// order. Each extension's first byte (its next-header field) is filled in here.
+Bytes ipv6(const Datagram& d, std::vector<std::pair<std::uint8_t, Bytes>> extensions = {}) {
+  Bytes chain;
+  for (std::size_t i = 0; i < extensions.size(); ++i) {
+    Bytes header = extensions[i].second;
+    header[0] = i + 1 < extensions.size() ? extensions[i + 1].first : d.protocol;
+    append(chain, header);
+  }
+  Bytes out;
+  put_be32(out, 0x60000000);
+  put_be16(out,
+           static_cast<std::uint16_t>(chain.size() + 8 + d.payload.size() + d.total_length_delta));
+  out.push_back(extensions.empty() ? d.protocol : extensions.front().first);
+  out.push_back(64);
+  out.insert(out.end(), d.source.ip6.begin(), d.source.ip6.end());
+  out.insert(out.end(), d.destination.ip6.begin(), d.destination.ip6.end());
+  append(out, chain);
   put_be16(out, d.source.port);
   put_be16(out, d.destination.port);
   put_be16(out, static_cast<std::uint16_t>(8 + d.payload.size() + d.udp_length_delta));
@@ -193,49 +211,6 @@ class PcapFile {
   Bytes bytes_;
 };
 
-// pcapng: one section, one Ethernet interface with nanosecond timestamps (if_tsresol = 9).
-Bytes pcapng_block(std::uint32_t type, Bytes body) {
-  body.resize((body.size() + 3) / 4 * 4, 0);
-  const auto total = static_cast<std::uint32_t>(12 + body.size());
-  Bytes out;
-  put_le32(out, type);
-  put_le32(out, total);
-  append(out, body);
-  put_le32(out, total);
-  return out;
-}
-
-Bytes pcapng_header() {
-  Bytes shb;
-  put_le32(shb, 0x1A2B3C4D);  // byte-order magic
-  put_le16(shb, 1);
-  put_le16(shb, 0);
-  put_le32(shb, 0xFFFFFFFF);  // section length unknown (-1)
-  put_le32(shb, 0xFFFFFFFF);
-  Bytes idb;
-  put_le16(idb, static_cast<std::uint16_t>(kLinktypeEthernet));
-  put_le16(idb, 0);
-  put_le32(idb, 0);           // snaplen: none
-  put_le16(idb, 9);           // option if_tsresol
-  put_le16(idb, 1);           //   length 1
-  append(idb, {9, 0, 0, 0});  //   10^-9 s, padded to 4
-  put_le32(idb, 0);           // opt_endofopt
-  Bytes out = pcapng_block(0x0A0D0D0A, shb);
-  append(out, pcapng_block(1, idb));
-  return out;
-}
-
-Bytes pcapng_packet(const Bytes& frame, std::uint64_t timestamp_ns) {
-  Bytes epb;
-  put_le32(epb, 0);  // interface 0
-  put_le32(epb, static_cast<std::uint32_t>(timestamp_ns >> 32));
-  put_le32(epb, static_cast<std::uint32_t>(timestamp_ns));
-  put_le32(epb, static_cast<std::uint32_t>(frame.size()));
-  put_le32(epb, static_cast<std::uint32_t>(frame.size()));
-  append(epb, frame);
-  return pcapng_block(6, epb);
-}
-
 // Everything a reader yields from a file, copied out of the reader.
 struct ReadResult {
   struct Record {
@@ -269,7 +244,7 @@ ReadResult read_all(const fs::path& path, CaptureReader::Options options = {}) {
   const CaptureStats& s = result.stats;
   // Every record is accounted for exactly once.
   CHECK(s.records ==
-        s.udp_datagrams + s.port_filtered + s.non_ipv4 + s.non_udp + s.ip_fragments + s.malformed);
+        s.udp_datagrams + s.port_filtered + s.non_ip + s.non_udp + s.ip_fragments + s.malformed);
   CHECK(s.udp_datagrams == result.records.size());
   return result;
 }
@@ -292,10 +267,11 @@ std::size_t count(const std::string& haystack, const std::string& needle) {
 
 }  // namespace
 
-TEST_CASE("to_string formats an endpoint as dotted quad and port", "[capture]") {
+TEST_CASE("to_string formats an endpoint as dotted quad (or [IPv6]) and port", "[capture]") {
   CHECK(pandarcap::to_string(kLidar) == "192.168.1.201:2368");
   CHECK(pandarcap::to_string(Endpoint{0xFFFFFFFF, 65535}) == "255.255.255.255:65535");
   CHECK(pandarcap::to_string(Endpoint{}) == "0.0.0.0:0");
+  CHECK(pandarcap::to_string(kLidar6) == "[fd00::201]:2368");
 }
 
 TEST_CASE("classic pcap times from 2038 to 2106 read back as written, not negative", "[capture]") {
@@ -674,17 +650,20 @@ TEST_CASE("Ethernet frames with any number of VLAN tags", "[capture]") {
       .add(ethernet(ipv4({.payload = pattern(11, 1)}), kEthertypeIpv4, {0x8100}))
       .add(ethernet(ipv4({.payload = pattern(12, 2)}), kEthertypeIpv4, {0x88A8, 0x8100}))
       .add(ethernet(ipv4({.payload = pattern(13, 3)}), kEthertypeIpv4, {0x9100, 0x8100, 0x8100}))
-      .add(ethernet(ipv4({.payload = pattern(14, 4)}), kEthertypeIpv6, {0x8100}))
+      .add(ethernet(ipv6({.payload = pattern(14, 4), .source = kLidar6, .destination = kHost6}),
+                    kEthertypeIpv6, {0x8100}))
+      .add(ethernet(Bytes(28, 0), kEthertypeArp, {0x8100}))
       .save(path);
   const ReadResult result = read_all(path);
   REQUIRE(result.status == CaptureStatus::kEnd);
-  REQUIRE(result.records.size() == 4);
-  for (std::size_t i = 0; i < 4; ++i) {
+  REQUIRE(result.records.size() == 5);
+  for (std::size_t i = 0; i < 5; ++i) {
     CHECK(result.records[i].payload == pattern(10 + i, static_cast<std::uint8_t>(i)));
-    CHECK(result.records[i].source == kLidar);
-    CHECK(result.records[i].destination == kHost);
+    CHECK(result.records[i].source == (i < 4 ? kLidar : kLidar6));
+    CHECK(result.records[i].destination == (i < 4 ? kHost : kHost6));
   }
-  CHECK(result.stats.non_ipv4 == 1);  // IPv6 behind a VLAN tag
+  CHECK(result.stats.ipv6_datagrams == 1);  // IPv6 behind a VLAN tag
+  CHECK(result.stats.non_ip == 1);          // ARP behind one
 }
 
 TEST_CASE("Linux cooked captures v1 (SLL) and v2 (SLL2)", "[capture]") {
@@ -707,27 +686,155 @@ TEST_CASE("Linux cooked captures v1 (SLL) and v2 (SLL2)", "[capture]") {
     REQUIRE(result.records.size() == 1);
     CHECK(result.records[0].payload == datagram.payload);
     CHECK(result.records[0].source == source);
-    CHECK(result.stats.non_ipv4 == 1);
+    CHECK(result.stats.non_ip == 1);
   }
 }
 
-TEST_CASE("raw IPv4 link types: LINKTYPE_RAW, LINKTYPE_IPV4 and DLT_RAW's values", "[capture]") {
+TEST_CASE("raw IP link types: LINKTYPE_RAW, LINKTYPE_IPV4/IPV6 and DLT_RAW's values", "[capture]") {
   ScratchDir dir("capture");
   const Datagram datagram{.payload = pattern(20, 5)};
-  Bytes ipv6_packet(48, 0);
-  ipv6_packet[0] = 0x60;
+  const Datagram datagram6{.payload = pattern(21, 6), .source = kLidar6, .destination = kHost6};
+  Bytes ipv6_jumbo(48, 0);  // payload length 0: a jumbogram's, refused
+  ipv6_jumbo[0] = 0x60;
   for (std::uint32_t linktype :
-       {kLinktypeRaw, kLinktypeIpv4, std::uint32_t{12}, std::uint32_t{14}}) {
+       {kLinktypeRaw, kLinktypeIpv4, kLinktypeIpv6, std::uint32_t{12}, std::uint32_t{14}}) {
     INFO("linktype " << linktype);
     const fs::path path = dir / ("raw" + std::to_string(linktype) + ".pcap");
-    PcapFile(linktype).add(ipv4(datagram)).add(ipv6_packet).add(Bytes{}).save(path);
+    PcapFile(linktype)
+        .add(ipv4(datagram))
+        .add(ipv6(datagram6))
+        .add(ipv6_jumbo)
+        .add(Bytes{})
+        .save(path);
     const ReadResult result = read_all(path);
-    REQUIRE(result.records.size() == 1);
+    REQUIRE(result.records.size() == 2);
     CHECK(result.records[0].payload == datagram.payload);
     CHECK(result.records[0].destination == kHost);
-    CHECK(result.stats.non_ipv4 == 1);
-    CHECK(result.stats.malformed == 1);  // the empty record
+    CHECK(result.records[1].payload == datagram6.payload);
+    CHECK(result.records[1].source == kLidar6);
+    CHECK(result.records[1].destination == kHost6);
+    CHECK(result.stats.ipv6_datagrams == 1);
+    CHECK(result.stats.malformed == 2);  // the jumbogram and the empty record
   }
+}
+
+TEST_CASE("IPv6 / UDP: behind extension headers, fragments and other protocols counted",
+          "[capture]") {
+  ScratchDir dir("capture");
+  const fs::path path = dir / "ipv6.pcap";
+  const Datagram d{.payload = pattern(30, 8), .source = kLidar6, .destination = kHost6};
+  const Bytes options8 = {0, 0, 1, 4, 0, 0, 0, 0};  // hop-by-hop / destination options: PadN
+  const Bytes routing16 = {0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};  // (1 + 1) * 8
+  const Bytes auth12 = {0, 1, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1};                 // AH: (1 + 2) * 4
+  const Bytes fragment = {0, 0, 0, 1, 0, 0, 0, 7};                           // offset 0, M
+  std::vector<std::pair<std::uint8_t, Bytes>> too_many;
+  for (int i = 0; i < 9; ++i)
+    too_many.emplace_back(std::uint8_t{60}, options8);
+  Datagram tcp = d;
+  tcp.protocol = 6;
+  Datagram long_udp = d;
+  long_udp.udp_length_delta = 1;
+  const Bytes chained = ethernet(
+      ipv6(d, {{0, options8}, {43, routing16}, {51, auth12}, {60, options8}}), kEthertypeIpv6);
+  PcapFile(kLinktypeEthernet)
+      .add(ethernet(ipv6(d), kEthertypeIpv6))
+      .add(chained)
+      .add(ethernet(ipv6(d, {{44, fragment}}), kEthertypeIpv6))                 // ip_fragments
+      .add(ethernet(ipv6(d, {{0, options8}, {44, fragment}}), kEthertypeIpv6))  // ip_fragments
+      .add(ethernet(ipv6(tcp), kEthertypeIpv6))                                 // non_udp
+      .add(ethernet(ipv6(d, too_many), kEthertypeIpv6))  // malformed: 9 extension headers
+      .add(ethernet(ipv6(long_udp), kEthertypeIpv6))     // malformed: UDP longer than IP
+      .add(ethernet(Bytes(39, 0x60), kEthertypeIpv6))    // malformed: header cut
+      .add(ethernet(ipv4({.payload = d.payload}), kEthertypeIpv6))  // malformed: version 4
+      .save(path);
+  const ReadResult result = read_all(path);
+  REQUIRE(result.status == CaptureStatus::kEnd);
+  REQUIRE(result.records.size() == 2);
+  for (const auto& record : result.records) {
+    CHECK(record.payload == d.payload);
+    CHECK(record.source == kLidar6);
+    CHECK(record.destination == kHost6);
+    CHECK(record.udp_payload_length == d.payload.size());
+  }
+  CHECK(result.stats.ipv6_datagrams == 2);
+  CHECK(result.stats.ip_fragments == 2);
+  CHECK(result.stats.non_udp == 1);
+  CHECK(result.stats.malformed == 4);
+  CHECK(result.stats.skipped() == 7);
+  // Every cut of the chained one stays inside the record: a payload is never longer than what
+  // the record holds of it.
+  const fs::path cut_path = dir / "ipv6-cut.pcap";
+  for (std::size_t cut = 0; cut < chained.size(); ++cut) {
+    INFO("cut at " << cut);
+    PcapFile(kLinktypeEthernet)
+        .add(Bytes(chained.begin(), chained.begin() + static_cast<std::ptrdiff_t>(cut)),
+             1'700'000'000, 0, chained.size())
+        .save(cut_path);
+    const ReadResult cut_result = read_all(cut_path);
+    for (const auto& record : cut_result.records) {
+      CHECK(record.snapped);
+      CHECK(record.payload.size() < d.payload.size());
+    }
+  }
+}
+
+TEST_CASE("PcapWriter writes IPv6 datagrams with IPv6 headers and a valid UDP checksum",
+          "[capture]") {
+  ScratchDir dir("capture");
+  const fs::path path = dir / "written6.pcap";
+  const Bytes odd = pattern(1261, 3);  // an odd length: the checksum pads the last byte
+  {
+    PcapWriter writer(path.string());
+    writer.write(odd, 1'700'000'000'000'000'000, kLidar6, kHost6);
+    writer.write(std::span(odd).first(100), odd.size(), 1'700'000'000'000'001'000, kLidar6, kHost6);
+    writer.close();
+  }
+  const ReadResult result = read_all(path);
+  REQUIRE(result.records.size() == 2);
+  CHECK(result.records[0].payload == odd);
+  CHECK(result.records[0].source == kLidar6);
+  CHECK(result.records[0].destination == kHost6);
+  CHECK(result.records[1].snapped);
+  CHECK(result.records[1].udp_payload_length == odd.size());
+  // The first record's frame, summed as a receiver checks it: pseudo-header + UDP header +
+  // payload add up to 0xFFFF when the checksum is right.
+  const Bytes file = read_bytes(path);
+  const std::size_t frame = kGlobalHeaderBytes + kRecordHeaderBytes;
+  CHECK(get_be16(file, frame + 12) == kEthertypeIpv6);
+  CHECK(file[frame + 14] >> 4 == 6);
+  CHECK(file[frame + 14 + 6] == 17);  // next header: UDP
+  const std::size_t udp = frame + 14 + 40;
+  const std::size_t udp_length = get_be16(file, udp + 4);
+  CHECK(udp_length == 8 + odd.size());
+  CHECK(get_be16(file, frame + 14 + 4) == udp_length);
+  std::uint64_t sum = 0;
+  for (std::size_t i = 0; i < 32; i += 2)
+    sum += get_be16(file, frame + 14 + 8 + i);
+  sum += udp_length + 17;
+  for (std::size_t i = 0; i < udp_length; i += 2) {
+    sum += i + 1 < udp_length ? get_be16(file, udp + i) : std::uint32_t{file[udp + i]} << 8;
+  }
+  while (sum >> 16)
+    sum = (sum & 0xFFFF) + (sum >> 16);
+  CHECK(sum == 0xFFFF);
+  CHECK(get_be16(file, udp + 6) != 0);
+  // The cut one: its sum cannot be known, so none is claimed.
+  const std::size_t second = frame + 14 + 40 + 8 + odd.size() + kRecordHeaderBytes;
+  CHECK(get_be16(file, second + 14 + 40 + 6) == 0);
+
+  const std::string tcpdump = tcpdump_path();
+  if (tcpdump.empty()) {
+    WARN("tcpdump not installed: skipping the third-party read of the file");
+    return;
+  }
+  // A third party's reading: -vv verifies the UDP checksum of an IPv6 datagram it holds whole.
+  const auto run =
+      pandarcap::test::run_command(tcpdump + " -nn -vv -r '" + path.string() + "' 2>&1");
+  INFO(run.out);
+  CHECK(run.exit_code == 0);
+  CHECK(run.out.find("fd00::201.2368 > fd00::10.2368: [udp sum ok] UDP, length 1261") !=
+        std::string::npos);
+  CHECK(count(run.out, "bad udp cksum") == 0);
 }
 
 TEST_CASE("frames that are not usable UDP datagrams are counted and skipped", "[capture]") {
@@ -736,8 +843,7 @@ TEST_CASE("frames that are not usable UDP datagrams are counted and skipped", "[
   const Bytes payload = pattern(40, 3);
   const Bytes mac_only = {0x02, 0, 0, 0, 0, 0x02, 0x02, 0, 0, 0, 0, 0x01};
   PcapFile(kLinktypeEthernet)
-      // non_ipv4
-      .add(ethernet(Bytes(40, 0), kEthertypeIpv6))
+      // non_ip
       .add(ethernet(Bytes(28, 0), kEthertypeArp))
       // non_udp
       .add(ethernet(ipv4({.payload = payload, .protocol = 6})))
@@ -755,6 +861,7 @@ TEST_CASE("frames that are not usable UDP datagrams are counted and skipped", "[
       .add(Bytes(mac_only.begin(), mac_only.begin() + 10))                 // no ethertype
       .add(ethernet({}, 0x8100))                                           // tag cut off
       .add(ethernet(Bytes(19, 0x45)))                                      // IPv4 header cut
+      .add(ethernet(Bytes(40, 0), kEthertypeIpv6))                         // IPv6 version 0
       // and reading goes on after all of them
       .add(ethernet(ipv4({.payload = payload})))
       .save(path);
@@ -763,10 +870,10 @@ TEST_CASE("frames that are not usable UDP datagrams are counted and skipped", "[
   REQUIRE(result.records.size() == 1);
   CHECK(result.records[0].payload == payload);
   CHECK(result.stats.records == 16);
-  CHECK(result.stats.non_ipv4 == 2);
+  CHECK(result.stats.non_ip == 1);
   CHECK(result.stats.non_udp == 1);
   CHECK(result.stats.ip_fragments == 2);
-  CHECK(result.stats.malformed == 10);
+  CHECK(result.stats.malformed == 11);
   CHECK(result.stats.udp_datagrams == 1);
 }
 

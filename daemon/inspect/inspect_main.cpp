@@ -313,8 +313,10 @@ int run(const Options& options) {
       {"capture",
        {{"records", cs.records},
         {"udp_datagrams", cs.udp_datagrams},
+        {"ipv6_datagrams", cs.ipv6_datagrams},
         {"port_filtered", cs.port_filtered},
-        {"non_ipv4", cs.non_ipv4},
+        {"skipped", cs.skipped()},
+        {"non_ip", cs.non_ip},
         {"non_udp", cs.non_udp},
         {"ip_fragments", cs.ip_fragments},
         {"malformed", cs.malformed},
@@ -347,6 +349,12 @@ int run(const Options& options) {
                fs.frames_complete, fs.frames_partial, points_per_complete_frame.dump());
     fmt::print("  packets per frame {}\n  calibration {}\n", packets_per_frame.dump(),
                calibration.source);
+    // What the file held besides the packets above, so that "packets 0" is never unexplained.
+    fmt::print(
+        "  records {}  UDP datagrams {} (IPv6 {})  other ports {}  skipped {} (not IP {}, not UDP "
+        "{}, IP fragments {}, malformed {})\n",
+        cs.records, cs.udp_datagrams, cs.ipv6_datagrams, cs.port_filtered, cs.skipped(), cs.non_ip,
+        cs.non_udp, cs.ip_fragments, cs.malformed);
   }
   return status == CaptureStatus::kError ? 1 : 0;
 }

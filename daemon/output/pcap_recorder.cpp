@@ -180,7 +180,9 @@ void PcapRecorder::write(const RawBatch& batch) {
   // The batch as the file would take it: a record header and synthesised headers per packet.
   std::uint64_t batch_bytes = 0;
   for (std::size_t i = 0; i < batch.size; ++i)
-    batch_bytes += batch.packets[i].length + kPcapRecordOverheadBytes;
+    batch_bytes += batch.packets[i].length + (batch.packets[i].source.v4.sin_family == AF_INET6
+                                                  ? kPcapRecordOverheadBytesIpv6
+                                                  : kPcapRecordOverheadBytes);
   if (batch.size > 0 && !space_.allows(volume_, batch_bytes, refusal_)) {
     packets_not_written_ += batch.size;
     accounting_.write_failed(refusal_, batch_bytes);

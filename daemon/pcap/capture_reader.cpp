@@ -17,6 +17,7 @@ namespace pandarcap {
 namespace {
 
 constexpr std::uint16_t kEthertypeIpv4 = 0x0800;
+constexpr std::uint16_t kEthertypeIpv6 = 0x86DD;
 constexpr std::uint16_t kEthertypeVlan = 0x8100;        // 802.1Q C-tag
 constexpr std::uint16_t kEthertypeQinQ = 0x88A8;        // 802.1ad S-tag
 constexpr std::uint16_t kEthertypeQinQLegacy = 0x9100;  // pre-802.1ad S-tag, still seen
@@ -27,6 +28,17 @@ constexpr std::uint8_t kIpProtocolUdp = 17;
 constexpr std::uint16_t kIpMoreFragments = 0x2000;
 constexpr std::uint16_t kIpFragmentOffsetMask = 0x1FFF;
 constexpr std::size_t kUdpHeaderBytes = 8;
+
+constexpr std::size_t kIpv6HeaderBytes = 40;
+// IPv6 next-header values (IANA "Assigned Internet Protocol Numbers").
+constexpr std::uint8_t kIpv6HopByHop = 0;
+constexpr std::uint8_t kIpv6Routing = 43;
+constexpr std::uint8_t kIpv6Fragment = 44;
+constexpr std::uint8_t kIpv6Authentication = 51;
+constexpr std::uint8_t kIpv6DestinationOptions = 60;
+// More extension headers than any real packet has (RFC 8200 recommends at most one of each):
+// a crafted chain is refused after this many rather than walked to its end.
+constexpr int kIpv6MaxExtensionHeaders = 8;
 
 std::uint16_t load_u16_be(const std::uint8_t* p) noexcept {
   return static_cast<std::uint16_t>((p[0] << 8) | p[1]);
@@ -50,7 +62,9 @@ constexpr int kDltRawBsdOs = 14;
 
 // DLT values as pcap_datalink() reports them (libpcap maps a file's LINKTYPE_ to its DLT_).
 std::optional<LinkLayer> link_layer(int dlt) noexcept {
-  if (dlt == DLT_RAW || dlt == kDltRawBsdOs || dlt == DLT_IPV4) return LinkLayer{0, 0, true};
+  if (dlt == DLT_RAW || dlt == kDltRawBsdOs || dlt == DLT_IPV4 || dlt == DLT_IPV6) {
+    return LinkLayer{0, 0, true};
+  }
   switch (dlt) {
     case DLT_EN10MB:
       return LinkLayer{14, 12, false};  // dst MAC, src MAC, ethertype
@@ -63,7 +77,61 @@ std::optional<LinkLayer> link_layer(int dlt) noexcept {
   }
 }
 
-enum class FrameKind { kUdp, kNonIpv4, kNonUdp, kFragment, kMalformed };
+enum class FrameKind { kUdp, kNonIp, kNonUdp, kFragment, kMalformed };
+
+// The UDP header and payload of a datagram: `datagram` is what the IP header says its payload is
+// (`datagram_bytes` long), of which `captured` bytes are in the record.
+FrameKind parse_udp(const std::uint8_t* udp, std::size_t datagram_bytes, std::size_t captured,
+                    CaptureRecord& out) noexcept {
+  if (datagram_bytes < kUdpHeaderBytes || captured < kUdpHeaderBytes) return FrameKind::kMalformed;
+  const std::size_t udp_length = load_u16_be(udp + 4);
+  // As the Linux stack does: a UDP length shorter than the IP payload is honoured (trailing bytes
+  // ignored), a longer one is malformed.
+  if (udp_length < kUdpHeaderBytes || udp_length > datagram_bytes) return FrameKind::kMalformed;
+  const std::size_t declared = udp_length - kUdpHeaderBytes;
+  // More bytes than declared: link-layer padding (Ethernet's 60-byte minimum) or a trailer.
+  // Fewer: the record was cut by the capture's snap length.
+  const std::size_t payload_captured = captured - kUdpHeaderBytes;
+  out.payload =
+      std::span<const std::uint8_t>(udp + kUdpHeaderBytes, std::min(declared, payload_captured));
+  out.udp_payload_length = static_cast<std::uint32_t>(declared);
+  out.snapped = payload_captured < declared;
+  out.source.port = load_u16_be(udp);
+  out.destination.port = load_u16_be(udp + 2);
+  return FrameKind::kUdp;
+}
+
+// IPv6 (RFC 8200): the fixed header, then a chain of extension headers to the UDP header. The
+// payload length counts everything after the fixed header; 0 (a jumbogram's) is refused.
+FrameKind parse_ipv6(std::span<const std::uint8_t> ip, CaptureRecord& out) noexcept {
+  if (ip.size() < kIpv6HeaderBytes || (ip[0] >> 4) != 6) return FrameKind::kMalformed;
+  const std::size_t payload_length = load_u16_be(ip.data() + 4);
+  if (payload_length == 0) return FrameKind::kMalformed;
+  std::uint8_t next = ip[6];
+  std::size_t offset = kIpv6HeaderBytes;
+  const std::size_t end = kIpv6HeaderBytes + payload_length;  // of the datagram, not the record
+  for (int headers = 0; next != kIpProtocolUdp; ++headers) {
+    if (next == kIpv6Fragment) return FrameKind::kFragment;
+    if (next != kIpv6HopByHop && next != kIpv6Routing && next != kIpv6DestinationOptions &&
+        next != kIpv6Authentication) {
+      return FrameKind::kNonUdp;  // TCP, ICMPv6, no next header, ESP, ...
+    }
+    if (headers == kIpv6MaxExtensionHeaders) return FrameKind::kMalformed;
+    if (ip.size() < offset + 2 || end < offset + 2) return FrameKind::kMalformed;
+    // Lengths: in 8-byte units not counting the first 8; AH's in 4-byte units not counting 8.
+    const std::size_t length = next == kIpv6Authentication ? (std::size_t{ip[offset + 1]} + 2) * 4
+                                                           : (std::size_t{ip[offset + 1]} + 1) * 8;
+    next = ip[offset];
+    offset += length;
+    if (offset > end || offset > ip.size()) return FrameKind::kMalformed;
+  }
+  const FrameKind kind = parse_udp(ip.data() + offset, end - offset, ip.size() - offset, out);
+  if (kind != FrameKind::kUdp) return kind;
+  out.source.ipv6 = out.destination.ipv6 = true;
+  std::copy_n(ip.data() + 8, 16, out.source.ip6.begin());
+  std::copy_n(ip.data() + 24, 16, out.destination.ip6.begin());
+  return FrameKind::kUdp;
+}
 
 // Parses one record's captured bytes down to the UDP payload. Reads only inside `frame`; every
 // length in the headers is untrusted and checked against what was captured before it is used.
@@ -71,10 +139,11 @@ FrameKind parse_frame(const LinkLayer& link, std::span<const std::uint8_t> frame
                       CaptureRecord& out) noexcept {
   std::size_t ip_offset = link.header_bytes;
   if (frame.size() < ip_offset) return FrameKind::kMalformed;
+  bool ipv6 = false;
   if (link.raw_ip) {
     // DLT_RAW carries IPv6 as well; the version nibble tells them apart.
     if (frame.empty()) return FrameKind::kMalformed;
-    if ((frame[0] >> 4) == 6) return FrameKind::kNonIpv4;
+    ipv6 = (frame[0] >> 4) == 6;
   } else {
     std::uint16_t protocol = load_u16_be(frame.data() + link.protocol_offset);
     // Any number of VLAN tags, each 4 bytes: TCI, then the ethertype of what follows.
@@ -84,10 +153,12 @@ FrameKind parse_frame(const LinkLayer& link, std::span<const std::uint8_t> frame
       protocol = load_u16_be(frame.data() + ip_offset + 2);
       ip_offset += kVlanTagBytes;
     }
-    if (protocol != kEthertypeIpv4) return FrameKind::kNonIpv4;
+    if (protocol != kEthertypeIpv4 && protocol != kEthertypeIpv6) return FrameKind::kNonIp;
+    ipv6 = protocol == kEthertypeIpv6;
   }
 
   const std::span<const std::uint8_t> ip = frame.subspan(ip_offset);
+  if (ipv6) return parse_ipv6(ip, out);
   if (ip.size() < kIpv4MinHeaderBytes) return FrameKind::kMalformed;
   if ((ip[0] >> 4) != 4) return FrameKind::kMalformed;
   const std::size_t ip_header_bytes = std::size_t{ip[0] & 0x0Fu} * 4;
@@ -101,29 +172,12 @@ FrameKind parse_frame(const LinkLayer& link, std::span<const std::uint8_t> frame
     return FrameKind::kFragment;
   }
   if (ip[9] != kIpProtocolUdp) return FrameKind::kNonUdp;
-
   // The UDP header must lie inside the datagram and inside the captured bytes.
-  if (total_length - ip_header_bytes < kUdpHeaderBytes ||
-      ip.size() - ip_header_bytes < kUdpHeaderBytes) {
-    return FrameKind::kMalformed;
-  }
-  const std::uint8_t* udp = ip.data() + ip_header_bytes;
-  const std::size_t udp_length = load_u16_be(udp + 4);
-  // As the Linux stack does: a UDP length shorter than the IP payload is honoured (trailing bytes
-  // ignored), a longer one is malformed.
-  if (udp_length < kUdpHeaderBytes || udp_length > total_length - ip_header_bytes) {
-    return FrameKind::kMalformed;
-  }
-
-  const std::size_t declared = udp_length - kUdpHeaderBytes;
-  // More bytes than declared: link-layer padding (Ethernet's 60-byte minimum) or a trailer.
-  // Fewer: the record was cut by the capture's snap length.
-  const std::size_t captured = ip.size() - ip_header_bytes - kUdpHeaderBytes;
-  out.payload = std::span<const std::uint8_t>(udp + kUdpHeaderBytes, std::min(declared, captured));
-  out.udp_payload_length = static_cast<std::uint32_t>(declared);
-  out.snapped = captured < declared;
-  out.source = {load_u32_be(ip.data() + 12), load_u16_be(udp)};
-  out.destination = {load_u32_be(ip.data() + 16), load_u16_be(udp + 2)};
+  const FrameKind kind = parse_udp(ip.data() + ip_header_bytes, total_length - ip_header_bytes,
+                                   ip.size() - ip_header_bytes, out);
+  if (kind != FrameKind::kUdp) return kind;
+  out.source.ip = load_u32_be(ip.data() + 12);
+  out.destination.ip = load_u32_be(ip.data() + 16);
   return FrameKind::kUdp;
 }
 
@@ -146,24 +200,6 @@ std::int64_t timestamp_ns(const timeval& ts, bool nanosecond) noexcept {
 }
 
 }  // namespace
-
-std::string to_string(const Endpoint& endpoint) {
-  return std::to_string(endpoint.ip >> 24) + '.' + std::to_string((endpoint.ip >> 16) & 0xFF) +
-         '.' + std::to_string((endpoint.ip >> 8) & 0xFF) + '.' +
-         std::to_string(endpoint.ip & 0xFF) + ':' + std::to_string(endpoint.port);
-}
-
-sockaddr_in to_sockaddr(const Endpoint& endpoint) noexcept {
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(endpoint.ip);
-  address.sin_port = htons(endpoint.port);
-  return address;
-}
-
-Endpoint to_endpoint(const sockaddr_in& address) noexcept {
-  return Endpoint{ntohl(address.sin_addr.s_addr), ntohs(address.sin_port)};
-}
 
 CaptureReader::CaptureReader(const std::string& path, Options options)
     : path_(path), options_(options) {
@@ -203,7 +239,7 @@ CaptureReader::CaptureReader(const std::string& path, Options options)
     const char* name = pcap_datalink_val_to_name(link_type_);
     throw CaptureError("capture '" + path + "' has unsupported link type " +
                        (name != nullptr ? name : "unknown") + " (" + std::to_string(link_type_) +
-                       "); supported: EN10MB, LINUX_SLL, LINUX_SLL2, RAW, IPV4");
+                       "); supported: EN10MB, LINUX_SLL, LINUX_SLL2, RAW, IPV4, IPV6");
   }
 }
 
@@ -222,8 +258,8 @@ CaptureStatus CaptureReader::next(CaptureRecord& out) {
     ++stats_.records;
     CaptureRecord record;
     switch (parse_frame(link, {data, header->caplen}, record)) {
-      case FrameKind::kNonIpv4:
-        ++stats_.non_ipv4;
+      case FrameKind::kNonIp:
+        ++stats_.non_ip;
         continue;
       case FrameKind::kNonUdp:
         ++stats_.non_udp;
@@ -243,6 +279,7 @@ CaptureStatus CaptureReader::next(CaptureRecord& out) {
     }
     record.timestamp_ns = timestamp_ns(header->ts, nanosecond_);
     ++stats_.udp_datagrams;
+    if (record.source.ipv6) ++stats_.ipv6_datagrams;
     if (record.snapped) ++stats_.snapped;
     out = record;
     return CaptureStatus::kRecord;

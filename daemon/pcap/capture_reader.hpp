@@ -1,8 +1,11 @@
 // Reads UDP payloads out of pcap and pcapng capture files (libpcap does the file formats).
 //
 // Link types: Ethernet (with any number of 802.1Q / 802.1ad VLAN tags), Linux cooked capture v1
-// (SLL) and v2 (SLL2), and raw IPv4. Network layer: IPv4 / UDP. Everything else (IPv6, ARP,
-// TCP, IP fragments, malformed headers) is skipped and counted in CaptureStats, never an error.
+// (SLL) and v2 (SLL2), and raw IP. Network layer: IPv4 / UDP and IPv6 / UDP (behind any
+// hop-by-hop, routing, destination-options or authentication headers). Everything else (ARP,
+// TCP, IP fragments, malformed headers) is skipped and counted in CaptureStats, never an error:
+// the replay's summary and pandarcap-inspect print those counts. Fragments are not reassembled
+// (a Pandar packet fits one Ethernet frame; a fragmented one was sent through a smaller MTU).
 //
 // End of input has three distinct outcomes:
 //   kEnd        the file ended cleanly after its last record;
@@ -14,14 +17,14 @@
 // Not thread-safe; one reader per thread. A record's payload span is valid until the next call.
 #pragma once
 
-#include <netinet/in.h>
-
 #include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
+
+#include "daemon/pcap/endpoint.hpp"
 
 struct pcap;  // libpcap's handle, kept out of this header
 
@@ -31,20 +34,6 @@ class CaptureError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
-
-// IPv4 address and port, both in host byte order (192.168.1.201 = 0xC0A801C9).
-struct Endpoint {
-  std::uint32_t ip = 0;
-  std::uint16_t port = 0;
-  friend bool operator==(const Endpoint&, const Endpoint&) = default;
-};
-
-// "192.168.1.201:2368"
-std::string to_string(const Endpoint& endpoint);
-
-// The same endpoint as the socket API holds it (network byte order), and back.
-sockaddr_in to_sockaddr(const Endpoint& endpoint) noexcept;
-Endpoint to_endpoint(const sockaddr_in& address) noexcept;
 
 struct CaptureRecord {
   std::span<const std::uint8_t> payload;  // UDP payload bytes present in the file
@@ -58,14 +47,18 @@ struct CaptureRecord {
 enum class CaptureStatus { kRecord, kEnd, kTruncated, kError };
 
 struct CaptureStats {
-  std::uint64_t records = 0;        // every record read from the file
-  std::uint64_t udp_datagrams = 0;  // records yielded (after the port filter)
-  std::uint64_t port_filtered = 0;  // UDP datagrams to another destination port
-  std::uint64_t non_ipv4 = 0;       // ARP, IPv6, unknown ethertypes / link protocols
-  std::uint64_t non_udp = 0;        // IPv4 but not UDP
-  std::uint64_t ip_fragments = 0;   // IPv4 fragments (not reassembled)
-  std::uint64_t malformed = 0;      // headers cut short or inconsistent
-  std::uint64_t snapped = 0;        // yielded datagrams with snapped == true
+  std::uint64_t records = 0;         // every record read from the file
+  std::uint64_t udp_datagrams = 0;   // records yielded (after the port filter)
+  std::uint64_t ipv6_datagrams = 0;  // of which IPv6 / UDP
+  std::uint64_t port_filtered = 0;   // UDP datagrams to another destination port
+  std::uint64_t non_ip = 0;          // ARP, unknown ethertypes / link protocols
+  std::uint64_t non_udp = 0;         // IPv4 or IPv6 but not UDP
+  std::uint64_t ip_fragments = 0;    // IPv4 fragments and IPv6 fragment headers (not reassembled)
+  std::uint64_t malformed = 0;       // headers cut short or inconsistent
+  std::uint64_t snapped = 0;         // yielded datagrams with snapped == true
+
+  // Records read but not yielded for what they are (the port filter's are asked for).
+  std::uint64_t skipped() const noexcept { return non_ip + non_udp + ip_fragments + malformed; }
 };
 
 class CaptureReader {

@@ -21,9 +21,11 @@ constexpr std::uint32_t kLinktypeEthernet = 1;
 
 constexpr std::size_t kEthernetBytes = 14;
 constexpr std::size_t kIpv4Bytes = 20;
+constexpr std::size_t kIpv6Bytes = 40;
 constexpr std::size_t kUdpBytes = 8;
-constexpr std::size_t kHeadersBytes = kEthernetBytes + kIpv4Bytes + kUdpBytes;  // 42
-constexpr std::size_t kMaxUdpPayloadBytes = 65535 - kIpv4Bytes - kUdpBytes;     // 65507
+constexpr std::size_t kHeadersBytes = kEthernetBytes + kIpv4Bytes + kUdpBytes;      // 42
+constexpr std::size_t kHeadersBytesIpv6 = kEthernetBytes + kIpv6Bytes + kUdpBytes;  // 62
+constexpr std::size_t kMaxUdpPayloadBytes = 65535 - kIpv4Bytes - kUdpBytes;         // 65507
 
 // Appends integers to a fixed buffer, in native order (pcap headers) or big-endian (wire headers).
 template <std::size_t N>
@@ -51,16 +53,27 @@ class ByteWriter {
   std::size_t size_ = 0;
 };
 
-// RFC 791 header checksum: one's complement of the one's-complement sum of the 16-bit words.
-std::uint16_t ipv4_checksum(std::span<const std::uint8_t> header) {
-  std::uint32_t sum = 0;
-  for (std::size_t i = 0; i + 1 < header.size(); i += 2) {
-    sum += static_cast<std::uint32_t>((header[i] << 8) | header[i + 1]);
+// The one's-complement sum of big-endian 16-bit words (RFC 1071), an odd last byte padded with
+// zero, added to `sum`; folded by internet_checksum().
+std::uint64_t add_words(std::uint64_t sum, std::span<const std::uint8_t> bytes) noexcept {
+  std::size_t i = 0;
+  for (; i + 1 < bytes.size(); i += 2) {
+    sum += static_cast<std::uint32_t>((bytes[i] << 8) | bytes[i + 1]);
   }
+  if (i < bytes.size()) sum += static_cast<std::uint32_t>(bytes[i] << 8);
+  return sum;
+}
+
+std::uint16_t internet_checksum(std::uint64_t sum) noexcept {
   while ((sum >> 16) != 0) {
     sum = (sum & 0xFFFF) + (sum >> 16);  // end-around carry
   }
   return static_cast<std::uint16_t>(~sum);
+}
+
+// RFC 791 header checksum: one's complement of the one's-complement sum of the 16-bit words.
+std::uint16_t ipv4_checksum(std::span<const std::uint8_t> header) {
+  return internet_checksum(add_words(0, header));
 }
 
 }  // namespace
@@ -138,12 +151,13 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
                                 " ns is outside the pcap range (1970 to 2106)");
   }
   const std::int64_t microseconds = timestamp_ns % kNsPerSecond / kNsPerMicrosecond;
+  const bool ipv6 = source.ipv6 || destination.ipv6;
+  const std::size_t headers = ipv6 ? kHeadersBytesIpv6 : kHeadersBytes;
   const auto udp_length = static_cast<std::uint16_t>(kUdpBytes + original);
-  const auto ip_length = static_cast<std::uint16_t>(kIpv4Bytes + udp_length);
-  const auto captured_bytes = static_cast<std::uint32_t>(kHeadersBytes + udp_payload.size());
-  const auto original_bytes = static_cast<std::uint32_t>(kHeadersBytes + original);
+  const auto captured_bytes = static_cast<std::uint32_t>(headers + udp_payload.size());
+  const auto original_bytes = static_cast<std::uint32_t>(headers + original);
 
-  ByteWriter<kPcapRecordHeaderBytes + kHeadersBytes> out;
+  ByteWriter<kPcapRecordHeaderBytes + kHeadersBytesIpv6> out;
   out.native_u32(static_cast<std::uint32_t>(seconds));
   out.native_u32(static_cast<std::uint32_t>(microseconds));
   out.native_u32(captured_bytes);  // bytes in this record
@@ -153,25 +167,44 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
   constexpr std::array<std::uint8_t, 6> kSourceMac{0x02, 0, 0, 0, 0, 0x01};
   out.bytes(kDestinationMac.data(), kDestinationMac.size());
   out.bytes(kSourceMac.data(), kSourceMac.size());
-  out.be_u16(0x0800);  // ethertype IPv4
-
   const std::size_t ip_offset = kPcapRecordHeaderBytes + kEthernetBytes;
-  out.be_u16(0x4500);  // version 4, IHL 5 (no options), DSCP/ECN 0
-  out.be_u16(ip_length);
-  out.be_u16(ip_id_++);
-  out.be_u16(0x4000);  // flags: DF; fragment offset 0
-  out.be_u16(0x4011);  // TTL 64, protocol UDP (17)
-  out.be_u16(0);       // header checksum, filled in below
-  out.be_u32(source.ip);
-  out.be_u32(destination.ip);
-  const std::uint16_t checksum = ipv4_checksum({out.at(ip_offset), kIpv4Bytes});
-  out.at(ip_offset + 10)[0] = static_cast<std::uint8_t>(checksum >> 8);
-  out.at(ip_offset + 10)[1] = static_cast<std::uint8_t>(checksum);
+  std::uint16_t udp_checksum = 0;  // IPv4: "not computed"
+  if (ipv6) {
+    out.be_u16(0x86DD);      // ethertype IPv6
+    out.be_u32(0x60000000);  // version 6, traffic class 0, flow label 0
+    out.be_u16(udp_length);  // payload length: the UDP datagram, no extension headers
+    out.be_u16(0x1140);      // next header UDP (17), hop limit 64
+    out.bytes(source.ip6.data(), source.ip6.size());
+    out.bytes(destination.ip6.data(), destination.ip6.size());
+    if (original == udp_payload.size()) {
+      // RFC 8200 8.1: over the pseudo-header (addresses, UDP length, next header), the UDP
+      // header with a zero checksum, and the payload; a sum of 0 is sent as 0xFFFF.
+      std::uint64_t sum = add_words(0, {out.at(ip_offset + 8), 32});
+      sum += udp_length + 17u;
+      sum += source.port + destination.port + udp_length;
+      sum = add_words(sum, udp_payload);
+      udp_checksum = internet_checksum(sum);
+      if (udp_checksum == 0) udp_checksum = 0xFFFF;
+    }
+  } else {
+    out.be_u16(0x0800);  // ethertype IPv4
+    out.be_u16(0x4500);  // version 4, IHL 5 (no options), DSCP/ECN 0
+    out.be_u16(static_cast<std::uint16_t>(kIpv4Bytes + udp_length));
+    out.be_u16(ip_id_++);
+    out.be_u16(0x4000);  // flags: DF; fragment offset 0
+    out.be_u16(0x4011);  // TTL 64, protocol UDP (17)
+    out.be_u16(0);       // header checksum, filled in below
+    out.be_u32(source.ip);
+    out.be_u32(destination.ip);
+    const std::uint16_t checksum = ipv4_checksum({out.at(ip_offset), kIpv4Bytes});
+    out.at(ip_offset + 10)[0] = static_cast<std::uint8_t>(checksum >> 8);
+    out.at(ip_offset + 10)[1] = static_cast<std::uint8_t>(checksum);
+  }
 
   out.be_u16(source.port);
   out.be_u16(destination.port);
   out.be_u16(udp_length);
-  out.be_u16(0);  // checksum 0: "not computed", legal for UDP over IPv4
+  out.be_u16(udp_checksum);
 
   append(out.written());
   append(udp_payload);

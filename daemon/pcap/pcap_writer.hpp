@@ -2,9 +2,11 @@
 // synthesised Ethernet / IPv4 / UDP headers, so that Wireshark, tcpdump, tcpreplay and LidarView
 // read the recording like one taken on the wire.
 //
-// Synthesised headers: Ethernet 02:00:00:00:00:02 <- 02:00:00:00:00:01, ethertype IPv4; IPv4 with
-// a correct header checksum, TTL 64, DF set, incrementing identification; UDP checksum 0 ("not
-// computed", legal for IPv4).
+// Synthesised headers: Ethernet 02:00:00:00:00:02 <- 02:00:00:00:00:01; for an IPv4 datagram
+// IPv4 with a correct header checksum, TTL 64, DF set, incrementing identification and UDP
+// checksum 0 ("not computed", legal for IPv4); for an IPv6 one (a replayed IPv6 capture) IPv6
+// with hop limit 64 and the UDP checksum IPv6 requires, computed (0 when only part of the
+// datagram is held: its sum cannot be known).
 //
 // Errors: every failing write throws std::system_error carrying errno and the file name (the
 // bytes go through daemon/io's OutputFile, so the tests' system-call seam reaches them). Nothing
@@ -29,8 +31,9 @@ namespace pandarcap {
 inline constexpr std::size_t kPcapGlobalHeaderBytes = 24;
 inline constexpr std::size_t kPcapRecordHeaderBytes = 16;
 // A record's bytes besides the UDP payload: its header and the Ethernet, IPv4 and UDP headers
-// written in front of the payload (14 + 20 + 8).
+// written in front of the payload (14 + 20 + 8); an IPv6 datagram's IPv6 header is 20 longer.
 inline constexpr std::size_t kPcapRecordOverheadBytes = kPcapRecordHeaderBytes + 42;
+inline constexpr std::size_t kPcapRecordOverheadBytesIpv6 = kPcapRecordHeaderBytes + 62;
 // Not 65535: the largest record (a 65507-byte payload) is a 65549-byte frame, and readers cut
 // records to the file's snaplen. 262144 is libpcap's maximum and tcpdump's default.
 inline constexpr std::uint32_t kPcapSnaplen = 262144;

@@ -95,7 +95,8 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
     }
     ReceiveCounters::add(counters.datagrams, 1);
     ReceiveCounters::add(counters.bytes, record.udp_payload_length);
-    if (sensor_ip_ && record.source.ip != *sensor_ip_) {
+    // The sensor's address is IPv4: an IPv6 sender is not it.
+    if (sensor_ip_ && (record.source.ipv6 || record.source.ip != *sensor_ip_)) {
       ReceiveCounters::add(counters.foreign, 1);
       continue;
     }
@@ -120,8 +121,8 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
     slot.truncated = record.udp_payload_length > sizeof slot.payload || record.snapped;
     if (slot.truncated) ReceiveCounters::add(counters.truncated, 1);
     slot.receive_time_ns = record.timestamp_ns;
-    slot.source = to_sockaddr(record.source);
-    slot.destination = to_sockaddr(record.destination);
+    slot.source = to_slot_address(record.source);
+    slot.destination = to_slot_address(record.destination);
     if (pending == slots.size()) publish();
   }
   publish();

@@ -209,8 +209,8 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
     PacketSlot& slot = slots[i];
     batch.iov[i] = {slot.payload, sizeof slot.payload};
     msghdr& header = batch.headers[i].msg_hdr;
-    header.msg_name = &slot.source;
-    header.msg_namelen = sizeof slot.source;
+    header.msg_name = &slot.source.v4;
+    header.msg_namelen = sizeof slot.source.v4;
     header.msg_iov = &batch.iov[i];
     header.msg_iovlen = 1;
     header.msg_control = batch.control[i].data();
@@ -243,7 +243,7 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
     slot.truncated = (message.msg_hdr.msg_flags & MSG_TRUNC) != 0 || slot.length < message.msg_len;
     truncated += slot.truncated;
     slot.receive_time_ns = fallback_time;
-    slot.destination = bound_;
+    slot.destination.v4 = bound_;
     for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;
          c = CMSG_NXTHDR(const_cast<msghdr*>(&message.msg_hdr), c)) {
       // The length is the kernel's to set, but it is checked before the copy all the same.
@@ -256,10 +256,10 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
                  c->cmsg_len >= CMSG_LEN(sizeof(in_pktinfo))) {
         in_pktinfo info{};
         std::memcpy(&info, CMSG_DATA(c), sizeof info);
-        slot.destination.sin_addr = info.ipi_addr;
+        slot.destination.v4.sin_addr = info.ipi_addr;
       }
     }
-    if (sensor_ip_ && slot.source.sin_addr.s_addr != *sensor_ip_) {
+    if (sensor_ip_ && slot.source.v4.sin_addr.s_addr != *sensor_ip_) {
       ++foreign;
       continue;
     }

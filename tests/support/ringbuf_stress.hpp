@@ -83,7 +83,7 @@ inline StressOutcome stress_packet_ring(const StressPlan& plan) {
         slot.length = static_cast<std::uint32_t>(next % 1267);
         slot.truncated = (next & 1) != 0;
         slot.receive_time_ns = static_cast<std::int64_t>(next * 3);
-        slot.source.sin_port = static_cast<std::uint16_t>(next);
+        slot.source.v4.sin_port = static_cast<std::uint16_t>(next);
         ++next;
         ++n;
       }
@@ -113,7 +113,7 @@ inline StressOutcome stress_packet_ring(const StressPlan& plan) {
                             slot.length == expected % 1267 &&
                             slot.truncated == ((expected & 1) != 0) &&
                             slot.receive_time_ns == static_cast<std::int64_t>(expected * 3) &&
-                            slot.source.sin_port == static_cast<std::uint16_t>(expected);
+                            slot.source.v4.sin_port == static_cast<std::uint16_t>(expected);
         if (!intact) ++outcome.mismatches;
         ++expected;
       }

@@ -1,0 +1,168 @@
+// A replay, whatever the capture holds: IPv4 or IPv6, pcap or pcapng, recorded on any day. The
+// sensor's clock is judged against the capture's own record times (never the day the replay
+// runs on), IPv6/UDP datagrams are decoded like IPv4 ones and recorded again as IPv6, and what
+// the replay cannot use (IP fragments, other protocols) is counted where the user looks: the
+// exit summary, a warning, and pandarcap-inspect's summary.
+#include <fmt/format.h>
+
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "bench/child_process.hpp"
+#include "core/sim/synthetic_sensor.hpp"
+#include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
+#include "support/capture_bytes.hpp"
+#include "support/test_support.hpp"
+
+using namespace pandarcap;
+using nlohmann::json;
+namespace fs = std::filesystem;
+using test::health_counter;
+
+namespace {
+
+// 2023-03-01T08:00:00Z: a recording from an earlier day than any the tests run on.
+constexpr std::int64_t kRecordedNs = 1'677'657'600'000'000'000;
+constexpr int kPackets = 7200;  // two seconds of a dual-return sensor at 600 RPM
+constexpr Endpoint kLidar{0xC0A801C9, 2368};
+constexpr Endpoint kHost{0xC0A8010A, 2368};
+constexpr Endpoint kLidar6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 1}};
+constexpr Endpoint kHost6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x10}};
+
+// The simulated sensor's packets as a host received them on that day: each record 300 us after
+// the packet's own time (a synchronised sensor).
+fs::path write_recording(const fs::path& path, Endpoint from, Endpoint to) {
+  SyntheticSensorConfig config;
+  config.start_unix_ns = kRecordedNs;
+  SyntheticSensor sensor(config);
+  std::array<std::uint8_t, kMaxPacketBytes> packet{};
+  PcapWriter pcap(path.string());
+  for (int i = 0; i < kPackets; ++i) {
+    const std::size_t size = sensor.next(packet);
+    pcap.write({packet.data(), size}, sensor.last_packet_time_ns() + 300'000, from, to);
+  }
+  pcap.close();
+  return path;
+}
+
+// The same records in pcapng (nanosecond times), from a classic pcap PcapWriter wrote.
+fs::path to_pcapng(const fs::path& pcap, const fs::path& path) {
+  const std::string bytes = harness::read_file(pcap);
+  test::Bytes out = test::pcapng_header();
+  for (std::size_t at = kPcapGlobalHeaderBytes; at + kPcapRecordHeaderBytes <= bytes.size();) {
+    std::uint32_t header[4];
+    std::memcpy(header, bytes.data() + at, sizeof header);  // seconds, us, captured, original
+    const auto* frame = reinterpret_cast<const std::uint8_t*>(bytes.data()) + at + 16;
+    const std::uint64_t ns = std::uint64_t{header[0]} * 1'000'000'000 + header[1] * 1000ull;
+    test::append(out, test::pcapng_packet(test::Bytes(frame, frame + header[2]), ns));
+    at += kPcapRecordHeaderBytes + header[2];
+  }
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(out.data()), static_cast<std::streamsize>(out.size()));
+  return path;
+}
+
+struct Replayed {
+  test::CommandResult run;
+  json health;
+};
+
+Replayed replay(const fs::path& capture, const fs::path& out) {
+  Replayed r;
+  r.run = test::run_command(test::pandarcapd_command() + " --replay '" + capture.string() +
+                            "' --output-dir '" + out.string() + "' 2>&1");
+  r.health = test::last_health_record(out);
+  return r;
+}
+
+}  // namespace
+
+TEST_CASE("a replay is judged by its capture's clock: an earlier day's recording is not degraded",
+          "[daemon][replay][threads]") {
+  test::ScratchDir dir("replay-formats");
+  const fs::path v4 = write_recording(dir / "v4.pcap", kLidar, kHost);
+  const fs::path v6 = write_recording(dir / "v6.pcap", kLidar6, kHost6);
+  const fs::path v6ng = to_pcapng(v6, dir / "v6.pcapng");
+  std::uint64_t frames_v4 = 0;
+  for (const fs::path& capture : {v4, v6, v6ng}) {
+    const fs::path out = dir / ("out-" + capture.filename().string());
+    const Replayed r = replay(capture, out);
+    INFO(capture.filename() << ":\n" << r.run.out << "\n" << r.health.dump());
+    REQUIRE(r.run.exit_code == 0);
+    // The sensor's clock agrees with the record times (300 us apart), years before today.
+    const json& gauges = r.health.at("gauges");
+    REQUIRE(gauges.contains("sensor_clock_offset_seconds"));
+    CHECK(std::abs(gauges.at("sensor_clock_offset_seconds").get<double>()) < 1.0);
+    CHECK(r.health.at("reason").get<std::string>().find("clock") == std::string::npos);
+    CHECK(r.run.out.find("clock off") == std::string::npos);
+    // Every packet decoded, whatever the network layer.
+    CHECK(health_counter(r.health, "datagrams_received") == kPackets);
+    CHECK(health_counter(r.health, "packets_accepted") == kPackets);
+    const std::uint64_t frames = health_counter(r.health, "frames_complete");
+    CHECK(frames >= 18);
+    if (capture == v4) frames_v4 = frames;
+    CHECK(frames == frames_v4);  // IPv6 decodes to the same frames as IPv4
+    const bool ipv6 = capture != v4;
+    CHECK(r.run.out.find(fmt::format("{} UDP datagrams ({} IPv6)", kPackets,
+                                     ipv6 ? kPackets : 0)) != std::string::npos);
+    CHECK(r.run.out.find("0 skipped") != std::string::npos);
+    // Recorded again as it came: IPv6 datagrams with IPv6 headers, the same payloads.
+    const auto recordings = test::files_ending(out / "raw", ".pcap");
+    REQUIRE(recordings.size() == 1);
+    CaptureReader reader(recordings.front().string());
+    CaptureRecord record;
+    std::uint64_t read = 0;
+    while (reader.next(record) == CaptureStatus::kRecord) {
+      if (read == 0) CHECK(record.source == (ipv6 ? kLidar6 : kLidar));
+      ++read;
+    }
+    CHECK(read == kPackets);
+    CHECK(reader.stats().ipv6_datagrams == (ipv6 ? kPackets : 0));
+  }
+}
+
+TEST_CASE("what a replay skips is never silent: the summary, a warning and pandarcap-inspect",
+          "[daemon][replay][threads]") {
+  test::ScratchDir dir("replay-skipped");
+  const fs::path capture = write_recording(dir / "fragments.pcap", kLidar, kHost);
+  // Three records become IPv4 fragments (more-fragments set), one a TCP segment.
+  std::string bytes = harness::read_file(capture);
+  const std::size_t record_bytes = kPcapRecordOverheadBytes + kMaxPacketBytes - 4;  // 1262 B
+  const auto ip_header = [&](int i) {
+    return kPcapGlobalHeaderBytes + static_cast<std::size_t>(i) * record_bytes +
+           kPcapRecordHeaderBytes + 14;
+  };
+  for (int i : {100, 101, 102})
+    bytes[ip_header(i) + 6] |= 0x20;
+  bytes[ip_header(200) + 9] = 6;
+  std::ofstream(capture, std::ios::binary | std::ios::trunc) << bytes;
+
+  const Replayed r = replay(capture, dir / "out");
+  INFO(r.run.out);
+  REQUIRE(r.run.exit_code == 0);
+  CHECK(health_counter(r.health, "datagrams_received") == kPackets - 4);
+  CHECK(r.run.out.find("4 skipped (0 not IP, 1 not UDP, 3 IP fragments, 0 malformed)") !=
+        std::string::npos);
+  CHECK(r.run.out.find("4 of 7200 records skipped") != std::string::npos);  // the warning
+
+  const auto inspect =
+      test::run_command(test::binary("pandarcap-inspect").string() + " '" + capture.string() + "'");
+  INFO(inspect.out);
+  CHECK(inspect.exit_code == 0);
+  CHECK(inspect.out.find("skipped 4 (not IP 0, not UDP 1, IP fragments 3, malformed 0)") !=
+        std::string::npos);
+  const auto inspect_json = test::run_command(test::binary("pandarcap-inspect").string() +
+                                              " --json '" + capture.string() + "'");
+  const json summary = json::parse(inspect_json.out, nullptr, false);
+  REQUIRE_FALSE(summary.is_discarded());
+  CHECK(summary["summary"]["capture"]["skipped"] == 4);
+  CHECK(summary["summary"]["capture"]["ip_fragments"] == 3);
+  CHECK(summary["summary"]["packets"] == kPackets - 4);
+}
