@@ -87,8 +87,10 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
                                  : std::string(),
       c.write_errors);
   if (c.duplicate_packets > 0 || c.outlier_packets > 0) {
-    fmt::print("{} duplicate packets (not decoded again), {} outliers left out of frames\n",
-               c.duplicate_packets, c.outlier_packets);
+    fmt::print(
+        "{} duplicate packets (not decoded again), {} isolated outliers (placed at their azimuth's "
+        "time, or left out), no frame cut for them\n",
+        c.duplicate_packets, c.outlier_packets);
   }
   if (wo.mcap) {
     fmt::print("mcap: {} messages written, {} not written, {} bytes{}\n",
