@@ -31,9 +31,12 @@ struct TrafficSource {
 
   // One second of the simulated sensor (`sensor.rpm`, `sensor.return_mode`): 3600 packets in
   // dual return, 1800 in single, whatever the RPM (the firing rate is fixed; the azimuth step
-  // per block grows with the RPM). A second is a whole number of revolutions at 600 and 1200
-  // RPM, so the cycle's azimuths join. Its sequence settings are ignored: the generator writes
-  // them.
+  // per block grows with the RPM). A second of packets is not quite a whole number of
+  // revolutions (3600 x 277.8 us = 1.00008 s: 10.0008 turns at 600 RPM), so where the cycle
+  // joins, the azimuth steps 0.29 deg short of its usual step (0.58 deg at 1200 RPM): well inside
+  // what a receiver takes for one rotation (pandarcapd: 2 deg + 2 %), and the running clock
+  // (loop_ns) keeps the times exact, but the azimuths fall that much behind the clock at each
+  // join. Its sequence settings are ignored: the generator writes them.
   static TrafficSource synthetic(const SyntheticSensorConfig& sensor);
   // Every valid Pandar40P packet of a pcap/pcapng file (its own sequence, if any, is replaced),
   // at its tail time's offset from the first's (its record time where the tail's is not valid).
