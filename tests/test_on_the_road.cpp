@@ -213,7 +213,7 @@ TEST_CASE("health never freezes: the default layout on a small disk, full and fr
   check_identity(records.back());
 }
 
-TEST_CASE("folders removed while running come back; recorded is what is on disk",
+TEST_CASE("folders removed while running come back, and recorded is what is on disk",
           "[daemon][reliability][road][threads]") {
   test::ScratchDir dir("road-vanish");
   const fs::path out = dir / "out";
@@ -334,7 +334,7 @@ TEST_CASE("control characters in a configured path are escaped in every line",
   CHECK(check.out.find('\n' + forged) == std::string::npos);
 }
 
-TEST_CASE("--check-config checks the free space the start needs, and prints it",
+TEST_CASE("check-config checks the free space the start needs, and prints it",
           "[daemon][road][disk][threads]") {
   test::ScratchDir dir("road-check-space");
   const auto fine = test::run_command(test::pandarcapd_command() + " --check-config --output-dir " +

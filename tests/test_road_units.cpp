@@ -316,7 +316,7 @@ TEST_CASE("Health policy: duplicates, outliers and lost recordings degrade while
   }
 }
 
-TEST_CASE("Log text: control characters become \\xNN, everything else is kept",
+TEST_CASE("Log text: control characters become hex escapes, everything else is kept",
           "[road][unit][log]") {
   CHECK(escaped_control("out\n[info] ok") == "out\\x0a[info] ok");
   CHECK(escaped_control("a\rb\tc\x1b[31md\x7f") == "a\\x0db\\x09c\\x1b[31md\\x7f");
