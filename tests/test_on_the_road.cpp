@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <string>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -32,6 +33,18 @@ namespace {
 
 bool logged(const harness::ChildProcess& daemon, const std::string& text) {
   return daemon.log().find(text) != std::string::npos;
+}
+
+// Removes a folder the daemon is writing into, as `rm -rf` does: the daemon may put a file in
+// while it is being emptied ("Directory not empty"), so it is emptied again until the removal
+// goes through. (The daemon may make it again at once: that is what is under test.)
+void remove_folder(const fs::path& dir) {
+  std::error_code error;
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    fs::remove_all(dir, error);
+    if (!error) return;
+  }
+  FAIL("cannot remove " << dir << ": " << error.message());
 }
 
 double now_s() {
@@ -229,7 +242,7 @@ TEST_CASE("folders removed while running come back, and recorded is what is on d
                               10s));
   // A clean-up script, or a USB disk pulled: recordings (finished and open), frames and health go.
   for (const char* folder : {"raw", "frames", "health"})
-    fs::remove_all(out / folder);
+    remove_folder(out / folder);
   const double removed_at = now_s();
   // Each comes back at its next write, the health within a second or two.
   CHECK(harness::wait_until([&] { return sample(out / "health").jsonl_fresh; }, 4s));
@@ -529,8 +542,8 @@ void vehicle_day(int seconds) {
     last_uptime = uptime(s.last);
     // The day's events, each once, in order.
     if (!removed && elapsed() > seconds * 0.15) {
-      fs::remove_all(view / "raw");
-      fs::remove_all(view / "frames");
+      remove_folder(view / "raw");
+      remove_folder(view / "frames");
       removed = true;
     } else if (!hangups && elapsed() > seconds * 0.3) {
       for (int i = 0; i < 20; ++i) {
