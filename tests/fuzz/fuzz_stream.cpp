@@ -3,8 +3,9 @@
 // of the stream: block azimuths (start and step, possibly invalid), the microsecond timestamp,
 // the return mode and the UDP sequence. That keeps most packets valid, so the fuzzer explores
 // cuts, wraps, gaps, reordering, discontinuities, frame overflow and the accounting rather than
-// the validator. Invariants: packets = accepted + rejected; no frame exceeds its capacity; the
-// frames handed out are in sequence order.
+// the validator. Invariants: packets = accepted + rejected + duplicates (a record that repeats
+// the one before it makes a duplicate); no frame exceeds its capacity; the frames handed out are
+// in sequence order.
 #include <array>
 #include <cstdint>
 #include <cstdlib>
@@ -73,6 +74,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   decoder.flush();
   const StreamStats& stats = decoder.stats();
-  if (broken || stats.packets != stats.accepted + stats.rejected()) std::abort();
+  if (broken || stats.packets != stats.accepted + stats.rejected() + stats.duplicates) std::abort();
   return 0;
 }
