@@ -385,9 +385,9 @@ TEST_CASE("pandarcapd --simulate runs the live path with no sensor",
   CHECK(latency.at("p50_us").get<double>() <= latency.at("p99_us").get<double>());
   CHECK(latency.at("p99_us").get<double>() <= latency.at("max_us").get<double>());
   if (!test::kSanitizerBuild) CHECK(latency.at("max_us").get<double>() < 1e6);
-  // The receive, decode and writer loops allocate nothing once warm (2 s), with frames, pcap
-  // and both health files being written. Sanitizer builds keep their own allocator, and then the
-  // daemon does not report the count at all.
+    // The receive, decode and writer loops allocate nothing once warm (2 s), with frames, pcap
+    // and both health files being written. Sanitizer builds keep their own allocator, and then the
+    // daemon does not report the count at all.
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
   CHECK_FALSE(h.at("counters").contains("hot_path_allocations"));
 #else
