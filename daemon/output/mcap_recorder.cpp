@@ -193,21 +193,13 @@ void McapRecorder::lose_open_file() {
 }
 
 void McapRecorder::verify_on_disk() {
-  std::uint64_t lost = 0;
-  std::size_t files = 0;
-  for (const auto& [path, messages] : recorded_) {
-    std::error_code error;
-    if (std::filesystem::exists(path, error) || error) continue;
-    lost += messages;
-    ++files;
-  }
-  recorded_.clear();
-  if (files == 0) return;
-  messages_lost_ += lost;
+  const RecordedFiles::Gone gone = recorded_.take_gone();
+  if (gone.files == 0) return;
+  messages_lost_ += gone.items;
   spdlog::warn(
       "{} of this run's MCAP files are gone from {} (removed while running): their {} "
       "messages are not counted as recorded",
-      files, dir_.string(), lost);
+      gone.files, dir_.string(), gone.items);
 }
 
 void McapRecorder::flush() {
@@ -256,11 +248,7 @@ void McapRecorder::place_finished(std::uint64_t messages) {
   messages_closed_ += messages;
   bytes_closed_ += bytes;
   retention_.add(final_path_, bytes);
-  recorded_.emplace_back(final_path_, messages);
-  if (retention_.limited()) {  // the oldest leave first, as in PcapRecorder
-    while (recorded_.size() > retention_.size())
-      recorded_.pop_front();
-  }
+  recorded_.add(final_path_, messages, retention_);
 }
 
 void McapRecorder::rotate() {

@@ -26,7 +26,6 @@
 #pragma once
 
 #include <cstdint>
-#include <deque>
 #include <exception>
 #include <filesystem>
 #include <memory>
@@ -94,7 +93,7 @@ class McapRecorder {
   std::filesystem::path dir_;
   int volume_;  // dir_'s file system, for space_
   Retention retention_;
-  std::deque<std::pair<std::string, std::uint64_t>> recorded_;  // as PcapRecorder's
+  RecordedFiles recorded_;  // this run's finished files still kept
   std::string refusal_;
   std::unique_ptr<McapFile> file_;
   std::string final_path_, part_path_;

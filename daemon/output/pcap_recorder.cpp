@@ -126,21 +126,13 @@ void PcapRecorder::lose_open_file() {
 }
 
 void PcapRecorder::verify_on_disk() {
-  std::uint64_t lost = 0;
-  std::size_t files = 0;
-  for (const auto& [path, packets] : recorded_) {
-    std::error_code error;
-    if (std::filesystem::exists(path, error) || error) continue;
-    lost += packets;
-    ++files;
-  }
-  recorded_.clear();
-  if (files == 0) return;
-  packets_lost_ += lost;
+  const RecordedFiles::Gone gone = recorded_.take_gone();
+  if (gone.files == 0) return;
+  packets_lost_ += gone.items;
   spdlog::warn(
       "{} of this run's recordings are gone from {} (removed while running): their {} "
       "packets are not counted as recorded",
-      files, dir_.string(), lost);
+      gone.files, dir_.string(), gone.items);
 }
 
 void PcapRecorder::abandon(const std::exception& error, std::uint64_t failed_bytes) {
@@ -163,12 +155,7 @@ void PcapRecorder::finish_file() {
       accounting_.put_in_place(part, final_path_);
       bytes_closed_ += pcap_->flushed_bytes();
       retention_.add(final_path_, pcap_->flushed_bytes());
-      recorded_.emplace_back(final_path_, pcap_->flushed_records());
-      // Retention removes the oldest first; this run's kept files are the newest it lists.
-      if (retention_.limited()) {
-        while (recorded_.size() > retention_.size())
-          recorded_.pop_front();
-      }
+      recorded_.add(final_path_, pcap_->flushed_records(), retention_);
     }
   } catch (const std::exception& error) {
     accounting_.write_failed(error, 0);

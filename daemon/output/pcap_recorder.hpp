@@ -26,7 +26,6 @@
 #pragma once
 
 #include <cstdint>
-#include <deque>
 #include <exception>
 #include <filesystem>
 #include <memory>
@@ -97,9 +96,7 @@ class PcapRecorder {
   std::filesystem::path dir_;
   int volume_;  // dir_'s file system, for space_
   Retention retention_;
-  // This run's finished recordings still kept (retention removes the oldest first: they leave
-  // the front), with their packets.
-  std::deque<std::pair<std::string, std::uint64_t>> recorded_;
+  RecordedFiles recorded_;  // this run's finished files still kept
   std::string refusal_;
   std::vector<char> record_buffer_;  // the open recording's buffer, allocated once
   std::unique_ptr<PcapWriter> pcap_;

@@ -19,4 +19,24 @@ std::size_t Retention::enforce() {
   return before - files_.size();
 }
 
+void RecordedFiles::add(std::string_view path, std::uint64_t items, const Retention& retention) {
+  files_.emplace_back(path, items);
+  if (retention.limited()) {
+    while (files_.size() > retention.size())
+      files_.pop_front();
+  }
+}
+
+RecordedFiles::Gone RecordedFiles::take_gone() {
+  Gone gone;
+  for (const auto& [path, items] : files_) {
+    std::error_code error;
+    if (std::filesystem::exists(path, error) || error) continue;
+    gone.items += items;
+    ++gone.files;
+  }
+  files_.clear();
+  return gone;
+}
+
 }  // namespace pandarcap

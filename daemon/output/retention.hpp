@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <deque>
 #include <filesystem>
+#include <string>
 #include <string_view>
 #include <utility>
 
@@ -44,6 +45,27 @@ class Retention {
  private:
   std::uint64_t max_files_, max_bytes_;
   std::deque<std::pair<std::filesystem::path, std::uint64_t>> files_;  // oldest first
+};
+
+// A recorder's finished files of this run still kept, each with what it holds (packets,
+// messages), so that the end can count what vanished from disk with its file
+// (pcap_packets_lost, mcap_messages_lost). Retention removes the oldest first, so they leave the
+// front. Adding a file costs one allocation (its name). Owned by the writer thread.
+class RecordedFiles {
+ public:
+  // A file just finished and put in place; then the list trimmed to what `retention` keeps.
+  void add(std::string_view path, std::uint64_t items, const Retention& retention);
+
+  struct Gone {
+    std::size_t files = 0;
+    std::uint64_t items = 0;
+  };
+  // The listed files that are no longer on disk (removed while the run went on), and what they
+  // held; the list is emptied. A file that cannot be asked about counts as there.
+  Gone take_gone();
+
+ private:
+  std::deque<std::pair<std::string, std::uint64_t>> files_;  // oldest first
 };
 
 }  // namespace pandarcap
