@@ -16,6 +16,8 @@
 #include "decoder.hpp"
 #include "latency_histogram.hpp"
 #include "packet.hpp"
+#include "ptc/ptc_messages.hpp"
+#include "ptc/status_plausibility.hpp"
 
 namespace pandarcap {
 
@@ -166,6 +168,21 @@ struct SensorStatusGauges {
   std::uint32_t implausible = 0;
   std::string implausible_reason;
 };
+
+// The status's fields into `gauges`, in units, with which of them are implausible (the reason
+// text rewritten in place, keeping its capacity). The freshness and PTP fields are the caller's.
+inline void set_status_fields(SensorStatusGauges& gauges, const ptc::SensorStatus& status) {
+  gauges.uptime_seconds = status.uptime_s;
+  gauges.motor_rpm = status.motor_rpm;
+  for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i)
+    gauges.temperatures_celsius[i] = status.temperature_centi_c[i] / 100.0;
+  gauges.gps_pps_locked = status.gps_pps_locked == 1;
+  gauges.gps_nmea_locked = status.gps_nmea_locked == 1;
+  gauges.ptp_state = status.ptp_state;
+  gauges.implausible = ptc::implausible_fields(status);
+  gauges.implausible_reason.clear();
+  ptc::describe_implausible(status, gauges.implausible, gauges.implausible_reason);
+}
 
 // Who the sensor is and where the angles come from: found at start-up, constant after. Empty
 // strings where the sensor was not asked or did not answer.

@@ -40,21 +40,13 @@ std::uint32_t bit(std::uint32_t b) {
   return 1u << b;
 }
 
-// A fresh, polled status in the health gauges, as daemon/output/health_publisher.cpp fills them.
+// A fresh, polled status in the health gauges, filled as daemon/output/health_publisher.cpp does.
 SensorStatusGauges status_gauges(const ptc::SensorStatus& s) {
   SensorStatusGauges st;
   st.polled = st.available = true;
   st.interval_seconds = 5;
   st.age_seconds = 1;
-  st.uptime_seconds = s.uptime_s;
-  st.motor_rpm = s.motor_rpm;
-  for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i)
-    st.temperatures_celsius[i] = s.temperature_centi_c[i] / 100.0;
-  st.gps_pps_locked = s.gps_pps_locked == 1;
-  st.gps_nmea_locked = s.gps_nmea_locked == 1;
-  st.ptp_state = s.ptp_state;
-  st.implausible = ptc::implausible_fields(s);
-  ptc::describe_implausible(s, st.implausible, st.implausible_reason);
+  set_status_fields(st, s);
   return st;
 }
 

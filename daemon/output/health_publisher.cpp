@@ -7,7 +7,6 @@
 
 #include "core/health_format.hpp"
 #include "core/health_policy.hpp"
-#include "core/ptc/status_plausibility.hpp"
 #include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
@@ -46,17 +45,7 @@ void fill_sensor_status(const SensorStatusSample* latest, std::int64_t now, Sens
   }
   st.age_seconds = static_cast<double>(now - latest->monotonic_ns) / 1e9;
   st.stale = interval_seconds > 0 && st.age_seconds > 3 * interval_seconds;
-  const ptc::SensorStatus& s = latest->status;
-  st.uptime_seconds = s.uptime_s;
-  st.motor_rpm = s.motor_rpm;
-  for (std::size_t i = 0; i < ptc::kTemperatureCount; ++i)
-    st.temperatures_celsius[i] = s.temperature_centi_c[i] / 100.0;
-  st.gps_pps_locked = s.gps_pps_locked == 1;
-  st.gps_nmea_locked = s.gps_nmea_locked == 1;
-  st.ptp_state = s.ptp_state;
-  st.implausible = ptc::implausible_fields(s);
-  st.implausible_reason.clear();  // its capacity kept
-  ptc::describe_implausible(s, st.implausible, st.implausible_reason);
+  set_status_fields(st, latest->status);
   st.ptp_offset_known = latest->ptp_offset_ns.has_value();
   st.ptp_offset_seconds = static_cast<double>(latest->ptp_offset_ns.value_or(0)) / 1e9;
   st.clock_source_known = latest->clock_source.has_value();
