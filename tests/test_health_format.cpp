@@ -63,20 +63,6 @@ HealthSnapshot distinct_snapshot() {
   return h;
 }
 
-// "name{labels} value" lines, keyed by "name{labels}".
-std::map<std::string, std::string> samples(const std::string& text) {
-  std::map<std::string, std::string> out;
-  std::istringstream in(text);
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    const auto space = line.rfind(' ');
-    REQUIRE(space != std::string::npos);
-    out[line.substr(0, space)] = line.substr(space + 1);
-  }
-  return out;
-}
-
 }  // namespace
 
 TEST_CASE("health states have stable names", "[health]") {
@@ -96,7 +82,7 @@ TEST_CASE("Prometheus text follows the textfile-collector conventions", "[health
   const std::string text = to_prometheus(h);
   REQUIRE(text.back() == '\n');
   const std::string sensor = R"(sensor="front \"left\"\\lidar")";
-  const auto s = samples(text);
+  const auto s = test::prom_samples(text);
 
   CHECK(s.at("pandarcap_build_info{" + sensor + ",version=\"1.2.3\",decoder=\"avx2\"}") == "1");
   CHECK(s.at("pandarcap_datagrams_received_total{" + sensor + "}") ==
@@ -146,7 +132,7 @@ TEST_CASE("Prometheus text follows the textfile-collector conventions", "[health
 
 TEST_CASE("Latency is a Prometheus histogram and percentiles in the JSON line", "[health]") {
   const HealthSnapshot h = distinct_snapshot();
-  const auto s = samples(to_prometheus(h));
+  const auto s = test::prom_samples(to_prometheus(h));
   const std::string sensor = R"(sensor="front \"left\"\\lidar")";
   const std::string name = "pandarcap_receive_to_decoded_latency_seconds";
   // Cumulative buckets: nothing below 65.5 µs, all 100 regular values below 262 µs, the outlier
@@ -174,14 +160,14 @@ TEST_CASE("Latency is a Prometheus histogram and percentiles in the JSON line", 
 TEST_CASE("Hot-path allocations: per thread when counted, absent when not", "[health]") {
   HealthSnapshot h = distinct_snapshot();
   const std::string sensor = R"(sensor="front \"left\"\\lidar")";
-  auto s = samples(to_prometheus(h));
+  auto s = test::prom_samples(to_prometheus(h));
   CHECK(s.at("pandarcap_hot_path_allocations_total{" + sensor + ",thread=\"decode\"}") == "0");
   CHECK(s.at("pandarcap_hot_path_allocations_total{" + sensor + ",thread=\"writer\"}") == "7");
   auto j = nlohmann::json::parse(to_json_line(h));
   CHECK(j.at("counters").at("hot_path_allocations") == 7);
   CHECK(j.at("counters").at("hot_path_allocations_by_thread").at("writer") == 7);
   h.hot_path_allocations.reset();  // a sanitizer build: nothing claimed
-  s = samples(to_prometheus(h));
+  s = test::prom_samples(to_prometheus(h));
   CHECK(s.count("pandarcap_hot_path_allocations_total{" + sensor + ",thread=\"writer\"}") == 0);
   j = nlohmann::json::parse(to_json_line(h));
   CHECK_FALSE(j.at("counters").contains("hot_path_allocations"));
@@ -258,7 +244,7 @@ TEST_CASE("JSON line survives a reason that is not UTF-8", "[health]") {
 TEST_CASE("Sensor identity and status over PTC: fresh values reported, stale ones not",
           "[health][ptc]") {
   HealthSnapshot h = distinct_snapshot();
-  auto prom = samples(to_prometheus(h));
+  auto prom = test::prom_samples(to_prometheus(h));
   const std::string sensor = "sensor=\"front \\\"left\\\"\\\\lidar\"";
   CHECK(prom.at("pandarcap_sensor_info{" + sensor +
                 ",serial=\"PA40\\\"P\\\\1\",firmware=\"4.03\",calibration_source=\"sensor\"}") ==
@@ -286,7 +272,7 @@ TEST_CASE("Sensor identity and status over PTC: fresh values reported, stale one
   // Stale: age and the flag, and none of the values, as if they were current.
   h.gauges.sensor_status.stale = true;
   h.gauges.sensor_status.age_seconds = 16;
-  prom = samples(to_prometheus(h));
+  prom = test::prom_samples(to_prometheus(h));
   CHECK(prom.at("pandarcap_sensor_status_stale{" + sensor + "}") == "1");
   CHECK(prom.count("pandarcap_sensor_uptime_seconds{" + sensor + "}") == 0);
   CHECK(prom.count("pandarcap_sensor_ptp_state{" + sensor + ",state=\"tracking\"}") == 0);
@@ -296,7 +282,7 @@ TEST_CASE("Sensor identity and status over PTC: fresh values reported, stale one
 
   // Not polled: the identity only.
   h.gauges.sensor_status = SensorStatusGauges{};
-  prom = samples(to_prometheus(h));
+  prom = test::prom_samples(to_prometheus(h));
   CHECK(prom.count("pandarcap_sensor_status_stale{" + sensor + "}") == 0);
   json = nlohmann::json::parse(to_json_line(h));
   CHECK(json["sensor_status"]["polled"] == false);

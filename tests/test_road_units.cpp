@@ -8,7 +8,6 @@
 #include <cstdlib>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
 
 #include "bench/udp_traffic.hpp"
@@ -19,6 +18,7 @@
 #include "core/packet_time.hpp"
 #include "core/ptc/status_plausibility.hpp"
 #include "core/timing.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 
@@ -48,18 +48,6 @@ SensorStatusGauges status_gauges(const ptc::SensorStatus& s) {
   st.age_seconds = 1;
   set_status_fields(st, s);
   return st;
-}
-
-// "name{labels} value" lines of a .prom text, keyed by "name{labels}".
-std::map<std::string, std::string> samples(const std::string& text) {
-  std::map<std::string, std::string> out;
-  std::istringstream in(text);
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    out[line.substr(0, line.rfind(' '))] = line.substr(line.rfind(' ') + 1);
-  }
-  return out;
 }
 
 // A sensor streaming as expected (600 RPM, last return), as tests/test_health_policy.cpp drives it.
@@ -199,7 +187,7 @@ TEST_CASE("Health renderings leave implausible status fields out and name them",
   CHECK(text.find("171234") == std::string::npos);
 
   const std::string prom_text = to_prometheus(h);
-  const auto prom = samples(prom_text);
+  const auto prom = test::prom_samples(prom_text);
   const std::string sensor = "sensor=\"road\"";
   CHECK(prom.count("pandarcap_sensor_motor_speed_rpm{" + sensor + "}") == 0);
   CHECK(prom.count("pandarcap_sensor_temperature_celsius{" + sensor + ",board=\"laser_rt_l\"}") ==
@@ -219,7 +207,9 @@ TEST_CASE("Health renderings leave implausible status fields out and name them",
   CHECK(plausible.at("motor_rpm") == 600);
   CHECK(plausible.at("ptp_state") == "locked");
   CHECK(plausible.at("temperatures_celsius").size() == ptc::kTemperatureCount);
-  CHECK(samples(to_prometheus(h)).at("pandarcap_sensor_motor_speed_rpm{" + sensor + "}") == "600");
+  CHECK(
+      test::prom_samples(to_prometheus(h)).at("pandarcap_sensor_motor_speed_rpm{" + sensor + "}") ==
+      "600");
 }
 
 TEST_CASE("Health policy: an implausible status degrades, naming the field and nothing else",

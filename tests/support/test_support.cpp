@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <random>
+#include <sstream>
 
 #include "bench/child_process.hpp"
 
@@ -99,6 +100,19 @@ void check_record_spacing(const std::vector<nlohmann::json>& records, double min
     if (!state_changed) CHECK(gap > min_gap_s);
     CHECK(gap <= 1.5);
   }
+}
+
+std::map<std::string, std::string> prom_samples(const std::string& text) {
+  std::map<std::string, std::string> out;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    const auto space = line.rfind(' ');
+    REQUIRE(space != std::string::npos);
+    out[line.substr(0, space)] = line.substr(space + 1);
+  }
+  return out;
 }
 
 std::vector<PcdPoint> pandarcap_pcd_points(const std::filesystem::path& file) {

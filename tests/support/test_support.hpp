@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -92,6 +93,10 @@ std::uint64_t health_counter(const nlohmann::json& record, std::string_view name
 // one before it sooner, so its gap is not checked; so may a record whose state differs from the
 // one before (the writer reports packets stopping or starting again at once).
 void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s);
+
+// The samples of a Prometheus text ("name{labels} value" lines), keyed by "name{labels}";
+// comment lines skipped. A sample line without a value fails the test.
+std::map<std::string, std::string> prom_samples(const std::string& text);
 
 // The points of a PCD file in the pandarcap layout (--pcd-fields pandarcap, the MCAP messages'
 // layout), decoded. Fails the test when the file has no data section or a partial point.
