@@ -64,6 +64,7 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("output", "directory", o.directory, &non_empty);
   v("output", "frames", o.frames, std::monostate{});
   v("output", "pcd_fields", o.pcd_fields, &pcd_fields);
+  v("output", "pcd_compression", o.pcd_compression, &pcd_compression);
   v("output", "frame_decimation", o.frame_decimation, IntRange{1, kU32});
   v("output", "frames_min_fraction", o.frames_min_fraction, RealRange{0.0, false, 1.0, false});
   v("output", "frames_max_files", o.frames_max_files, IntRange{0, kI64});
@@ -73,6 +74,8 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("output", "pcap_rotate_seconds", o.pcap_rotate_seconds, IntRange{0, kU32});
   v("output", "pcap_max_files", o.pcap_max_files, IntRange{0, kI64});
   v("output", "pcap_max_bytes", o.pcap_max_bytes, IntRange{0, kI64});
+  v("output", "pcap_compression", o.pcap_compression, &pcap_compression);
+  v("output", "pcap_compression_level", o.pcap_compression_level, IntRange{-7, 19});
   v("output", "mcap", o.mcap, std::monostate{});
   v("output", "mcap_packets", o.mcap_packets, std::monostate{});
   v("output", "mcap_compression", o.mcap_compression, &mcap_compression);
@@ -86,6 +89,8 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("output", "mcap_points_topic", o.mcap_points_topic, &topic);
   v("output", "mcap_health_topic", o.mcap_health_topic, &topic);
   v("output", "mcap_packets_topic", o.mcap_packets_topic, &topic);
+  v("output", "min_free_bytes", o.min_free_bytes, IntRange{0, kI64});
+  v("output", "min_free_percent", o.min_free_percent, RealRange{0.0, false, 90.0, false});
 
   auto& h = c.health;
   v("health", "sensor_name", h.sensor_name, &label);
@@ -98,6 +103,7 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("health", "jsonl_rotate_bytes", h.jsonl_rotate_bytes, IntRange{0, kI64});
   v("health", "directory", h.directory, &any_string);
   v("health", "prometheus_file", h.prometheus_file, &prom_file_or_empty);
+  v("health", "min_hours_left", h.min_hours_left, RealRange{0.0, false, 100'000.0, false});
 
   auto& t = c.threads;
   v("threads", "receive_cpu", t.receive_cpu, IntRange{-1, kMaxCpu});

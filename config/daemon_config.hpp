@@ -51,6 +51,8 @@ struct OutputSection {
   std::string directory = "pandarcap-output";  // frames/, raw/, mcap/, health/ go under it
   bool frames = true;                          // write frames as PCD
   std::string pcd_fields = "pcl";  // PCD field layout: "pcl", "pandarcap", "velodyne", "autoware"
+  // PCD DATA encoding: "none" (binary) or "lzf" (binary_compressed, as PCL writes it).
+  std::string pcd_compression = "none";
   std::uint32_t frame_decimation = 1;  // write every Nth frame; >= 1
   // A partial frame covering less than this fraction of a revolution (in azimuth and in
   // single-return packets at rotation_speed) is a fragment: counted (frames_fragment), not
@@ -63,6 +65,8 @@ struct OutputSection {
   std::uint32_t pcap_rotate_seconds = 0;       // start a new file after this long; 0 = never
   std::uint64_t pcap_max_files = 0;            // retention; 0 = unlimited
   std::uint64_t pcap_max_bytes = 0;            // retention; 0 = unlimited
+  std::string pcap_compression = "none";       // "none" (NAME.pcap) or "zstd" (NAME.pcap.zst)
+  int pcap_compression_level = 1;              // zstd level: -7 (fastest) .. 19
   // MCAP (Foxglove, ros2 bag): frames as sensor_msgs/msg/PointCloud2, health as JSON, the
   // calibration attached; optionally the raw packets. In mcap/ under the directory.
   bool mcap = false;
@@ -78,6 +82,11 @@ struct OutputSection {
   std::string mcap_points_topic = "/pandar/points";
   std::string mcap_health_topic = "/pandar/health";
   std::string mcap_packets_topic = "/pandar/packets";
+  // A floor of free space on each output file system: below it the oldest of pandarcap's own
+  // files (frames, recordings, MCAP; earlier runs' too) are deleted. 0 = no floor. The floor is
+  // the larger of the two.
+  std::uint64_t min_free_bytes = 0;
+  double min_free_percent = 0;  // of the file system's size; 0..90
 };
 
 struct HealthSection {
@@ -89,6 +98,8 @@ struct HealthSection {
   std::uint64_t jsonl_rotate_bytes = 64u << 20;  // rotate health.jsonl; 0 = never
   std::string directory;        // health.jsonl (and pandarcap.prom); "" = OUTPUT-DIR/health
   std::string prometheus_file;  // the .prom file; "" = HEALTH-DIR/pandarcap.prom
+  // Fewer hours of disk left than this at the last minute's write rate: degraded. 0 = off.
+  double min_hours_left = 0;
 };
 
 // Optional placement of the threads on a dedicated PC (best effort: what the limits refuse is

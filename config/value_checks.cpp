@@ -100,6 +100,14 @@ std::optional<std::string> mcap_compression(const std::string& s) {
   return one_of(s, {"zstd", "none"});
 }
 
+std::optional<std::string> pcap_compression(const std::string& s) {
+  return one_of(s, {"none", "zstd"});
+}
+
+std::optional<std::string> pcd_compression(const std::string& s) {
+  return one_of(s, {"none", "lzf"});
+}
+
 std::optional<std::string> topic(const std::string& s) {
   return ros_name(s, true);
 }

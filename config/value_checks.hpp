@@ -43,6 +43,8 @@ std::optional<std::string> calibration_source(const std::string& s);
 std::optional<std::string> pcd_fields(const std::string& s);
 std::optional<std::string> axes(const std::string& s);
 std::optional<std::string> mcap_compression(const std::string& s);
+std::optional<std::string> pcap_compression(const std::string& s);
+std::optional<std::string> pcd_compression(const std::string& s);
 // ROS 2 names: a topic is absolute ("/pandar/points"), a frame id is not.
 std::optional<std::string> topic(const std::string& s);
 std::optional<std::string> frame_id(const std::string& s);

@@ -29,6 +29,12 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.pcap_rotate_seconds = config.output.pcap_rotate_seconds;
   wo.pcap_max_files = config.output.pcap_max_files;
   wo.pcap_max_bytes = config.output.pcap_max_bytes;
+  wo.pcap_zstd = config.output.pcap_compression == "zstd";
+  wo.pcap_zstd_level = config.output.pcap_compression_level;
+  wo.pcd_lzf = config.output.pcd_compression == "lzf";
+  wo.min_free_bytes = config.output.min_free_bytes;
+  wo.min_free_percent = config.output.min_free_percent;
+  wo.min_hours_left = config.health.min_hours_left;
   const OutputSection& o = config.output;
   wo.mcap = o.mcap;
   // Both were checked when the configuration was read.

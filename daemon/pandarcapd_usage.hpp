@@ -56,6 +56,11 @@ Overrides (same names as the configuration keys):
                          (REP 103: x forward, y left, z up)
   --pcd-fields LAYOUT    output.pcd_fields: pcl (default: float intensity, PCL's PointXYZI),
                          pandarcap, velodyne (PointXYZIRT) or autoware (nebula's PointXYZIRCAEDT)
+  --pcd-compression C    output.pcd_compression: none (default) or lzf (DATA binary_compressed)
+  --pcap-compression C   output.pcap_compression: none (default: raw/NAME.pcap) or zstd
+                         (raw/NAME.pcap.zst, which tshark and --replay read as it is)
+  --min-free-bytes N     output.min_free_bytes: delete the oldest of pandarcap's files to keep
+                         N bytes free on each output file system (default 0: no floor)
   --min-range M          sensor.min_range (default 0.3)
   --max-range M          sensor.max_range (default 200)
   --dual-return-distance-threshold M

@@ -21,11 +21,14 @@ struct WriterOptions {
   PcdFormat pcd_format;  // output.pcd_fields and sensor.frame (the MCAP takes the axes only)
   std::uint64_t frames_max_files = 0;
   std::uint64_t frames_max_bytes = 0;
+  bool pcd_lzf = false;  // output.pcd_compression = "lzf": DATA binary_compressed
   bool pcap = true;
   std::uint64_t pcap_rotate_bytes = 0;
   std::uint32_t pcap_rotate_seconds = 0;
   std::uint64_t pcap_max_files = 0;
   std::uint64_t pcap_max_bytes = 0;
+  bool pcap_zstd = false;  // output.pcap_compression = "zstd": raw/NAME.pcap.zst
+  int pcap_zstd_level = 1;
   bool mcap = false;
   std::uint64_t mcap_rotate_bytes = 0;
   std::uint32_t mcap_rotate_seconds = 0;
@@ -34,6 +37,9 @@ struct WriterOptions {
   // Health messages take the latest frame's or packet's time (a replay), not the host's clock.
   bool mcap_replay_time = false;
   McapFileOptions mcap_file;
+  // The floor of free space on each output file system (the larger of the two; 0 = none).
+  std::uint64_t min_free_bytes = 0;
+  double min_free_percent = 0;
   bool prometheus = true;
   bool jsonl = true;
   std::uint64_t jsonl_rotate_bytes = 0;
@@ -41,6 +47,7 @@ struct WriterOptions {
   std::string version;
   std::string decoder;  // decoder target in use, reported in the health output
   double no_data_timeout_seconds = 1.0;
+  double min_hours_left = 0;  // fewer hours of disk left: degraded; 0 = not checked
   double max_sensor_clock_offset_seconds = 1.0;  // further off is degraded; 0 = not checked
   std::string expected_return_mode = "any";
   int expected_rpm = 600;
