@@ -59,7 +59,11 @@ bool OutputFile::at_its_path() const noexcept {
 }
 
 void OutputFile::truncate(std::uint64_t size) noexcept {
-  if (fd_ >= 0 && io::file_syscalls().ftruncate(fd_, static_cast<off_t>(size)) == 0) size_ = size;
+  if (fd_ >= 0 && io::file_syscalls().ftruncate(fd_, static_cast<off_t>(size)) == 0) {
+    size_ = size;
+    // A write after the cut continues at the cut, not past it (which would leave a hole).
+    ::lseek(fd_, static_cast<off_t>(size), SEEK_SET);
+  }
 }
 
 void OutputFile::close() {

@@ -32,7 +32,8 @@ class OutputFile {
   }
   // Closes, reporting a failed close (a deferred write error on some file systems).
   void close();
-  // Cuts the file back to `size` bytes (after a failed write), best effort: no throw.
+  // Cuts the file back to `size` bytes (after a failed write), best effort: no throw. The next
+  // write continues there.
   void truncate(std::uint64_t size) noexcept;
   std::uint64_t size() const noexcept { return size_; }
   const std::string& path() const noexcept { return path_; }

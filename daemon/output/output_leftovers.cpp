@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <iterator>
 #include <optional>
 #include <string_view>
 #include <system_error>
@@ -52,6 +53,11 @@ struct Finished {
 
 Finished finish_pcap(const std::string& part) {
   const PcapRecovery r = finish_interrupted_pcap(part);
+  return {r.ours, r.records, r.cut_bytes};
+}
+
+Finished finish_pcap_zst(const std::string& part) {
+  const PcapRecovery r = finish_interrupted_pcap_zst(part);
   return {r.ours, r.records, r.cut_bytes};
 }
 
@@ -142,6 +148,10 @@ struct Found {
   std::uint64_t bytes;
 };
 
+bool oldest_first(const Found& a, const Found& b) {
+  return a.number != b.number ? a.number < b.number : a.name < b.name;
+}
+
 // Our files in `dir`, oldest (lowest number) first; a link or anything not a regular file is not
 // ours.
 std::vector<Found> scan(const fs::path& dir, std::string_view prefix, std::string_view suffix,
@@ -155,15 +165,24 @@ std::vector<Found> scan(const fs::path& dir, std::string_view prefix, std::strin
     const auto bytes = entry.file_size(ec);
     found.push_back({*number, name, entry.path(), ec ? 0 : bytes});
   }
-  std::sort(found.begin(), found.end(), [](const Found& a, const Found& b) {
-    return a.number != b.number ? a.number < b.number : a.name < b.name;
-  });
+  std::sort(found.begin(), found.end(), oldest_first);
   return found;
 }
 
 std::uint64_t adopt(const fs::path& dir, std::string_view prefix, std::string_view suffix,
-                    int field, Retention& retention, const char* what) {
-  const std::vector<Found> found = scan(dir, prefix, suffix, field);
+                    int field, Retention& retention, const char* what,
+                    std::string_view other_suffix = {}) {
+  std::vector<Found> found = scan(dir, prefix, suffix, field);
+  if (!other_suffix.empty()) {
+    // Both kinds in one list, oldest first: retention and the numbering span them.
+    std::vector<Found> other = scan(dir, prefix, other_suffix, field);
+    std::vector<Found> both;
+    both.reserve(found.size() + other.size());
+    std::merge(std::make_move_iterator(found.begin()), std::make_move_iterator(found.end()),
+               std::make_move_iterator(other.begin()), std::make_move_iterator(other.end()),
+               std::back_inserter(both), oldest_first);
+    found = std::move(both);
+  }
   if (found.empty()) return 0;
   for (const Found& f : found)
     retention.adopt(f.path.native(), f.bytes);
@@ -179,6 +198,7 @@ std::uint64_t adopt(const fs::path& dir, std::string_view prefix, std::string_vi
 void finish_leftovers(const OutputLeftovers& where, OutputAccounting& accounting) {
   if (!where.raw_dir.empty()) {
     finish_interrupted_recordings(where.raw_dir, ".pcap", &finish_pcap, accounting);
+    finish_interrupted_recordings(where.raw_dir, ".pcap.zst", &finish_pcap_zst, accounting);
   }
   if (!where.mcap_dir.empty()) {
     finish_interrupted_recordings(where.mcap_dir, ".mcap", &finish_mcap, accounting);
@@ -199,7 +219,7 @@ std::uint64_t adopt_earlier_frames(const fs::path& dir, Retention& retention) {
 }
 
 std::uint64_t adopt_earlier_recordings(const fs::path& dir, Retention& retention) {
-  return adopt(dir, "pandarcap_", ".pcap", 1, retention, "recordings");
+  return adopt(dir, "pandarcap_", ".pcap", 1, retention, "recordings", ".pcap.zst");
 }
 
 std::uint64_t adopt_earlier_mcap_files(const fs::path& dir, Retention& retention) {

@@ -3,8 +3,9 @@
 //
 // An interrupted run (a crash, a kill, a power cut) can leave:
 //   - raw/*.pcap.part, a recording still open: cut back to its last whole record and renamed to
-//     its final name (removed if it holds no whole record; a file that is not a pcap of ours, a
-//     link or a device is left alone, with a warning);
+//     its final name (raw/*.pcap.zst.part: its whole records compressed again into a finished
+//     frame, daemon/pcap/pcap_recovery.hpp) (removed if it holds no whole record; a file that is
+//     not a pcap of ours, a link or a device is left alone, with a warning);
 //   - mcap/*.mcap.part, an MCAP file still open: cut back to its last whole chunk and finished
 //     with a summary and footer (daemon/mcap/mcap_recovery.hpp), then renamed the same way;
 //   - .NAME.tmp in frames/ and raw/, a file not yet renamed into place: it was never complete,
@@ -36,7 +37,8 @@ struct OutputLeftovers {
 // kept under a "_dupN" name (counted in `accounting`).
 void finish_leftovers(const OutputLeftovers& where, OutputAccounting& accounting);
 
-// Earlier runs' frames (frame_<N>_...pcd) / recordings (pandarcap_<UTC>_<N>...pcap) in `dir`:
+// Earlier runs' frames (frame_<N>_...pcd) / recordings (pandarcap_<UTC>_<N>...pcap and .pcap.zst,
+// one list) in `dir`:
 // adopted into `retention` oldest first, which is then applied; logged. Returns the next free
 // number (0 when there are none).
 std::uint64_t adopt_earlier_frames(const std::filesystem::path& dir, Retention& retention);

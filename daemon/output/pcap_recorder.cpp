@@ -25,7 +25,10 @@ PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accou
       dir_(options.output_dir / "raw"),
       volume_(space.watch(dir_)),
       retention_(options.pcap_max_files, options.pcap_max_bytes),
-      record_buffer_(kPcapBufferBytes) {}
+      record_buffer_(kPcapBufferBytes),
+      compressor_(options.pcap_zstd ? std::make_unique<ZstdStreamCompressor>(
+                                          kPcapBufferBytes, options.pcap_zstd_level)
+                                    : nullptr) {}
 
 PcapRecorder::~PcapRecorder() = default;
 
@@ -55,16 +58,17 @@ std::uint64_t PcapRecorder::bytes_written() const noexcept {
 }
 
 void PcapRecorder::open(std::int64_t first_packet_ns) {
-  final_path_ = (dir_ / fmt::format("pandarcap_{}_{:04}.pcap",
-                                    utc_file_stamp(first_packet_ns, false), next_index_++))
-                    .native();
+  final_path_ =
+      (dir_ / fmt::format("pandarcap_{}_{:04}.pcap{}", utc_file_stamp(first_packet_ns, false),
+                          next_index_++, compressor_ ? ".zst" : ""))
+          .native();
   const std::filesystem::path part = final_path_ + ".part";
   try {
     try {
-      pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_);
+      pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_, compressor_.get());
     } catch (const std::system_error& error) {
       if (error.code().value() != ENOENT || !make_again_if_removed(dir_)) throw;
-      pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_);
+      pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_, compressor_.get());
     }
   } catch (...) {
     // Created but not even its header written (a full disk): not left behind, one per attempt.

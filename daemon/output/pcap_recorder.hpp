@@ -1,4 +1,7 @@
-// Raw packets recorded as classic pcap files: DIR/raw/pandarcap_<UTC first packet>_<N>.pcap.
+// Raw packets recorded as classic pcap files: DIR/raw/pandarcap_<UTC first packet>_<N>.pcap, or
+// with output.pcap_compression = "zstd" the same stream compressed, NAME.pcap.zst (one zstd frame
+// per file, a block ended at every flush; daemon/pcap/zstd_stream.hpp). Everything below holds
+// for both; sizes (rotation, retention, bytes written) are the files' bytes on disk.
 //
 // A recording is written as NAME.pcap.part and renamed to NAME.pcap when closed (without
 // replacing anything: a taken name becomes "_dupN", counted). It is closed and a new one begun
@@ -98,7 +101,8 @@ class PcapRecorder {
   Retention retention_;
   RecordedFiles recorded_;  // this run's finished files still kept
   std::string refusal_;
-  std::vector<char> record_buffer_;  // the open recording's buffer, allocated once
+  std::vector<char> record_buffer_;                   // the open recording's buffer, allocated once
+  std::unique_ptr<ZstdStreamCompressor> compressor_;  // output.pcap_compression = "zstd"
   std::unique_ptr<PcapWriter> pcap_;
   std::string final_path_;
   std::int64_t opened_monotonic_ns_ = 0;

@@ -27,4 +27,14 @@ struct PcapRecovery {
 // (never followed: the cut must not reach a file elsewhere).
 PcapRecovery finish_interrupted_pcap(const std::string& path);
 
+// The same for a compressed recording (NAME.pcap.zst.part, PcapWriter with a compressor), whose
+// zstd frame a killed run left unfinished. It is decompressed as far as it goes (a cut or corrupt
+// block ends it), and its whole records are compressed again into one finished frame, written
+// beside it as a temporary (.NAME.tmp) that then replaces it: every record a flush reached is
+// kept, and tshark reads the result. Ours: a file whose stream begins with pcap_global_header()
+// (or the start of it), or, decompressing to nothing, one that begins as a zstd frame does.
+// kept_bytes is the finished file's size; cut_bytes counts pcap stream bytes dropped (a record
+// cut short, or garbage). With no whole record the file is left for the caller to remove.
+PcapRecovery finish_interrupted_pcap_zst(const std::string& path);
+
 }  // namespace pandarcap

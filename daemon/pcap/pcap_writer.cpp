@@ -92,8 +92,10 @@ std::array<std::uint8_t, kPcapGlobalHeaderBytes> pcap_global_header() noexcept {
   return bytes;
 }
 
-PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer)
-    : path_(path), buffer_(buffer) {
+PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer,
+                       ZstdStreamCompressor* compressor)
+    : path_(path), compressor_(compressor), buffer_(buffer) {
+  if (compressor_ != nullptr) compressor_->begin();
   file_.open(path_, OutputFile::Mode::kCreate);
   append(pcap_global_header());
   bytes_ = kPcapGlobalHeaderBytes;
@@ -120,7 +122,7 @@ void PcapWriter::append(std::span<const std::uint8_t> bytes) {
   if (buffered_ + bytes.size() > buffer_.size()) {
     flush_buffer();
     if (bytes.size() > buffer_.size()) {
-      file_.write(bytes);
+      emit(bytes, ZstdStreamCompressor::Step::kContinue);
       return;
     }
   }
@@ -128,9 +130,18 @@ void PcapWriter::append(std::span<const std::uint8_t> bytes) {
   buffered_ += bytes.size();
 }
 
-void PcapWriter::flush_buffer() {
+void PcapWriter::flush_buffer(ZstdStreamCompressor::Step step) {
   const std::size_t n = std::exchange(buffered_, 0);
-  file_.write(std::span(reinterpret_cast<const std::uint8_t*>(buffer_.data()), n));
+  emit(std::span(reinterpret_cast<const std::uint8_t*>(buffer_.data()), n), step);
+}
+
+void PcapWriter::emit(std::span<const std::uint8_t> bytes, ZstdStreamCompressor::Step step) {
+  if (compressor_ == nullptr) {
+    file_.write(bytes);
+    return;
+  }
+  const std::span<const std::uint8_t> out = compressor_->compress(bytes, step);
+  if (!out.empty()) file_.write(out);
 }
 
 void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
@@ -214,25 +225,40 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
 
 void PcapWriter::flush() {
   if (!file_.is_open()) io::throw_error(EBADF, "cannot write", path_);
-  flush_buffer();
+  flush_buffer(ZstdStreamCompressor::Step::kFlush);
   flushed_records_ = records_;
-  flushed_bytes_ = bytes_;
+  flushed_bytes_ = bytes();
+  flushed_stream_bytes_ = bytes_;
 }
 
 void PcapWriter::close() {
   if (!file_.is_open()) return;
   // A failing flush leaves the file open, for abandon() to cut back to whole records.
-  flush();
+  if (compressor_ != nullptr) {
+    if (!file_.is_open()) io::throw_error(EBADF, "cannot write", path_);
+    flush_buffer(ZstdStreamCompressor::Step::kEnd);
+    flushed_records_ = records_;
+    flushed_bytes_ = bytes();
+    flushed_stream_bytes_ = bytes_;
+  } else {
+    flush();
+  }
   file_.close();
 }
 
 PcapWriter::Dropped PcapWriter::abandon() noexcept {
-  const Dropped dropped{records_ - flushed_records_, bytes_ - flushed_bytes_};
+  const Dropped dropped{records_ - flushed_records_, bytes_ - flushed_stream_bytes_};
   buffered_ = 0;  // never written
   if (file_.is_open()) {
     // What reached the file past the last good flush is a prefix of a record at best. If the
     // cut fails too, the reader stops at the cut record (kTruncated).
     file_.truncate(flushed_bytes_);
+    try {
+      // A flush ended a block: an empty last block ends the frame there.
+      if (compressor_ != nullptr && flushed_bytes_ > 0) file_.write(kZstdEmptyLastBlock);
+    } catch (const std::exception&) {
+      // The frame stays unfinished: readers get every flushed record, then report the cut.
+    }
     try {
       file_.close();
     } catch (const std::exception&) {
@@ -240,7 +266,7 @@ PcapWriter::Dropped PcapWriter::abandon() noexcept {
     }
   }
   records_ = flushed_records_;
-  bytes_ = flushed_bytes_;
+  bytes_ = flushed_stream_bytes_;
   return dropped;
 }
 

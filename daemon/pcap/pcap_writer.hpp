@@ -8,6 +8,11 @@
 // with hop limit 64 and the UDP checksum IPv6 requires, computed (0 when only part of the
 // datagram is held: its sum cannot be known).
 //
+// Compressed (given a ZstdStreamCompressor): the same pcap stream as one zstd frame
+// (daemon/pcap/zstd_stream.hpp), each flush() ending a block, close() ending the frame; the file
+// then opens as it is in tshark, Wireshark and pandarcapd --replay. bytes() and flushed_bytes()
+// are the file's (compressed) bytes.
+//
 // Errors: every failing write throws std::system_error carrying errno and the file name (the
 // bytes go through daemon/io's OutputFile, so the tests' system-call seam reaches them). Nothing
 // is buffered past flush(); close() (or the destructor, which cannot report a failure) flushes.
@@ -24,6 +29,7 @@
 
 #include "daemon/io/file_output.hpp"
 #include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/zstd_stream.hpp"
 
 namespace pandarcap {
 
@@ -53,7 +59,10 @@ class PcapWriter {
   // `buffer`, if given, holds records until flush() (it must outlive the writer): unbuffered, a
   // recording at one sensor's rate costs two write(2) a packet; a buffer that holds what arrives
   // between two flush() calls makes it one per flush.
-  explicit PcapWriter(const std::string& path, std::span<char> buffer = {});
+  // `compressor`, if given, makes the file a zstd frame (it must outlive the writer, and serve
+  // one writer at a time: the writer begins its frame).
+  explicit PcapWriter(const std::string& path, std::span<char> buffer = {},
+                      ZstdStreamCompressor* compressor = nullptr);
   ~PcapWriter();
   PcapWriter(const PcapWriter&) = delete;
   PcapWriter& operator=(const PcapWriter&) = delete;
@@ -75,18 +84,22 @@ class PcapWriter {
   void flush();
   void close();
 
-  // What abandon() dropped: the records (and their bytes) written since the last good flush.
+  // What abandon() dropped: the records (and their pcap bytes) written since the last good flush.
   struct Dropped {
     std::uint64_t records = 0;
     std::uint64_t bytes = 0;
   };
   // Discards whatever is buffered, truncates the file to the last successful flush and closes
-  // it, without throwing. The file then holds flushed_records() whole records (0: possibly not
-  // even the global header; the caller removes it).
+  // it, without throwing; a compressed file is then ended with an empty last block (if that
+  // write fails too, the frame stays unfinished: readers see every flushed record, then a cut). The
+  // file then holds flushed_records() whole records (0: possibly not even the global header; the
+  // caller removes it).
   Dropped abandon() noexcept;
 
   std::uint64_t records() const noexcept { return records_; }
-  std::uint64_t bytes() const noexcept { return bytes_; }  // file size so far
+  // The file's size so far (uncompressed: with what is buffered; compressed: as written).
+  std::uint64_t bytes() const noexcept { return compressor_ ? file_.size() : bytes_; }
+  bool compressed() const noexcept { return compressor_ != nullptr; }
   std::uint64_t flushed_records() const noexcept { return flushed_records_; }
   std::uint64_t flushed_bytes() const noexcept { return flushed_bytes_; }
   const std::string& path() const noexcept { return path_; }
@@ -96,17 +109,21 @@ class PcapWriter {
  private:
   // Appends to the buffer, or straight to the file when there is none (or `bytes` is larger).
   void append(std::span<const std::uint8_t> bytes);
-  void flush_buffer();  // the buffered bytes to the file
+  // The buffered bytes to the file; compressed, with the block or frame ended as `step` says.
+  void flush_buffer(ZstdStreamCompressor::Step step = ZstdStreamCompressor::Step::kContinue);
+  void emit(std::span<const std::uint8_t> bytes, ZstdStreamCompressor::Step step);
 
   std::string path_;
   OutputFile file_;
-  std::span<char> buffer_;  // the caller's; bytes [0, buffered_) await the next flush()
+  ZstdStreamCompressor* compressor_;  // the caller's; null: uncompressed
+  std::span<char> buffer_;            // the caller's; bytes [0, buffered_) await the next flush()
   std::size_t buffered_ = 0;
   std::uint16_t ip_id_ = 0;
   std::uint64_t records_ = 0;
-  std::uint64_t bytes_ = 0;
-  std::uint64_t flushed_records_ = 0;  // as of the last flush() that succeeded
-  std::uint64_t flushed_bytes_ = 0;
+  std::uint64_t bytes_ = 0;                 // of the pcap stream (uncompressed)
+  std::uint64_t flushed_records_ = 0;       // as of the last flush() that succeeded
+  std::uint64_t flushed_bytes_ = 0;         // the file's size then
+  std::uint64_t flushed_stream_bytes_ = 0;  // the pcap stream's (uncompressed) bytes then
 };
 
 }  // namespace pandarcap
