@@ -10,6 +10,7 @@
 
 #include "bench/decode_bench.hpp"
 #include "bench/ring_bench.hpp"
+#include "bench/storage_bench.hpp"
 #include "bench/write_bench.hpp"
 #include "bench/zero_loss.hpp"
 #include "daemon/cli_args.hpp"
@@ -26,6 +27,9 @@ Subcommands:
             search), against a bare recvmmsg receiver and a recvfrom receiver searched the same
             way in the same run; the daemon's CPU, latency, RSS and allocations at one sensor's
             rate; a JSON report, a Markdown summary and an SVG plot.
+  storage   what each choice of outputs (pcap, pcap.zst, PCD, PCD lzf, decimated, MCAP, the
+            vehicle profile) costs the disk and the CPU at one sensor's rate, running the real
+            pandarcapd: MB/s, GB/hour, hours per TB, % of a core.
   write     the writer's formats: PCD frames (encode, encode + write) and pcap recording, in
             points/s, packets/s and MB/s, and what one sensor's stream costs of a core.
   ring      SPSC packet ring (batches 1, 8, 32) and typed queue against a mutex + condition
@@ -352,6 +356,52 @@ int run_write(int argc, char** argv) {
   return 0;
 }
 
+constexpr std::string_view kStorageUsage = R"(Usage: pandarcap-bench storage [OPTIONS]
+
+Runs pandarcapd with its simulated sensor (3600 packets/s) once per choice of outputs and
+measures, over a window of traffic, the bytes written (MB/s, GB per hour, hours per TB) and the
+daemon's CPU (% of one core, without the simulated sensor's thread).
+
+Options:
+  --json               print one JSON object instead of a Markdown table
+  --seconds S          the measured window of each run (default 8)
+  --rounds N           run every configuration N times, interleaved; medians (default 1)
+  --dir DIR            where the runs write (default: a temporary directory, removed)
+  --daemon PATH        pandarcapd (default: the one beside pandarcap-bench)
+  -h, --help           this text
+
+JSON keys: rows[] (name, config, packets_per_s, mb_per_s, mb_per_s_by_output {frames, raw,
+mcap, health}, gb_per_hour, hours_per_tb, cpu_fraction_of_core, cpu_over_reference,
+writer_cpu_fraction_of_core), seconds, rounds, method.
+)";
+
+int run_storage(int argc, char** argv) {
+  pandarcap::CliArgs args(argc, argv, kStorageUsage);
+  pandarcap::bench::StorageBenchOptions options;
+  bool json = false;
+  while (args.more()) {
+    const std::string_view arg = args.next();
+    if (arg == "--json") {
+      json = true;
+    } else if (arg == "--seconds") {
+      options.seconds = args.number(arg, 1, 3600);
+    } else if (arg == "--rounds") {
+      options.rounds = static_cast<int>(args.integer(arg, 1, 100));
+    } else if (arg == "--dir") {
+      options.directory = std::string(args.value(arg));
+    } else if (arg == "--daemon") {
+      options.daemon = std::string(args.value(arg));
+    } else {
+      args.unknown_option(arg);
+    }
+  }
+  const auto report =
+      run_reporting_errors("storage", [&] { return pandarcap::bench::run_storage_bench(options); });
+  if (!report) return 1;
+  print_report(*report, json, pandarcap::bench::print_storage_report);
+  return 0;
+}
+
 int run_decode(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kDecodeUsage);
   pandarcap::bench::DecodeBenchOptions options;
@@ -522,7 +572,7 @@ int run_send(int argc, char** argv) {
 int main(int argc, char** argv) {
   pandarcap::CliArgs args(argc, argv, kUsage);
   if (!args.more()) {
-    args.usage_error("a subcommand is required (decode, ring, send, write, zero-loss)");
+    args.usage_error("a subcommand is required (decode, ring, send, storage, write, zero-loss)");
   }
   const std::string_view subcommand = args.next();
   // The subcommand parses the rest, with "pandarcap-bench SUBCOMMAND" as its program name.
@@ -531,6 +581,11 @@ int main(int argc, char** argv) {
   static char zero_loss_name[] = "pandarcap-bench zero-loss";
   static char write_name[] = "pandarcap-bench write";
   static char send_name[] = "pandarcap-bench send";
+  static char storage_name[] = "pandarcap-bench storage";
+  if (subcommand == "storage") {
+    argv[1] = storage_name;
+    return run_storage(argc - 1, argv + 1);
+  }
   if (subcommand == "send") {
     argv[1] = send_name;
     return run_send(argc - 1, argv + 1);

@@ -107,6 +107,29 @@ std::uint64_t process_memory_bytes(int pid, std::string_view field) {
   return 0;
 }
 
+std::map<std::string, std::uint64_t> thread_cpu_ticks(int pid) {
+  std::map<std::string, std::uint64_t> ticks;
+  std::error_code ec;
+  const auto tasks = std::filesystem::path("/proc") / std::to_string(pid) / "task";
+  for (const auto& task : std::filesystem::directory_iterator(tasks, ec)) {
+    const std::string stat = read_file(task.path() / "stat");
+    const auto close = stat.rfind(')');  // the name may hold spaces; fields follow the last ')'
+    if (close == std::string::npos || close + 2 > stat.size()) continue;
+    std::istringstream fields(stat.substr(close + 2));
+    std::string field;
+    std::uint64_t utime = 0, stime = 0;
+    for (int i = 3; i <= 15 && fields >> field; ++i) {
+      if (i == 14) utime = std::stoull(field);
+      if (i == 15) stime = std::stoull(field);
+    }
+    std::string name = read_file(task.path() / "comm");
+    while (!name.empty() && (name.back() == '\n' || name.back() == ' '))
+      name.pop_back();
+    ticks[name] += utime + stime;
+  }
+  return ticks;
+}
+
 bool wait_until(const std::function<bool()>& condition, std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   for (;;) {

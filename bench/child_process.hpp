@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -43,6 +44,10 @@ std::string read_file(const std::filesystem::path& path);
 // A memory figure from /proc/PID/status, in bytes: `field` is "VmRSS" (resident now), "VmHWM"
 // (peak resident), ...; 0 when the process or the field is gone.
 std::uint64_t process_memory_bytes(int pid, std::string_view field);
+
+// CPU ticks (utime + stime, sysconf(_SC_CLK_TCK) per second) used so far by each thread of
+// process `pid`, summed per thread name (/proc/PID/task/*/stat and comm).
+std::map<std::string, std::uint64_t> thread_cpu_ticks(int pid);
 
 // Polls `condition` every few milliseconds until it returns true (-> true) or `timeout` passes
 // (-> false).

@@ -34,27 +34,8 @@ std::string trim(std::string s) {
 
 namespace {
 
-// CPU ticks (utime + stime) per thread name, from /proc/PID/task/*/stat.
-std::map<std::string, std::uint64_t> thread_ticks(int pid) {
-  std::map<std::string, std::uint64_t> ticks;
-  std::error_code ec;
-  for (const auto& task : fs::directory_iterator(fmt::format("/proc/{}/task", pid), ec)) {
-    const std::string stat = read_file(task.path() / "stat");
-    const auto close = stat.rfind(')');  // the name may hold spaces; fields follow the last ')'
-    if (close == std::string::npos) continue;
-    std::istringstream fields(stat.substr(close + 2));
-    std::string field;
-    std::uint64_t utime = 0, stime = 0;
-    for (int i = 3; i <= 15 && fields >> field; ++i) {
-      if (i == 14) utime = std::stoull(field);
-      if (i == 15) stime = std::stoull(field);
-    }
-    ticks[trim(read_file(task.path() / "comm"))] += utime + stime;
-  }
-  return ticks;
-}
-
-// The daemon's CPU between two thread_ticks() readings `seconds` apart, in total and per thread.
+// The daemon's CPU between two thread_cpu_ticks() readings `seconds` apart, in total and per
+// thread.
 ordered_json cpu_use(const std::map<std::string, std::uint64_t>& before,
                      const std::map<std::string, std::uint64_t>& after, double seconds,
                      std::uint64_t packets) {
@@ -179,13 +160,13 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
       daemon_socket_buffer = log.substr(at + 23, log.find('\n', at) - at - 23);
     }
   }
-  const auto cpu_before = thread_ticks(process.pid());
+  const auto cpu_before = harness::thread_cpu_ticks(process.pid());
   GeneratorOptions g = o_.traffic;
   g.port = port;
   g.rate_pps = rate;
   g.seconds = seconds;
   const GeneratorResult sent = run_generator(source_, g);
-  const auto cpu_after = thread_ticks(process.pid());
+  const auto cpu_after = harness::thread_cpu_ticks(process.pid());
   const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
   // A health record written in the traffic's last half second or after it: its per-second
   // wake-up rates cover the traffic. (The latest record on disk may be older on a slow machine:
@@ -277,13 +258,13 @@ ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
     throw std::runtime_error(fmt::format("'{}' did not bind UDP port {} within 15 s:\n{}",
                                          o_.receiver_command, o_.receiver_port, process.log()));
   }
-  const auto cpu_before = thread_ticks(process.pid());
+  const auto cpu_before = harness::thread_cpu_ticks(process.pid());
   GeneratorOptions g = o_.traffic;
   g.port = o_.receiver_port;
   g.rate_pps = rate;
   g.seconds = seconds;
   const GeneratorResult sent = run_generator(source_, g);
-  const auto cpu_after = thread_ticks(process.pid());
+  const auto cpu_after = harness::thread_cpu_ticks(process.pid());
   const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
   process.signal(SIGTERM);
   const std::optional<int> status = process.wait_exit(10s);
