@@ -368,6 +368,7 @@ Options:
   --rounds N           run every configuration N times, interleaved; medians (default 1)
   --dir DIR            where the runs write (default: a temporary directory, removed)
   --daemon PATH        pandarcapd (default: the one beside pandarcap-bench)
+  --only TEXT          only the configurations whose name holds TEXT (and the reference)
   -h, --help           this text
 
 JSON keys: rows[] (name, config, packets_per_s, mb_per_s, mb_per_s_by_output {frames, raw,
@@ -391,6 +392,8 @@ int run_storage(int argc, char** argv) {
       options.directory = std::string(args.value(arg));
     } else if (arg == "--daemon") {
       options.daemon = std::string(args.value(arg));
+    } else if (arg == "--only") {
+      options.only = std::string(args.value(arg));
     } else {
       args.unknown_option(arg);
     }

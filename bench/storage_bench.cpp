@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <stdexcept>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -150,9 +151,13 @@ ordered_json run_storage_bench(const StorageBenchOptions& o) {
   const fs::path work =
       temporary ? fs::temp_directory_path() / fmt::format("pandarcap-storage-{}", ::getpid())
                 : fs::path(o.directory);
+  std::vector<std::size_t> chosen;
+  for (std::size_t i = 0; i < std::size(kChoices); ++i)
+    if (i == 0 || std::string_view(kChoices[i].name).find(o.only) != std::string_view::npos)
+      chosen.push_back(i);
   std::vector<std::vector<ordered_json>> runs(std::size(kChoices));
   for (int round = 0; round < o.rounds; ++round) {
-    for (std::size_t i = 0; i < std::size(kChoices); ++i) {
+    for (const std::size_t i : chosen) {
       const fs::path dir = work / fmt::format("round{}_{:02}", round, i);
       runs[i].push_back(run_once(daemon, dir, kChoices[i], o.seconds));
       std::error_code ec;
@@ -165,7 +170,7 @@ ordered_json run_storage_bench(const StorageBenchOptions& o) {
   }
   ordered_json rows = ordered_json::array();
   double reference_cpu = 0;
-  for (std::size_t i = 0; i < std::size(kChoices); ++i) {
+  for (const std::size_t i : chosen) {
     const auto med = [&](const char* key) {
       std::vector<double> v;
       for (const auto& r : runs[i])

@@ -19,6 +19,7 @@ struct StorageBenchOptions {
   int rounds = 1;         // runs of each configuration, interleaved; medians reported
   std::string directory;  // where the runs write; "" = a temporary directory, removed
   std::string daemon;     // pandarcapd; "" = the one beside pandarcap-bench
+  std::string only;       // only the configurations whose name holds this (and the reference)
 };
 
 nlohmann::ordered_json run_storage_bench(const StorageBenchOptions& options);
