@@ -252,9 +252,18 @@ CaptureReader::CaptureReader(const std::string& path, Options options)
   // Once open, libpcap owns the FILE (pcap_close closes it); a failed open leaves it ours.
   handle_ = pcap_fopen_offline_with_tstamp_precision(file, PCAP_TSTAMP_PRECISION_NANO, errbuf);
   if (handle_ == nullptr) {
-    // A zstd stream that does not decompress says why (libpcap only saw a failed read).
-    std::string why = zstd_ != nullptr && !zstd_->error().empty() ? zstd_->error() : errbuf;
-    if (zstd_ != nullptr && zstd_->error().empty()) why = "(decompressed) " + why;
+    // A zstd stream that does not decompress says why (libpcap only saw a failed read), and so
+    // does one cut before its first whole capture header.
+    std::string why = errbuf;
+    if (zstd_ != nullptr && !zstd_->error().empty()) {
+      why = zstd_->error();
+    } else if (zstd_ != nullptr && zstd_->unfinished_frame()) {
+      why =
+          "the zstd stream ends inside a frame before a whole capture header (cut off while "
+          "recording)";
+    } else if (zstd_ != nullptr) {
+      why = "(decompressed) " + why;
+    }
     std::fclose(file);
     throw CaptureError("cannot open capture '" + path + "': " + why);
   }
