@@ -239,7 +239,7 @@ TEST_CASE("a .pcap.zst of concatenated frames reads as one capture", "[capture][
 }
 
 TEST_CASE("a cut .pcap.zst (a killed run's .part) gives every complete record, then kTruncated",
-          "[capture][zstd]") {
+          "[capture][zstd][daemon][threads]") {
   test::ScratchDir dir("zstd-cut");
   const fs::path pcap = simulated_capture(dir / "capture.pcap");
   const std::string bytes = harness::read_file(pcap);
@@ -287,7 +287,7 @@ TEST_CASE("a cut .pcap.zst (a killed run's .part) gives every complete record, t
   }
 }
 
-TEST_CASE("corrupt zstd data is an error naming the file", "[capture][zstd]") {
+TEST_CASE("corrupt zstd data is an error naming the file", "[capture][zstd][daemon]") {
   test::ScratchDir dir("zstd-corrupt");
   const fs::path pcap = simulated_capture(dir / "capture.pcap");
 

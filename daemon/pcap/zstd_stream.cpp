@@ -49,7 +49,7 @@ std::FILE* ZstdReadStream::open(int fd, const ZstdReadStream*& state) {
   return file;
 }
 
-long ZstdReadStream::read_cookie(void* cookie, char* out, std::size_t size) {
+ssize_t ZstdReadStream::read_cookie(void* cookie, char* out, std::size_t size) {
   return static_cast<ZstdReadStream*>(cookie)->read(out, size);
 }
 
@@ -58,7 +58,7 @@ int ZstdReadStream::close_cookie(void* cookie) {
   return 0;
 }
 
-long ZstdReadStream::read(char* out, std::size_t size) {
+ssize_t ZstdReadStream::read(char* out, std::size_t size) {
   if (!error_.empty()) {
     errno = EIO;
     return -1;
@@ -92,7 +92,7 @@ long ZstdReadStream::read(char* out, std::size_t size) {
     // Nothing more will come: everything before the end was delivered; a frame may be unfinished.
     if (output.pos == 0 && eof_ && input_pos_ == input_size_) break;
   }
-  return static_cast<long>(output.pos);
+  return static_cast<ssize_t>(output.pos);
 }
 
 }  // namespace pandarcap

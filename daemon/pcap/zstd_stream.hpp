@@ -14,6 +14,8 @@
 //   - the bytes do not decompress: the read fails (EIO) and error() names zstd's reason.
 #pragma once
 
+#include <sys/types.h>
+
 #include <cstdio>
 #include <string>
 
@@ -36,9 +38,9 @@ class ZstdReadStream {
 
  private:
   explicit ZstdReadStream(int fd);
-  long read(char* out, std::size_t size);  // as cookie_read_function_t
+  ssize_t read(char* out, std::size_t size);  // as cookie_read_function_t
 
-  static long read_cookie(void* cookie, char* out, std::size_t size);
+  static ssize_t read_cookie(void* cookie, char* out, std::size_t size);
   static int close_cookie(void* cookie);
 
   int fd_;
