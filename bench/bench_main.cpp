@@ -356,28 +356,8 @@ int run_write(int argc, char** argv) {
   return 0;
 }
 
-constexpr std::string_view kStorageUsage = R"(Usage: pandarcap-bench storage [OPTIONS]
-
-Runs pandarcapd with its simulated sensor (3600 packets/s) once per choice of outputs and
-measures, over a window of traffic, the bytes written (MB/s, GB per hour, hours per TB) and the
-daemon's CPU (% of one core, without the simulated sensor's thread).
-
-Options:
-  --json               print one JSON object instead of a Markdown table
-  --seconds S          the measured window of each run (default 8)
-  --rounds N           run every configuration N times, interleaved; medians (default 1)
-  --dir DIR            where the runs write (default: a temporary directory, removed)
-  --daemon PATH        pandarcapd (default: the one beside pandarcap-bench)
-  --only TEXT          only the configurations whose name holds TEXT (and the reference)
-  -h, --help           this text
-
-JSON keys: rows[] (name, config, packets_per_s, mb_per_s, mb_per_s_by_output {frames, raw,
-mcap, health}, gb_per_hour, hours_per_tb, cpu_fraction_of_core, cpu_over_reference,
-writer_cpu_fraction_of_core), seconds, rounds, method.
-)";
-
 int run_storage(int argc, char** argv) {
-  pandarcap::CliArgs args(argc, argv, kStorageUsage);
+  pandarcap::CliArgs args(argc, argv, pandarcap::bench::kStorageUsage);
   pandarcap::bench::StorageBenchOptions options;
   bool json = false;
   while (args.more()) {

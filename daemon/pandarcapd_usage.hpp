@@ -10,7 +10,7 @@ namespace pandarcap {
 inline constexpr std::string_view kPandarcapdUsage =
     R"(Usage: pandarcapd [options]                  live capture from the sensor
        pandarcapd --simulate [options]       live path fed by a built-in simulated sensor
-       pandarcapd --replay FILE [options]    process a pcap/pcapng recording
+       pandarcapd --replay FILE [options]    process a recording (pcap, pcap.zst, MCAP)
 
 Captures a Hesai Pandar40P: receives its UDP packets, decodes them into frames, and writes
 OUTPUT-DIR/frames/*.pcd, OUTPUT-DIR/raw/*.pcap (+ calibration.csv), with --mcap
@@ -33,8 +33,11 @@ Configuration:
 Sources:
   --simulate             start a simulated sensor that sends over loopback to the daemon's own
                          socket (127.0.0.1, a free port unless --port is given)
-  --replay FILE          read packets from a capture file instead of the network; exits when
-                         the file is done
+  --replay FILE          read packets from a recording instead of the network; exits when
+                         the file is done. FILE: pcap or pcapng, either compressed with zstd
+                         (.pcap.zst, or a killed run's .pcap.zst.part: read to its cut), or
+                         MCAP with packets (--mcap-packets; its pandar_msgs/msg/PandarPacket
+                         messages, timed by their log time); told apart by the first bytes
   --top-speed            replay as fast as the decoder goes (the default)
   --rate X               replay at X times the recorded pace (1 = real time)
   --duration S           stop after S seconds (live and simulated runs)
@@ -50,7 +53,9 @@ Overrides (same names as the configuration keys):
                          (PTP/GPS lock, motor, temperatures) over PTC; 0 = off
   --host-ip IP           sensor.host_ip (default 0.0.0.0)
   --port N               sensor.data_port (default 2368); with --replay: only datagrams to N
+                         (not for MCAP: its packets carry no addresses)
   --sensor-ip IP         sensor.sensor_ip: drop (and count) datagrams from other sources
+                         (not for a replayed MCAP: its packets carry no addresses)
   --cut-angle DEG        sensor.cut_angle (default 0)
   --frame AXES           sensor.frame: hesai (default; the sensor's axes, y at azimuth 0) or ros
                          (REP 103: x forward, y left, z up)

@@ -22,7 +22,7 @@
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
-#include "daemon/pcap/zstd_stream.hpp"
+#include "daemon/pcap/zstd_write_stream.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

@@ -174,4 +174,29 @@ void write_pandar_packet(ByteWriter& w, RosTime stamp, std::span<const std::uint
   w.u32(static_cast<std::uint32_t>(payload.size()));
 }
 
+std::optional<PandarPacketView> parse_pandar_packet(std::span<const std::uint8_t> cdr) noexcept {
+  // Encapsulation: 00 00 plain CDR big-endian, 00 01 little-endian; then two option bytes.
+  if (cdr.size() < kEncapsulation || cdr[0] != 0 || cdr[1] > 1) return std::nullopt;
+  const bool little = cdr[1] == 1;
+  std::size_t at = kEncapsulation;
+  const auto u32 = [&](std::uint32_t& v) {
+    at = aligned(at, 4);
+    if (cdr.size() < at || cdr.size() - at < 4) return false;
+    const std::uint8_t* p = cdr.data() + at;
+    v = little ? (std::uint32_t{p[0]} | std::uint32_t{p[1]} << 8 | std::uint32_t{p[2]} << 16 |
+                  std::uint32_t{p[3]} << 24)
+               : (std::uint32_t{p[3]} | std::uint32_t{p[2]} << 8 | std::uint32_t{p[1]} << 16 |
+                  std::uint32_t{p[0]} << 24);
+    at += 4;
+    return true;
+  };
+  std::uint32_t sec = 0, nanosec = 0, length = 0, size = 0;
+  if (!u32(sec) || !u32(nanosec) || !u32(length)) return std::nullopt;
+  if (cdr.size() - at < length) return std::nullopt;
+  const std::span<const std::uint8_t> data = cdr.subspan(at, length);
+  at += length;
+  if (!u32(size) || size > length) return std::nullopt;
+  return PandarPacketView{RosTime{static_cast<std::int32_t>(sec), nanosec}, data.first(size)};
+}
+
 }  // namespace pandarcap::mcap

@@ -14,6 +14,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string_view>
 
@@ -49,5 +50,15 @@ void write_pointcloud2_suffix(ByteWriter& w);
 // The bytes of a PandarPacket message for a payload of `payload_bytes`.
 std::size_t pandar_packet_bytes(std::size_t payload_bytes) noexcept;
 void write_pandar_packet(ByteWriter& w, RosTime stamp, std::span<const std::uint8_t> payload);
+
+// A PandarPacket message read back from untrusted CDR bytes (little- or big-endian
+// encapsulation). `data` is the packet: the first `size` bytes of the message's data array (Hesai's
+// driver may send a larger array than the datagram; pandarcap writes size == the array's length).
+// Nothing when the bytes do not hold a whole message or `size` exceeds the array.
+struct PandarPacketView {
+  RosTime stamp;
+  std::span<const std::uint8_t> data;
+};
+std::optional<PandarPacketView> parse_pandar_packet(std::span<const std::uint8_t> cdr) noexcept;
 
 }  // namespace pandarcap::mcap

@@ -1,4 +1,5 @@
-// pandarcap-inspect: per-packet field dump and summary of a Pandar40P capture (pcap / pcapng).
+// pandarcap-inspect: per-packet field dump and summary of a Pandar40P capture (pcap / pcapng,
+// either compressed with zstd, or the PandarPacket messages of an MCAP file).
 //
 // Exit status: 0 the capture was read to its end (cleanly or truncated: see "capture_status"),
 // 1 the capture is corrupt part-way (what was read is still summarised), 2 the capture or the
@@ -34,14 +35,17 @@ using nlohmann::json;
 
 constexpr std::string_view kUsage = R"(Usage: pandarcap-inspect [options] FILE
 
-Dumps the fields of every Pandar40P packet in a pcap or pcapng capture, then a summary
-(packets, rejects by reason, frames, points per frame, RPM range, sequence gaps).
+Dumps the fields of every Pandar40P packet in a capture, then a summary (packets, rejects by
+reason, frames, points per frame, RPM range, sequence gaps). FILE: pcap or pcapng, either
+compressed with zstd (.pcap.zst), or MCAP (its pandar_msgs/msg/PandarPacket messages, recorded
+with output.mcap_packets = true); the kind is told by the file's first bytes.
 
 Options:
   --json                 one JSON object: {"packets": [...], "frames": [...], "summary": {...}}
   --summary              print only the summary (no per-packet lines)
   --calibration FILE     angle-correction CSV (default: the nominal Pandar40P table)
-  --port N               only UDP datagrams to destination port N (default: any port)
+  --port N               only UDP datagrams to destination port N (default: any port; an
+                         MCAP file's packets have no ports: not applied)
   --cut-angle DEG        frame cut angle in degrees (default 0)
   --min-range M          drop points closer than M metres (default 0.3)
   --max-range M          drop points farther than M metres (default 200)
@@ -139,12 +143,14 @@ std::string format_utc(const TailDateTime& utc) {
                      utc.day, utc.hour, utc.minute, utc.second);
 }
 
-json packet_json(std::uint64_t index, const CaptureRecord& record, RejectReason reason) {
+json packet_json(std::uint64_t index, const CaptureRecord& record, RejectReason reason,
+                 bool has_endpoints) {
   json j;
   j["index"] = index;
   j["record_time_ns"] = record.timestamp_ns;
-  j["source"] = to_string(record.source);
-  j["destination"] = to_string(record.destination);
+  // An MCAP file's packets have no addresses.
+  j["source"] = has_endpoints ? json(to_string(record.source)) : json(nullptr);
+  j["destination"] = has_endpoints ? json(to_string(record.destination)) : json(nullptr);
   j["size"] = record.payload.size();
   if (record.snapped) j["original_size"] = record.udp_payload_length;  // the file holds a part
   j["status"] = reason == RejectReason::kNone ? "ok" : std::string(to_string(reason));
@@ -211,10 +217,28 @@ std::string_view status_name(CaptureStatus status) {
   return "reading";
 }
 
+std::string_view format_name(CaptureFormat format) {
+  switch (format) {
+    case CaptureFormat::kPcapZstd:
+      return "pcap.zst";
+    case CaptureFormat::kMcap:
+      return "mcap";
+    case CaptureFormat::kPcap:
+      break;
+  }
+  return "pcap";
+}
+
 int run(const Options& options) {
   Calibration calibration = Calibration::nominal();
   if (options.calibration) calibration = Calibration::load(*options.calibration);
   CaptureReader reader(options.file, CaptureReader::Options{options.port});
+  if (options.port && !reader.has_endpoints()) {
+    std::fprintf(stderr,
+                 "pandarcap-inspect: %s: an MCAP file's packets have no ports: --port %u "
+                 "is not applied\n",
+                 options.file.c_str(), unsigned{*options.port});
+  }
 
   json frames = json::array();
   json points_per_complete_frame = json::array();
@@ -253,7 +277,7 @@ int run(const Options& options) {
     const RejectReason reason =
         decoder.process(record.snapped ? std::span<const std::uint8_t>() : record.payload);
     if (per_packet) {
-      json p = packet_json(index, record, reason);
+      json p = packet_json(index, record, reason, reader.has_endpoints());
       if (options.json_output) {
         packets.push_back(std::move(p));
       } else {
@@ -280,6 +304,7 @@ int run(const Options& options) {
       {"file", options.file},
       {"capture_status", status_name(status)},
       {"capture_error", reader.error()},
+      {"capture_format", format_name(reader.format())},
       {"calibration", calibration.source},
       {"packets", s.packets},
       {"accepted", s.accepted},

@@ -11,10 +11,17 @@
 #include <cstring>
 #include <limits>
 
+#include "core/mcap/mcap_records.hpp"
+#include "core/mcap/ros2_messages.hpp"
 #include "core/units.hpp"
+#include "daemon/pcap/mcap_packet_reader.hpp"
+#include "daemon/pcap/zstd_read_stream.hpp"
 
 namespace pandarcap {
 namespace {
+
+// A zstd frame's first bytes (RFC 8878: 0xFD2FB528, little-endian).
+constexpr std::uint8_t kZstdMagic[] = {0x28, 0xB5, 0x2F, 0xFD};
 
 constexpr std::uint16_t kEthertypeIpv4 = 0x0800;
 constexpr std::uint16_t kEthertypeIpv6 = 0x86DD;
@@ -217,18 +224,48 @@ CaptureReader::CaptureReader(const std::string& path, Options options)
                        "': not a regular file (a FIFO, socket, device or directory)");
   }
   ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
-  FILE* file = ::fdopen(fd, "rb");
-  if (file == nullptr) {
-    ::close(fd);
-    throw CaptureError("cannot open capture '" + path + "': " + std::strerror(errno));
+  // The kind of file, by its first bytes (pread: the file position stays at 0 for libpcap).
+  std::uint8_t magic[mcap::kMagic.size()] = {};
+  const ssize_t got = ::pread(fd, magic, sizeof magic, 0);
+  const auto have = static_cast<std::size_t>(std::max<ssize_t>(got, 0));
+  if (have == sizeof magic && std::equal(mcap::kMagic.begin(), mcap::kMagic.end(), magic)) {
+    open_mcap(fd);
+    return;
+  }
+  FILE* file = nullptr;
+  if (have >= sizeof kZstdMagic && std::equal(kZstdMagic, kZstdMagic + sizeof kZstdMagic, magic)) {
+    format_ = CaptureFormat::kPcapZstd;
+    try {
+      file = ZstdReadStream::open(fd, zstd_);  // owns fd from here
+    } catch (const std::exception& e) {
+      throw CaptureError("cannot open capture '" + path + "': " + e.what());
+    }
+  } else {
+    file = ::fdopen(fd, "rb");
+    if (file == nullptr) {
+      ::close(fd);
+      throw CaptureError("cannot open capture '" + path + "': " + std::strerror(errno));
+    }
   }
   char errbuf[PCAP_ERRBUF_SIZE] = {};
   // Nanosecond precision: libpcap scales microsecond files up, and keeps pcapng's finer units.
   // Once open, libpcap owns the FILE (pcap_close closes it); a failed open leaves it ours.
   handle_ = pcap_fopen_offline_with_tstamp_precision(file, PCAP_TSTAMP_PRECISION_NANO, errbuf);
   if (handle_ == nullptr) {
+    // A zstd stream that does not decompress says why (libpcap only saw a failed read), and so
+    // does one cut before its first whole capture header.
+    std::string why = errbuf;
+    if (zstd_ != nullptr && !zstd_->error().empty()) {
+      why = zstd_->error();
+    } else if (zstd_ != nullptr && zstd_->unfinished_frame()) {
+      why =
+          "the zstd stream ends inside a frame before a whole capture header (cut off while "
+          "recording)";
+    } else if (zstd_ != nullptr) {
+      why = "(decompressed) " + why;
+    }
     std::fclose(file);
-    throw CaptureError("cannot open capture '" + path + "': " + errbuf);
+    throw CaptureError("cannot open capture '" + path + "': " + why);
   }
   // Always nano with libpcap >= 1.5 (the open fails otherwise); checked so that a microsecond
   // handle could never be read as nanoseconds.
@@ -243,12 +280,47 @@ CaptureReader::CaptureReader(const std::string& path, Options options)
   }
 }
 
+// An MCAP file: its first packet is read now, so that a file without any fails at once (the
+// daemon's "capture unreadable" exit, inspect's), not after a start that replays nothing.
+void CaptureReader::open_mcap(int fd) {
+  format_ = CaptureFormat::kMcap;
+  mcap_ = std::make_unique<McapPacketReader>(fd, path_);  // owns fd from here
+  CaptureRecord record;
+  const CaptureStatus status = mcap_->next(record, stats_);
+  if (status == CaptureStatus::kRecord) {
+    first_ = record;
+    return;
+  }
+  if (stats_.records == 0) {
+    std::string message = path_ + " holds no " + std::string(mcap::kPandarPacketName) +
+                          " messages: record with output.mcap_packets = true";
+    if (status != CaptureStatus::kEnd)
+      message += " (and reading it failed: " + mcap_->error() + ")";
+    throw CaptureError(message);
+  }
+  final_status_ = status;  // packets, none of them readable: the summary says so
+  error_ = mcap_->error();
+}
+
 CaptureReader::~CaptureReader() {
-  pcap_close(handle_);
+  if (handle_ != nullptr) pcap_close(handle_);
 }
 
 CaptureStatus CaptureReader::next(CaptureRecord& out) {
   if (final_status_) return *final_status_;
+  if (mcap_) {
+    if (first_) {
+      out = *first_;
+      first_.reset();
+      return CaptureStatus::kRecord;
+    }
+    const CaptureStatus status = mcap_->next(out, stats_);
+    if (status != CaptureStatus::kRecord) {
+      final_status_ = status;
+      error_ = mcap_->error();
+    }
+    return status;
+  }
   const LinkLayer link = *link_layer(link_type_);
   for (;;) {
     pcap_pkthdr* header = nullptr;
@@ -298,8 +370,17 @@ CaptureStatus CaptureReader::next(CaptureRecord& out) {
 //                                  "block total length in header and trailer don't match"
 // A corrupt caplen that is plausible (below the file's snaplen) but runs past the end of the file
 // is indistinguishable from a cut-off recording and reads as kTruncated.
+// A zstd capture: a stream that failed to decompress is kError with zstd's reason; one that ends
+// inside its frame (a killed run's .part, cut at a record boundary) kTruncated even when libpcap
+// saw a clean end.
 CaptureStatus CaptureReader::finish(int pcap_status) {
-  if (pcap_status == PCAP_ERROR_BREAK) {
+  if (zstd_ != nullptr && !zstd_->error().empty()) {
+    error_ = path_ + ": " + zstd_->error();
+    final_status_ = CaptureStatus::kError;
+  } else if (pcap_status == PCAP_ERROR_BREAK && zstd_ != nullptr && zstd_->unfinished_frame()) {
+    error_ = path_ + ": the zstd stream ends inside a frame (cut off while recording)";
+    final_status_ = CaptureStatus::kTruncated;
+  } else if (pcap_status == PCAP_ERROR_BREAK) {
     final_status_ = CaptureStatus::kEnd;
   } else {
     const std::string message = pcap_status == PCAP_ERROR

@@ -9,7 +9,7 @@
 // datagram is held: its sum cannot be known).
 //
 // Compressed (given a ZstdStreamCompressor): the same pcap stream as one zstd frame
-// (daemon/pcap/zstd_stream.hpp), each flush() ending a block, close() ending the frame; the file
+// (daemon/pcap/zstd_write_stream.hpp), each flush() ending a block, close() ending the frame; the file
 // then opens as it is in tshark, Wireshark and pandarcapd --replay. bytes() and flushed_bytes()
 // are the file's (compressed) bytes.
 //
@@ -29,7 +29,7 @@
 
 #include "daemon/io/file_output.hpp"
 #include "daemon/pcap/capture_reader.hpp"
-#include "daemon/pcap/zstd_stream.hpp"
+#include "daemon/pcap/zstd_write_stream.hpp"
 
 namespace pandarcap {
 

@@ -17,7 +17,7 @@
 #include "daemon/io/unique_fd.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
-#include "daemon/pcap/zstd_stream.hpp"
+#include "daemon/pcap/zstd_write_stream.hpp"
 
 namespace pandarcap {
 namespace {

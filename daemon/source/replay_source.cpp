@@ -1,6 +1,7 @@
 #include "daemon/source/replay_source.hpp"
 
 #include <arpa/inet.h>
+#include <spdlog/spdlog.h>
 #include <time.h>
 
 #include <algorithm>
@@ -38,6 +39,20 @@ constexpr double kMaxReplayOffsetNs = 1e15;
 
 ReplaySource::ReplaySource(const ReplayOptions& options)
     : options_(options), reader_(options.path, CaptureReader::Options{options.destination_port}) {
+  if (!reader_.has_endpoints()) {
+    // MCAP packets carry no addresses: neither filter can apply. What pandarcapd recorded there
+    // is already the sensor's datagrams to its data port (the live receiver's own filters).
+    if (options.destination_port || !options.sensor_ip.empty()) {
+      spdlog::warn(
+          "{}: an MCAP file's packets carry no addresses: {} not applied (every packet in it is "
+          "replayed)",
+          options.path,
+          options.destination_port && !options.sensor_ip.empty() ? "--port and sensor_ip are"
+          : options.destination_port                             ? "--port is"
+                                                                 : "sensor_ip is");
+    }
+    return;
+  }
   if (!options.sensor_ip.empty()) {
     // A bad address is refused, never ignored: ignoring it would replay every source.
     sensor_ip_ = parse_ipv4_host_order(options.sensor_ip);

@@ -1,5 +1,7 @@
-// The replay source: feeds a pcap/pcapng capture through the same PacketRing the live socket
-// fills, so a recording is processed exactly as live data would be.
+// The replay source: feeds a capture (pcap/pcapng, either compressed with zstd, or the packets of
+// an MCAP file: CaptureReader) through the same PacketRing the live socket fills, so a recording
+// is processed exactly as live data would be. An MCAP file's packets have no addresses: the port
+// and sensor-address filters do not apply to them (a warning says so when they are set).
 //
 // Pace: as fast as the decoder takes it (top speed, the default for files), or the recorded
 // pace scaled by `rate` (1 = real time, 2 = twice as fast). Unlike the live receiver, replay

@@ -1,5 +1,5 @@
 #define ZSTD_STATIC_LINKING_ONLY  // ZSTD_initStaticCCtx, ZSTD_estimateCStreamSize
-#include "daemon/pcap/zstd_stream.hpp"
+#include "daemon/pcap/zstd_write_stream.hpp"
 
 #include <zstd.h>
 

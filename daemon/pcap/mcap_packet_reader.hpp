@@ -1,0 +1,82 @@
+// Reads the Pandar packets out of an MCAP file: the messages of its pandar_msgs/msg/PandarPacket
+// channel (what pandarcapd writes with output.mcap_packets = true, or Hesai's ROS 2 driver
+// records), in file order, each as a CaptureRecord whose payload is the packet and whose time is
+// the message's log time. CaptureReader uses it for a file that starts with the MCAP magic, so
+// the replay and pandarcap-inspect read MCAP as they read pcap.
+//
+// Streaming, bounded memory: records are read one at a time from the data section (never the
+// whole file, never the summary); a chunk is held whole, compressed and decompressed, and a chunk
+// claiming more than kMaxChunkBytes is refused. Chunks compressed with zstd or not at all are
+// read (lz4 is not: a clear error). Schemas and channels may come anywhere before their messages,
+// inside chunks or not.
+//
+// Which packets: messages on a channel with message encoding "cdr" whose schema is named
+// pandar_msgs/msg/PandarPacket; when a file holds several such channels (several sensors), the
+// first one with a message is read and the others' messages are counted as port_filtered. Other
+// channels' messages (points, health) are not records.
+//
+// What the packets do not carry: their addresses. Source and destination are left empty
+// (0.0.0.0:0), so a port or sensor-address filter cannot apply; pandarcapd recorded only the
+// sensor's datagrams to its data port in the first place.
+//
+// End of input: kEnd at the DataEnd record (or the footer); kTruncated when the file ends before
+// it (a file copied while being written, or one a killed run left and no start finished); kError
+// for a record that does not parse, a chunk that does not decompress or fails its CRC.
+#pragma once
+
+#include <bitset>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "daemon/pcap/capture_reader.hpp"
+
+namespace pandarcap {
+
+// A chunk's uncompressed records: twice the largest output.mcap_chunk_bytes (256 MiB; a chunk
+// exceeds it by at most one message). A claim beyond it is damage, refused before allocation.
+inline constexpr std::uint64_t kMaxChunkBytes = 512ull << 20;
+// Any other record read whole (a Message, Schema or Channel outside chunks, a chunk as stored).
+inline constexpr std::uint64_t kMaxMcapRecordBytes = 512ull << 20;
+
+class McapPacketReader {
+ public:
+  // Reads the file `fd` (a regular file; owned from here, closed by the destructor) whose first
+  // bytes are the MCAP magic. `path` names it in errors.
+  McapPacketReader(int fd, std::string path);
+  ~McapPacketReader();
+  McapPacketReader(const McapPacketReader&) = delete;
+  McapPacketReader& operator=(const McapPacketReader&) = delete;
+
+  // The next packet, counted in `stats` (records: packet messages read; udp_datagrams: yielded;
+  // malformed: messages that are not a whole PandarPacket). kRecord fills `out` (its payload valid
+  // until the next call); anything else is final, with error() saying why.
+  CaptureStatus next(CaptureRecord& out, CaptureStats& stats);
+  const std::string& error() const noexcept { return error_; }
+
+ private:
+  enum class Handled { kNone, kRecord, kFailed };
+  CaptureStatus fail(CaptureStatus status, const std::string& what);
+  bool read_at(std::uint64_t offset, std::uint8_t* out, std::size_t n);
+  // One record of the data section (top level or inside a chunk).
+  Handled handle(std::uint8_t op, std::span<const std::uint8_t> content, std::uint64_t offset,
+                 CaptureRecord& out, CaptureStats& stats);
+  Handled load_chunk(std::span<const std::uint8_t> content, std::uint64_t offset);
+
+  int fd_;
+  std::string path_;
+  std::uint64_t size_ = 0;
+  std::uint64_t offset_;                   // of the next top-level record
+  std::vector<std::uint8_t> record_;       // the top-level record being read
+  std::unique_ptr<std::uint8_t[]> chunk_;  // the current chunk's records, uncompressed
+  std::uint64_t chunk_capacity_ = 0, chunk_size_ = 0, chunk_pos_ = 0;
+  std::uint64_t chunk_offset_ = 0;  // its Chunk record's offset in the file
+  bool in_chunk_ = false;
+  std::bitset<65536> packet_schemas_, packet_channels_;
+  std::optional<std::uint16_t> channel_;  // the packet channel being read
+  std::string error_;
+};
+
+}  // namespace pandarcap
