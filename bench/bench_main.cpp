@@ -30,8 +30,9 @@ Subcommands:
   storage   what each choice of outputs (pcap, pcap.zst, PCD, PCD lzf, decimated, MCAP, the
             vehicle profile) costs the disk and the CPU at one sensor's rate, running the real
             pandarcapd: MB/s, GB/hour, hours per TB, % of a core.
-  write     the writer's formats: PCD frames (encode, encode + write) and pcap recording, in
-            points/s, packets/s and MB/s, and what one sensor's stream costs of a core.
+  write     the writer's formats: PCD frames (encode, encode + LZF, encode + write) and pcap
+            recording, in points/s, packets/s and MB/s, and what one sensor's stream costs of
+            a core.
   ring      SPSC packet ring (batches 1, 8, 32) and typed queue against a mutex + condition
             variable queue measured in the same run: items/s, round-trip latency, and the CPU
             an idle consumer uses at the sensor's packet rate.
@@ -326,9 +327,10 @@ Options:
   --dir DIR            write the files there (default: a temporary directory, removed)
   -h, --help           this text
 
-JSON keys: points_per_frame, pcd_encode, pcd_encode_and_write, pcap_write (each with
-items_per_s, mb_per_s, items_per_cpu_s, cpu_fraction_of_wall), sensor_pcd_cpu_fraction,
-sensor_pcap_cpu_fraction, method.
+JSON keys: points_per_frame, pcd_encode, pcd_encode_and_write, pcd_encode_lzf (encoded and
+compressed as DATA binary_compressed, not written), pcap_write (each with items_per_s, mb_per_s
+(uncompressed), items_per_cpu_s, cpu_fraction_of_wall), pcd_lzf_size_ratio,
+pcd_cpu_us_per_frame {binary, lzf}, sensor_pcd_cpu_fraction, sensor_pcap_cpu_fraction, method.
 )";
 
 int run_write(int argc, char** argv) {

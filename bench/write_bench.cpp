@@ -10,6 +10,7 @@
 
 #include "core/frame_collector.hpp"
 #include "core/pcd.hpp"
+#include "core/pcd_compressed.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "core/stream_decoder.hpp"
 #include "daemon/clocks.hpp"
@@ -74,6 +75,15 @@ nlohmann::ordered_json run_write_bench(const WriteBenchOptions& o) {
     for (int f = 0; f < o.frames; ++f)
       encode(nullptr);
   });
+  // The same frames as DATA binary_compressed (output.pcd_compression = "lzf"): encoded,
+  // transposed and compressed, not written.
+  PcdCompressor compressor;
+  compressor.reserve(frame.size(), PcdLayout::kPandarcap);
+  std::size_t lzf_bytes = 0;
+  const auto [lzf_wall, lzf_cpu] = timed([&] {
+    for (int f = 0; f < o.frames; ++f)
+      lzf_bytes = compressor.compress(frame, {PcdLayout::kPandarcap, Axes::kHesai}, {}).size();
+  });
   OutputFile file;
   const auto [write_wall, write_cpu] = timed([&] {
     for (int f = 0; f < o.frames; ++f) {
@@ -112,6 +122,11 @@ nlohmann::ordered_json run_write_bench(const WriteBenchOptions& o) {
   report["points_per_frame"] = frame.size();
   report["pcd_encode"] = rates(points, pcd_bytes, encode_wall, encode_cpu);
   report["pcd_encode_and_write"] = rates(points, pcd_bytes, write_wall, write_cpu);
+  report["pcd_encode_lzf"] = rates(points, pcd_bytes, lzf_wall, lzf_cpu);
+  report["pcd_lzf_size_ratio"] =
+      static_cast<double>(lzf_bytes) / static_cast<double>(frame.size() * kPcdPointBytes);
+  report["pcd_cpu_us_per_frame"] = {{"binary", encode_cpu / o.frames * 1e6},
+                                    {"lzf", lzf_cpu / o.frames * 1e6}};
   report["pcap_write"] = rates(o.packets, static_cast<double>(pcap_bytes), pcap_wall, pcap_cpu);
   // What one dual-return sensor needs: 10 frames/s of this size and 3600 packets/s.
   report["sensor_pcd_cpu_fraction"] =
@@ -126,11 +141,15 @@ nlohmann::ordered_json run_write_bench(const WriteBenchOptions& o) {
 
 void print_write_report(const nlohmann::ordered_json& report) {
   std::printf("%-22s %14s %10s %16s\n", "", "items/s", "MB/s", "items/CPU-s");
-  for (const char* key : {"pcd_encode", "pcd_encode_and_write", "pcap_write"}) {
+  for (const char* key : {"pcd_encode", "pcd_encode_lzf", "pcd_encode_and_write", "pcap_write"}) {
     const auto& r = report[key];
     std::printf("%-22s %14.0f %10.1f %16.0f\n", key, r["items_per_s"].get<double>(),
                 r["mb_per_s"].get<double>(), r["items_per_cpu_s"].get<double>());
   }
+  std::printf("PCD frame CPU: %.0f us binary, %.0f us lzf (%.2f of the size)\n",
+              report["pcd_cpu_us_per_frame"]["binary"].get<double>(),
+              report["pcd_cpu_us_per_frame"]["lzf"].get<double>(),
+              report["pcd_lzf_size_ratio"].get<double>());
   std::printf("one sensor: PCD %.2f %% of a core, pcap %.2f %% of a core\n",
               100 * report["sensor_pcd_cpu_fraction"].get<double>(),
               100 * report["sensor_pcap_cpu_fraction"].get<double>());

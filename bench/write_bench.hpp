@@ -1,8 +1,9 @@
 // `pandarcap-bench write`: how fast the writer's two formats go on this machine. PCD frames
-// (encoding alone, and encoding plus writing a file) and pcap recording (packets written to a
-// file), in points/s, packets/s and MB/s. The files go to a temporary directory (the page cache,
-// unless the disk is slower than memory), so these are the writer's CPU limits rather than a disk
-// benchmark.
+// (encoding alone, encoding and LZF compression as DATA binary_compressed, and encoding plus
+// writing a file) and pcap recording (packets written to a file), in points/s, packets/s and
+// MB/s, and the CPU per PCD frame with and without LZF. The files go to a temporary directory (the
+// page cache, unless the disk is slower than memory), so these are the writer's CPU limits rather
+// than a disk benchmark.
 #pragma once
 
 #include <nlohmann/json.hpp>

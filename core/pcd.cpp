@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cassert>
 #include <cmath>
@@ -34,6 +35,32 @@ constexpr LayoutSpec kLayouts[] = {
     {"autoware", 32, "x y z intensity return_type channel azimuth elevation distance time_stamp",
      "4 4 4 1 1 2 4 4 4 4", "F F F U U U F F F U", "1 1 1 1 1 1 1 1 1 1"},
 };
+
+// A SIZE line as numbers (every size is one digit: 1, 2, 4 or 8).
+struct FieldSizes {
+  std::array<std::uint8_t, 10> bytes{};
+  std::size_t count = 0;
+  std::size_t total = 0;
+};
+constexpr FieldSizes parse_sizes(std::string_view line) {
+  FieldSizes f;
+  for (const char c : line) {
+    if (c == ' ') continue;
+    f.bytes[f.count++] = static_cast<std::uint8_t>(c - '0');
+    f.total += static_cast<std::size_t>(c - '0');
+  }
+  return f;
+}
+constexpr FieldSizes kFieldSizes[] = {
+    parse_sizes(kLayouts[0].sizes), parse_sizes(kLayouts[1].sizes), parse_sizes(kLayouts[2].sizes),
+    parse_sizes(kLayouts[3].sizes)};
+constexpr bool sizes_add_up() {
+  for (std::size_t i = 0; i < std::size(kLayouts); ++i) {
+    if (kFieldSizes[i].total != kLayouts[i].point_bytes) return false;
+  }
+  return std::size(kFieldSizes) == std::size(kLayouts);
+}
+static_assert(sizes_add_up(), "each layout's SIZE line adds up to its point size");
 
 const LayoutSpec& spec(PcdLayout layout) noexcept {
   return kLayouts[static_cast<std::size_t>(layout)];
@@ -78,6 +105,11 @@ std::size_t pcd_point_bytes(PcdLayout layout) noexcept {
   return spec(layout).point_bytes;
 }
 
+std::span<const std::uint8_t> pcd_field_sizes(PcdLayout layout) noexcept {
+  const FieldSizes& f = kFieldSizes[static_cast<std::size_t>(layout)];
+  return std::span(f.bytes).first(f.count);
+}
+
 std::string pcd_header(std::size_t points) {
   std::string out;
   append_pcd_header(out, points);
@@ -85,7 +117,7 @@ std::string pcd_header(std::size_t points) {
 }
 
 void append_pcd_header(std::string& out, std::size_t points, PcdLayout layout,
-                       std::optional<std::int64_t> reference_ns) {
+                       std::optional<std::int64_t> reference_ns, PcdData data) {
   const LayoutSpec& s = spec(layout);
   out += "# .PCD v0.7 - Point Cloud Data file format\n";
   if (reference_ns) {
@@ -105,8 +137,9 @@ void append_pcd_header(std::string& out, std::size_t points, PcdLayout layout,
                  "HEIGHT 1\n"
                  "VIEWPOINT 0 0 0 1 0 0 0\n"
                  "POINTS {}\n"
-                 "DATA binary\n",
-                 s.fields, s.sizes, s.types, s.counts, points, points);
+                 "DATA {}\n",
+                 s.fields, s.sizes, s.types, s.counts, points, points,
+                 data == PcdData::kBinaryCompressed ? "binary_compressed" : "binary");
 }
 
 std::uint8_t nebula_return_type(ReturnType type, ReturnMode mode) noexcept {

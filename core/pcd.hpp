@@ -28,7 +28,8 @@
 //   # pandarcap frame_reference_time 1795348800.123456789 2026-11-22T12:00:00.123456789Z
 // so the relative times of the velodyne and autoware layouts keep an absolute anchor.
 // The header keys come in the order PCL writes and expects them; an unordered cloud has
-// WIDTH = POINTS and HEIGHT = 1.
+// WIDTH = POINTS and HEIGHT = 1. The points follow as "DATA binary" (packed rows, encoded here)
+// or as "DATA binary_compressed" (LZF, output.pcd_compression; core/pcd_compressed.hpp).
 #pragma once
 
 #include <cstddef>
@@ -71,13 +72,20 @@ inline constexpr std::size_t kPcdPointBytes = 3 * 4 + 3 * 1 + 8;  // 23: the pan
 inline constexpr std::size_t kMaxPcdPointBytes = 32;              // the autoware layout
 std::size_t pcd_point_bytes(PcdLayout layout) noexcept;
 
+// The byte size of each of a layout's fields, in their order (they add up to pcd_point_bytes).
+std::span<const std::uint8_t> pcd_field_sizes(PcdLayout layout) noexcept;
+
+// How the points follow the header: its DATA line.
+enum class PcdData : std::uint8_t { kBinary, kBinaryCompressed };
+
 // The pandarcap layout's ASCII header for `points` points, ending with "DATA binary\n".
 std::string pcd_header(std::size_t points);
 // A layout's header appended to `out` (no allocation once `out` has room), with the frame's
 // reference time in a comment when `reference_ns` is given.
 void append_pcd_header(std::string& out, std::size_t points,
                        PcdLayout layout = PcdLayout::kPandarcap,
-                       std::optional<std::int64_t> reference_ns = std::nullopt);
+                       std::optional<std::int64_t> reference_ns = std::nullopt,
+                       PcdData data = PcdData::kBinary);
 
 // Encodes points into `out` (which must hold points.size() * pcd_point_bytes(layout) bytes) and
 // returns the bytes written. No allocation. The default is the pandarcap layout in Hesai axes.

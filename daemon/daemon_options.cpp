@@ -32,6 +32,7 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.pcap_zstd = config.output.pcap_compression == "zstd";
   wo.pcap_zstd_level = config.output.pcap_compression_level;
   wo.pcd_lzf = config.output.pcd_compression == "lzf";
+  wo.max_frame_points = config.arenas.points_per_frame;
   wo.min_free_bytes = config.output.min_free_bytes;
   wo.min_free_percent = config.output.min_free_percent;
   wo.min_hours_left = config.health.min_hours_left;

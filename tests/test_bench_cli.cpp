@@ -427,11 +427,16 @@ TEST_CASE("pandarcap-bench write --json: PCD and pcap rates from one run", "[ben
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
   CHECK(report["points_per_frame"].get<std::size_t>() > 50'000);  // one simulated revolution
-  for (const char* key : {"pcd_encode", "pcd_encode_and_write", "pcap_write"}) {
+  for (const char* key : {"pcd_encode", "pcd_encode_and_write", "pcd_encode_lzf", "pcap_write"}) {
     INFO(key);
     CHECK(report[key]["items_per_s"].get<double>() > 0);
     CHECK(report[key]["mb_per_s"].get<double>() > 0);
   }
+  // LZF costs CPU on top of the encoding, and shrinks the simulated frame.
+  CHECK(report["pcd_cpu_us_per_frame"]["lzf"].get<double>() >
+        report["pcd_cpu_us_per_frame"]["binary"].get<double>());
+  CHECK(report["pcd_lzf_size_ratio"].get<double>() > 0);
+  CHECK(report["pcd_lzf_size_ratio"].get<double>() < 1);
   // The sensor's share follows from the rates: 10 frames/s and 3600 packets/s.
   CHECK(report["sensor_pcap_cpu_fraction"].get<double>() ==
         Approx(3600.0 / report["pcap_write"]["items_per_cpu_s"].get<double>()));

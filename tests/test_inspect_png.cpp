@@ -8,11 +8,8 @@
 #include <string>
 #include <vector>
 
-#include "core/calibration.hpp"
 #include "core/frame_collector.hpp"
-#include "core/stream_decoder.hpp"
 #include "core/topdown_render.hpp"
-#include "daemon/pcap/capture_reader.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;
@@ -101,12 +98,7 @@ TEST_CASE("pandarcap-inspect --png draws the real capture's frame where its poin
   FrameCollector collector(3, kDefaultFrameCapacityPoints, [&](const Frame& f) {
     if (!f.info.partial && f.size > frame.size()) frame.assign(f.used().begin(), f.used().end());
   });
-  StreamDecoder decoder(Calibration::load(calibration->string()), {}, collector);
-  CaptureReader reader(capture->string());
-  CaptureRecord record;
-  while (reader.next(record) == CaptureStatus::kRecord)
-    decoder.process(record.payload);
-  decoder.flush();
+  test::decode_capture(*capture, *calibration, collector);
   REQUIRE(frame.size() == 56762);
 
   TopDownOptions o;

@@ -27,6 +27,8 @@ FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& account
       volume_(space.watch(dir_)),
       retention_(options.frames_max_files, options.frames_max_bytes),
       format_(options.pcd_format),
+      lzf_(options.pcd_lzf),
+      max_frame_points_(options.max_frame_points),
       pcd_buffer_(kPcdChunkPoints * pcd_point_bytes(options.pcd_format.layout)) {}
 
 void FrameOutput::adopt_earlier_files() {
@@ -37,16 +39,28 @@ void FrameOutput::reserve() {
   path_.reserve(4096);
   temporary_path_.reserve(4096);
   pcd_header_.reserve(1024);
+  if (lzf_) compressor_.reserve(max_frame_points_, format_.layout);
 }
 
 void FrameOutput::write(const FrameArena& arena) {
   const Frame& frame = arena.frame;
   const std::span<const Point> points = frame.used();
   pcd_header_.clear();
-  append_pcd_header(pcd_header_, points.size(), format_.layout, frame.info.start_ns);
-  const std::uint64_t expected =
-      pcd_header_.size() + points.size() * pcd_point_bytes(format_.layout);
+  append_pcd_header(pcd_header_, points.size(), format_.layout, frame.info.start_ns,
+                    lzf_ ? PcdData::kBinaryCompressed : PcdData::kBinary);
   const PcdFrameContext context{frame.info.start_ns, frame.info.return_mode};
+  std::span<const std::uint8_t> compressed;
+  if (lzf_) {
+    try {
+      compressed = compressor_.compress(points, format_, context);
+    } catch (const std::exception& error) {
+      accounting_.write_failed(error, 0);
+      return;
+    }
+  }
+  const std::uint64_t expected =
+      pcd_header_.size() +
+      (lzf_ ? compressed.size() : points.size() * pcd_point_bytes(format_.layout));
   // frames/frame_000123_20261122T120000.123Z[_partial].pcd, written as frames/.<name>.tmp.
   path_.assign(dir_.native());
   fmt::format_to(std::back_inserter(path_), "/frame_{:06}_", number_base_ + frame.info.sequence);
@@ -60,10 +74,14 @@ void FrameOutput::write(const FrameArena& arena) {
   try {
     open_in_directory(file_, temporary_path_, OutputFile::Mode::kCreate, dir_);
     file_.write(pcd_header_);
-    for (std::size_t i = 0; i < points.size(); i += kPcdChunkPoints) {
-      const auto chunk = points.subspan(i, std::min(kPcdChunkPoints, points.size() - i));
-      const std::size_t n = encode_pcd_points(chunk, pcd_buffer_, format_, context);
-      file_.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
+    if (lzf_) {
+      file_.write(compressed);
+    } else {
+      for (std::size_t i = 0; i < points.size(); i += kPcdChunkPoints) {
+        const auto chunk = points.subspan(i, std::min(kPcdChunkPoints, points.size() - i));
+        const std::size_t n = encode_pcd_points(chunk, pcd_buffer_, format_, context);
+        file_.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
+      }
     }
     file_.close();
     accounting_.put_in_place(temporary_path_, path_);

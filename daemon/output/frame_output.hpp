@@ -9,7 +9,11 @@
 // base plus the frame's sequence number. Retention (frames_max_files / frames_max_bytes) counts
 // earlier runs' frames too.
 //
-// Once warm, writing a frame allocates nothing: the names, header and encode buffer are reused
+// With output.pcd_compression = "lzf" a frame is compressed whole (DATA binary_compressed,
+// core/pcd_compressed.hpp) before it is written, in buffers sized at start-up for the largest
+// frame (arenas.points_per_frame).
+//
+// Once warm, writing a frame allocates nothing: the names, header and encode buffers are reused
 // (retention, when on, lists one name per file). Owned by the writer thread.
 #pragma once
 
@@ -19,6 +23,7 @@
 #include <vector>
 
 #include "core/latency_histogram.hpp"
+#include "core/pcd_compressed.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/retention.hpp"
@@ -53,10 +58,13 @@ class FrameOutput {
   int volume_;  // dir_'s file system, for space_
   Retention retention_;
   PcdFormat format_;
+  bool lzf_;
+  std::size_t max_frame_points_;
   std::uint64_t number_base_ = 0;  // + the frame's sequence = its file number
   std::uint64_t frames_written_ = 0, bytes_written_ = 0;
   LatencyHistogram latency_;
   std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
+  PcdCompressor compressor_;              // lzf_: sized by reserve()
   std::string path_, temporary_path_, pcd_header_, refusal_;
   OutputFile file_;
 };

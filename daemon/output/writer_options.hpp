@@ -22,6 +22,9 @@ struct WriterOptions {
   std::uint64_t frames_max_files = 0;
   std::uint64_t frames_max_bytes = 0;
   bool pcd_lzf = false;  // output.pcd_compression = "lzf": DATA binary_compressed
+  // arenas.points_per_frame: the largest frame, which the compressed frames' buffers are sized
+  // for at start-up (0: sized by the first frames, allocating then).
+  std::size_t max_frame_points = 0;
   bool pcap = true;
   std::uint64_t pcap_rotate_bytes = 0;
   std::uint32_t pcap_rotate_seconds = 0;

@@ -14,6 +14,8 @@
 #include <sstream>
 
 #include "bench/child_process.hpp"
+#include "core/calibration.hpp"
+#include "core/stream_decoder.hpp"
 
 namespace pandarcap::test {
 
@@ -127,6 +129,16 @@ std::vector<PcdPoint> pandarcap_pcd_points(const std::filesystem::path& file) {
         reinterpret_cast<const std::uint8_t*>(bytes.data() + at), kPcdPointBytes)));
   }
   return points;
+}
+
+void decode_capture(const std::filesystem::path& capture,
+                    const std::filesystem::path& calibration_csv, FrameSink& frames) {
+  StreamDecoder decoder(Calibration::load(calibration_csv.string()), {}, frames);
+  CaptureReader reader(capture.string());
+  CaptureRecord record;
+  while (reader.next(record) == CaptureStatus::kRecord)
+    decoder.process(record.payload);
+  decoder.flush();
 }
 
 std::vector<std::filesystem::path> files_ending(const std::filesystem::path& dir,

@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/frame.hpp"
 #include "core/pcd.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
@@ -101,6 +102,11 @@ std::map<std::string, std::string> prom_samples(const std::string& text);
 // The points of a PCD file in the pandarcap layout (--pcd-fields pandarcap, the MCAP messages'
 // layout), decoded. Fails the test when the file has no data section or a partial point.
 std::vector<PcdPoint> pandarcap_pcd_points(const std::filesystem::path& file);
+
+// Every packet of a capture decoded with the calibration file `calibration_csv` (a
+// StreamDecoder with the default configuration), its frames into `frames`, flushed at the end.
+void decode_capture(const std::filesystem::path& capture,
+                    const std::filesystem::path& calibration_csv, FrameSink& frames);
 
 // The files directly in `dir` whose names end in `suffix` (".pcd", ".pcap"), sorted. No
 // directory: none.
