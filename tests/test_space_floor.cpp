@@ -152,7 +152,7 @@ TEST_CASE("Space floor: which files are ours", "[output][space]") {
   CHECK_FALSE(floor_file_is_ours(FloorKind::kNone, "frame_000001_x.pcd"));
 }
 
-TEST_CASE("Space floor: the oldest of ours go first, across outputs; nothing else is touched",
+TEST_CASE("Space floor: the oldest of ours go first, across outputs, and nothing else is touched",
           "[output][space]") {
   test::ScratchDir dir("space-floor");
   const Tree tree(dir.path());
@@ -413,6 +413,14 @@ TEST_CASE("Hours left: the storage gauges in the JSON line and the .prom", "[hea
   CHECK(j.at("storage").at("hours_left").is_null());
   prom = test::prom_samples(to_prometheus(h));
   CHECK(prom.at("pandarcap_storage_hours_left{sensor=\"front\"}") == "+Inf");
+  if (test::run_command("command -v promtool >/dev/null").exit_code == 0) {
+    test::ScratchDir dir("storage-prom");
+    std::ofstream(dir / "pandarcap.prom") << to_prometheus(h);
+    std::string said;
+    const bool accepted = test::promtool_accepts(dir / "pandarcap.prom", said);
+    INFO(said);
+    CHECK(accepted);  // +Inf is a valid sample
+  }
   // The free space unknown: null, and neither sample.
   st.free_known = false;
   j = json::parse(to_json_line(h));
