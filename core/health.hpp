@@ -10,8 +10,10 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include "decoder.hpp"
 #include "latency_histogram.hpp"
@@ -119,6 +121,11 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(bytes_not_written, "not_written_bytes", "Bytes lost to failed writes")                         \
   X(output_name_collisions, "output_name_collisions",                                              \
     "Finished files whose name was taken: kept under a _dupN name instead of replacing")           \
+  X(files_removed_for_space, "files_removed_for_space",                                            \
+    "Files of ours (frames, recordings, MCAP; earlier runs' too) removed, oldest first, to keep "  \
+    "output.min_free_bytes / min_free_percent free")                                               \
+  X(bytes_removed_for_space, "removed_for_space_bytes",                                            \
+    "Bytes of the files removed to keep the free-space floor")                                     \
   X(receive_wakeups, "receive_wakeups",                                                            \
     "Returns of the receive thread from its wait (socket or latency-budget timer)")                \
   X(decode_wakeups, "decode_wakeups", "Returns of the decode thread from its wait on the ring")    \
@@ -192,6 +199,29 @@ struct SensorIdentity {
   std::string calibration_source;  // "sensor", "file" or "nominal"
 };
 
+// What the outputs write and how long their disk lasts at that pace (docs/storage.md). The
+// outputs, in this order: frames (PCD files), pcap (raw recordings), mcap, health (health.jsonl
+// lines; the .prom file is replaced, it does not grow).
+inline constexpr std::size_t kStorageOutputCount = 4;
+inline constexpr std::array<std::string_view, kStorageOutputCount> kStorageOutputNames = {
+    "frames", "pcap", "mcap", "health"};
+
+struct StorageGauges {
+  // Free bytes (statvfs f_bavail) on the output file system that fills first at the current
+  // rates (with every output on one file system, simply its free space); unknown when no output
+  // file system could be asked.
+  bool free_known = false;
+  std::uint64_t free_bytes = 0;
+  // Bytes written per second over the last minute (fewer seconds just after the start), by output
+  // (kStorageOutputNames order), and their sum.
+  std::array<double, kStorageOutputCount> written_bytes_per_second{};
+  double written_bytes_per_second_total = 0;
+  // Hours until that file system is full at the last minute's pace: its free bytes over the rate
+  // of the outputs on it (the least over file systems). +infinity when nothing is written there,
+  // or the free space is unknown (JSON null; the .prom says +Inf).
+  double hours_left = std::numeric_limits<double>::infinity();
+};
+
 struct HealthGauges {
   double rpm_tail = 0;            // mean motor speed reported in the tails over the last second
   double rpm_measured = 0;        // from azimuth progression over packet time, last second
@@ -210,6 +240,7 @@ struct HealthGauges {
   double decode_wakeups_per_second = 0;
   double writer_wakeups_per_second = 0;
   SensorStatusGauges sensor_status;
+  StorageGauges storage;
   HealthState state = HealthState::kNoData;
   std::string reason;  // one line saying why the state is not ok ("" when ok)
 };

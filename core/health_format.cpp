@@ -335,6 +335,56 @@ void sensor_json(std::string& out, const HealthSnapshot& h) {
   out += "}";
 }
 
+// The storage gauges (docs/storage.md). hours_left is +Inf while nothing is written; free space
+// and hours are left out when no output file system could be asked.
+void storage_prometheus(std::string& out, std::string_view sensor, const StorageGauges& st) {
+  const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
+    fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
+  };
+  if (st.free_known) {
+    family(out, "storage_free_bytes", "gauge",
+           "Free bytes on the output file system that fills first at the last minute's write "
+           "rate");
+    append("pandarcap_storage_free_bytes{{{}}} {}\n", sensor, st.free_bytes);
+  }
+  family(out, "storage_written_bytes_per_second", "gauge",
+         "Bytes written per second over the last minute, by output (frames, pcap, mcap, health)");
+  for (std::size_t i = 0; i < kStorageOutputCount; ++i) {
+    append("pandarcap_storage_written_bytes_per_second{{{},output=\"{}\"}} {}\n", sensor,
+           kStorageOutputNames[i], st.written_bytes_per_second[i]);
+  }
+  if (st.free_known) {
+    family(out, "storage_hours_left", "gauge",
+           "Hours until the output file system is full at the last minute's write rate; +Inf "
+           "while nothing is written");
+    if (std::isfinite(st.hours_left)) {
+      append("pandarcap_storage_hours_left{{{}}} {}\n", sensor, st.hours_left);
+    } else {
+      append("pandarcap_storage_hours_left{{{}}} +Inf\n", sensor);
+    }
+  }
+}
+
+void storage_json(std::string& out, const StorageGauges& st) {
+  out += ",\"storage\":{\"free_bytes\":";
+  if (st.free_known) {
+    fmt::format_to(std::back_inserter(out), "{}", st.free_bytes);
+  } else {
+    out += "null";
+  }
+  out += ",\"written_bytes_per_second\":{";
+  for (std::size_t i = 0; i < kStorageOutputCount; ++i) {
+    fmt::format_to(std::back_inserter(out), "\"{}\":", kStorageOutputNames[i]);
+    append_json_number(out, st.written_bytes_per_second[i]);
+    out += ',';
+  }
+  out += "\"total\":";
+  append_json_number(out, st.written_bytes_per_second_total);
+  out += "},\"hours_left\":";
+  append_json_number(out, st.free_known ? st.hours_left : NAN);  // null: nothing written
+  out += '}';
+}
+
 }  // namespace
 
 void render_prometheus(const HealthSnapshot& h, std::string& out) {
@@ -390,6 +440,8 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
     append("pandarcap_state{{{},state=\"{}\"}} {}\n", sensor, to_string(state),
            h.gauges.state == state ? 1 : 0);
   }
+
+  storage_prometheus(out, sensor, h.gauges.storage);
 
   if (const auto& a = h.hot_path_allocations) {
     family(out, "hot_path_allocations_total", "counter",
@@ -470,6 +522,7 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   out += '}';
 
   sensor_json(out, h);
+  storage_json(out, h.gauges.storage);
   latency_json(out, "latency", h.latency, "us", 1e3);
   latency_json(out, "frame_latency", h.frame_latency, "ms", 1e6);
   out += "}\n";

@@ -9,9 +9,10 @@
 //
 // The JSON line has the keys `time` (RFC 3339 UTC), `unix_time_ns`, `sensor`, `version`,
 // `decoder`, `state`, `reason`, `counters` {name: value, with `rejects` and `filtered_points` as
-// {reason: value}}, `gauges` {name: value} and `latency` {count, p50_us, p99_us, p999_us,
-// max_us}. Names match the HealthCounters/HealthGauges
-// fields one-to-one, so the accounting identity can be checked from either output.
+// {reason: value}}, `gauges` {name: value}, `storage` {free_bytes, written_bytes_per_second
+// {frames, pcap, mcap, health, total}, hours_left (null while nothing is written)} and `latency`
+// {count, p50_us, p99_us, p999_us, max_us}. Names match the HealthCounters/HealthGauges fields
+// one-to-one, so the accounting identity can be checked from either output.
 #pragma once
 
 #include <string>

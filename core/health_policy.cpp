@@ -81,6 +81,14 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
       problem("sensor status: motor at {:.0f} RPM (expected {})", sensor.motor_rpm, expected.rpm);
     }
   }
+  const StorageGauges& storage = g.storage;
+  if (expected.min_hours_left > 0 && storage.free_known &&
+      storage.hours_left < expected.min_hours_left) {
+    problem(
+        "{:.1f} hours of disk left ({} MiB free at {:.1f} MB/s written; health.min_hours_left {})",
+        storage.hours_left, storage.free_bytes >> 20, storage.written_bytes_per_second_total / 1e6,
+        expected.min_hours_left);
+  }
   // Failing writes degrade (capture goes on, and every byte not written is counted; they lead
   // the reason). A failing socket is an error: the daemon is not capturing.
   if (c.receive_errors > p.receive_errors) {

@@ -17,6 +17,8 @@
 //               answer over PTC for 16 s"), or PTP configured but not locked ("sensor clock
 //               source is PTP but PTP is tracking (not locked)"). A sensor that never answered
 //               PTC does not degrade: it is reported (age -1, ptc_errors), not assumed broken.
+//               Last, fewer hours of disk left than health.min_hours_left ("0.8 hours of disk
+//               left (3072 MiB free at 1.1 MB/s written; health.min_hours_left 1)").
 //   - ok:       none of these; the reason is "".
 // Example: "2 kernel drops; return mode dual (expected last)".
 #pragma once
@@ -34,6 +36,9 @@ struct HealthExpectations {
   // sensor_clock_offset_seconds); 0 = not checked. The daemon's default is 1 s
   // (health.max_sensor_clock_offset_seconds); 0 here keeps the pure default neutral.
   double max_clock_offset_seconds = 0;
+  // Fewer hours of disk left than this (gauges' storage.hours_left) is a problem; 0 = not
+  // checked (health.min_hours_left).
+  double min_hours_left = 0;
 };
 
 // Sets gauges.state and gauges.reason from `now` against `before` (the counters of the previous

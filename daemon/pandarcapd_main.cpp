@@ -100,6 +100,14 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
                    ? fmt::format("; {} more lost with their file", c.mcap_messages_lost)
                    : std::string());
   }
+  if (c.files_removed_for_space > 0) {
+    // Removed on purpose, as retention's are: what they held was recorded (counted above), then
+    // given up, oldest first, for the floor of free space.
+    fmt::print(
+        "free-space floor: {} of the oldest files ({} MiB, earlier runs' included) removed to keep "
+        "output.min_free_bytes free\n",
+        c.files_removed_for_space, c.bytes_removed_for_space >> 20);
+  }
 }
 
 // The main thread while the pipeline runs: signals, --duration, the end of a replay, STATUS and

@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/latency_histogram.hpp"
@@ -45,6 +46,8 @@ class FrameOutput {
 
   // Writes the arena's frame; a failure is counted, never thrown.
   void write(const FrameArena& arena);
+  // A frame removed by the free-space floor (space_floor.hpp): off the retention list.
+  void removed_for_space(std::string_view path) noexcept { retention_.forget(path); }
 
   std::uint64_t frames_written() const noexcept { return frames_written_; }
   std::uint64_t bytes_written() const noexcept { return bytes_written_; }

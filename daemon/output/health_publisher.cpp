@@ -118,6 +118,8 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.write_errors = sources.accounting.write_errors();
   c.bytes_not_written = sources.accounting.bytes_not_written();
   c.output_name_collisions = sources.accounting.name_collisions();
+  c.files_removed_for_space = sources.files_removed_for_space;
+  c.bytes_removed_for_space = sources.bytes_removed_for_space;
   c.receive_wakeups = receive.wakeups.load(std::memory_order_relaxed);
   c.decode_wakeups = decode.wakeups;
   c.writer_wakeups = sources.writer_wakeups;
@@ -163,10 +165,16 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   fill_sensor_status(sources.sensor_status, now, g.sensor_status, options_.status_polled,
                      options_.status_interval_seconds);
 
-  classify_health(c, previous_counters_,
-                  HealthExpectations{options_.expected_return_mode, options_.expected_rpm,
-                                     options_.max_sensor_clock_offset_seconds},
-                  sources.silent, sources.accounting.last_error(), g);
+  // The storage gauges: written bytes per output (kStorageOutputNames order) over the minute.
+  write_rates_.sample(now, WriteRateWindow::Bytes{c.pcd_bytes_written, c.pcap_bytes_written,
+                                                  c.mcap_bytes_written, jsonl_bytes_written_});
+  fill_storage(write_rates_, sources.storage, g.storage);
+
+  classify_health(
+      c, previous_counters_,
+      HealthExpectations{options_.expected_return_mode, options_.expected_rpm,
+                         options_.max_sensor_clock_offset_seconds, options_.min_hours_left},
+      sources.silent, sources.accounting.last_error(), g);
 }
 
 void HealthPublisher::remember(const DecodeSnapshot& decode, std::int64_t now) {
@@ -241,6 +249,7 @@ void HealthPublisher::write_jsonl_line() {
   const std::uint64_t before = jsonl_file_.size();
   try {
     jsonl_file_.write(json_text_);
+    jsonl_bytes_written_ += json_text_.size();
   } catch (...) {
     // A line cut short (a full disk) would glue itself to the next one: take it back.
     jsonl_file_.truncate(before);

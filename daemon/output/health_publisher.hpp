@@ -5,6 +5,9 @@
 //     snapshot and the writer's own parts (frames, recordings, failed writes), with the per-second
 //     rates and the state and reason decided by core/health_policy.hpp against the previous
 //     record. Filled in place: once warm its strings keep their capacity.
+//     The `storage` gauges: each output's bytes written per second over the last minute
+//     (a preallocated window of per-second samples, core/storage_rate.hpp) and the hours of disk
+//     left at that pace, which health.min_hours_left checks.
 //   - write(): DIR/pandarcap.prom replaced whole (temporary file + rename: node_exporter never
 //     reads half a file), one line appended to health.jsonl (kept open; rotated to
 //     health.jsonl.1 past jsonl_rotate_bytes; a line cut short by a failed write is taken back so
@@ -21,6 +24,7 @@
 #include <string>
 
 #include "core/health.hpp"
+#include "core/storage_rate.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/output/frame_output.hpp"
 #include "daemon/output/mcap_recorder.hpp"
@@ -48,6 +52,11 @@ struct HealthSources {
   std::uint64_t ptc_requests;
   std::uint64_t ptc_errors;
   std::uint64_t sensor_status_implausible;
+  // The free space of each output's file system (core/storage_rate.hpp), asked by the free-space
+  // floor this second, and what the floor removed (daemon/output/space_floor.hpp).
+  const StorageInputs& storage;
+  std::uint64_t files_removed_for_space;
+  std::uint64_t bytes_removed_for_space;
 };
 
 class HealthPublisher {
@@ -78,6 +87,8 @@ class HealthPublisher {
   // The MCAP counters of snapshot() brought up to date, nothing else: after the last MCAP file
   // is closed with the final record in it, for the exit summary.
   void count_mcap(const McapRecorder& mcap) noexcept;
+  // Bytes of health.jsonl lines written (the health output's share of the write rate).
+  std::uint64_t jsonl_bytes_written() const noexcept { return jsonl_bytes_written_; }
 
  private:
   void write_prometheus();  // throws
@@ -92,6 +103,8 @@ class HealthPublisher {
   HealthCounters counters_a_second_ago_{};  // for the per-second wake-up rates
   HealthCounters previous_counters_{};      // the last record's: what grew since
   DecodeSnapshot decode_prev_;              // the decoder's counters of the last record, for rates
+  WriteRateWindow write_rates_;             // the outputs' bytes, a sample a second
+  std::uint64_t jsonl_bytes_written_ = 0;
   std::string prom_path_, prom_temporary_path_, jsonl_path_, jsonl_rotated_path_;
   std::string prom_text_, json_text_;
   bool json_text_current_ = false;  // json_text_ is health_ as it is now

@@ -67,6 +67,12 @@ class McapRecorder {
 
   // This run's finished files no longer on disk: their messages counted as lost. At the end.
   void verify_on_disk();
+  // A finished file of ours removed by the free-space floor (space_floor.hpp): removed on
+  // purpose, as retention's are, so not counted as lost.
+  void removed_for_space(std::string_view path) noexcept {
+    retention_.forget(path);
+    recorded_.forget(path);
+  }
 
   // Every message written (monotonic); those on disk are messages_written() - messages_lost().
   std::uint64_t messages_written() const noexcept;

@@ -76,6 +76,12 @@ class PcapRecorder {
   // This run's finished recordings that are no longer on disk (removed by someone else): their
   // packets counted as lost. At the end, after close().
   void verify_on_disk();
+  // A finished file of ours removed by the free-space floor (space_floor.hpp): removed on
+  // purpose, as retention's are, so not counted as lost.
+  void removed_for_space(std::string_view path) noexcept {
+    retention_.forget(path);
+    recorded_.forget(path);
+  }
 
   // Every packet written to a recording (monotonic, as a Prometheus counter must be): those on
   // disk are packets_written() - packets_lost().

@@ -19,6 +19,24 @@ std::size_t Retention::enforce() {
   return before - files_.size();
 }
 
+void Retention::forget(std::string_view path) noexcept {
+  for (auto it = files_.begin(); it != files_.end(); ++it) {
+    if (it->first.native() == path) {
+      files_.erase(it);
+      return;
+    }
+  }
+}
+
+void RecordedFiles::forget(std::string_view path) noexcept {
+  for (auto it = files_.begin(); it != files_.end(); ++it) {
+    if (it->first == path) {
+      files_.erase(it);
+      return;
+    }
+  }
+}
+
 void RecordedFiles::add(std::string_view path, std::uint64_t items, const Retention& retention) {
   files_.emplace_back(path, items);
   if (retention.limited()) {

@@ -41,6 +41,9 @@ class Retention {
   // Removes the oldest files while over a limit (a removal that fails is not retried); returns
   // how many left the list.
   std::size_t enforce();
+  // A listed file removed by the free-space floor (space_floor.hpp): off the list, its bytes no
+  // longer counted. Searched from the oldest (the floor removes the oldest). Allocates nothing.
+  void forget(std::string_view path) noexcept;
 
  private:
   std::uint64_t max_files_, max_bytes_;
@@ -63,6 +66,9 @@ class RecordedFiles {
   // The listed files that are no longer on disk (removed while the run went on), and what they
   // held; the list is emptied. A file that cannot be asked about counts as there.
   Gone take_gone();
+  // A listed file removed on purpose by the free-space floor (space_floor.hpp): off the list, so
+  // take_gone() does not count it as lost (as retention's removals are not). Allocates nothing.
+  void forget(std::string_view path) noexcept;
 
  private:
   std::deque<std::pair<std::string, std::uint64_t>> files_;  // oldest first

@@ -16,19 +16,19 @@
 
 namespace pandarcap {
 
-std::optional<std::uint64_t> free_bytes_at(const std::filesystem::path& path) noexcept {
+std::optional<FileSystemSpace> file_system_space_at(const std::filesystem::path& path) noexcept {
   struct statvfs info {};
+  const auto space = [&info] {
+    return FileSystemSpace{static_cast<std::uint64_t>(info.f_bavail) * info.f_frsize,
+                           static_cast<std::uint64_t>(info.f_blocks) * info.f_frsize};
+  };
   // The usual case asks once and allocates nothing (the writer asks every 100 ms).
-  if (::statvfs(path.c_str(), &info) == 0) {
-    return static_cast<std::uint64_t>(info.f_bavail) * info.f_frsize;
-  }
+  if (::statvfs(path.c_str(), &info) == 0) return space();
   try {
     std::filesystem::path at = path;
     while (errno == ENOENT && at.has_parent_path() && at.parent_path() != at) {
       at = at.parent_path();
-      if (::statvfs(at.c_str(), &info) == 0) {
-        return static_cast<std::uint64_t>(info.f_bavail) * info.f_frsize;
-      }
+      if (::statvfs(at.c_str(), &info) == 0) return space();
     }
   } catch (const std::exception&) {
   }

@@ -28,9 +28,17 @@ inline constexpr std::uint64_t kHealthReserveBytes = 8ull << 20;
 inline constexpr std::uint64_t kHealthReservePieceBytes = 256ull << 10;
 
 // Free space on the file system holding `path`, or its nearest existing parent (a removed
-// directory is made again on the same file system): what an unprivileged writer may use.
-// Nothing when it cannot be asked.
-std::optional<std::uint64_t> free_bytes_at(const std::filesystem::path& path) noexcept;
+// directory is made again on the same file system): what an unprivileged writer may use
+// (statvfs f_bavail), and the file system's size. Nothing when it cannot be asked. The usual case
+// (the path exists) asks once and allocates nothing.
+struct FileSystemSpace {
+  std::uint64_t free = 0, size = 0;
+};
+std::optional<FileSystemSpace> file_system_space_at(const std::filesystem::path& path) noexcept;
+inline std::optional<std::uint64_t> free_bytes_at(const std::filesystem::path& path) noexcept {
+  const auto space = file_system_space_at(path);
+  return space ? std::optional<std::uint64_t>(space->free) : std::nullopt;
+}
 
 class SpaceGuard {
  public:

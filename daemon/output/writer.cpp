@@ -44,6 +44,7 @@ Writer::Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQue
       pcap_(options_, accounting_, space_),
       mcap_(options_, accounting_, space_),
       health_(options_, accounting_, space_),
+      floor_(options_.min_free_bytes, options_.min_free_percent),
       sensor_status_(sensor_status) {}
 
 Writer::~Writer() = default;
@@ -87,10 +88,32 @@ void Writer::prepare() {
     mcap_.prepare();
   }
   frames_.reserve();
+  // The floor watches the outputs' directories (the health directory for its free space only),
+  // and is held once already: earlier runs' files may have brought the disk under it.
+  if (options_.frames) floor_handles_[0] = floor_.watch(frames_.directory(), FloorKind::kFrames);
+  if (options_.pcap) floor_handles_[1] = floor_.watch(pcap_.directory(), FloorKind::kRecordings);
+  if (options_.mcap) floor_handles_[2] = floor_.watch(mcap_.directory(), FloorKind::kMcap);
+  if (options_.jsonl) floor_handles_[3] = floor_.watch(options_.health_dir, FloorKind::kNone);
+  floor_.on_removed([this](FloorKind kind, std::string_view path) {
+    if (kind == FloorKind::kFrames) frames_.removed_for_space(path);
+    if (kind == FloorKind::kRecordings) pcap_.removed_for_space(path);
+    if (kind == FloorKind::kMcap) mcap_.removed_for_space(path);
+  });
+  floor_.prepare();
+  tend_floor(start);
   // Proves the health directories are writable before the daemon reports ready.
   take_sensor_status();
   health_.build(sources(start), start);
   health_.write_first();
+}
+
+void Writer::tend_floor(std::int64_t now) noexcept {
+  floor_.tend(now);
+  for (std::size_t i = 0; i < kStorageOutputCount; ++i) {
+    storage_.free_bytes[i] =
+        floor_handles_[i] < 0 ? std::nullopt : floor_.free_bytes(floor_handles_[i]);
+    storage_.file_system[i] = floor_handles_[i] < 0 ? -1 : floor_.file_system(floor_handles_[i]);
+  }
 }
 
 HealthSources Writer::sources(std::int64_t now) const noexcept {
@@ -107,7 +130,10 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
       .sensor_status = latest_sensor_status_ ? &*latest_sensor_status_ : nullptr,
       .ptc_requests = sensor_status_.requests.load(std::memory_order_relaxed),
       .ptc_errors = sensor_status_.errors.load(std::memory_order_relaxed),
-      .sensor_status_implausible = sensor_status_.implausible.load(std::memory_order_relaxed)};
+      .sensor_status_implausible = sensor_status_.implausible.load(std::memory_order_relaxed),
+      .storage = storage_,
+      .files_removed_for_space = floor_.files_removed(),
+      .bytes_removed_for_space = floor_.bytes_removed()};
 }
 
 void Writer::take_sensor_status() noexcept {
@@ -121,6 +147,7 @@ void Writer::write_health() {
   pcap_.flush();  // the recordings on disk are at most a second behind
   if (options_.mcap) mcap_.flush();
   take_sensor_status();
+  tend_floor(now);
   health_.build(sources(now), now);
   health_.remember(decode_, now);
   log_fragments(now);

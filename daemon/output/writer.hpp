@@ -11,6 +11,9 @@
 //     DIR/health/health.jsonl (daemon/output/health_publisher.hpp); and at once, outside that
 //     schedule, when packets stop for longer than the no-data timeout or start again (checked at
 //     every wake-up, at least every 100 ms), the schedule restarting from there.
+// Before each health record the free-space floor is held (daemon/output/space_floor.hpp: a
+// statvfs per output file system; below output.min_free_bytes / min_free_percent the oldest of our
+// files are removed), and its free space feeds the health record's storage gauges.
 // At start-up (prepare()) it deals with what an interrupted run left
 // (daemon/output/output_leftovers.hpp) and adopts earlier runs' files: numbers continue across runs
 // and retention counts them, so restarts and crash loops can neither repeat a name nor fill the
@@ -23,6 +26,7 @@
 // (counted) — the receive thread never waits for the disk. Once warm, the loop allocates nothing.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 
@@ -32,6 +36,7 @@
 #include "daemon/output/mcap_recorder.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/pcap_recorder.hpp"
+#include "daemon/output/space_floor.hpp"
 #include "daemon/output/space_guard.hpp"
 #include "daemon/output/writer_options.hpp"
 #include "daemon/pipeline_types.hpp"
@@ -71,6 +76,8 @@ class Writer {
   // The health record now: built from everything's counters, published.
   void write_health();
   HealthSources sources(std::int64_t now_monotonic_ns) const noexcept;
+  // The floor held and the free space asked (once a second, and at start-up).
+  void tend_floor(std::int64_t now_monotonic_ns) noexcept;
   void take_sensor_status() noexcept;  // the poller's latest answer, if any came
   void log_fragments(std::int64_t now_monotonic_ns);
   void stall_while_test_file_exists() const;
@@ -91,6 +98,9 @@ class Writer {
   PcapRecorder pcap_;
   McapRecorder mcap_;
   HealthPublisher health_;
+  SpaceFloor floor_;  // output.min_free_bytes, and the free space health reports
+  std::array<int, kStorageOutputCount> floor_handles_{-1, -1, -1, -1};  // per storage output
+  StorageInputs storage_;  // the free space of each output's file system, this second
 
   DecodeSnapshot decode_;  // the latest counters from the decoder
   SensorStatusChannel& sensor_status_;

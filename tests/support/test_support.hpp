@@ -95,6 +95,12 @@ std::uint64_t health_counter(const nlohmann::json& record, std::string_view name
 // one before (the writer reports packets stopping or starting again at once).
 void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s);
 
+// `promtool check metrics` on a Prometheus text file: its exit status 0, or 3 (lint problems
+// only) when the one lint it reports is pandarcap_storage_hours_left's unit, an hours gauge by
+// the choice where Prometheus's convention is seconds (docs/storage.md). `output` gets
+// what promtool said.
+bool promtool_accepts(const std::filesystem::path& file, std::string& output);
+
 // The samples of a Prometheus text ("name{labels} value" lines), keyed by "name{labels}";
 // comment lines skipped. A sample line without a value fails the test.
 std::map<std::string, std::string> prom_samples(const std::string& text);

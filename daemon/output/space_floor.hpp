@@ -1,0 +1,126 @@
+// The floor of free space (output.min_free_bytes, output.min_free_percent; docs/storage.md), and
+// the free space the health record reports (storage.free_bytes, hours_left).
+//
+// The output directories (frames/, raw/, mcap/, and the health directory for the free space
+// only) are grouped by file system at start-up (prepare()). Once a second (tend(), from the
+// writer thread) each file system is asked its free space: one statvfs each, nothing else while
+// above the floor. The floor is the larger of min_free_bytes and min_free_percent of the file
+// system's size. Below it, the output directories on that file system are read (a directory scan,
+// only then) and the oldest of our files there are removed, oldest first across frames,
+// recordings and MCAP alike, until the floor is back:
+//   - ours: frames/frame_<N>_<UTC>[...].pcd, raw/pandarcap_<UTC>_<N>[...].pcap and .pcap.zst,
+//     mcap/pandarcap_<UTC>_<N>[...].mcap, as regular files (a link never), earlier runs'
+//     included. Never anything else: not the open recording (.part), not a temporary
+//     (.NAME.tmp), not calibration.csv or sensor.json, not another program's file.
+//   - oldest: by modification time (when the file was finished), then by name.
+// Each removal is counted (files_removed(), bytes_removed()) and reported to the owner (the
+// recorders then neither count the file as lost at the end nor keep it on their retention
+// lists); the removals are logged at most every 10 s, summed. When no file of ours is left to
+// remove and the file system is still below the floor (someone else fills it), that is logged
+// (at most every 10 s) and the full-disk behaviour applies (space_guard.hpp): writes stop short
+// of the health files' room, counted.
+//
+// Nothing is allocated after prepare(): the scan reads directories with getdents64 into a buffer
+// of its own, keeps the oldest kCandidates files of a pass in a preallocated heap, and removes
+// them with unlinkat; a file system still below the floor after a pass is scanned again (a few
+// passes a second at most). Owned by the writer thread.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "daemon/output/space_guard.hpp"
+
+namespace pandarcap {
+
+// Which naming an output directory's files follow.
+enum class FloorKind : std::uint8_t { kFrames, kRecordings, kMcap, kNone /* free space only */ };
+
+// Whether `name` (a file name, no directory) is one of our finished files in a directory of
+// `kind`: frame_<N>_....pcd; pandarcap_<UTC>_<N>....pcap / .pcap.zst; pandarcap_<UTC>_<N>....mcap.
+bool floor_file_is_ours(FloorKind kind, std::string_view name) noexcept;
+
+class SpaceFloor {
+ public:
+  static constexpr std::size_t kCandidates = 256;  // the oldest files kept per pass
+
+  // `min_free_bytes` and `min_free_percent` (of the file system's size): the floor is the larger
+  // (both 0: no floor; the free space is still asked, for the health record).
+  SpaceFloor(std::uint64_t min_free_bytes, double min_free_percent);
+
+  // At start-up: an output directory (`kind` kNone: only its free space is reported); returns
+  // its handle, for free_bytes().
+  int watch(const std::filesystem::path& directory, FloorKind kind);
+  // At start-up, once the directories exist: grouped by file system, the buffers allocated.
+  void prepare();
+  // Called with each file the floor removed (its path, and its directory's kind), before the
+  // count goes up: the recorders forget it. Set at start-up.
+  void on_removed(std::function<void(FloorKind, std::string_view)> callback) {
+    on_removed_ = std::move(callback);
+  }
+
+  // For the tests: the free space asked of `query` instead of statvfs (a fake disk).
+  using SpaceQuery = std::function<std::optional<FileSystemSpace>(const std::filesystem::path&)>;
+  void ask_space_with(SpaceQuery query) { query_ = std::move(query); }
+
+  // Once a second: the free space asked, and the floor held. `now_ns` is monotonic.
+  void tend(std::int64_t now_ns) noexcept;
+
+  // The free space on `handle`'s file system at the last tend(); nothing when not known.
+  std::optional<std::uint64_t> free_bytes(int handle) const noexcept;
+  // Which file system `handle` is on (handles with the same number share one).
+  int file_system(int handle) const noexcept;
+  std::uint64_t files_removed() const noexcept { return files_removed_; }
+  std::uint64_t bytes_removed() const noexcept { return bytes_removed_; }
+  bool enabled() const noexcept { return min_free_bytes_ != 0 || min_free_percent_ > 0; }
+
+ private:
+  struct Directory {
+    std::filesystem::path path;
+    FloorKind kind;
+    int volume = -1;
+  };
+  struct Volume {
+    std::size_t first_directory = 0;  // its free space is asked there
+    bool known = false;
+    FileSystemSpace space;
+    // Since the last log line: what was removed, and whether the floor could not be held.
+    std::uint64_t files_unlogged = 0, bytes_unlogged = 0;
+    std::int64_t last_log_ns = -1, last_unheld_log_ns = -1;
+  };
+  struct Candidate {
+    std::int64_t mtime_ns;
+    std::uint64_t bytes, blocks_bytes;
+    std::uint32_t directory;
+    char name[256];
+  };
+
+  std::uint64_t floor_of(const FileSystemSpace& space) const noexcept;
+  std::optional<FileSystemSpace> ask(const std::filesystem::path& at) const noexcept;
+  // One pass over `volume`'s directories: the oldest files of ours, oldest first, in candidates_
+  // (candidate_count_ of them).
+  void scan(int volume) noexcept;
+  // Removes the oldest candidates until `volume` is back at its floor; returns how many.
+  std::size_t remove_oldest(int volume, std::uint64_t floor) noexcept;
+  void log(Volume& volume, std::uint64_t floor, std::int64_t now_ns, bool force) noexcept;
+
+  std::uint64_t min_free_bytes_;
+  double min_free_percent_;
+  std::vector<Directory> directories_;
+  std::vector<Volume> volumes_;
+  std::vector<Candidate> candidates_;  // a max-heap by age while scanning, then sorted
+  std::size_t candidate_count_ = 0;
+  std::vector<char> dirent_buffer_;
+  std::string removed_path_;  // the path handed to on_removed_ (its capacity reserved)
+  std::function<void(FloorKind, std::string_view)> on_removed_;
+  SpaceQuery query_;  // empty: statvfs
+  std::uint64_t files_removed_ = 0, bytes_removed_ = 0;
+};
+
+}  // namespace pandarcap
