@@ -408,7 +408,7 @@ TEST_CASE(
 }
 
 TEST_CASE("the real capture recorded compressed: the same pcap stream in under 0.30 of its bytes",
-          "[daemon][zstd][real]") {
+          "[daemon][zstd][real][threads]") {
   const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
   if (!capture) return;
   test::ScratchDir dir("zstd-real");
