@@ -66,14 +66,20 @@ std::uint64_t bytes_under(const fs::path& dir) {
   return total;
 }
 
-std::uint64_t datagrams_received(const fs::path& out) {
+// The newest health record's datagram count and time (0, 0 before the first).
+struct Received {
+  std::uint64_t datagrams = 0;
+  std::int64_t unix_time_ns = 0;
+};
+Received datagrams_received(const fs::path& out) {
   std::ifstream in(out / "health" / "health.jsonl");
   std::string line, last;
   while (std::getline(in, line))
     if (!line.empty()) last = line;
   const auto record = nlohmann::json::parse(last, nullptr, false);
-  if (record.is_discarded() || !record.contains("counters")) return 0;
-  return record["counters"].value("datagrams_received", std::uint64_t{0});
+  if (record.is_discarded() || !record.contains("counters")) return {};
+  return {record["counters"].value("datagrams_received", std::uint64_t{0}),
+          record.value("unix_time_ns", std::int64_t{0})};
 }
 
 double cpu_seconds(const std::map<std::string, std::uint64_t>& before,
@@ -101,14 +107,14 @@ ordered_json run_once(const fs::path& daemon, const fs::path& dir, const Choice&
   if (::geteuid() == 0) args.insert(args.begin(), "--allow-root");
   harness::ChildProcess process(daemon, args, dir / "daemon.log");
   // Warmed up: the first health record is out (the first frames and files too).
-  if (!harness::wait_until([&] { return datagrams_received(out) > 0; }, 20s)) {
+  if (!harness::wait_until([&] { return datagrams_received(out).datagrams > 0; }, 20s)) {
     throw std::runtime_error("pandarcapd did not start recording:\n" + process.log());
   }
   std::map<std::string, std::uint64_t> bytes_before;
   for (const char* output : kOutputs)
     bytes_before[output] = bytes_under(out / output);
   const auto cpu_before = harness::thread_cpu_ticks(process.pid());
-  const std::uint64_t packets_before = datagrams_received(out);
+  const Received packets_before = datagrams_received(out);
   const auto start = std::chrono::steady_clock::now();
   // The measured window: the experiment's variable, not a wait for the daemon.
   std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
@@ -123,13 +129,19 @@ ordered_json run_once(const fs::path& daemon, const fs::path& dir, const Choice&
     per_output[output] = grew / wall / 1e6;
     total += grew;
   }
-  const std::uint64_t packets_after = datagrams_received(out);
+  const Received packets_after = datagrams_received(out);
   process.signal(SIGTERM);
   if (process.wait_exit(30s) != 0) {
     throw std::runtime_error("pandarcapd did not stop cleanly:\n" + process.log());
   }
   ordered_json row;
-  row["packets_per_s"] = static_cast<double>(packets_after - packets_before) / wall;
+  // Between the two health records the window's ends saw (a record a second): their own times.
+  const double between_s =
+      static_cast<double>(packets_after.unix_time_ns - packets_before.unix_time_ns) / 1e9;
+  row["packets_per_s"] =
+      between_s > 0
+          ? static_cast<double>(packets_after.datagrams - packets_before.datagrams) / between_s
+          : 0.0;
   row["mb_per_s"] = total / wall / 1e6;
   row["mb_per_s_by_output"] = per_output;
   row["cpu_fraction_of_core"] = cpu_seconds(cpu_before, cpu_after, false) / wall;
