@@ -109,6 +109,15 @@ bool place_without_replacing(const std::string& from, std::string& to) {
   }
 }
 
+std::pair<io::UniqueFd, std::uint64_t> open_leftover(const std::string& path, int access) {
+  io::UniqueFd file(::open(path.c_str(), access | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK));
+  if (!file) io::throw_errno("cannot open", path);
+  struct stat info {};
+  if (::fstat(file.get(), &info) != 0) io::throw_errno("cannot stat", path);
+  if (!S_ISREG(info.st_mode)) io::throw_error(EINVAL, "not a regular file:", path);
+  return {std::move(file), static_cast<std::uint64_t>(info.st_size)};
+}
+
 std::filesystem::path temporary_name(const std::filesystem::path& path) {
   std::string name;
   assign_temporary_name(name, path.native());

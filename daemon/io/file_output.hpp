@@ -9,6 +9,9 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
+
+#include "daemon/io/unique_fd.hpp"
 
 namespace pandarcap {
 
@@ -77,6 +80,13 @@ void write_file_replacing(const std::string& path, const std::string& temporary,
 std::filesystem::path temporary_name(const std::filesystem::path& path);
 // The same into `out` (its capacity reused: no allocation once it has grown).
 void assign_temporary_name(std::string& out, std::string_view path);
+
+// Opens a file an interrupted run left, to finish it (`access`: O_RDONLY or O_RDWR): never through
+// a symbolic link (O_NOFOLLOW: a link in an output directory never leads a cut to a file
+// elsewhere), never hanging the start on a FIFO put there (O_NONBLOCK); anything but a regular
+// file is refused. Returns the descriptor and the file's size. Throws std::system_error naming
+// the path.
+std::pair<io::UniqueFd, std::uint64_t> open_leftover(const std::string& path, int access);
 
 // "20261122T120000.123Z" (with_millis) or "20261122T120000Z", for file names.
 std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis);

@@ -14,6 +14,7 @@
 #include "core/mcap/mcap_parse.hpp"
 #include "core/mcap/mcap_records.hpp"
 #include "daemon/io/errors.hpp"
+#include "daemon/io/file_output.hpp"
 #include "daemon/io/unique_fd.hpp"
 
 namespace pandarcap {
@@ -112,13 +113,7 @@ std::optional<ChunkContents> read_chunk(const mcap::ChunkView& chunk) {
 }  // namespace
 
 McapRecovery finish_interrupted_mcap(const std::string& path) {
-  // O_NOFOLLOW: a link is refused, never followed; O_NONBLOCK: a FIFO cannot hang the start.
-  io::UniqueFd fd(::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK));
-  if (!fd) io::throw_errno("cannot open", path);
-  struct stat st {};
-  if (::fstat(fd.get(), &st) != 0) io::throw_errno("cannot stat", path);
-  if (!S_ISREG(st.st_mode)) io::throw_error(EINVAL, "not a regular file:", path);
-  const auto size = static_cast<std::uint64_t>(st.st_size);
+  auto [fd, size] = open_leftover(path, O_RDWR);
 
   McapRecovery result;
   std::array<std::uint8_t, mcap::kMagic.size()> magic{};

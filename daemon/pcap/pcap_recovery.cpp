@@ -11,6 +11,7 @@
 #include <system_error>
 
 #include "daemon/io/errors.hpp"
+#include "daemon/io/file_output.hpp"
 #include "daemon/io/unique_fd.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
 
@@ -42,18 +43,8 @@ std::uint32_t u32_at(const std::uint8_t* bytes) {
 }  // namespace
 
 PcapRecovery finish_interrupted_pcap(const std::string& path) {
-  // O_NOFOLLOW: a link in the recording directory never leads the cut to a file elsewhere;
-  // O_NONBLOCK: a FIFO put there does not hang the start.
-  const io::UniqueFd file(::open(path.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK));
-  if (!file) io::throw_errno("cannot open", path);
+  const auto [file, size] = open_leftover(path, O_RDWR);
   const int fd = file.get();
-  struct stat info {};
-  if (::fstat(fd, &info) != 0) io::throw_errno("cannot stat", path);
-  if (!S_ISREG(info.st_mode)) {
-    errno = EINVAL;
-    io::throw_errno("not a regular file:", path);
-  }
-  const auto size = static_cast<std::uint64_t>(info.st_size);
 
   // Ours: the file begins with PcapWriter's global header, or, shorter than it (killed between
   // creating the file and writing the header; empty included), with the start of it.

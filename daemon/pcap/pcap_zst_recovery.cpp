@@ -85,16 +85,7 @@ std::uint32_t u32_at(const std::uint8_t* bytes) {
 }  // namespace
 
 PcapRecovery finish_interrupted_pcap_zst(const std::string& path) {
-  // As finish_interrupted_pcap: never through a link, never hanging on a FIFO.
-  const io::UniqueFd file(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK));
-  if (!file) io::throw_errno("cannot open", path);
-  struct stat info {};
-  if (::fstat(file.get(), &info) != 0) io::throw_errno("cannot stat", path);
-  if (!S_ISREG(info.st_mode)) {
-    errno = EINVAL;
-    io::throw_errno("not a regular file:", path);
-  }
-  const auto size = static_cast<std::uint64_t>(info.st_size);
+  const auto [file, size] = open_leftover(path, O_RDONLY);
   PcapRecovery result;
   result.kept_bytes = size;
 
