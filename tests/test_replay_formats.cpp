@@ -36,20 +36,8 @@ constexpr Endpoint kHost{0xC0A8010A, 2368};
 constexpr Endpoint kLidar6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 1}};
 constexpr Endpoint kHost6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x10}};
 
-// The simulated sensor's packets as a host received them on that day: each record 300 us after
-// the packet's own time (a synchronised sensor).
 fs::path write_recording(const fs::path& path, Endpoint from, Endpoint to) {
-  SyntheticSensorConfig config;
-  config.start_unix_ns = kRecordedNs;
-  SyntheticSensor sensor(config);
-  std::array<std::uint8_t, kMaxPacketBytes> packet{};
-  PcapWriter pcap(path.string());
-  for (int i = 0; i < kPackets; ++i) {
-    const std::size_t size = sensor.next(packet);
-    pcap.write({packet.data(), size}, sensor.last_packet_time_ns() + 300'000, from, to);
-  }
-  pcap.close();
-  return path;
+  return test::write_simulated_recording(path, kPackets, kRecordedNs, from, to);
 }
 
 // The same records in pcapng (nanosecond times), from a classic pcap PcapWriter wrote.

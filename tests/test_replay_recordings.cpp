@@ -44,17 +44,7 @@ void write_bytes(const fs::path& path, std::string_view bytes) {
 }
 
 fs::path simulated_capture(const fs::path& path) {
-  SyntheticSensorConfig config;
-  config.start_unix_ns = kRecordedNs;
-  SyntheticSensor sensor(config);
-  std::array<std::uint8_t, kMaxPacketBytes> packet{};
-  PcapWriter pcap(path.string());
-  for (int i = 0; i < kPackets; ++i) {
-    const std::size_t size = sensor.next(packet);
-    pcap.write({packet.data(), size}, sensor.last_packet_time_ns() + 300'000, kLidar, kHost);
-  }
-  pcap.close();
-  return path;
+  return test::write_simulated_recording(path, kPackets, kRecordedNs, kLidar, kHost);
 }
 
 // `zstd -1`, as an operator compresses a capture.

@@ -434,7 +434,7 @@ TEST_CASE("Hours left: the storage gauges in the JSON line and the .prom", "[hea
 TEST_CASE("Space floor: a daemon on a small disk with earlier runs' files and a foreign one",
           "[daemon][space][disk][threads]") {
   test::ScratchDir dir("space-floor-daemon");
-  // What earlier runs and another program left, copied onto a fresh 128 MiB tmpfs before the
+  // What earlier runs and another program left, copied onto a fresh 160 MiB tmpfs before the
   // daemon starts: three of our files (8 MiB each, a day old) and another program's (4 MiB, older
   // still), one named like an open recording.
   const fs::path seed = dir / "seed";
@@ -448,9 +448,13 @@ TEST_CASE("Space floor: a daemon on a small disk with earlier runs' files and a 
   const std::vector<std::string> foreign = {"raw/someone-elses-capture.pcap", "frames/notes.txt"};
   make_file(seed / foreign[0], 1, 4 << 20);
   make_file(seed / foreign[1], 2, 1000);
+  // The floor 64 MiB above the 32 MiB the health files keep: the ~2 s of writing (frames, pcap
+  // and MCAP: ~35 MB/s) between two of the writer's once-a-second checks, with room to spare on
+  // a busy machine, so that no write is ever refused. (At 32 MiB above, one late check was seen
+  // to let a write reach the reserve.)
   const fs::path config = dir / "floor.toml";
   std::ofstream(config) << "[output]\nmcap = true\npcap_rotate_seconds = 1\nmcap_rotate_seconds = "
-                           "1\nmin_free_bytes = 67108864\n";
+                           "1\nmin_free_bytes = 100663296\n";
   const fs::path mount_point = dir / "out";
   fs::create_directories(mount_point);
   // As test::tmpfs_run_args, with the seed copied in first and, at the end, the health folder
@@ -467,7 +471,7 @@ TEST_CASE("Space floor: a daemon on a small disk with earlier runs' files and a 
   for (const std::string& a :
        {std::string("--mount"), std::string("--propagation"), std::string("private"),
         std::string("--"), std::string("/bin/sh"), std::string("-c"),
-        std::string("mount -t tmpfs -o size=128m pandarcap-test \"$0\" && cp -a \"$1\"/. \"$0\"/ "
+        std::string("mount -t tmpfs -o size=160m pandarcap-test \"$0\" && cp -a \"$1\"/. \"$0\"/ "
                     "&& shift && { \"$@\"; status=$?; mkdir -p \"$0.after\"; "
                     "cp -r \"$0/health\" \"$0.after/\"; "
                     "(cd \"$0\" && find . -type f) >\"$0.after/files\"; exit $status; }"),

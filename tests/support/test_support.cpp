@@ -15,7 +15,9 @@
 
 #include "bench/child_process.hpp"
 #include "core/calibration.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "core/stream_decoder.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 
 namespace pandarcap::test {
 
@@ -173,6 +175,22 @@ std::size_t open_descriptors(int pid) {
        it != std::filesystem::directory_iterator(); it.increment(ec))
     ++n;
   return n;
+}
+
+std::filesystem::path write_simulated_recording(const std::filesystem::path& path, int packets,
+                                                std::int64_t start_unix_ns, Endpoint from,
+                                                Endpoint to) {
+  SyntheticSensorConfig config;
+  config.start_unix_ns = start_unix_ns;
+  SyntheticSensor sensor(config);
+  std::array<std::uint8_t, kMaxPacketBytes> packet{};
+  PcapWriter pcap(path.string());
+  for (int i = 0; i < packets; ++i) {
+    const std::size_t size = sensor.next(packet);
+    pcap.write({packet.data(), size}, sensor.last_packet_time_ns() + 300'000, from, to);
+  }
+  pcap.close();
+  return path;
 }
 
 std::pair<CaptureStatus, std::size_t> read_capture(const std::filesystem::path& file) {

@@ -122,6 +122,13 @@ std::vector<std::filesystem::path> files_ending(const std::filesystem::path& dir
 // How many file descriptors process `pid` has open (/proc/PID/fd).
 std::size_t open_descriptors(int pid);
 
+// `packets` of the simulated sensor (dual return, 600 RPM) from `start_unix_ns` on, recorded at
+// `path` as a host received them: each record 300 us after the packet's own time (a synchronised
+// sensor), from `from` to `to`. Returns `path`.
+std::filesystem::path write_simulated_recording(const std::filesystem::path& path, int packets,
+                                                std::int64_t start_unix_ns, Endpoint from,
+                                                Endpoint to);
+
 // Reads a capture to its end: how the read ended and how many records it held.
 std::pair<CaptureStatus, std::size_t> read_capture(const std::filesystem::path& file);
 
