@@ -6,6 +6,7 @@
 #include <signal.h>
 #include <zstd.h>
 
+#include <array>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cstdint>
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
+#include "core/sim/synthetic_sensor.hpp"
 #include "daemon/io/syscalls.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
@@ -217,16 +219,26 @@ TEST_CASE("finish_interrupted_pcap_zst keeps every whole record of a frame cut a
   ZstdStreamCompressor compressor(kPcapBufferBytes, 1);
   const fs::path whole = dir / "whole.pcap.zst";
   {
+    // Megabytes of the simulated sensor's packets (they compress as real ones do): the reader's
+    // output fills now and then just as its input runs out, and what the decompressor holds
+    // back then must still come out at the end of the file.
     PcapWriter writer(whole.string(), buffer, &compressor);
-    write_packets(writer, 200, 25);
+    SyntheticSensor sensor(SyntheticSensorConfig{});
+    std::array<std::uint8_t, kMaxPacketBytes> packet{};
+    for (int i = 0; i < 2000; ++i) {
+      const std::size_t size = sensor.next(packet);
+      REQUIRE(size == 1262);
+      writer.write({packet.data(), size}, kTime + i * 1000, kSource, kDestination);
+      if ((i + 1) % 250 == 0) writer.flush();
+    }
     writer.close();
   }
   const std::string bytes = contents(whole);
   const std::string stream = decompress(bytes).bytes;
   const std::size_t record = kPcapRecordOverheadBytes + 1262;
-  REQUIRE(stream.size() == kPcapGlobalHeaderBytes + 200 * record);
+  REQUIRE(stream.size() == kPcapGlobalHeaderBytes + 2000 * record);
   int checked = 0;
-  for (std::size_t cut = 0; cut <= bytes.size(); cut += 1 + bytes.size() / 37) {
+  for (std::size_t cut = 0; cut <= bytes.size(); cut += 1 + bytes.size() / 97) {
     INFO("cut at " << cut << " of " << bytes.size());
     const fs::path part = dir / "cut.pcap.zst.part";
     std::ofstream(part, std::ios::binary) << bytes.substr(0, cut);

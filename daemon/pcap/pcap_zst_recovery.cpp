@@ -44,18 +44,17 @@ class Decompressed {
   bool more(std::vector<std::uint8_t>& out) {
     std::array<std::uint8_t, 128 * 1024> chunk{};
     while (!ended_) {
-      if (input_.pos == input_.size) {
+      if (input_.pos == input_.size && !end_of_file_) {
         const ssize_t got = ::read(fd_, in_.data(), in_.size());
         if (got < 0) {
           if (errno == EINTR) continue;
           io::throw_errno("cannot read", path_);
         }
-        if (got == 0) {
-          ended_ = true;
-          break;
-        }
+        if (got == 0) end_of_file_ = true;
         input_ = {in_.data(), static_cast<std::size_t>(got), 0};
       }
+      // At the end of the file too: a block decompressed into a full output is held back by
+      // zstd until it is asked again.
       ZSTD_outBuffer output{chunk.data(), chunk.size(), 0};
       const std::size_t r = ZSTD_decompressStream(context_.get(), &output, &input_);
       if (ZSTD_isError(r)) ended_ = true;  // corrupt or not zstd at all: the good part ends
@@ -63,6 +62,7 @@ class Decompressed {
         out.insert(out.end(), chunk.data(), chunk.data() + output.pos);
         return true;
       }
+      if (end_of_file_ && input_.pos == input_.size) ended_ = true;  // nothing held back
     }
     return false;
   }
@@ -73,6 +73,7 @@ class Decompressed {
   std::unique_ptr<ZSTD_DCtx, DctxFree> context_;
   std::vector<std::uint8_t> in_;
   ZSTD_inBuffer input_{nullptr, 0, 0};
+  bool end_of_file_ = false;
   bool ended_ = false;
 };
 
