@@ -1,7 +1,7 @@
 // Raw packets recorded as classic pcap files: DIR/raw/pandarcap_<UTC first packet>_<N>.pcap, or
 // with output.pcap_compression = "zstd" the same stream compressed, NAME.pcap.zst (one zstd frame
-// per file, a block ended at every flush; daemon/pcap/zstd_write_stream.hpp). Everything below holds
-// for both; sizes (rotation, retention, bytes written) are the files' bytes on disk.
+// per file, a block ended at every flush; daemon/pcap/zstd_write_stream.hpp). Everything below
+// holds for both; sizes (rotation, retention, bytes written) are the files' bytes on disk.
 //
 // A recording is written as NAME.pcap.part and renamed to NAME.pcap when closed (without
 // replacing anything: a taken name becomes "_dupN", counted). It is closed and a new one begun

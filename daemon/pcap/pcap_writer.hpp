@@ -9,9 +9,9 @@
 // datagram is held: its sum cannot be known).
 //
 // Compressed (given a ZstdStreamCompressor): the same pcap stream as one zstd frame
-// (daemon/pcap/zstd_write_stream.hpp), each flush() ending a block, close() ending the frame; the file
-// then opens as it is in tshark, Wireshark and pandarcapd --replay. bytes() and flushed_bytes()
-// are the file's (compressed) bytes.
+// (daemon/pcap/zstd_write_stream.hpp), each flush() ending a block, close() ending the frame; the
+// file then opens as it is in tshark, Wireshark and pandarcapd --replay. bytes() and
+// flushed_bytes() are the file's (compressed) bytes.
 //
 // Errors: every failing write throws std::system_error carrying errno and the file name (the
 // bytes go through daemon/io's OutputFile, so the tests' system-call seam reaches them). Nothing
