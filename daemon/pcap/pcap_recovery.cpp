@@ -42,6 +42,14 @@ std::uint32_t u32_at(const std::uint8_t* bytes) {
 
 }  // namespace
 
+std::optional<std::uint32_t> pcap_record_captured_bytes(
+    const std::uint8_t* record_header) noexcept {
+  const std::uint32_t captured = u32_at(record_header + 8);
+  const std::uint32_t original = u32_at(record_header + 12);
+  if (captured > kPcapSnaplen || captured > original) return std::nullopt;
+  return captured;
+}
+
 PcapRecovery finish_interrupted_pcap(const std::string& path) {
   const auto [file, size] = open_leftover(path, O_RDWR);
   const int fd = file.get();
@@ -60,12 +68,9 @@ PcapRecovery finish_interrupted_pcap(const std::string& path) {
   std::uint64_t end = kPcapGlobalHeaderBytes;  // end of the last whole record
   std::array<std::uint8_t, kPcapRecordHeaderBytes> record{};
   while (read_at(fd, end, record.data(), record.size(), path)) {
-    const std::uint32_t captured = u32_at(record.data() + 8);
-    const std::uint32_t original = u32_at(record.data() + 12);
-    // A header that cannot be one of ours is where the good part ends.
-    // (A cut datagram is recorded with fewer captured than original bytes, never more.)
-    if (captured > kPcapSnaplen || captured > original) break;
-    const std::uint64_t next = end + kPcapRecordHeaderBytes + captured;
+    const std::optional<std::uint32_t> captured = pcap_record_captured_bytes(record.data());
+    if (!captured) break;  // not a header of ours: the good part ends here
+    const std::uint64_t next = end + kPcapRecordHeaderBytes + *captured;
     if (next > size) break;  // the record's bytes never all reached the file
     end = next;
     ++result.records;

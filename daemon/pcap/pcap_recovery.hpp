@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 namespace pandarcap {
@@ -21,6 +22,12 @@ struct PcapRecovery {
   std::uint64_t kept_bytes = 0;  // the file's length now
   std::uint64_t cut_bytes = 0;   // bytes of a cut record (or garbage) removed from the end
 };
+
+// The bytes a PcapWriter record holds after its 16-byte header `record_header`, or nothing when
+// the header cannot be one of ours (more than the snap length, or more captured than the
+// datagram had: a cut datagram is recorded with fewer captured than original bytes, never more).
+// Where a recovery finds one, the good part of the file ends.
+std::optional<std::uint32_t> pcap_record_captured_bytes(const std::uint8_t* record_header) noexcept;
 
 // Scans `path` and truncates it after its last whole record. Throws std::system_error when the
 // file cannot be read or truncated, and when `path` is a symbolic link or not a regular file

@@ -77,12 +77,6 @@ class Decompressed {
   bool ended_ = false;
 };
 
-std::uint32_t u32_at(const std::uint8_t* bytes) {
-  std::uint32_t v = 0;
-  std::memcpy(&v, bytes, sizeof v);  // native order, as written
-  return v;
-}
-
 }  // namespace
 
 PcapRecovery finish_interrupted_pcap_zst(const std::string& path) {
@@ -121,14 +115,13 @@ PcapRecovery finish_interrupted_pcap_zst(const std::string& path) {
     bool good = true;
     do {
       while (good && stream.size() - at >= kPcapRecordHeaderBytes) {
-        const std::uint32_t captured = u32_at(stream.data() + at + 8);
-        const std::uint32_t original = u32_at(stream.data() + at + 12);
-        // A header that cannot be one of ours is where the good part ends.
-        if (captured > kPcapSnaplen || captured > original) {
+        const std::optional<std::uint32_t> captured =
+            pcap_record_captured_bytes(stream.data() + at);
+        if (!captured) {  // not a header of ours: the good part ends here
           good = false;
           break;
         }
-        const std::size_t record = kPcapRecordHeaderBytes + captured;
+        const std::size_t record = kPcapRecordHeaderBytes + *captured;
         if (stream.size() - at < record) break;  // the rest is still to come (or never came)
         out.write(compressor.compress({stream.data() + at, record},
                                       ZstdStreamCompressor::Step::kContinue));
