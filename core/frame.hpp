@@ -6,6 +6,7 @@
 #include <span>
 
 #include "packet.hpp"
+#include "pcd.hpp"
 #include "point.hpp"
 
 namespace pandarcap {
@@ -31,15 +32,33 @@ struct FrameInfo {
   std::uint32_t azimuth_span_cdeg = 0;
 };
 
-// Storage for one frame. `points` is fixed-capacity storage owned by whoever provides frames.
+// Storage for one frame, owned by whoever provides frames, in one of two forms:
+//  - `points`: each point as a Point (tests, tools that look at points);
+//  - `encoded`: each point already in the output layout `format` (the daemon's arenas), so the
+//    PCD writer and MCAP persist the bytes as they are: the points are encoded once, by the
+//    decode thread, and never again. Relative times (the velodyne and autoware layouts) are
+//    against `reference_ns`, which is info.start_ns once the frame is finished.
+// The frame assembler fills whichever has capacity (`encoded` when it is not empty).
 struct Frame {
   FrameInfo info;
-  std::span<Point> points;  // capacity
-  std::size_t size = 0;     // points used
+  std::span<Point> points;          // capacity, as Points
+  std::span<std::uint8_t> encoded;  // capacity, as bytes of `format`
+  PcdFormat format;
+  std::int64_t reference_ns = 0;
+  std::size_t size = 0;  // points used
 
-  std::span<const Point> used() const noexcept { return points.first(size); }
+  bool is_encoded() const noexcept { return !encoded.empty(); }
+  std::size_t capacity() const noexcept {
+    return is_encoded() ? encoded.size() / pcd_point_bytes(format.layout) : points.size();
+  }
+  std::span<const Point> used() const noexcept { return points.first(is_encoded() ? 0 : size); }
+  std::span<const std::uint8_t> used_bytes() const noexcept {
+    return is_encoded() ? encoded.first(size * pcd_point_bytes(format.layout))
+                        : std::span<const std::uint8_t>();
+  }
   void reset() noexcept {
     info = FrameInfo{};
+    reference_ns = 0;
     size = 0;
   }
 };

@@ -122,7 +122,7 @@ void FrameAssembler::add_point(Slot& slot, const Point& point, const PacketMeta&
   FrameInfo& info = frame.info;
   // Capacity first: a packet whose points were all dropped must not count towards the frame's
   // packets, RPM or time validity.
-  if (frame.size == frame.points.size()) {
+  if (frame.size == frame.capacity()) {
     ++stats_.points_dropped_full;
     ++info.points_dropped;
     return;
@@ -136,7 +136,15 @@ void FrameAssembler::add_point(Slot& slot, const Point& point, const PacketMeta&
   }
   if (info.points == 0 || position_ < slot.first_position) slot.first_position = position_;
   if (info.points == 0 || position_ > slot.last_position) slot.last_position = position_;
-  frame.points[frame.size++] = point;
+  if (frame.is_encoded()) {
+    const std::size_t step = pcd_point_bytes(frame.format.layout);
+    if (info.points == 0) frame.reference_ns = point.timestamp_ns;
+    encode_pcd_points(std::span(&point, 1), frame.encoded.subspan(frame.size * step, step),
+                      frame.format, PcdFrameContext{frame.reference_ns, meta.return_mode});
+    ++frame.size;
+  } else {
+    frame.points[frame.size++] = point;
+  }
   if (info.points == 0 || point.timestamp_ns < info.start_ns) info.start_ns = point.timestamp_ns;
   if (info.points == 0 || point.timestamp_ns > info.end_ns) info.end_ns = point.timestamp_ns;
   ++info.points;
@@ -155,6 +163,15 @@ void FrameAssembler::close_slot(Slot& slot, bool partial) {
     info.rpm = info.packets > 0 ? slot.rpm_sum / info.packets : 0;
     info.azimuth_span_cdeg = static_cast<std::uint32_t>(
         std::clamp<std::int64_t>(slot.last_position - slot.first_position, 0, kFullCircle));
+    Frame& frame = *slot.frame;
+    if (frame.is_encoded()) {
+      // Encoded against the first point's time; an earlier one came later (reordered).
+      if (info.points > 0 && info.start_ns < frame.reference_ns) {
+        const auto bytes = frame.encoded.first(frame.size * pcd_point_bytes(frame.format.layout));
+        rebase_pcd_times(bytes, frame.format.layout, frame.reference_ns - info.start_ns);
+      }
+      frame.reference_ns = info.start_ns;
+    }
     ++(info.partial ? stats_.frames_partial : stats_.frames_complete);
     sink_.frame_done(*slot.frame);
   }

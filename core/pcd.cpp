@@ -62,6 +62,35 @@ constexpr bool sizes_add_up() {
 }
 static_assert(sizes_add_up(), "each layout's SIZE line adds up to its point size");
 
+// The FIELDS, SIZE and TYPE lines as one PcdField per field.
+struct FieldList {
+  std::array<PcdField, 10> fields{};
+  std::size_t count = 0;
+};
+constexpr FieldList parse_fields(const LayoutSpec& s) {
+  FieldList list;
+  std::size_t name = 0, type = 0;
+  std::uint32_t offset = 0;
+  for (const char size : s.sizes) {
+    if (size == ' ') continue;
+    std::size_t end = s.fields.find(' ', name);
+    if (end == std::string_view::npos) end = s.fields.size();
+    PcdField& f = list.fields[list.count++];
+    f.name = s.fields.substr(name, end - name);
+    f.offset = offset;
+    f.size = static_cast<std::uint8_t>(size - '0');
+    f.type = s.types[type];
+    offset += f.size;
+    name = end + 1;
+    type += 2;
+  }
+  return list;
+}
+constexpr FieldList kFieldLists[] = {parse_fields(kLayouts[0]), parse_fields(kLayouts[1]),
+                                     parse_fields(kLayouts[2]), parse_fields(kLayouts[3])};
+static_assert(kFieldLists[3].fields[9].name == "time_stamp" &&
+              kFieldLists[3].fields[9].offset == 28);
+
 const LayoutSpec& spec(PcdLayout layout) noexcept {
   return kLayouts[static_cast<std::size_t>(layout)];
 }
@@ -108,6 +137,33 @@ std::size_t pcd_point_bytes(PcdLayout layout) noexcept {
 std::span<const std::uint8_t> pcd_field_sizes(PcdLayout layout) noexcept {
   const FieldSizes& f = kFieldSizes[static_cast<std::size_t>(layout)];
   return std::span(f.bytes).first(f.count);
+}
+
+std::span<const PcdField> pcd_fields(PcdLayout layout) noexcept {
+  const FieldList& f = kFieldLists[static_cast<std::size_t>(layout)];
+  return std::span(f.fields).first(f.count);
+}
+
+void rebase_pcd_times(std::span<std::uint8_t> rows, PcdLayout layout,
+                      std::int64_t shift_ns) noexcept {
+  const std::size_t step = pcd_point_bytes(layout);
+  if (layout == PcdLayout::kVelodyne) {
+    const double shift_s = static_cast<double>(shift_ns) * 1e-9;
+    for (std::size_t at = 18; at + 4 <= rows.size(); at += step) {
+      float t;
+      std::memcpy(&t, rows.data() + at, 4);
+      t = static_cast<float>(t + shift_s);
+      std::memcpy(rows.data() + at, &t, 4);
+    }
+  } else if (layout == PcdLayout::kAutoware) {
+    const auto shift = static_cast<std::uint32_t>(shift_ns);  // modulo 2^32, as encoded
+    for (std::size_t at = 28; at + 4 <= rows.size(); at += step) {
+      std::uint32_t t;
+      std::memcpy(&t, rows.data() + at, 4);
+      t += shift;
+      std::memcpy(rows.data() + at, &t, 4);
+    }
+  }
 }
 
 std::string pcd_header(std::size_t points) {
@@ -198,7 +254,10 @@ std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint
         p = put(p, std::atan2(point.z, horizontal));
         p = put(p, point.distance_m);
         const std::int64_t since = point.timestamp_ns - frame.reference_ns;
-        p = put(p, static_cast<std::uint32_t>(std::clamp<std::int64_t>(since, 0, UINT32_MAX)));
+        // Before the reference only while a frame arena is filled (see rebase_pcd_times).
+        p = put(p, since < 0
+                       ? static_cast<std::uint32_t>(since)
+                       : static_cast<std::uint32_t>(std::min<std::int64_t>(since, UINT32_MAX)));
         break;
       }
     }

@@ -75,6 +75,15 @@ std::size_t pcd_point_bytes(PcdLayout layout) noexcept;
 // The byte size of each of a layout's fields, in their order (they add up to pcd_point_bytes).
 std::span<const std::uint8_t> pcd_field_sizes(PcdLayout layout) noexcept;
 
+// A field of a layout, where it sits in a point: what a PointCloud2's PointField says.
+struct PcdField {
+  std::string_view name;
+  std::uint32_t offset = 0;
+  std::uint8_t size = 0;  // bytes: 1, 2, 4 or 8
+  char type = 'F';        // 'F' float, 'U' unsigned, as the header's TYPE line
+};
+std::span<const PcdField> pcd_fields(PcdLayout layout) noexcept;
+
 // How the points follow the header: its DATA line.
 enum class PcdData : std::uint8_t { kBinary, kBinaryCompressed };
 
@@ -92,6 +101,14 @@ void append_pcd_header(std::string& out, std::size_t points,
 std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint8_t> out,
                               PcdFormat format = {PcdLayout::kPandarcap, Axes::kHesai},
                               PcdFrameContext frame = {}) noexcept;
+
+// Moves the relative times of encoded rows (the velodyne and autoware layouts; nothing for the
+// others, whose times are absolute) from one reference to another `shift_ns` earlier: each time
+// grows by shift_ns. A frame arena encodes against its first point's time and rebases once at
+// the end if an earlier point came later (a reordered packet). The autoware layout's U4 times
+// are kept modulo 2^32 while encoding, so a point before the first one comes out right.
+void rebase_pcd_times(std::span<std::uint8_t> rows, PcdLayout layout,
+                      std::int64_t shift_ns) noexcept;
 
 // nebula's return-type code for a point (autoware layout).
 std::uint8_t nebula_return_type(ReturnType type, ReturnMode mode) noexcept;

@@ -59,21 +59,38 @@ std::span<const std::uint8_t> PcdCompressor::compress(std::span<const Point> poi
                                                       PcdFormat format, PcdFrameContext frame) {
   reserve(points.size(), format.layout);  // nothing to do for a frame within the reserve
   const std::size_t n = points.size();
-  const std::size_t step = pcd_point_bytes(format.layout);
-  const std::size_t data = n * step;
-  const std::span<const std::uint8_t> sizes = pcd_field_sizes(format.layout);
   for (std::size_t first = 0; first < n; first += kChunkPoints) {
     const std::size_t count = std::min(kChunkPoints, n - first);
-    encode_pcd_points(points.subspan(first, count), rows_, format, frame);
-    // Field f's column starts after the columns before it: n values of each.
-    std::size_t row_offset = 0, column_start = 0;
-    for (const std::uint8_t size : sizes) {
-      gather(size, rows_.data() + row_offset, step, count,
-             columns_.data() + column_start + first * size);
-      row_offset += size;
-      column_start += n * size;
-    }
+    const std::size_t bytes = encode_pcd_points(points.subspan(first, count), rows_, format, frame);
+    scatter(std::span<const std::uint8_t>(rows_.data(), bytes), first, n, format.layout);
   }
+  return finish(n, format.layout);
+}
+
+std::span<const std::uint8_t> PcdCompressor::compress_rows(std::span<const std::uint8_t> rows,
+                                                           PcdLayout layout) {
+  const std::size_t n = rows.size() / pcd_point_bytes(layout);
+  reserve(n, layout);
+  scatter(rows, 0, n, layout);
+  return finish(n, layout);
+}
+
+void PcdCompressor::scatter(std::span<const std::uint8_t> rows, std::size_t first,
+                            std::size_t total, PcdLayout layout) {
+  const std::size_t step = pcd_point_bytes(layout);
+  const std::size_t count = rows.size() / step;
+  // Field f's column starts after the columns before it: `total` values of each.
+  std::size_t row_offset = 0, column_start = 0;
+  for (const std::uint8_t size : pcd_field_sizes(layout)) {
+    gather(size, rows.data() + row_offset, step, count,
+           columns_.data() + column_start + first * size);
+    row_offset += size;
+    column_start += total * size;
+  }
+}
+
+std::span<const std::uint8_t> PcdCompressor::finish(std::size_t points, PcdLayout layout) {
+  const std::size_t data = points * pcd_point_bytes(layout);
   std::size_t compressed = 0;
   if (data > 0) {
     compressed =

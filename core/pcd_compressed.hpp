@@ -43,8 +43,15 @@ class PcdCompressor {
   // bound rules out.
   std::span<const std::uint8_t> compress(std::span<const Point> points, PcdFormat format,
                                          PcdFrameContext frame);
+  // The same for points already encoded as rows of `layout` (a frame arena's bytes).
+  std::span<const std::uint8_t> compress_rows(std::span<const std::uint8_t> rows, PcdLayout layout);
 
  private:
+  // Rows of points first..first+n of a `total`-point frame into their columns.
+  void scatter(std::span<const std::uint8_t> rows, std::size_t first, std::size_t total,
+               PcdLayout layout);
+  std::span<const std::uint8_t> finish(std::size_t points, PcdLayout layout);
+
   std::vector<std::uint8_t> rows_;     // one chunk of points, encoded as rows
   std::vector<std::uint8_t> columns_;  // the whole frame, field-major
   std::vector<std::uint8_t> out_;      // sizes + LZF data

@@ -7,6 +7,12 @@
 
 namespace pandarcap {
 
+PcdFormat pcd_format(const DaemonConfig& config) {
+  // Both were checked when the configuration was read.
+  return PcdFormat{parse_pcd_layout(config.output.pcd_fields).value_or(PcdLayout::kPcl),
+                   parse_axes(config.sensor.frame).value_or(Axes::kHesai)};
+}
+
 WriterOptions writer_options(const DaemonConfig& config) {
   const std::filesystem::path output_dir = config.output.directory;
   WriterOptions wo;
@@ -38,10 +44,8 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.min_hours_left = config.health.min_hours_left;
   const OutputSection& o = config.output;
   wo.mcap = o.mcap;
-  // Both were checked when the configuration was read.
-  wo.pcd_format.layout = parse_pcd_layout(o.pcd_fields).value_or(PcdLayout::kPcl);
-  wo.pcd_format.axes = parse_axes(config.sensor.frame).value_or(Axes::kHesai);
-  wo.mcap_file.axes = wo.pcd_format.axes;
+  wo.pcd_format = pcd_format(config);
+  wo.mcap_file.format = wo.pcd_format;
   wo.mcap_rotate_bytes = o.mcap_rotate_bytes;
   wo.mcap_rotate_seconds = o.mcap_rotate_seconds;
   wo.mcap_max_files = o.mcap_max_files;

@@ -26,6 +26,10 @@ namespace pandarcap {
 // PANDARCAP_TEST_HOOKS (the test builds; never the package).
 WriterOptions writer_options(const DaemonConfig& config);
 
+// The frames' layout and axes (output.pcd_fields, sensor.frame), which the arenas hold, the PCD
+// files and MCAP write.
+PcdFormat pcd_format(const DaemonConfig& config);
+
 // The decode worker's options for the chosen decoder target and source.
 DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTarget target,
                                           const RunSource& source);

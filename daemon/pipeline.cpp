@@ -4,6 +4,8 @@
 
 #include <latch>
 
+#include "daemon/daemon_options.hpp"
+
 namespace pandarcap {
 namespace {
 
@@ -23,7 +25,7 @@ Pipeline::Pipeline(const DaemonConfig& c)
       to_writer(power_of_two_at_least(c.arenas.count + raw_batches(c) + 16)),
       status(4) {
   for (std::uint32_t i = 0; i < c.arenas.count; ++i) {
-    arenas.push_back(std::make_unique<FrameArena>(c.arenas.points_per_frame));
+    arenas.push_back(std::make_unique<FrameArena>(c.arenas.points_per_frame, pcd_format(c)));
     free_arenas.try_push(arenas.back().get());
   }
   for (std::uint32_t i = 0; i < raw_batches(c); ++i) {

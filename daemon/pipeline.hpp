@@ -18,10 +18,10 @@
 
 #include "config/daemon_config.hpp"
 #include "daemon/decode_worker.hpp"
+#include "daemon/output/writer.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/ptc/sensor_status_channel.hpp"
-#include "daemon/output/writer.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {

@@ -5,10 +5,11 @@
 //                                        +---- SpscQueue<FrameArena*> ----------+  (empty arenas)
 //                                        +---- SpscQueue<RawBatch*>   ----------+  (empty batches)
 //
-// A FrameArena is one frame's fixed point storage. A RawBatch is a run of raw datagrams, copied
-// out of the ring, on their way to the pcap recording. When no empty arena (or batch) is there,
-// the decode worker drops the frame (or the datagram's recording) and counts it: it never
-// allocates and never waits for the writer.
+// A FrameArena is one frame's fixed point storage, in the output layout (PCD and MCAP): the decode
+// worker encodes each point into it once, and the writer persists its bytes as they are. A RawBatch
+// is a run of raw datagrams, copied out of the ring, on their way to the pcap recording. When no
+// empty arena (or batch) is there, the decode worker drops the frame (or the datagram's recording)
+// and counts it: it never allocates and never waits for the writer.
 #pragma once
 
 #include <netinet/in.h>
@@ -30,11 +31,13 @@
 namespace pandarcap {
 
 struct FrameArena {
-  explicit FrameArena(std::size_t capacity_points)
-      : storage(new Point[capacity_points]()), capacity(capacity_points) {
-    frame.points = std::span<Point>(storage.get(), capacity);
+  FrameArena(std::size_t capacity_points, PcdFormat format)
+      : storage(new std::uint8_t[capacity_points * pcd_point_bytes(format.layout)]()),
+        capacity(capacity_points) {
+    frame.encoded = std::span(storage.get(), capacity * pcd_point_bytes(format.layout));
+    frame.format = format;
   }
-  std::unique_ptr<Point[]> storage;
+  std::unique_ptr<std::uint8_t[]> storage;
   std::size_t capacity;
   Frame frame;
   // Kernel receive time (CLOCK_REALTIME ns) of the packet whose arrival finished the frame: the

@@ -174,25 +174,58 @@ TEST_CASE("MCAP parsers refuse every truncation of a record", "[mcap]") {
 
 TEST_CASE("CDR PointCloud2: the prefix length is what is written, fields as the PCD's",
           "[mcap][cdr]") {
-  // Frame ids of every length modulo 4 exercise every alignment of what follows the string.
-  for (const std::string frame_id : {"", "p", "pa", "pan", "pandar", "vehicle/lidar_front"}) {
-    for (const std::uint32_t points : {0u, 1u, 72000u}) {
-      std::vector<std::uint8_t> out{0xAA, 0xBB, 0xCC};  // not at the buffer's start
-      ByteWriter w(out);
-      write_pointcloud2_prefix(w, RosTime{1'700'000'000, 5}, frame_id, points);
-      INFO("frame_id '" << frame_id << "', " << points << " points");
-      REQUIRE(out.size() - 3 == pointcloud2_prefix_bytes(frame_id.size()));
-      // The data length is the prefix's last field, and row_step and point_step precede it.
-      CHECK(u32_at(out, out.size() - 4) == points * kPcdPointBytes);
-      CHECK(u32_at(out, out.size() - 8) == points * kPcdPointBytes);
-      CHECK(u32_at(out, out.size() - 12) == kPcdPointBytes);
-      // Encapsulation: plain CDR, little-endian; then stamp and the NUL-terminated frame id.
-      CHECK(out[3] == 0);
-      CHECK(out[4] == 1);
-      CHECK(u32_at(out, 7) == 1'700'000'000u);
-      CHECK(u32_at(out, 11) == 5u);
-      CHECK(u32_at(out, 15) == frame_id.size() + 1);
-      CHECK(out[19 + frame_id.size()] == 0);
+  for (const PcdLayout layout :
+       {PcdLayout::kPcl, PcdLayout::kPandarcap, PcdLayout::kVelodyne, PcdLayout::kAutoware}) {
+    const std::uint32_t step = static_cast<std::uint32_t>(pcd_point_bytes(layout));
+    // Frame ids of every length modulo 4 exercise every alignment of what follows the string.
+    for (const std::string frame_id : {"", "p", "pa", "pan", "pandar", "vehicle/lidar_front"}) {
+      for (const std::uint32_t points : {0u, 1u, 72000u}) {
+        std::vector<std::uint8_t> out{0xAA, 0xBB, 0xCC};  // not at the buffer's start
+        ByteWriter w(out);
+        write_pointcloud2_prefix(w, RosTime{1'700'000'000, 5}, frame_id, points, layout);
+        INFO("layout " << to_string(layout) << ", frame_id '" << frame_id << "', " << points
+                       << " points");
+        REQUIRE(out.size() - 3 == pointcloud2_prefix_bytes(frame_id.size(), layout));
+        // The data length is the prefix's last field, and row_step and point_step precede it.
+        CHECK(u32_at(out, out.size() - 4) == points * step);
+        CHECK(u32_at(out, out.size() - 8) == points * step);
+        CHECK(u32_at(out, out.size() - 12) == step);
+        // Encapsulation: plain CDR, little-endian; then stamp and the NUL-terminated frame id.
+        CHECK(out[3] == 0);
+        CHECK(out[4] == 1);
+        CHECK(u32_at(out, 7) == 1'700'000'000u);
+        CHECK(u32_at(out, 11) == 5u);
+        CHECK(u32_at(out, 15) == frame_id.size() + 1);
+        CHECK(out[19 + frame_id.size()] == 0);
+        // height 1, width, then one PointField per PCD field: name, offset, datatype, count.
+        std::size_t at = 3 + 4 + 8 + 4 + frame_id.size() + 1;
+        at = 3 + 4 + (at - 7 + 3) / 4 * 4;
+        CHECK(u32_at(out, at) == 1);
+        CHECK(u32_at(out, at + 4) == points);
+        const auto fields = pcd_fields(layout);
+        REQUIRE(u32_at(out, at + 8) == fields.size());
+        at += 12;
+        for (const PcdField& f : fields) {
+          INFO("field " << f.name);
+          REQUIRE(u32_at(out, at) == f.name.size() + 1);
+          CHECK(std::string_view(reinterpret_cast<const char*>(out.data() + at + 4),
+                                 f.name.size()) == f.name);
+          at += 4 + f.name.size() + 1;
+          at = 3 + 4 + (at - 7 + 3) / 4 * 4;
+          CHECK(u32_at(out, at) == f.offset);
+          const std::uint8_t datatype = out[at + 4];
+          // sensor_msgs/PointField: UINT8 2, UINT16 4, UINT32 6, FLOAT32 7, FLOAT64 8.
+          const std::uint8_t expected = f.type == 'F' ? (f.size == 8 ? 8 : 7)
+                                        : f.size == 1 ? 2
+                                        : f.size == 2 ? 4
+                                                      : 6;
+          CHECK(datatype == expected);
+          at += 5;
+          at = 3 + 4 + (at - 7 + 3) / 4 * 4;
+          CHECK(u32_at(out, at) == 1);
+          at += 4;
+        }
+      }
     }
   }
 }

@@ -7,8 +7,10 @@
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <random>
 #include <string>
 #include <vector>
@@ -346,5 +348,85 @@ TEST_CASE("every compression setting gives files the reader accepts",
     CHECK(file["topics"]["/pandar/points"]["count"].get<int>() >= 5);
     CHECK(file["chunk_compression"] ==
           json::array({setting.find("none") != std::string::npos ? "" : "zstd"}));
+  }
+}
+
+namespace {
+
+// A field's value in a PCD row, as a number (what the reader prints).
+double pcd_value(const std::string& data, std::size_t at, const PcdField& f) {
+  const char* p = data.data() + at + f.offset;
+  if (f.type == 'F') {
+    if (f.size == 8) {
+      double v;
+      std::memcpy(&v, p, 8);
+      return v;
+    }
+    float v;
+    std::memcpy(&v, p, 4);
+    return v;
+  }
+  std::uint64_t v = 0;
+  std::memcpy(&v, p, f.size);  // little-endian
+  return static_cast<double>(v);
+}
+
+}  // namespace
+
+TEST_CASE("MCAP points are the PCD files' bytes in the layout and axes chosen and encoded once",
+          "[daemon][mcap][realtime][threads]") {
+  for (const auto& [layout, frame] :
+       {std::pair{PcdLayout::kAutoware, "ros"}, std::pair{PcdLayout::kPcl, "hesai"}}) {
+    INFO("layout " << to_string(layout) << ", sensor.frame " << frame);
+    test::ScratchDir dir("mcap-layout");
+    const fs::path out = dir / "out";
+    const fs::path config = dir / "pandarcap.toml";
+    std::ofstream(config) << "[sensor]\nframe = \"" << frame << "\"\n[output]\nmcap = true\n"
+                          << "pcd_fields = \"" << to_string(layout) << "\"\n";
+    const auto r =
+        test::run_command(test::pandarcapd_command() + " -c " + quoted(config) +
+                          " --simulate --duration 2 --output-dir " + quoted(out) + " 2>&1");
+    INFO(r.out);
+    REQUIRE(r.exit_code == 0);
+    const auto files = test::files_ending(out / "mcap", ".mcap");
+    REQUIRE(files.size() == 1);
+    const json file = read_or_fail(files[0]);
+    if (file.is_null()) continue;
+    const json& messages = file["topics"]["/pandar/points"]["messages"];
+    const auto pcds = test::files_ending(out / "frames", ".pcd");
+    REQUIRE(messages.size() == pcds.size());
+    REQUIRE(pcds.size() >= 10);
+    const std::size_t step = pcd_point_bytes(layout);
+    const auto fields = pcd_fields(layout);
+    for (std::size_t i = 0; i < pcds.size(); ++i) {
+      INFO("frame " << i << ": " << pcds[i].filename().string());
+      const json& m = messages[i];
+      REQUIRE(m["point_step"] == step);
+      REQUIRE(m["fields"].size() == fields.size());
+      for (std::size_t k = 0; k < fields.size(); ++k) {
+        CHECK(m["fields"][k]["name"] == fields[k].name);
+        CHECK(m["fields"][k]["offset"] == fields[k].offset);
+      }
+      std::ifstream in(pcds[i], std::ios::binary);
+      const std::string pcd{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+      const std::size_t data_at = pcd.find("DATA binary\n");
+      REQUIRE(data_at != std::string::npos);
+      const std::string data = pcd.substr(data_at + 12);
+      REQUIRE(m["points"] == data.size() / step);
+      REQUIRE(data.size() % step == 0);
+      if (data.empty()) continue;
+      for (const PcdField& f : fields) {
+        INFO("field " << f.name);
+        CHECK(m["first"][std::string(f.name)].get<double>() == pcd_value(data, 0, f));
+        CHECK(m["last"][std::string(f.name)].get<double>() ==
+              pcd_value(data, data.size() - step, f));
+      }
+      // The relative times' reference is the header's stamp: the frame's first firing.
+      const double stamp =
+          m["stamp"]["sec"].get<double>() + m["stamp"]["nanosec"].get<double>() * 1e-9;
+      const auto ref_at = pcd.find("frame_reference_time ");
+      REQUIRE(ref_at != std::string::npos);
+      CHECK(std::stod(pcd.substr(ref_at + 21, 30)) == Approx(stamp).margin(1e-6));
+    }
   }
 }

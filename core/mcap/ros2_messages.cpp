@@ -56,21 +56,21 @@ uint32 nanosec
 
 namespace {
 
-constexpr std::uint8_t kUint8 = 2, kFloat32 = 7, kFloat64 = 8;
+// sensor_msgs/PointField datatypes.
+constexpr std::uint8_t kUint8 = 2, kUint16 = 4, kUint32 = 6, kFloat32 = 7, kFloat64 = 8;
 
-struct Field {
-  std::string_view name;
-  std::uint32_t offset;
-  std::uint8_t datatype;
-};
-// The PCD layout (core/pcd.hpp), field for field.
-constexpr std::array<Field, 7> kFields{{{"x", 0, kFloat32},
-                                        {"y", 4, kFloat32},
-                                        {"z", 8, kFloat32},
-                                        {"intensity", 12, kUint8},
-                                        {"channel", 13, kUint8},
-                                        {"return_type", 14, kUint8},
-                                        {"timestamp", 15, kFloat64}}};
+// PointField's datatype for a PCD field (sensor_msgs/PointField's constants).
+std::uint8_t datatype(const PcdField& f) noexcept {
+  if (f.type == 'F') return f.size == 8 ? kFloat64 : kFloat32;
+  switch (f.size) {
+    case 1:
+      return kUint8;
+    case 2:
+      return kUint16;
+    default:
+      return kUint32;
+  }
+}
 
 constexpr std::size_t kEncapsulation = 4;
 
@@ -113,11 +113,11 @@ RosTime ros_time(std::int64_t unix_ns) noexcept {
   return RosTime{static_cast<std::int32_t>(sec), static_cast<std::uint32_t>(ns)};
 }
 
-std::size_t pointcloud2_prefix_bytes(std::size_t frame_id_bytes) noexcept {
+std::size_t pointcloud2_prefix_bytes(std::size_t frame_id_bytes, PcdLayout layout) noexcept {
   std::size_t at = kEncapsulation + 8;  // stamp
   at += 4 + frame_id_bytes + 1;         // frame_id
   at = aligned(at, 4) + 4 + 4 + 4;      // height, width, fields' count
-  for (const Field& f : kFields) {
+  for (const PcdField& f : pcd_fields(layout)) {
     at = aligned(at, 4) + 4 + f.name.size() + 1;  // name
     at = aligned(at, 4) + 4 + 1;                  // offset, datatype
     at = aligned(at, 4) + 4;                      // count
@@ -128,7 +128,9 @@ std::size_t pointcloud2_prefix_bytes(std::size_t frame_id_bytes) noexcept {
 }
 
 void write_pointcloud2_prefix(ByteWriter& w, RosTime stamp, std::string_view frame_id,
-                              std::uint32_t points) {
+                              std::uint32_t points, PcdLayout layout) {
+  const std::span<const PcdField> fields = pcd_fields(layout);
+  const auto step = static_cast<std::uint32_t>(pcd_point_bytes(layout));
   const std::size_t start = w.size();
   encapsulation(w);
   w.u32(static_cast<std::uint32_t>(stamp.sec));
@@ -137,21 +139,21 @@ void write_pointcloud2_prefix(ByteWriter& w, RosTime stamp, std::string_view fra
   align(w, start, 4);
   w.u32(1);       // height: an unordered cloud
   w.u32(points);  // width
-  w.u32(static_cast<std::uint32_t>(kFields.size()));
-  for (const Field& f : kFields) {
+  w.u32(static_cast<std::uint32_t>(fields.size()));
+  for (const PcdField& f : fields) {
     align(w, start, 4);
     cdr_string(w, f.name);
     align(w, start, 4);
     w.u32(f.offset);
-    w.u8(f.datatype);
+    w.u8(datatype(f));
     align(w, start, 4);
     w.u32(1);  // count
   }
   w.u8(0);  // is_bigendian
   align(w, start, 4);
-  w.u32(static_cast<std::uint32_t>(kPcdPointBytes));           // point_step
-  w.u32(static_cast<std::uint32_t>(kPcdPointBytes * points));  // row_step
-  w.u32(static_cast<std::uint32_t>(kPcdPointBytes * points));  // data: length, then the bytes
+  w.u32(step);           // point_step
+  w.u32(step * points);  // row_step
+  w.u32(step * points);  // data: length, then the bytes
 }
 
 void write_pointcloud2_suffix(ByteWriter& w) {

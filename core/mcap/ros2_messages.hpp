@@ -2,10 +2,11 @@
 // rosbag2 use, and Foxglove reads): a 4-byte encapsulation header (00 01 00 00: plain CDR,
 // little-endian), then each field aligned to its own size counted from after that header.
 //
-//   sensor_msgs/msg/PointCloud2   one per frame. Its points are the PCD files' bytes exactly
-//                                 (core/pcd.hpp: x y z F4, intensity channel return_type U1,
-//                                 timestamp F8 = 23 bytes, packed), so both outputs agree point
-//                                 for point; header.stamp is the frame's first firing time.
+//   sensor_msgs/msg/PointCloud2   one per frame. Its points are the PCD files' bytes exactly, in
+//                                 the same layout (core/pcd.hpp: output.pcd_fields; the fields
+//                                 name each of the layout's), so both outputs agree point for
+//                                 point; header.stamp is the frame's first firing time, the
+//                                 reference of the relative-time layouts.
 //   pandar_msgs/msg/PandarPacket  one per datagram (optional): receive time, payload, size, as
 //                                 Hesai's ROS 2 driver defines it.
 // Each schema text is the message definition with its dependencies appended, as rosbag2 writes
@@ -19,6 +20,7 @@
 #include <string_view>
 
 #include "core/mcap/mcap_records.hpp"
+#include "core/pcd.hpp"
 
 namespace pandarcap::mcap {
 
@@ -36,15 +38,17 @@ struct RosTime {
 RosTime ros_time(std::int64_t unix_ns) noexcept;
 
 // Bytes of a PointCloud2 message before its point data (encapsulation header included), for a
-// frame id of `frame_id_bytes` characters.
-std::size_t pointcloud2_prefix_bytes(std::size_t frame_id_bytes) noexcept;
+// frame id of `frame_id_bytes` characters and points in `layout`.
+std::size_t pointcloud2_prefix_bytes(std::size_t frame_id_bytes,
+                                     PcdLayout layout = PcdLayout::kPandarcap) noexcept;
 // The message's bytes after the point data (is_dense).
 inline constexpr std::size_t kPointCloud2SuffixBytes = 1;
 
 // Writes a PointCloud2 message up to (and including) the data length: the caller appends
-// `points` * kPcdPointBytes bytes of PCD point data and then write_pointcloud2_suffix().
+// `points` * pcd_point_bytes(layout) bytes of PCD point data and then
+// write_pointcloud2_suffix().
 void write_pointcloud2_prefix(ByteWriter& w, RosTime stamp, std::string_view frame_id,
-                              std::uint32_t points);
+                              std::uint32_t points, PcdLayout layout = PcdLayout::kPandarcap);
 void write_pointcloud2_suffix(ByteWriter& w);
 
 // The bytes of a PandarPacket message for a payload of `payload_bytes`.

@@ -26,12 +26,11 @@ constexpr std::size_t kTailBytesPerChunk = 160;
 
 McapFile::McapFile(const McapFileOptions& options)
     : options_(options),
-      compressor_(options.chunk_bytes + (mcap::kMessagePrefixBytes +
-                                         mcap::pointcloud2_prefix_bytes(options.frame_id.size()) +
-                                         options.max_frame_points * kPcdPointBytes + 1),
+      max_message_bytes_(
+          mcap::pointcloud2_prefix_bytes(options.frame_id.size(), options.format.layout) +
+          options.max_frame_points * pcd_point_bytes(options.format.layout) + 1),
+      compressor_(options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_,
                   options.compression_level),
-      max_message_bytes_(mcap::pointcloud2_prefix_bytes(options.frame_id.size()) +
-                         options.max_frame_points * kPcdPointBytes + 1),
       // A chunk holds chunk_bytes; its smallest messages (packets) are over 1 KB.
       max_index_entries_(options.chunk_bytes / 1024 + 64) {
   const std::size_t chunk_capacity =
@@ -128,17 +127,25 @@ void McapFile::begin_message(std::uint16_t channel, std::uint64_t log_time,
 }
 
 void McapFile::add_frame(const Frame& frame, std::uint64_t log_time) {
-  const std::span<const Point> points = frame.used();
-  const std::size_t prefix = mcap::pointcloud2_prefix_bytes(options_.frame_id.size());
-  const std::size_t data = points.size() * kPcdPointBytes;
+  const PcdLayout layout = options_.format.layout;
+  const std::size_t prefix = mcap::pointcloud2_prefix_bytes(options_.frame_id.size(), layout);
+  const std::size_t data = frame.size * pcd_point_bytes(layout);
+  // A daemon arena holds its points in the output layout already: its bytes go in as they are.
+  const bool as_is = frame.is_encoded() && frame.format.layout == layout &&
+                     frame.format.axes == options_.format.axes;
   begin_message(kPointsChannel, log_time, prefix + data + mcap::kPointCloud2SuffixBytes);
   mcap::ByteWriter w(chunk_);
   mcap::write_pointcloud2_prefix(w, mcap::ros_time(frame.info.start_ns), options_.frame_id,
-                                 static_cast<std::uint32_t>(points.size()));
-  const std::size_t at = chunk_.size();
-  chunk_.resize(at + data);  // within the reserved capacity: no allocation
-  encode_pcd_points(points, std::span(chunk_.data() + at, data),
-                    PcdFormat{PcdLayout::kPandarcap, options_.axes});
+                                 static_cast<std::uint32_t>(frame.size), layout);
+  if (as_is) {
+    w.bytes(frame.used_bytes());  // within the reserved capacity: no allocation
+  } else {
+    if (frame.is_encoded()) throw std::invalid_argument("MCAP frame layout differs from the PCD's");
+    const std::size_t at = chunk_.size();
+    chunk_.resize(at + data);  // within the reserved capacity: no allocation
+    encode_pcd_points(frame.used(), std::span(chunk_.data() + at, data), options_.format,
+                      PcdFrameContext{frame.info.start_ns, frame.info.return_mode});
+  }
   mcap::write_pointcloud2_suffix(w);
 }
 

@@ -73,8 +73,8 @@ class McapFile {
 
   McapFileOptions options_;
   std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_
+  std::size_t max_message_bytes_;  // before compressor_, which is sized from it
   mcap::ChunkCompressor compressor_;
-  std::size_t max_message_bytes_;
   std::size_t max_index_entries_;
   OutputFile file_;
   mcap::Summary summary_;

@@ -22,8 +22,10 @@ struct McapFileOptions {
   std::string health_topic = "/pandar/health";
   std::string packets_topic = "/pandar/packets";
   std::string frame_id = "pandar";
-  Axes axes = Axes::kHesai;  // sensor.frame: the points' axes (the layout is always pandarcap's)
-  std::string library;       // the Header's, "pandarcap <version>"
+  // The points' layout and axes (output.pcd_fields, sensor.frame): the PCD files', so a frame
+  // arena's bytes go into the PointCloud2 message as they are.
+  PcdFormat format{PcdLayout::kPandarcap, Axes::kHesai};
+  std::string library;                                        // the Header's, "pandarcap <version>"
   std::vector<std::pair<std::string, std::string>> metadata;  // the "pandarcap" record
   std::string calibration_csv;  // attached to every file as calibration.csv
 };

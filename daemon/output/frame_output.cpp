@@ -13,12 +13,6 @@
 #include "daemon/output/output_leftovers.hpp"
 
 namespace pandarcap {
-namespace {
-
-constexpr std::size_t kPcdChunkPoints = 4096;
-
-}  // namespace
-
 FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& accounting,
                          SpaceGuard& space)
     : accounting_(accounting),
@@ -28,8 +22,7 @@ FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& account
       retention_(options.frames_max_files, options.frames_max_bytes),
       format_(options.pcd_format),
       lzf_(options.pcd_lzf),
-      max_frame_points_(options.max_frame_points),
-      pcd_buffer_(kPcdChunkPoints * pcd_point_bytes(options.pcd_format.layout)) {}
+      max_frame_points_(options.max_frame_points) {}
 
 void FrameOutput::adopt_earlier_files() {
   number_base_ = adopt_earlier_frames(dir_, retention_);
@@ -44,23 +37,21 @@ void FrameOutput::reserve() {
 
 void FrameOutput::write(const FrameArena& arena) {
   const Frame& frame = arena.frame;
-  const std::span<const Point> points = frame.used();
+  // The decode worker encoded the points in this layout already (the arenas are made with it).
+  const std::span<const std::uint8_t> rows = frame.used_bytes();
   pcd_header_.clear();
-  append_pcd_header(pcd_header_, points.size(), format_.layout, frame.info.start_ns,
+  append_pcd_header(pcd_header_, frame.size, format_.layout, frame.info.start_ns,
                     lzf_ ? PcdData::kBinaryCompressed : PcdData::kBinary);
-  const PcdFrameContext context{frame.info.start_ns, frame.info.return_mode};
-  std::span<const std::uint8_t> compressed;
+  std::span<const std::uint8_t> data = rows;
   if (lzf_) {
     try {
-      compressed = compressor_.compress(points, format_, context);
+      data = compressor_.compress_rows(rows, format_.layout);
     } catch (const std::exception& error) {
       accounting_.write_failed(error, 0);
       return;
     }
   }
-  const std::uint64_t expected =
-      pcd_header_.size() +
-      (lzf_ ? compressed.size() : points.size() * pcd_point_bytes(format_.layout));
+  const std::uint64_t expected = pcd_header_.size() + data.size();
   // frames/frame_000123_20261122T120000.123Z[_partial].pcd, written as frames/.<name>.tmp.
   path_.assign(dir_.native());
   fmt::format_to(std::back_inserter(path_), "/frame_{:06}_", number_base_ + frame.info.sequence);
@@ -74,15 +65,7 @@ void FrameOutput::write(const FrameArena& arena) {
   try {
     open_in_directory(file_, temporary_path_, OutputFile::Mode::kCreate, dir_);
     file_.write(pcd_header_);
-    if (lzf_) {
-      file_.write(compressed);
-    } else {
-      for (std::size_t i = 0; i < points.size(); i += kPcdChunkPoints) {
-        const auto chunk = points.subspan(i, std::min(kPcdChunkPoints, points.size() - i));
-        const std::size_t n = encode_pcd_points(chunk, pcd_buffer_, format_, context);
-        file_.write(std::span<const std::uint8_t>(pcd_buffer_.data(), n));
-      }
-    }
+    file_.write(data);
     file_.close();
     accounting_.put_in_place(temporary_path_, path_);
     ++frames_written_;

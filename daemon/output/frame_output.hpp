@@ -13,7 +13,9 @@
 // core/pcd_compressed.hpp) before it is written, in buffers sized at start-up for the largest
 // frame (arenas.points_per_frame).
 //
-// Once warm, writing a frame allocates nothing: the names, header and encode buffers are reused
+// The points come encoded in the output layout (the decode worker wrote them into the arena so):
+// a frame is its header and the arena's bytes, two writes. Once warm, writing a frame allocates
+// nothing: the names, header and LZF buffers are reused
 // (retention, when on, lists one name per file). Owned by the writer thread.
 #pragma once
 
@@ -66,8 +68,7 @@ class FrameOutput {
   std::uint64_t number_base_ = 0;  // + the frame's sequence = its file number
   std::uint64_t frames_written_ = 0, bytes_written_ = 0;
   LatencyHistogram latency_;
-  std::vector<std::uint8_t> pcd_buffer_;  // allocated once: frames are encoded in chunks
-  PcdCompressor compressor_;              // lzf_: sized by reserve()
+  PcdCompressor compressor_;  // lzf_: sized by reserve()
   std::string path_, temporary_path_, pcd_header_, refusal_;
   OutputFile file_;
 };

@@ -17,9 +17,8 @@
 namespace pandarcap {
 namespace {
 
-// For the space a message asks for: a PointCloud2 point (the pandarcap layout, 23 bytes) and a
-// message's record, chunk and index bytes besides its data, generously.
-constexpr std::uint64_t kMcapPointBytes = 23;
+// For the space a message asks for: a message's record, chunk and index bytes besides its data,
+// generously.
 constexpr std::uint64_t kMcapMessageOverheadBytes = 128;
 
 }  // namespace
@@ -117,7 +116,7 @@ void McapRecorder::write_frame(const FrameArena& arena) {
   const auto log_time = static_cast<std::uint64_t>(
       arena.completed_log_ns > 0 ? arena.completed_log_ns : info.start_ns);
   last_log_time_ = log_time;
-  if (!ready(log_time, arena.frame.size * kMcapPointBytes)) {
+  if (!ready(log_time, arena.frame.used_bytes().size())) {
     ++messages_not_written_;
     return;
   }
