@@ -74,21 +74,37 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
     }
     previous_azimuth_ = azimuth;
 
-    for (std::size_t i = layout.block_begin[b]; i < layout.block_begin[b + 1]; ++i) {
-      const Point& point = points[i];
-      const std::int64_t u = position_ + signed_step(point.azimuth_cdeg, azimuth);
-      Slot* slot = slot_for(floor_div(u, kFullCircle));
-      if (slot == nullptr) {
-        ++stats_.points_late;
-      } else {
-        add_point(*slot, point, meta);
+    const std::size_t begin = layout.block_begin[b], end = layout.block_begin[b + 1];
+    // Every point of the block lies within the channels' azimuth bounds of U: away from the cut
+    // (all but a few blocks a revolution) they all fall in one frame, and go in together.
+    const std::int64_t lowest =
+        floor_div(position_ + config_.relative_azimuth_min_cdeg, kFullCircle);
+    const std::int64_t highest =
+        floor_div(position_ + config_.relative_azimuth_max_cdeg, kFullCircle);
+    if (lowest == highest) {
+      if (begin < end) {
+        Slot* slot = slot_for(lowest);
+        if (slot == nullptr) {
+          stats_.points_late += end - begin;
+        } else {
+          add_points(*slot, points.subspan(begin, end - begin), meta);
+        }
+      }
+    } else {
+      for (std::size_t i = begin; i < end; ++i) {
+        const Point& point = points[i];
+        const std::int64_t u = position_ + signed_step(point.azimuth_cdeg, azimuth);
+        Slot* slot = slot_for(floor_div(u, kFullCircle));
+        if (slot == nullptr) {
+          ++stats_.points_late;
+        } else {
+          add_points(*slot, std::span(&point, 1), meta);
+        }
       }
     }
 
     // Frames that no channel can reach any more are done.
-    const std::int64_t reachable =
-        floor_div(position_ + config_.relative_azimuth_min_cdeg, kFullCircle);
-    if (reachable > next_open_index_) close_through(reachable - 1, false);
+    if (lowest > next_open_index_) close_through(lowest - 1, false);
   }
 }
 
@@ -113,20 +129,23 @@ FrameAssembler::Slot* FrameAssembler::slot_for(std::int64_t frame_index) {
   return slot;
 }
 
-void FrameAssembler::add_point(Slot& slot, const Point& point, const PacketMeta& meta) {
+void FrameAssembler::add_points(Slot& slot, std::span<const Point> points, const PacketMeta& meta) {
   if (slot.dropped) {
-    ++stats_.points_dropped_no_frame;
+    stats_.points_dropped_no_frame += points.size();
     return;
   }
   Frame& frame = *slot.frame;
   FrameInfo& info = frame.info;
   // Capacity first: a packet whose points were all dropped must not count towards the frame's
   // packets, RPM or time validity.
-  if (frame.size == frame.capacity()) {
-    ++stats_.points_dropped_full;
-    ++info.points_dropped;
-    return;
+  const std::size_t room = frame.capacity() - frame.size;
+  if (points.size() > room) {
+    const std::size_t dropped = points.size() - room;
+    stats_.points_dropped_full += dropped;
+    info.points_dropped += static_cast<std::uint32_t>(dropped);
+    points = points.first(room);
   }
+  if (points.empty()) return;
   if (slot.last_packet != packet_counter_) {
     slot.last_packet = packet_counter_;
     slot.rpm_sum += meta.motor_rpm;
@@ -136,18 +155,23 @@ void FrameAssembler::add_point(Slot& slot, const Point& point, const PacketMeta&
   }
   if (info.points == 0 || position_ < slot.first_position) slot.first_position = position_;
   if (info.points == 0 || position_ > slot.last_position) slot.last_position = position_;
+  if (info.points == 0) {
+    info.start_ns = info.end_ns = points.front().timestamp_ns;
+    frame.reference_ns = points.front().timestamp_ns;
+  }
+  for (const Point& point : points) {
+    info.start_ns = std::min(info.start_ns, point.timestamp_ns);
+    info.end_ns = std::max(info.end_ns, point.timestamp_ns);
+  }
   if (frame.is_encoded()) {
     const std::size_t step = pcd_point_bytes(frame.format.layout);
-    if (info.points == 0) frame.reference_ns = point.timestamp_ns;
-    encode_pcd_points(std::span(&point, 1), frame.encoded.subspan(frame.size * step, step),
+    encode_pcd_points(points, frame.encoded.subspan(frame.size * step, points.size() * step),
                       frame.format, PcdFrameContext{frame.reference_ns, meta.return_mode});
-    ++frame.size;
   } else {
-    frame.points[frame.size++] = point;
+    std::copy(points.begin(), points.end(), frame.points.begin() + frame.size);
   }
-  if (info.points == 0 || point.timestamp_ns < info.start_ns) info.start_ns = point.timestamp_ns;
-  if (info.points == 0 || point.timestamp_ns > info.end_ns) info.end_ns = point.timestamp_ns;
-  ++info.points;
+  frame.size += points.size();
+  info.points += static_cast<std::uint32_t>(points.size());
 }
 
 void FrameAssembler::close_slot(Slot& slot, bool partial) {

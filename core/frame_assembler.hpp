@@ -88,7 +88,8 @@ class FrameAssembler {
   Slot* slot_for(std::int64_t frame_index);
   void close_slot(Slot& slot, bool partial);
   void close_through(std::int64_t frame_index, bool partial);
-  void add_point(Slot& slot, const Point& point, const PacketMeta& meta);
+  // Points of one block that all belong to `slot`'s frame (as many as it has room for).
+  void add_points(Slot& slot, std::span<const Point> points, const PacketMeta& meta);
 
   FrameAssemblerConfig config_;
   FrameSink& sink_;

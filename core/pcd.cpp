@@ -213,54 +213,74 @@ std::uint8_t nebula_return_type(ReturnType type, ReturnMode mode) noexcept {
   return 0;
 }
 
+namespace {
+
+// One layout's rows, the layout and axes fixed at compile time so the loop has no branch on them.
+template <PcdLayout Layout, bool Ros>
+std::uint8_t* encode_rows(std::span<const Point> points, std::uint8_t* p,
+                          PcdFrameContext frame) noexcept {
+  for (const Point& point : points) {
+    p = put(p, Ros ? point.y : point.x);
+    p = put(p, Ros ? -point.x : point.y);
+    p = put(p, point.z);
+    if constexpr (Layout == PcdLayout::kPcl) {
+      p = put(p, static_cast<float>(point.intensity));
+      p = put(p, static_cast<std::uint16_t>(point.channel));
+      p = put(p, static_cast<std::uint8_t>(point.return_type));
+      p = put(p, epoch_seconds(point.timestamp_ns));
+    } else if constexpr (Layout == PcdLayout::kPandarcap) {
+      p = put(p, point.intensity);
+      p = put(p, point.channel);
+      p = put(p, static_cast<std::uint8_t>(point.return_type));
+      p = put(p, epoch_seconds(point.timestamp_ns));
+    } else if constexpr (Layout == PcdLayout::kVelodyne) {
+      p = put(p, static_cast<float>(point.intensity));
+      p = put(p, static_cast<std::uint16_t>(point.channel));
+      p = put(p, static_cast<float>(static_cast<double>(point.timestamp_ns - frame.reference_ns) *
+                                    1e-9));
+    } else {
+      p = put(p, point.intensity);
+      p = put(p, nebula_return_type(point.return_type, frame.return_mode));
+      p = put(p, static_cast<std::uint16_t>(point.channel));
+      p = put(p, static_cast<float>(point.azimuth_cdeg * (std::numbers::pi / 18000.0)));
+      const float horizontal = std::hypot(point.x, point.y);
+      p = put(p, std::atan2(point.z, horizontal));
+      p = put(p, point.distance_m);
+      // Before the reference only while a frame arena is filled (see rebase_pcd_times).
+      const std::int64_t since = point.timestamp_ns - frame.reference_ns;
+      p = put(p, since < 0 ? static_cast<std::uint32_t>(since)
+                           : static_cast<std::uint32_t>(std::min<std::int64_t>(since, UINT32_MAX)));
+    }
+  }
+  return p;
+}
+
+template <PcdLayout Layout>
+std::uint8_t* encode_rows(std::span<const Point> points, std::uint8_t* p, Axes axes,
+                          PcdFrameContext frame) noexcept {
+  return axes == Axes::kRos ? encode_rows<Layout, true>(points, p, frame)
+                            : encode_rows<Layout, false>(points, p, frame);
+}
+
+}  // namespace
+
 std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint8_t> out,
                               PcdFormat format, PcdFrameContext frame) noexcept {
-  const std::size_t step = pcd_point_bytes(format.layout);
-  assert(out.size() >= points.size() * step);
-  (void)step;
-  const bool ros = format.axes == Axes::kRos;
+  assert(out.size() >= points.size() * pcd_point_bytes(format.layout));
   std::uint8_t* p = out.data();
-  for (const Point& point : points) {
-    const float x = ros ? point.y : point.x;
-    const float y = ros ? -point.x : point.y;
-    p = put(p, x);
-    p = put(p, y);
-    p = put(p, point.z);
-    switch (format.layout) {
-      case PcdLayout::kPcl:
-        p = put(p, static_cast<float>(point.intensity));
-        p = put(p, static_cast<std::uint16_t>(point.channel));
-        p = put(p, static_cast<std::uint8_t>(point.return_type));
-        p = put(p, epoch_seconds(point.timestamp_ns));
-        break;
-      case PcdLayout::kPandarcap:
-        p = put(p, point.intensity);
-        p = put(p, point.channel);
-        p = put(p, static_cast<std::uint8_t>(point.return_type));
-        p = put(p, epoch_seconds(point.timestamp_ns));
-        break;
-      case PcdLayout::kVelodyne:
-        p = put(p, static_cast<float>(point.intensity));
-        p = put(p, static_cast<std::uint16_t>(point.channel));
-        p = put(p, static_cast<float>(static_cast<double>(point.timestamp_ns - frame.reference_ns) *
-                                      1e-9));
-        break;
-      case PcdLayout::kAutoware: {
-        p = put(p, point.intensity);
-        p = put(p, nebula_return_type(point.return_type, frame.return_mode));
-        p = put(p, static_cast<std::uint16_t>(point.channel));
-        p = put(p, static_cast<float>(point.azimuth_cdeg * (std::numbers::pi / 18000.0)));
-        const float horizontal = std::hypot(point.x, point.y);
-        p = put(p, std::atan2(point.z, horizontal));
-        p = put(p, point.distance_m);
-        const std::int64_t since = point.timestamp_ns - frame.reference_ns;
-        // Before the reference only while a frame arena is filled (see rebase_pcd_times).
-        p = put(p, since < 0
-                       ? static_cast<std::uint32_t>(since)
-                       : static_cast<std::uint32_t>(std::min<std::int64_t>(since, UINT32_MAX)));
-        break;
-      }
-    }
+  switch (format.layout) {
+    case PcdLayout::kPcl:
+      p = encode_rows<PcdLayout::kPcl>(points, p, format.axes, frame);
+      break;
+    case PcdLayout::kPandarcap:
+      p = encode_rows<PcdLayout::kPandarcap>(points, p, format.axes, frame);
+      break;
+    case PcdLayout::kVelodyne:
+      p = encode_rows<PcdLayout::kVelodyne>(points, p, format.axes, frame);
+      break;
+    case PcdLayout::kAutoware:
+      p = encode_rows<PcdLayout::kAutoware>(points, p, format.axes, frame);
+      break;
   }
   return static_cast<std::size_t>(p - out.data());
 }
