@@ -198,6 +198,17 @@ void append_pcd_header(std::string& out, std::size_t points, PcdLayout layout,
                  data == PcdData::kBinaryCompressed ? "binary_compressed" : "binary");
 }
 
+bool pad_pcd_header(std::string& header, std::size_t size) {
+  const std::size_t at = header.find("\nVERSION ");
+  // The padding line is "#", spaces, "\n": at least two bytes.
+  if (at == std::string::npos || header.size() + 2 > size) return false;
+  const std::size_t spaces = size - header.size() - 2;
+  header.insert(at + 1, spaces + 2, ' ');
+  header[at + 1] = '#';
+  header[at + 2 + spaces] = '\n';
+  return true;
+}
+
 std::uint8_t nebula_return_type(ReturnType type, ReturnMode mode) noexcept {
   // nebula's ReturnType: UNKNOWN 0, LAST 1, FIRST 2, STRONGEST 3, ..., IDENTICAL 6.
   switch (type) {

@@ -96,6 +96,12 @@ void append_pcd_header(std::string& out, std::size_t points,
                        std::optional<std::int64_t> reference_ns = std::nullopt,
                        PcdData data = PcdData::kBinary);
 
+// Pads a header made by append_pcd_header to exactly `size` bytes with a comment line of spaces
+// (PCL and Open3D skip comment lines) just before VERSION, so the points start at byte `size`:
+// a page boundary, which lets them be written from the arena past the page cache (O_DIRECT).
+// False, with `header` untouched, when it is already too long for that.
+bool pad_pcd_header(std::string& header, std::size_t size);
+
 // Encodes points into `out` (which must hold points.size() * pcd_point_bytes(layout) bytes) and
 // returns the bytes written. No allocation. The default is the pandarcap layout in Hesai axes.
 std::size_t encode_pcd_points(std::span<const Point> points, std::span<std::uint8_t> out,

@@ -71,3 +71,22 @@ TEST_CASE("PCD points encode every field and decode back", "[pcd]") {
   }
   CHECK(encode_pcd_points({}, bytes) == 0);
 }
+
+TEST_CASE("a PCD header padded to a block keeps every line and puts the points at its end",
+          "[pcd]") {
+  std::string header;
+  append_pcd_header(header, 1234, PcdLayout::kPcl, 1'795'348'800'123'456'789);
+  const std::string plain = header;
+  REQUIRE(pad_pcd_header(header, 4096));
+  CHECK(header.size() == 4096);
+  CHECK(header.ends_with("DATA binary\n"));
+  // The padding is one comment line just before VERSION; without it, the header as it was.
+  const std::size_t version = header.find("\nVERSION ");
+  const std::size_t padding = header.rfind('\n', version - 1) + 1;
+  CHECK(header[padding] == '#');
+  CHECK(header.find_first_not_of(' ', padding + 1) == version);
+  CHECK(header.substr(0, padding) + header.substr(version + 1) == plain);
+  std::string too_long = plain;
+  CHECK_FALSE(pad_pcd_header(too_long, plain.size() + 1));
+  CHECK(too_long == plain);
+}

@@ -20,16 +20,32 @@ void OutputFile::open(std::string_view path, Mode mode) {
   if (fd_ >= 0) io::file_syscalls().close(fd_);
   fd_ = -1;
   size_ = 0;
+  direct_ = false;
   path_.assign(path);
   const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | (mode == Mode::kAppend ? O_APPEND : O_TRUNC);
-  do {
+  if (mode == Mode::kCreateDirect) {
+    do {
+      fd_ = ::open(path_.c_str(), flags | O_DIRECT, 0644);
+    } while (fd_ < 0 && errno == EINTR);
+    direct_ = fd_ >= 0;
+    // EINVAL: the file system has no O_DIRECT (tmpfs before Linux 6.6, some FUSE): the page
+    // cache it is.
+    if (fd_ < 0 && errno != EINVAL) throw_errno("cannot open", path_);
+  }
+  while (fd_ < 0) {
     fd_ = ::open(path_.c_str(), flags, 0644);
-  } while (fd_ < 0 && errno == EINTR);
-  if (fd_ < 0) throw_errno("cannot open", path_);
+    if (fd_ < 0 && errno != EINTR) throw_errno("cannot open", path_);
+  }
   if (mode == Mode::kAppend) {
     const off_t end = ::lseek(fd_, 0, SEEK_END);
     size_ = end > 0 ? static_cast<std::uint64_t>(end) : 0;
   }
+}
+
+void OutputFile::end_direct() noexcept {
+  if (fd_ < 0 || !direct_) return;
+  const int flags = ::fcntl(fd_, F_GETFL);
+  if (flags >= 0 && ::fcntl(fd_, F_SETFL, flags & ~O_DIRECT) == 0) direct_ = false;
 }
 
 OutputFile::~OutputFile() {

@@ -17,7 +17,10 @@ namespace pandarcap {
 
 class OutputFile {
  public:
-  enum class Mode { kCreate, kAppend };
+  // kCreateDirect: create, past the page cache (O_DIRECT) when the file system allows it (else
+  // as kCreate; direct() says which). While direct, each write must be whole 4096-byte blocks
+  // from 4096-aligned memory; end_direct() then lets an unaligned tail follow.
+  enum class Mode { kCreate, kAppend, kCreateDirect };
   OutputFile() = default;  // closed; open() it
   // Opens (creating, truncating for kCreate) `path`. Throws std::system_error.
   OutputFile(const std::filesystem::path& path, Mode mode) { open(path.native(), mode); }
@@ -33,6 +36,9 @@ class OutputFile {
   void write(std::string_view text) {
     write(std::span(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
   }
+  bool direct() const noexcept { return direct_; }
+  // Back to writes through the page cache (for a file's unaligned tail). Best effort: no throw.
+  void end_direct() noexcept;
   // Closes, reporting a failed close (a deferred write error on some file systems).
   void close();
   // Cuts the file back to `size` bytes (after a failed write), best effort: no throw. The next
@@ -49,7 +55,12 @@ class OutputFile {
   std::string path_;
   int fd_ = -1;
   std::uint64_t size_ = 0;  // for kAppend: the size at open plus what was written
+  bool direct_ = false;
 };
+
+// The block size and alignment O_DIRECT writes are made in (the page size: every file system's
+// logical block size divides it).
+inline constexpr std::size_t kDirectIoBlock = 4096;
 
 // Gives `from` the name `to` unless a file of that name exists: renameat2(RENAME_NOREPLACE), or,
 // on a file system without it, link + unlink (which refuse an existing name just the same).

@@ -4,8 +4,10 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <iterator>
 #include <span>
+#include <system_error>
 
 #include "core/pcd.hpp"
 #include "daemon/clocks.hpp"
@@ -51,7 +53,11 @@ void FrameOutput::write(const FrameArena& arena) {
       return;
     }
   }
-  const std::uint64_t expected = pcd_header_.size() + data.size();
+  // Uncompressed frames go past the page cache when the file system allows it: the header is
+  // padded to one block, so the points start page-aligned in the file as in the arena.
+  const bool direct = !lzf_ && rows.size() >= kDirectIoBlock;
+  const std::uint64_t expected =
+      (direct ? std::max(kDirectIoBlock, pcd_header_.size()) : pcd_header_.size()) + data.size();
   // frames/frame_000123_20261122T120000.123Z[_partial].pcd, written as frames/.<name>.tmp.
   path_.assign(dir_.native());
   fmt::format_to(std::back_inserter(path_), "/frame_{:06}_", number_base_ + frame.info.sequence);
@@ -63,21 +69,47 @@ void FrameOutput::write(const FrameArena& arena) {
     return;
   }
   try {
-    open_in_directory(file_, temporary_path_, OutputFile::Mode::kCreate, dir_);
-    file_.write(pcd_header_);
-    file_.write(data);
+    const bool try_direct = direct && direct_works_ && pad_pcd_header(pcd_header_, kDirectIoBlock);
+    open_in_directory(file_, temporary_path_,
+                      try_direct ? OutputFile::Mode::kCreateDirect : OutputFile::Mode::kCreate,
+                      dir_);
+    if (file_.direct()) {
+      write_direct(rows);
+    } else {
+      file_.write(pcd_header_);
+      file_.write(data);
+    }
     file_.close();
     accounting_.put_in_place(temporary_path_, path_);
     ++frames_written_;
-    bytes_written_ += expected;
+    bytes_written_ += file_.size();
     if (arena.completed_receive_ns > 0) {
       latency_.record(realtime_ns() - arena.completed_receive_ns);
     }
-    retention_.add(path_, expected);
+    retention_.add(path_, file_.size());
   } catch (const std::exception& error) {
     ::unlink(temporary_path_.c_str());
     accounting_.write_failed(error, expected);
   }
+}
+
+void FrameOutput::write_direct(std::span<const std::uint8_t> rows) {
+  // The padded header is exactly one block; it is copied where O_DIRECT can take it from.
+  std::copy(pcd_header_.begin(), pcd_header_.end(), header_block_.begin());
+  const std::span<const std::uint8_t> header(header_block_);
+  const std::size_t whole = rows.size() / kDirectIoBlock * kDirectIoBlock;
+  try {
+    file_.write(header);
+    file_.write(rows.first(whole));
+  } catch (const std::system_error& error) {
+    // A file system that opens with O_DIRECT but refuses the writes: the page cache, for the
+    // rest of this frame (from where it stopped) and for every frame after it.
+    if (error.code().value() != EINVAL) throw;
+    direct_works_ = false;
+  }
+  file_.end_direct();
+  if (file_.size() == 0) file_.write(header);
+  file_.write(rows.subspan(file_.size() - kDirectIoBlock));  // the tail, or all that is left
 }
 
 }  // namespace pandarcap

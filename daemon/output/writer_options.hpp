@@ -18,7 +18,7 @@ struct WriterOptions {
   std::filesystem::path health_dir;       // health.jsonl
   std::filesystem::path prometheus_file;  // the .prom textfile
   bool frames = true;
-  PcdFormat pcd_format;  // output.pcd_fields and sensor.frame (the MCAP takes the axes only)
+  PcdFormat pcd_format;  // output.pcd_fields and sensor.frame (the arenas, PCD and MCAP)
   std::uint64_t frames_max_files = 0;
   std::uint64_t frames_max_bytes = 0;
   bool pcd_lzf = false;  // output.pcd_compression = "lzf": DATA binary_compressed
