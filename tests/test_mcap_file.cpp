@@ -280,14 +280,14 @@ TEST_CASE("no free chunk buffer: the message is left out and counted, never wait
   file.open(path.string(), kT0);
   TestFrame frame(3000, static_cast<std::int64_t>(kT0));  // 69 kB: over a 64 kB chunk
   CHECK(file.add_frame(frame.frame, kT0));
-  // The next message hands the full chunk over, and the only buffer is then in flight: it can
-  // only come back through this thread, so this message has no chunk to go to.
+  // The next message hands the full chunk over, and the only buffer is then in flight: it comes
+  // back only when this thread picks it up, at the next message at the earliest, so this
+  // message has no chunk to go to.
   CHECK_FALSE(file.add_frame(frame.frame, kT0 + 100'000'000));
-  CHECK_FALSE(file.add_health(R"({"state":"ok"})", kT0 + 200'000'000));
-  CHECK(file.messages_not_recorded() == 2);
+  CHECK(file.messages_not_recorded() == 1);
   file.close();
   CHECK(file.messages() == 1);
-  CHECK(file.messages_not_recorded() == 2);
+  CHECK(file.messages_not_recorded() == 1);
   const McapRecovery r = finish_interrupted_mcap(path.string());  // a finished file: all kept
   CHECK(r.messages == 1);
   const auto read = test::read_mcap_independently(path);
