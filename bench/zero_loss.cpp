@@ -215,6 +215,7 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
     const ordered_json& latency = t["latency"];
     const ordered_json& frame = t["frame_latency"];
     const double cpu = t["cpu_fraction_of_one_core"].get<double>();
+    const ordered_json stages = t.value("loss_by_stage", ordered_json::object());
     return ordered_json{
         {"budget_ms", t["budget_ms"]},
         {"offered_pps", o.sensor_rate},
@@ -234,7 +235,12 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
         {"latency_max_us", latency.value("max_us", 0.0)},
         {"hot_path_allocations", t["hot_path_allocations"]},
         {"peak_rss_bytes", t["peak_rss_bytes"]},
-        {"written_bytes", t["written_bytes"]}};
+        {"written_bytes", t["written_bytes"]},
+        // What the writer side left out: frames (no free arena), pcap packets (writer behind)
+        // and MCAP messages (every chunk buffer waiting for compression).
+        {"frames_dropped", stages.value("frames_dropped", ordered_json())},
+        {"pcap_packets_not_recorded", stages.value("pcap_packets_not_recorded", ordered_json())},
+        {"mcap_messages_not_recorded", stages.value("mcap_messages_not_recorded", ordered_json())}};
   };
   ordered_json sensor = sensor_summary(at_sensor);
   sensor["bare_recvmmsg_cpu_fraction_of_one_core"] = bare_cpu;

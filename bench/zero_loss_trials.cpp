@@ -206,6 +206,7 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
                          {"pcap_packets_not_recorded", counter(h, "pcap_packets_not_recorded")},
                          {"write_errors", counter(h, "write_errors")},
                          {"mcap_messages_not_written", counter(h, "mcap_messages_not_written")},
+                         {"mcap_messages_not_recorded", counter(h, "mcap_messages_not_recorded")},
                          {"unaccounted", sent.sent > received + counter(h, "kernel_drops")
                                              ? sent.sent - received - counter(h, "kernel_drops")
                                              : 0}};

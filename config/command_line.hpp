@@ -45,6 +45,7 @@ inline constexpr std::array kKeyOptions{
     KeyOption{"--return-mode", "sensor.return_mode"},
     KeyOption{"--mcap", "output.mcap", true},
     KeyOption{"--mcap-packets", "output.mcap_packets", true},
+    KeyOption{"--mcap-compression", "output.mcap_compression"},
     KeyOption{"--decoder", "decoder"},
     KeyOption{"--latency-budget-ms", "latency.budget_ms"},
     KeyOption{"--log-level", "log_level"},

@@ -97,7 +97,7 @@ std::optional<std::string> axes(const std::string& s) {
 }
 
 std::optional<std::string> mcap_compression(const std::string& s) {
-  return one_of(s, {"zstd", "none"});
+  return one_of(s, {"zstd", "lz4", "none"});
 }
 
 std::optional<std::string> pcap_compression(const std::string& s) {

@@ -38,6 +38,8 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   grew(c.frames_dropped_no_arena, p.frames_dropped_no_arena, "frames dropped (no free arena)");
   grew(c.pcap_packets_not_recorded, p.pcap_packets_not_recorded, "packets not recorded");
   grew(c.pcap_packets_lost, p.pcap_packets_lost, "recorded packets lost (recording removed)");
+  grew(c.mcap_messages_not_recorded, p.mcap_messages_not_recorded,
+       "MCAP messages not recorded (compression behind)");
   grew(c.mcap_messages_lost, p.mcap_messages_lost, "MCAP messages lost (file removed)");
   grew(c.sequence_lost, p.sequence_lost, "packets lost (sequence)");
   grew(c.azimuth_gaps, p.azimuth_gaps, "azimuth gaps");

@@ -50,7 +50,10 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.mcap_rotate_seconds = o.mcap_rotate_seconds;
   wo.mcap_max_files = o.mcap_max_files;
   wo.mcap_max_bytes = o.mcap_max_bytes;
-  wo.mcap_file.compress = o.mcap_compression == "zstd";
+  wo.mcap_file.compression = o.mcap_compression == "none"
+                                 ? mcap::ChunkCompression::kNone
+                                 : mcap::parse_compression_name(o.mcap_compression)
+                                       .value_or(mcap::ChunkCompression::kZstd);
   wo.mcap_file.compression_level = o.mcap_compression_level;
   wo.mcap_file.chunk_bytes = o.mcap_chunk_bytes;
   wo.mcap_file.max_frame_points = config.arenas.points_per_frame;

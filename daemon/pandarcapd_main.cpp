@@ -93,9 +93,9 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
         c.duplicate_packets, c.outlier_packets);
   }
   if (wo.mcap) {
-    fmt::print("mcap: {} messages written, {} not written, {} bytes{}\n",
+    fmt::print("mcap: {} messages written, {} not written, {} not recorded, {} bytes{}\n",
                c.mcap_messages_written - c.mcap_messages_lost, c.mcap_messages_not_written,
-               c.mcap_bytes_written,
+               c.mcap_messages_not_recorded, c.mcap_bytes_written,
                c.mcap_messages_lost > 0
                    ? fmt::format("; {} more lost with their file", c.mcap_messages_lost)
                    : std::string());
@@ -236,6 +236,9 @@ int run(const CommandLine& options) {
   pipe.sensor_status.requests.store(sensor.ptc_requests);
   pipe.sensor_status.errors.store(sensor.ptc_errors);
   wo.mcap_replay_time = options.source.kind == RunSource::Kind::kReplay;
+  // A replay (a conversion) is written whole: the writer waits for a chunk buffer rather than
+  // leave a message out; live, nothing may wait on the compression thread.
+  wo.mcap_file.wait_for_free_chunk = wo.mcap_replay_time;
   const auto lock = claim_outputs(config.output.directory);
   Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live,
                 pipe.sensor_status);

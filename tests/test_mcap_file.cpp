@@ -1,6 +1,7 @@
-// daemon/mcap: one MCAP file written by McapFile, and finish_interrupted_mcap() for a ".part" a
-// killed run left, cut anywhere. Every finished or recovered file is read back by the MCAP
-// project's own reader (support/mcap_reader.hpp), which must accept it whole.
+// daemon/mcap: one MCAP file written by McapFile (its chunks compressed by the chunk pipeline's
+// thread, so every test that makes one is tagged [threads]), and finish_interrupted_mcap() for a
+// ".part" a killed run left, cut anywhere. Every finished or recovered file is read back by the
+// MCAP project's own reader (support/mcap_reader.hpp), which must accept it whole.
 #include <catch2/catch.hpp>
 #include <cstdint>
 #include <filesystem>
@@ -45,8 +46,9 @@ struct TestFrame {
   }
 };
 
-McapFileOptions small_options() {
+McapFileOptions small_options(mcap::ChunkCompression compression = mcap::ChunkCompression::kZstd) {
   McapFileOptions o;
+  o.compression = compression;
   o.chunk_bytes = 64 * 1024;  // several chunks per file
   o.max_frame_points = 4000;
   o.max_chunks = 64;
@@ -54,6 +56,7 @@ McapFileOptions small_options() {
   o.library = "pandarcap test";
   o.metadata = {{"version", "test"}};
   o.calibration_csv = "Channel,Elevation,Azimuth\n1,15,0\n";
+  o.wait_for_free_chunk = true;  // the files below are whole; the tests of the pool say otherwise
   return o;
 }
 
@@ -79,9 +82,8 @@ std::uint64_t write_file(const fs::path& path, const McapFileOptions& options, i
         kT0 + s * 1'000'000'000ull + 900'000'000ull);
     file.flush();
   }
-  const std::uint64_t messages = file.messages();
   file.close();
-  return messages;
+  return file.messages();
 }
 
 std::string read_all(const fs::path& path) {
@@ -91,10 +93,13 @@ std::string read_all(const fs::path& path) {
 }  // namespace
 
 TEST_CASE("an MCAP file is read whole by the MCAP project's reader, messages decoded",
-          "[mcap][outputs]") {
-  test::ScratchDir dir("mcap-file");
+          "[mcap][outputs][threads]") {
+  const auto compression = GENERATE(mcap::ChunkCompression::kZstd, mcap::ChunkCompression::kLz4);
+  const std::string name(mcap::compression_name(compression));
+  INFO("compression " << name);
+  test::ScratchDir dir("mcap-file-" + name);
   const fs::path path = dir / "a.mcap";
-  const McapFileOptions options = small_options();
+  const McapFileOptions options = small_options(compression);
   const std::uint64_t messages = write_file(path, options, 2);
   CHECK(messages == 2 * (3 + 15 + 1));
   const auto read = test::read_mcap_independently(path);
@@ -106,7 +111,7 @@ TEST_CASE("an MCAP file is read whole by the MCAP project's reader, messages dec
   CHECK(f["header"]["library"] == "pandarcap test");
   CHECK(f["statistics"]["message_count"] == messages);
   CHECK(f["statistics"]["chunk_count"].get<int>() >= 6);  // a frame fills a 64 kB chunk
-  CHECK(f["chunk_compression"] == nlohmann::json::array({"zstd"}));
+  CHECK(f["chunk_compression"] == nlohmann::json::array({name}));
   REQUIRE(f["attachments"].size() == 1);
   CHECK(f["attachments"][0]["name"] == "calibration.csv");
   CHECK(f["attachments"][0]["text"] == options.calibration_csv);
@@ -138,10 +143,13 @@ TEST_CASE("an MCAP file is read whole by the MCAP project's reader, messages dec
 }
 
 TEST_CASE("a file cut anywhere is finished into one the reader accepts, keeping whole chunks",
-          "[mcap][recovery]") {
-  test::ScratchDir dir("mcap-recovery");
+          "[mcap][recovery][threads]") {
+  const auto compression = GENERATE(mcap::ChunkCompression::kZstd, mcap::ChunkCompression::kLz4);
+  const std::string name(mcap::compression_name(compression));
+  INFO("compression " << name);
+  test::ScratchDir dir("mcap-recovery-" + name);
   const fs::path whole = dir / "whole.mcap";
-  const McapFileOptions options = small_options();
+  const McapFileOptions options = small_options(compression);
   const std::uint64_t messages = write_file(whole, options, 3);
   const std::string bytes = read_all(whole);
   std::mt19937 rng(20261125);
@@ -170,6 +178,7 @@ TEST_CASE("a file cut anywhere is finished into one the reader accepts, keeping 
     INFO(read.error);
     REQUIRE(read.file);
     CHECK((*read.file)["statistics"]["message_count"] == r.messages);
+    CHECK((*read.file)["chunk_compression"] == nlohmann::json::array({name}));
     CHECK((*read.file)["attachments"][0]["name"] == "calibration.csv");
     previous_kept = std::max(previous_kept, r.kept_bytes);
   }
@@ -188,7 +197,7 @@ TEST_CASE("a file cut anywhere is finished into one the reader accepts, keeping 
 }
 
 TEST_CASE("recovery leaves files that are not pandarcap's MCAP alone and refuses links",
-          "[mcap][recovery]") {
+          "[mcap][recovery][threads]") {
   test::ScratchDir dir("mcap-not-ours");
   const fs::path text = dir / "notes.mcap.part";
   std::ofstream(text) << "not an MCAP file at all\n";
@@ -220,7 +229,8 @@ TEST_CASE("recovery leaves files that are not pandarcap's MCAP alone and refuses
   CHECK(read_all(target) == target_bytes);
 }
 
-TEST_CASE("a damaged chunk ends what is kept: nothing after it is trusted", "[mcap][recovery]") {
+TEST_CASE("a damaged chunk ends what is kept: nothing after it is trusted",
+          "[mcap][recovery][threads]") {
   test::ScratchDir dir("mcap-damaged");
   const fs::path whole = dir / "whole.mcap";
   const std::uint64_t messages = write_file(whole, small_options(), 2);
@@ -241,14 +251,15 @@ TEST_CASE("a damaged chunk ends what is kept: nothing after it is trusted", "[mc
   CHECK((*read.file)["statistics"]["message_count"] == r.messages);
 }
 
-TEST_CASE("McapFile::abandon cuts back to the last whole chunk", "[mcap][recovery]") {
+TEST_CASE("McapFile::abandon cuts back to the last whole chunk", "[mcap][recovery][threads]") {
   test::ScratchDir dir("mcap-abandon");
   const fs::path path = dir / "a.mcap.part";
   McapFile file(small_options());
   file.open(path.string(), kT0);
   TestFrame frame(3000, static_cast<std::int64_t>(kT0));
   file.add_frame(frame.frame, kT0);
-  file.flush();
+  file.flush();  // handed to the compression thread
+  file.drain();  // and written
   const auto flushed = fs::file_size(path);
   file.add_health(R"({"state":"ok"})", kT0 + 1);  // in the open chunk, not on disk
   CHECK(file.abandon() == 1);
@@ -256,4 +267,119 @@ TEST_CASE("McapFile::abandon cuts back to the last whole chunk", "[mcap][recover
   const McapRecovery r = finish_interrupted_mcap(path.string());
   CHECK(r.messages == 1);
   CHECK(r.cut_bytes == 0);
+}
+
+TEST_CASE("no free chunk buffer: the message is left out and counted, never waited for",
+          "[mcap][threads]") {
+  test::ScratchDir dir("mcap-pool-full");
+  const fs::path path = dir / "a.mcap";
+  McapFileOptions options = small_options();
+  options.chunk_buffers = 1;
+  options.wait_for_free_chunk = false;  // live: never wait
+  McapFile file(options);
+  file.open(path.string(), kT0);
+  TestFrame frame(3000, static_cast<std::int64_t>(kT0));  // 69 kB: over a 64 kB chunk
+  CHECK(file.add_frame(frame.frame, kT0));
+  // The next message hands the full chunk over, and the only buffer is then in flight: it comes
+  // back only when this thread picks it up, at the next message at the earliest, so this
+  // message has no chunk to go to.
+  CHECK_FALSE(file.add_frame(frame.frame, kT0 + 100'000'000));
+  CHECK(file.messages_not_recorded() == 1);
+  file.close();
+  CHECK(file.messages() == 1);
+  CHECK(file.messages_not_recorded() == 1);
+  const McapRecovery r = finish_interrupted_mcap(path.string());  // a finished file: all kept
+  CHECK(r.messages == 1);
+  const auto read = test::read_mcap_independently(path);
+  if (read.reader_missing) return;
+  INFO(read.error);
+  REQUIRE(read.file);
+  CHECK((*read.file)["statistics"]["message_count"] == 1);
+}
+
+TEST_CASE("close drains the chunk pipeline: every chunk handed over is in the file",
+          "[mcap][threads]") {
+  const auto compression = GENERATE(mcap::ChunkCompression::kZstd, mcap::ChunkCompression::kLz4,
+                                    mcap::ChunkCompression::kNone);
+  const std::string name(mcap::compression_name(compression));
+  INFO("compression '" << name << "'");
+  test::ScratchDir dir("mcap-drain");
+  const fs::path path = dir / "a.mcap";
+  McapFileOptions options = small_options(compression);
+  options.chunk_buffers = 8;  // more than the chunks below: none is ever left out
+  McapFile file(options);
+  file.open(path.string(), kT0);
+  // Five frames, a chunk each, handed over one after the other without any wait; close()
+  // then finds most of them still in flight.
+  for (int f = 0; f < 5; ++f) {
+    const std::uint64_t t = kT0 + f * 100'000'000ull;
+    TestFrame frame(3000, static_cast<std::int64_t>(t));
+    REQUIRE(file.add_frame(frame.frame, t));
+  }
+  file.close();
+  CHECK(file.messages() == 5);
+  CHECK(file.messages_not_recorded() == 0);
+  const auto read = test::read_mcap_independently(path);
+  if (read.reader_missing) return;
+  INFO(read.error);
+  REQUIRE(read.file);
+  CHECK((*read.file)["statistics"]["message_count"] == 5);
+  CHECK((*read.file)["statistics"]["chunk_count"] == 5);
+  CHECK((*read.file)["topics"]["/pandar/points"]["count"] == 5);
+}
+
+TEST_CASE("writer and compression thread: every message written or counted, files whole",
+          "[mcap][threads]") {
+  // Two buffers and small chunks, so the writer often finds both in flight: messages are left
+  // out (counted) while the compression thread works, in any interleaving. Run under TSan in CI.
+  test::ScratchDir dir("mcap-threads");
+  McapFileOptions options = small_options(mcap::ChunkCompression::kZstd);
+  options.chunk_buffers = 2;
+  options.wait_for_free_chunk = false;
+  options.chunk_bytes = 16 * 1024;
+  options.max_chunks = 4096;
+  McapFile file(options);
+  std::vector<std::uint8_t> packet(1262, 0xAB);
+  std::uint64_t handed = 0, recorded = 0, written = 0;
+  for (int n = 0; n < 3; ++n) {
+    const fs::path path = dir / ("f" + std::to_string(n) + ".mcap");
+    file.open(path.string(), kT0);
+    const std::uint64_t not_recorded_before = file.messages_not_recorded();
+    std::uint64_t in_file = 0;
+    for (int i = 0; i < 3000; ++i) {
+      const std::uint64_t t = kT0 + static_cast<std::uint64_t>(i) * 1000;
+      packet[0] = static_cast<std::uint8_t>(i);
+      ++handed;
+      in_file += file.add_packet(packet, static_cast<std::int64_t>(t), t);
+      if (i % 700 == 0) file.flush();
+    }
+    file.close();
+    CHECK(file.messages() == in_file);
+    CHECK(in_file + (file.messages_not_recorded() - not_recorded_before) == 3000);
+    recorded += in_file;
+    written += file.messages();
+    const McapRecovery r = finish_interrupted_mcap(path.string());
+    CHECK(r.messages == in_file);
+  }
+  CHECK(written == recorded);
+  CHECK(recorded + file.messages_not_recorded() == handed);
+}
+
+TEST_CASE("a replay waits for a chunk buffer instead: every message is written",
+          "[mcap][threads]") {
+  test::ScratchDir dir("mcap-pool-wait");
+  const fs::path path = dir / "a.mcap";
+  McapFileOptions options = small_options();
+  options.chunk_buffers = 1;  // every second frame finds the only buffer in flight
+  McapFile file(options);
+  file.open(path.string(), kT0);
+  for (int f = 0; f < 6; ++f) {
+    const std::uint64_t t = kT0 + f * 100'000'000ull;
+    TestFrame frame(3000, static_cast<std::int64_t>(t));
+    CHECK(file.add_frame(frame.frame, t));
+  }
+  file.close();
+  CHECK(file.messages() == 6);
+  CHECK(file.messages_not_recorded() == 0);
+  CHECK(finish_interrupted_mcap(path.string()).messages == 6);
 }

@@ -90,7 +90,7 @@ TEST_CASE("MCAP message prefix, chunk and message index round trip", "[mcap]") {
   CHECK(message->publish_time == 1001);
   CHECK(std::string(message->data.begin(), message->data.end()) == data);
 
-  ChunkCompressor compressor(records.size());
+  ChunkCompressor compressor(ChunkCompression::kZstd, records.size());
   std::vector<std::uint8_t> compressed(compressor.bound());
   compressed.resize(compressor.compress(records, compressed));
   std::vector<std::uint8_t> out;
@@ -104,7 +104,7 @@ TEST_CASE("MCAP message prefix, chunk and message index round trip", "[mcap]") {
   // The header alone, the stored records written after it, is the same record.
   std::vector<std::uint8_t> split;
   ByteWriter s(split);
-  write_chunk_header(s, 1000, 1000, records, "zstd", compressed.size());
+  write_chunk_header(s, 1000, 1000, records.size(), crc32(records), "zstd", compressed.size());
   s.bytes(compressed);
   CHECK(split == out);
   std::vector<std::uint8_t> back(chunk->uncompressed_size);
@@ -114,6 +114,7 @@ TEST_CASE("MCAP message prefix, chunk and message index round trip", "[mcap]") {
   std::vector<std::uint8_t> wrong(records.size() + 1);
   CHECK_FALSE(decompress_chunk("zstd", chunk->records, wrong));
   CHECK_FALSE(decompress_chunk("lz4", chunk->records, back));
+  CHECK_FALSE(decompress_chunk("brotli", chunk->records, back));
   std::vector<std::uint8_t> damaged(chunk->records.begin(), chunk->records.end());
   damaged.resize(damaged.size() / 2);
   CHECK_FALSE(decompress_chunk("zstd", damaged, back));
@@ -123,6 +124,50 @@ TEST_CASE("MCAP message prefix, chunk and message index round trip", "[mcap]") {
   write_message_index(w, 2, entries);
   CHECK(out.size() == 9 + 2 + 4 + 32);
   CHECK(parse_message_index_channel(record_at(out)->content) == std::optional<std::uint16_t>(2));
+}
+
+TEST_CASE("lz4 chunks: the LZ4 frame format, its stated size, round trip and damage refused",
+          "[mcap]") {
+  CHECK(compression_name(ChunkCompression::kLz4) == "lz4");
+  CHECK(parse_compression_name("lz4") == ChunkCompression::kLz4);
+  CHECK(parse_compression_name("") == ChunkCompression::kNone);
+  CHECK_FALSE(parse_compression_name("bz2"));
+  // Records like a frame's: repetitive, several LZ4 blocks' worth (over 4 MB) plus some.
+  std::vector<std::uint8_t> records(5'000'000);
+  for (std::size_t i = 0; i < records.size(); ++i)
+    records[i] = static_cast<std::uint8_t>((i % 23) * 7 + (i / 4096) % 5);
+  for (const int level : {1, -3, 9}) {
+    INFO("level " << level);
+    ChunkCompressor compressor(ChunkCompression::kLz4, records.size(), level);
+    std::vector<std::uint8_t> stored(compressor.bound());
+    stored.resize(compressor.compress(records, stored));
+    CHECK(stored.size() < records.size() / 2);
+    // The LZ4 frame's magic number (0x184D2204, little-endian): a frame, not a raw block.
+    REQUIRE(stored.size() > 4);
+    CHECK(std::vector<std::uint8_t>(stored.begin(), stored.begin() + 4) ==
+          std::vector<std::uint8_t>{0x04, 0x22, 0x4D, 0x18});
+    CHECK(stored_content_size("lz4", stored) == records.size());
+    std::vector<std::uint8_t> back(records.size());
+    REQUIRE(decompress_chunk("lz4", stored, back));
+    CHECK(back == records);
+    std::vector<std::uint8_t> wrong(records.size() - 1);
+    CHECK_FALSE(decompress_chunk("lz4", stored, wrong));
+    CHECK_FALSE(decompress_chunk("zstd", stored, back));
+    const std::vector<std::uint8_t> cut(
+        stored.begin(), stored.begin() + static_cast<std::ptrdiff_t>(stored.size() / 2));
+    CHECK_FALSE(decompress_chunk("lz4", cut, back));
+    // A damaged frame header fails its header checksum. Damaged blocks are refused or come out
+    // different (no content checksum: the chunk's CRC-32 is what refuses them), never read or
+    // written past the buffers.
+    std::vector<std::uint8_t> damaged = stored;
+    damaged[5] ^= 0x10;
+    CHECK_FALSE(decompress_chunk("lz4", damaged, back));
+    damaged = stored;
+    for (std::size_t i = 64; i < damaged.size(); i += 101)
+      damaged[i] ^= 0x5A;
+    if (decompress_chunk("lz4", damaged, back)) CHECK(crc32(back) != crc32(records));
+  }
+  CHECK_FALSE(stored_content_size("lz4", std::vector<std::uint8_t>{1, 2, 3}));
 }
 
 TEST_CASE("MCAP parsers refuse every truncation of a record", "[mcap]") {
@@ -308,7 +353,7 @@ TEST_CASE("MCAP tail: summary offsets point at their groups, footer CRC covers t
 TEST_CASE("a chunk's stored size is read from its zstd frame header before any decompression",
           "[mcap]") {
   std::vector<std::uint8_t> records(100'000, 0x42);
-  ChunkCompressor compressor(records.size());
+  ChunkCompressor compressor(ChunkCompression::kZstd, records.size());
   std::vector<std::uint8_t> compressed(compressor.bound());
   compressed.resize(compressor.compress(records, compressed));
   CHECK(stored_content_size("zstd", compressed) == std::optional<std::uint64_t>(100'000));

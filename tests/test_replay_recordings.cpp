@@ -116,12 +116,14 @@ json inspect_summary(const fs::path& input, const std::string& extra = {}) {
 void check_round_trip(const fs::path& pcap, const fs::path& dir, const std::string& extra) {
   const fs::path zst = zstd_command(pcap, dir / "capture.pcap.zst");
   const fs::path mcap = to_mcap(pcap, dir / "convert", extra);
+  // The same with lz4 chunks (the LZ4 frame format): read as the zstd ones are.
+  const fs::path mcap_lz4 = to_mcap(pcap, dir / "convert-lz4", extra + " --mcap-compression lz4");
 
   // The readers: the same payloads at the same times, in the same order.
   const Read from_pcap = read_all(pcap);
   REQUIRE(from_pcap.status == CaptureStatus::kEnd);
   REQUIRE_FALSE(from_pcap.records.empty());
-  for (const fs::path& file : {zst, mcap}) {
+  for (const fs::path& file : {zst, mcap, mcap_lz4}) {
     INFO(file.filename());
     const Read r = read_all(file);
     CHECK(r.status == CaptureStatus::kEnd);
@@ -140,6 +142,7 @@ void check_round_trip(const fs::path& pcap, const fs::path& dir, const std::stri
   REQUIRE(frames.size() >= 3);
   CHECK(replay_frames(zst, dir / "out-zst", extra) == frames);
   CHECK(replay_frames(mcap, dir / "out-mcap", extra) == frames);
+  CHECK(replay_frames(mcap_lz4, dir / "out-mcap-lz4", extra) == frames);
 
   // pandarcap-inspect: the same summary.
   const json s = inspect_summary(pcap, extra);

@@ -146,15 +146,16 @@ void write_message_prefix(ByteWriter& w, std::uint16_t channel, std::uint32_t se
 }
 
 void write_chunk_header(ByteWriter& w, std::uint64_t message_start_time,
-                        std::uint64_t message_end_time, std::span<const std::uint8_t> uncompressed,
-                        std::string_view compression, std::uint64_t stored_bytes) {
+                        std::uint64_t message_end_time, std::uint64_t uncompressed_bytes,
+                        std::uint32_t uncompressed_crc, std::string_view compression,
+                        std::uint64_t stored_bytes) {
   // The length is known before the records follow: the fields below, then the records.
   w.u8(static_cast<std::uint8_t>(Op::kChunk));
   w.u64(8 + 8 + 8 + 4 + 4 + compression.size() + 8 + stored_bytes);
   w.u64(message_start_time);
   w.u64(message_end_time);
-  w.u64(uncompressed.size());
-  w.u32(crc32(uncompressed));
+  w.u64(uncompressed_bytes);
+  w.u32(uncompressed_crc);
   w.string(compression);
   w.u64(stored_bytes);
 }
@@ -162,8 +163,8 @@ void write_chunk_header(ByteWriter& w, std::uint64_t message_start_time,
 void write_chunk(ByteWriter& w, std::uint64_t message_start_time, std::uint64_t message_end_time,
                  std::span<const std::uint8_t> uncompressed, std::string_view compression,
                  std::span<const std::uint8_t> stored) {
-  write_chunk_header(w, message_start_time, message_end_time, uncompressed, compression,
-                     stored.size());
+  write_chunk_header(w, message_start_time, message_end_time, uncompressed.size(),
+                     crc32(uncompressed), compression, stored.size());
   w.bytes(stored);
 }
 

@@ -182,9 +182,11 @@ void write_chunk(ByteWriter& w, std::uint64_t message_start_time, std::uint64_t 
                  std::span<const std::uint8_t> stored);
 // The same Chunk record up to its stored records, which the caller writes next
 // (`stored_bytes` of them): the writer sends a compressed chunk to the file without copying it.
+// The records' size and CRC-32 are given, computed where the chunk was compressed.
 void write_chunk_header(ByteWriter& w, std::uint64_t message_start_time,
-                        std::uint64_t message_end_time, std::span<const std::uint8_t> uncompressed,
-                        std::string_view compression, std::uint64_t stored_bytes);
+                        std::uint64_t message_end_time, std::uint64_t uncompressed_bytes,
+                        std::uint32_t uncompressed_crc, std::string_view compression,
+                        std::uint64_t stored_bytes);
 // A MessageIndex record: (log_time, offset in the chunk's uncompressed records) pairs.
 struct MessageIndexEntry {
   std::uint64_t log_time = 0, offset = 0;

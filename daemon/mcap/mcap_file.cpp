@@ -29,22 +29,17 @@ McapFile::McapFile(const McapFileOptions& options)
       max_message_bytes_(
           mcap::pointcloud2_prefix_bytes(options.frame_id.size(), options.format.layout) +
           options.max_frame_points * pcd_point_bytes(options.format.layout) + 1),
-      compressor_(options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_,
-                  options.compression_level),
       // A chunk holds chunk_bytes; its smallest messages (packets) are over 1 KB.
-      max_index_entries_(options.chunk_bytes / 1024 + 64) {
-  const std::size_t chunk_capacity =
-      options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_;
-  chunk_.reserve(chunk_capacity);
-  compressed_.resize(compressor_.bound());
+      max_index_entries_(options.chunk_bytes / 1024 + 64),
+      pipeline_(std::max<std::size_t>(options.chunk_buffers, 1),
+                options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_,
+                max_index_entries_, options.compression, options.compression_level) {
   // out_ holds the opening records (the calibration among them), a chunk's fields and message
-  // indexes (its records go to the file from chunk_ or compressed_), or the tail.
+  // indexes (its records go to the file from its chunk buffer), or the tail.
   const std::size_t index_bytes =
       mcap::kMaxChannels * (mcap::kRecordPrefixBytes + 2 + 4 + max_index_entries_ * 16);
   out_.reserve(kRecordSlack + options.calibration_csv.size() + index_bytes +
                options.max_chunks * kTailBytesPerChunk);
-  for (auto& index : index_)
-    index.reserve(max_index_entries_);
   // What open() records, made here so that starting a file (a rotation) allocates nothing.
   for (const auto& [key, value] : options_.metadata)
     metadata_.emplace_back(key, value);
@@ -71,10 +66,10 @@ void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
   summary_.message_count = 0;
   summary_.channel_message_count.fill(0);
   summary_.message_start_time = summary_.message_end_time = 0;
-  chunk_.clear();
-  chunk_messages_ = 0;
-  for (auto& index : index_)
-    index.clear();
+  // close() and abandon() drained the chunks of the file before: none is in flight.
+  if (open_ != nullptr) open_->clear();
+  messages_in_flight_ = 0;
+  bytes_in_flight_ = 0;
   for (auto& s : sequence_)
     s = 0;
   out_.clear();
@@ -103,94 +98,129 @@ void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
   write_out({out_});
 }
 
-void McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
+bool McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
   if (data_bytes > max_message_bytes_) {
     throw std::length_error("MCAP message larger than the configured frame capacity");
   }
-  const bool too_big = chunk_.size() + mcap::kMessagePrefixBytes + data_bytes > chunk_.capacity();
-  const bool over = chunk_.size() >= options_.chunk_bytes;
-  if (chunk_messages_ != 0 &&
-      (too_big || over || index_[channel - 1].size() >= max_index_entries_)) {
-    write_chunk();
+  write_done_chunks();
+  if (open_ != nullptr && open_->messages != 0) {
+    const bool too_big =
+        open_->records.size() + mcap::kMessagePrefixBytes + data_bytes > open_->records.capacity();
+    const bool over = open_->records.size() >= options_.chunk_bytes;
+    if (too_big || over || open_->index[channel - 1].size() >= max_index_entries_) submit_open();
   }
+  if (open_ == nullptr) open_ = pipeline_.take_free();
+  if (open_ == nullptr && options_.wait_for_free_chunk) {
+    if (ChunkBuffer* oldest = pipeline_.wait_done()) write_chunk(*oldest);
+    open_ = pipeline_.take_free();
+  }
+  if (open_ != nullptr) return true;
+  ++not_recorded_;
+  return false;
 }
 
-void McapFile::begin_message(std::uint16_t channel, std::uint64_t log_time,
+bool McapFile::begin_message(std::uint16_t channel, std::uint64_t log_time,
                              std::size_t data_bytes) {
-  make_room(data_bytes, channel);
-  if (chunk_messages_ == 0 || log_time < chunk_start_time_) chunk_start_time_ = log_time;
-  if (chunk_messages_ == 0 || log_time > chunk_end_time_) chunk_end_time_ = log_time;
-  ++chunk_messages_;
-  index_[channel - 1].push_back({log_time, chunk_.size()});
-  mcap::ByteWriter w(chunk_);
+  if (!make_room(data_bytes, channel)) return false;
+  ChunkBuffer& chunk = *open_;
+  if (chunk.messages == 0 || log_time < chunk.start_time) chunk.start_time = log_time;
+  if (chunk.messages == 0 || log_time > chunk.end_time) chunk.end_time = log_time;
+  ++chunk.messages;
+  chunk.index[channel - 1].push_back({log_time, chunk.records.size()});
+  mcap::ByteWriter w(chunk.records);
   mcap::write_message_prefix(w, channel, sequence_[channel]++, log_time, log_time, data_bytes);
+  return true;
 }
 
-void McapFile::add_frame(const Frame& frame, std::uint64_t log_time) {
+void McapFile::submit_open() {
+  messages_in_flight_ += open_->messages;
+  bytes_in_flight_ += open_->records.size();
+  pipeline_.submit(open_);
+  open_ = nullptr;
+}
+
+bool McapFile::add_frame(const Frame& frame, std::uint64_t log_time) {
   const PcdLayout layout = options_.format.layout;
   const std::size_t prefix = mcap::pointcloud2_prefix_bytes(options_.frame_id.size(), layout);
   const std::size_t data = frame.size * pcd_point_bytes(layout);
   // A daemon arena holds its points in the output layout already: its bytes go in as they are.
   const bool as_is = frame.is_encoded() && frame.format.layout == layout &&
                      frame.format.axes == options_.format.axes;
-  begin_message(kPointsChannel, log_time, prefix + data + mcap::kPointCloud2SuffixBytes);
-  mcap::ByteWriter w(chunk_);
+  if (frame.is_encoded() && !as_is) {
+    throw std::invalid_argument("MCAP frame layout differs from the PCD's");
+  }
+  if (!begin_message(kPointsChannel, log_time, prefix + data + mcap::kPointCloud2SuffixBytes)) {
+    return false;
+  }
+  std::vector<std::uint8_t>& records = open_->records;
+  mcap::ByteWriter w(records);
   mcap::write_pointcloud2_prefix(w, mcap::ros_time(frame.info.start_ns), options_.frame_id,
                                  static_cast<std::uint32_t>(frame.size), layout);
   if (as_is) {
     w.bytes(frame.used_bytes());  // within the reserved capacity: no allocation
   } else {
-    if (frame.is_encoded()) throw std::invalid_argument("MCAP frame layout differs from the PCD's");
-    const std::size_t at = chunk_.size();
-    chunk_.resize(at + data);  // within the reserved capacity: no allocation
-    encode_pcd_points(frame.used(), std::span(chunk_.data() + at, data), options_.format,
+    const std::size_t at = records.size();
+    records.resize(at + data);  // within the reserved capacity: no allocation
+    encode_pcd_points(frame.used(), std::span(records.data() + at, data), options_.format,
                       PcdFrameContext{frame.info.start_ns, frame.info.return_mode});
   }
   mcap::write_pointcloud2_suffix(w);
+  return true;
 }
 
-void McapFile::add_packet(std::span<const std::uint8_t> payload, std::int64_t receive_time_ns,
+bool McapFile::add_packet(std::span<const std::uint8_t> payload, std::int64_t receive_time_ns,
                           std::uint64_t log_time) {
-  begin_message(kPacketsChannel, log_time, mcap::pandar_packet_bytes(payload.size()));
-  mcap::ByteWriter w(chunk_);
+  if (!begin_message(kPacketsChannel, log_time, mcap::pandar_packet_bytes(payload.size()))) {
+    return false;
+  }
+  mcap::ByteWriter w(open_->records);
   mcap::write_pandar_packet(w, mcap::ros_time(receive_time_ns), payload);
+  return true;
 }
 
-void McapFile::add_health(std::string_view json, std::uint64_t log_time) {
+bool McapFile::add_health(std::string_view json, std::uint64_t log_time) {
   while (!json.empty() && json.back() == '\n')
     json.remove_suffix(1);
-  begin_message(kHealthChannel, log_time, json.size());
-  mcap::ByteWriter(chunk_).bytes(json);
+  if (!begin_message(kHealthChannel, log_time, json.size())) return false;
+  mcap::ByteWriter(open_->records).bytes(json);
+  return true;
 }
 
-void McapFile::write_chunk() {
-  if (chunk_messages_ == 0) return;
+void McapFile::write_done_chunks() {
+  while (ChunkBuffer* chunk = pipeline_.take_done())
+    write_chunk(*chunk);
+}
+
+void McapFile::write_chunk(ChunkBuffer& chunk) {
+  // Whatever happens, the buffer is free again; its messages stay in messages_in_flight_ until
+  // written, so a failure's abandon() counts them as lost.
+  struct GiveBack {
+    ChunkPipeline& pipeline;
+    ChunkBuffer& chunk;
+    ~GiveBack() { pipeline.give_back(&chunk); }
+  } give_back{pipeline_, chunk};
+  if (chunk.failed) throw std::runtime_error(chunk.error.data());
   const std::uint64_t chunk_start = file_.size();
-  const std::span<const std::uint8_t> records(chunk_);
-  std::span<const std::uint8_t> stored = records;
-  if (options_.compress) {
-    stored = std::span<const std::uint8_t>(compressed_.data(),
-                                           compressor_.compress(records, compressed_));
-  }
-  const std::string_view compression = options_.compress ? "zstd" : "";
+  const std::span<const std::uint8_t> stored = chunk.stored();
+  const std::string_view compression = mcap::compression_name(pipeline_.compression());
   // The chunk's fields, its stored records straight from where they are, then its indexes.
   out_.clear();
   mcap::ByteWriter w(out_);
-  mcap::write_chunk_header(w, chunk_start_time_, chunk_end_time_, records, compression,
-                           stored.size());
+  mcap::write_chunk_header(w, chunk.start_time, chunk.end_time, chunk.records.size(), chunk.crc,
+                           compression, stored.size());
   const std::size_t header_bytes = w.size();
   mcap::ChunkInfo info;
-  info.message_start_time = chunk_start_time_;
-  info.message_end_time = chunk_end_time_;
+  info.message_start_time = chunk.start_time;
+  info.message_end_time = chunk.end_time;
   info.chunk_start_offset = chunk_start;
   info.chunk_length = header_bytes + stored.size();
   info.compression = compression;
   info.compressed_size = stored.size();
-  info.uncompressed_size = records.size();
+  info.uncompressed_size = chunk.records.size();
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
-    if (index_[c].empty()) continue;
+    if (chunk.index[c].empty()) continue;
     info.message_index_offset[c] = chunk_start + info.chunk_length + (w.size() - header_bytes);
-    mcap::write_message_index(w, static_cast<std::uint16_t>(c + 1), index_[c]);
+    mcap::write_message_index(w, static_cast<std::uint16_t>(c + 1), chunk.index[c]);
   }
   info.message_index_length = w.size() - header_bytes;
   const std::span<const std::uint8_t> out(out_);
@@ -198,12 +228,11 @@ void McapFile::write_chunk() {
   write_out({out.first(header_bytes), stored, out.subspan(header_bytes)});
   summary_.chunks.push_back(info);
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
-    for (const auto& entry : index_[c])
+    for (const auto& entry : chunk.index[c])
       summary_.count_message(static_cast<std::uint16_t>(c + 1), entry.log_time);
-    index_[c].clear();
   }
-  chunk_.clear();
-  chunk_messages_ = 0;
+  messages_in_flight_ -= chunk.messages;
+  bytes_in_flight_ -= chunk.records.size();
 }
 
 void McapFile::write_out(std::initializer_list<std::span<const std::uint8_t>> parts) {
@@ -218,12 +247,21 @@ void McapFile::write_out(std::initializer_list<std::span<const std::uint8_t>> pa
 }
 
 void McapFile::flush() {
-  if (file_.is_open()) write_chunk();
+  if (!file_.is_open()) return;
+  write_done_chunks();
+  if (open_ != nullptr && open_->messages != 0) submit_open();
+}
+
+void McapFile::drain() {
+  if (!file_.is_open()) return;
+  while (ChunkBuffer* chunk = pipeline_.wait_done())
+    write_chunk(*chunk);
 }
 
 void McapFile::close() {
   if (!file_.is_open()) return;
-  write_chunk();
+  flush();
+  drain();
   out_.clear();
   mcap::ByteWriter w(out_);
   mcap::write_tail(w, file_.size(), summary_);
@@ -232,11 +270,15 @@ void McapFile::close() {
 }
 
 std::uint64_t McapFile::abandon() noexcept {
-  const std::uint64_t lost = chunk_messages_;
-  chunk_.clear();
-  chunk_messages_ = 0;
-  for (auto& index : index_)
-    index.clear();
+  std::uint64_t lost = messages_in_flight_;
+  if (open_ != nullptr) {
+    lost += open_->messages;
+    open_->clear();
+  }
+  while (ChunkBuffer* chunk = pipeline_.wait_done())
+    pipeline_.give_back(chunk);
+  messages_in_flight_ = 0;
+  bytes_in_flight_ = 0;
   file_.truncate(whole_bytes_);
   try {
     file_.close();

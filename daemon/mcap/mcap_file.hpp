@@ -1,18 +1,27 @@
 // One MCAP file being written (https://mcap.dev/spec; the records are core/mcap/).
 //
-// Messages collect in an uncompressed chunk in memory; a chunk is compressed and written, with
-// one MessageIndex record per channel in it, when it would outgrow chunk_bytes, when its message
-// index is full, and at every flush() (the writer's once-a-second tick), so a killed run loses at
-// most the last second, and what is on disk always ends on a whole chunk and its indexes: the
-// recovery (mcap_recovery.hpp) cuts back to that point and writes the summary. close() writes the
-// last chunk, DataEnd, the summary (schemas, channels, statistics, chunk, attachment and metadata
-// indexes), the summary offsets and the footer.
+// Messages collect in an uncompressed chunk in memory, one of a small pool of chunk buffers
+// (chunk_pipeline.hpp). A chunk is handed to the compression thread when it would outgrow
+// chunk_bytes, when its message index is full, and at every flush() (the writer's
+// once-a-second tick); the writer thread picks it up compressed, without waiting, as it adds the
+// next messages or at the next flush, and writes it with one MessageIndex record per channel in
+// it. So a killed run loses about the last second, and what is on disk always ends on a whole
+// chunk and its indexes: the recovery (mcap_recovery.hpp) cuts back to that point and writes the
+// summary. close() hands the last chunk over, waits for every chunk in flight and writes it (the
+// drain), then DataEnd, the summary (schemas, channels, statistics, chunk, attachment and
+// metadata indexes), the summary offsets and the footer.
+//
+// When every chunk buffer is in flight (the compression thread is behind), a message is left
+// out at once and counted (messages_not_recorded()), or with wait_for_free_chunk (replays) the
+// oldest chunk in flight is waited for; otherwise the writer thread never waits for the
+// compression thread except in drain(), close() and abandon().
 //
 // Every buffer is allocated when the McapFile is made, sized from the options; writing messages,
 // chunks and the summary then allocates nothing. A file holds at most max_chunks chunks (the
 // summary's index is preallocated): full() says when the recorder must start the next file.
 // Failures throw (std::system_error from the file, std::length_error for a message larger than
 // the options allow); the file is then left as it was after its last whole chunk.
+// Not thread-safe: one thread (the writer) calls everything; the compression thread is internal.
 #pragma once
 
 #include <cstddef>
@@ -25,9 +34,9 @@
 #include <vector>
 
 #include "core/frame.hpp"
-#include "core/mcap/chunk_codec.hpp"
 #include "core/mcap/mcap_records.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/mcap/chunk_pipeline.hpp"
 #include "daemon/mcap/mcap_file_options.hpp"
 
 namespace pandarcap {
@@ -44,46 +53,63 @@ class McapFile {
   bool is_open() const noexcept { return file_.is_open(); }
   // The open file is still where its path says (see OutputFile::at_its_path).
   bool at_its_path() const noexcept { return file_.at_its_path(); }
-  bool full() const noexcept { return summary_.chunks.size() + 1 >= options_.max_chunks; }
+  bool full() const noexcept {
+    return summary_.chunks.size() + pipeline_.in_flight() + 1 >= options_.max_chunks;
+  }
 
-  void add_frame(const Frame& frame, std::uint64_t log_time);
-  void add_packet(std::span<const std::uint8_t> payload, std::int64_t receive_time_ns,
+  // Each returns false when the message was left out because every chunk buffer is in flight
+  // (counted in messages_not_recorded()).
+  bool add_frame(const Frame& frame, std::uint64_t log_time);
+  bool add_packet(std::span<const std::uint8_t> payload, std::int64_t receive_time_ns,
                   std::uint64_t log_time);
-  void add_health(std::string_view json, std::uint64_t log_time);
+  bool add_health(std::string_view json, std::uint64_t log_time);
 
-  // Writes the open chunk (if any).
+  // Hands the open chunk (if any) to the compression thread and writes the chunks that came
+  // back compressed; never waits.
   void flush();
-  // Writes the open chunk and the tail, and closes the file.
+  // Waits for every chunk in flight and writes it: the file then ends on all that was flushed.
+  void drain();
+  // Writes the open chunk, every chunk in flight and the tail, and closes the file.
   void close();
   // After a failure: the file cut back to its last whole chunk and closed, unfinished (a .part
-  // for the next start's recovery). Returns the messages that were lost with the open chunk.
+  // for the next start's recovery). Returns the messages that were lost with the open chunk and
+  // the chunks in flight (waited for, and discarded).
   std::uint64_t abandon() noexcept;
 
+  // In the chunks written to the open file.
   std::uint64_t messages() const noexcept { return summary_.message_count; }
   std::uint64_t bytes() const noexcept { return file_.is_open() ? file_.size() : 0; }
+  // The chunks handed over and not yet written, uncompressed (an upper bound of what they add
+  // to bytes(); rotation by size counts them).
+  std::uint64_t bytes_in_flight() const noexcept { return bytes_in_flight_; }
+  // Left out because every chunk buffer was in flight; for the McapFile's life (monotonic).
+  std::uint64_t messages_not_recorded() const noexcept { return not_recorded_; }
 
  private:
-  // Room in the chunk for a message of `data_bytes`: writes the chunk first when needed.
-  void make_room(std::size_t data_bytes, std::uint16_t channel);
-  void begin_message(std::uint16_t channel, std::uint64_t log_time, std::size_t data_bytes);
-  void write_chunk();
+  // Room in the open chunk for a message of `data_bytes`: the chunk handed over first when
+  // needed; false when no chunk buffer is free.
+  bool make_room(std::size_t data_bytes, std::uint16_t channel);
+  bool begin_message(std::uint16_t channel, std::uint64_t log_time, std::size_t data_bytes);
+  void submit_open();
+  // Writes the chunks back from the compression thread (never waits).
+  void write_done_chunks();
+  void write_chunk(ChunkBuffer& chunk);
   // `parts` to the file, one after the other; on a failure the file is cut back to its last
   // whole chunk and the error rethrown.
   void write_out(std::initializer_list<std::span<const std::uint8_t>> parts);
 
   McapFileOptions options_;
   std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_
-  std::size_t max_message_bytes_;  // before compressor_, which is sized from it
-  mcap::ChunkCompressor compressor_;
+  std::size_t max_message_bytes_;
   std::size_t max_index_entries_;
   OutputFile file_;
   mcap::Summary summary_;
-  std::vector<std::uint8_t> chunk_;       // the open chunk's Message records, uncompressed
-  std::vector<std::uint8_t> compressed_;  // its compressed form
-  std::vector<std::uint8_t> out_;         // records on their way to the file
-  std::vector<mcap::MessageIndexEntry> index_[mcap::kMaxChannels];
-  std::uint64_t chunk_start_time_ = 0, chunk_end_time_ = 0;
-  std::uint64_t chunk_messages_ = 0;
+  std::vector<std::uint8_t> out_;  // records on their way to the file
+  ChunkPipeline pipeline_;
+  ChunkBuffer* open_ = nullptr;           // the chunk messages go to; null when none was free
+  std::uint64_t messages_in_flight_ = 0;  // in chunks handed over and not yet written
+  std::uint64_t bytes_in_flight_ = 0;     // their records, uncompressed
+  std::uint64_t not_recorded_ = 0;
   std::uint32_t sequence_[mcap::kMaxChannels + 1]{};
   std::uint64_t whole_bytes_ = 0;  // the file's length after its last whole chunk
 };

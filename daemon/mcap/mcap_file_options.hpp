@@ -7,14 +7,20 @@
 #include <utility>
 #include <vector>
 
+#include "core/mcap/chunk_codec.hpp"
 #include "core/pcd.hpp"
 
 namespace pandarcap {
 
 struct McapFileOptions {
-  bool compress = true;                    // zstd chunks; false: stored as they are
-  int compression_level = 1;               // zstd's: -7 (fastest) .. 19
-  std::size_t chunk_bytes = 4u << 20;      // uncompressed messages per chunk, about
+  mcap::ChunkCompression compression = mcap::ChunkCompression::kZstd;
+  int compression_level = 1;           // zstd's: -7 (fastest) .. 19 (lz4: chunk_codec.hpp)
+  std::size_t chunk_bytes = 4u << 20;  // uncompressed messages per chunk, about
+  std::size_t chunk_buffers = 3;       // the chunk pool (chunk_pipeline.hpp): >= 2
+  // No free chunk buffer: false (live) leaves the message out, counted; true (a replay, a
+  // conversion that must be whole, with no sensor to keep up with) waits for the oldest chunk in
+  // flight and writes it.
+  bool wait_for_free_chunk = false;
   std::size_t max_frame_points = 180'000;  // the largest frame (the arenas' capacity)
   std::size_t max_chunks = 16'384;         // per file
   bool packets = false;                    // a /pandar/packets channel

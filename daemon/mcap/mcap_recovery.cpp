@@ -187,7 +187,9 @@ McapRecovery finish_interrupted_mcap(const std::string& path) {
         info.message_end_time = chunk->message_end_time;
         info.chunk_start_offset = at;
         info.chunk_length = length;
-        info.compression = chunk->compression == "zstd" ? "zstd" : "";
+        // A chunk that decompressed has a compression pandarcap reads: the name, as stored.
+        info.compression = mcap::compression_name(mcap::parse_compression_name(chunk->compression)
+                                                      .value_or(mcap::ChunkCompression::kNone));
         info.compressed_size = chunk->records.size();
         info.uncompressed_size = chunk->uncompressed_size;
         // Its indexes follow: one per channel with messages in the chunk, each whole.

@@ -67,8 +67,9 @@ bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
     return false;
   }
   if (file_->is_open() &&
-      (file_->full() || rotation_due(file_->bytes(), opened_monotonic_ns_,
-                                     options_.mcap_rotate_bytes, options_.mcap_rotate_seconds))) {
+      (file_->full() ||
+       rotation_due(file_->bytes() + file_->bytes_in_flight(), opened_monotonic_ns_,
+                    options_.mcap_rotate_bytes, options_.mcap_rotate_seconds))) {
     close();
   }
   if (file_->is_open()) return true;
@@ -182,7 +183,8 @@ void McapRecorder::write_health(std::string_view json_line, std::int64_t realtim
 
 void McapRecorder::lose_open_file() {
   const std::uint64_t messages = file_->messages();
-  file_->abandon();
+  // Those not yet in it (the open chunk, the chunks in flight) were never written.
+  messages_not_written_ += file_->abandon();
   messages_closed_ += messages;  // written, and lost with the file: messages_written stays
   messages_lost_ += messages;
   spdlog::warn(
@@ -209,6 +211,16 @@ void McapRecorder::flush() {
   }
   try {
     file_->flush();
+  } catch (const std::exception& error) {
+    failed(error);
+  }
+}
+
+void McapRecorder::drain() {
+  flush();
+  if (!file_ || !file_->is_open()) return;
+  try {
+    file_->drain();
   } catch (const std::exception& error) {
     failed(error);
   }

@@ -58,8 +58,12 @@ class McapRecorder {
   void write_frame(const FrameArena& arena);
   void write_packets(const RawBatch& batch);
   void write_health(std::string_view json_line, std::int64_t realtime_ns);
-  // Writes the open chunk: the file on disk at most a second behind.
+  // Hands the open chunk to the compression thread and writes those compressed since: the file
+  // on disk about a second behind. Never waits.
   void flush();
+  // The same, then waits for every chunk in flight and writes it (at the end, before the final
+  // health record, so that record counts every message).
+  void drain();
   // Finishes the open file (if any); the next message starts a new one.
   void close();
   // SIGHUP: the open file finished.
@@ -78,10 +82,13 @@ class McapRecorder {
   std::uint64_t messages_written() const noexcept;
   std::uint64_t messages_not_written() const noexcept { return messages_not_written_; }
   std::uint64_t messages_lost() const noexcept { return messages_lost_; }
+  // Left out because the compression thread was behind (every chunk buffer in flight).
+  std::uint64_t messages_not_recorded() const noexcept {
+    return file_ ? file_->messages_not_recorded() : 0;
+  }
   std::uint64_t bytes_written() const noexcept;
 
  private:
-  // The file to write a message of `log_time` to: rotated when due, opened when none is.
   // The file to write a message of `log_time` and about `bytes` to: rotated when due, opened when
   // none is; false (counted by the caller) when none can be, or space is short.
   bool ready(std::uint64_t log_time, std::uint64_t bytes);

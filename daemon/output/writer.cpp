@@ -266,6 +266,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
   // What the recordings hold on disk now, not what was written to them: files of this run
   // removed while it ran are counted as lost.
   pcap_.verify_on_disk();
+  if (options_.mcap) mcap_.drain();  // every message handed over counted in the final record
   write_health();  // the final record goes into the MCAP file too, before it is closed
   mcap_.close();
   mcap_.verify_on_disk();

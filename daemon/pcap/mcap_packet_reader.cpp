@@ -62,10 +62,10 @@ McapPacketReader::Handled McapPacketReader::load_chunk(std::span<const std::uint
     fail(CaptureStatus::kError, "the chunk" + at_offset(offset) + " does not parse");
     return Handled::kFailed;
   }
-  if (chunk->compression != "zstd" && !chunk->compression.empty()) {
+  if (!mcap::parse_compression_name(chunk->compression)) {
     fail(CaptureStatus::kError, "the chunk" + at_offset(offset) + " is compressed with '" +
                                     std::string(chunk->compression) +
-                                    "', which is not read (zstd or none)");
+                                    "', which is not read (zstd, lz4 or none)");
     return Handled::kFailed;
   }
   if (chunk->uncompressed_size > kMaxChunkBytes) {
@@ -75,7 +75,7 @@ McapPacketReader::Handled McapPacketReader::load_chunk(std::span<const std::uint
              " MiB a chunk may hold (a damaged file)");
     return Handled::kFailed;
   }
-  // The zstd frame must state the same size (checked before the buffer is made that large).
+  // The zstd or LZ4 frame must state the same size (checked before the buffer is made that large).
   if (mcap::stored_content_size(chunk->compression, chunk->records) != chunk->uncompressed_size) {
     fail(CaptureStatus::kError,
          "the chunk" + at_offset(offset) + " does not hold the size it claims (a damaged file)");

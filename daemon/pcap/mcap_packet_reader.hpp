@@ -6,9 +6,9 @@
 //
 // Streaming, bounded memory: records are read one at a time from the data section (never the
 // whole file, never the summary); a chunk is held whole, compressed and decompressed, and a chunk
-// claiming more than kMaxChunkBytes is refused. Chunks compressed with zstd or not at all are
-// read (lz4 is not: a clear error). Schemas and channels may come anywhere before their messages,
-// inside chunks or not.
+// claiming more than kMaxChunkBytes is refused. Chunks compressed with zstd, lz4 (the LZ4
+// frame format) or not at all are read (any other compression: a clear error). Schemas and channels
+// may come anywhere before their messages, inside chunks or not.
 //
 // Which packets: messages on a channel with message encoding "cdr" whose schema is named
 // pandar_msgs/msg/PandarPacket; when a file holds several such channels (several sensors), the

@@ -15,6 +15,7 @@ import { McapIndexedReader, McapStreamReader } from "@mcap/core";
 import { parse } from "@foxglove/rosmsg";
 import { MessageReader } from "@foxglove/rosmsg2-serialization";
 import { decompress as zstdDecompress } from "fzstd";
+import lz4 from "lz4js";
 import { open, readFile } from "node:fs/promises";
 
 const decompressHandlers = {
@@ -22,6 +23,16 @@ const decompressHandlers = {
     const out = zstdDecompress(buffer);
     if (BigInt(out.byteLength) !== decompressedSize) {
       throw new Error(`zstd chunk: ${out.byteLength} bytes, the chunk says ${decompressedSize}`);
+    }
+    return out;
+  },
+  // MCAP's "lz4" is the LZ4 frame format; lz4js reads frames (block size, content size and
+  // checksum flags included) into a buffer of the size the chunk states.
+  lz4: (buffer, decompressedSize) => {
+    const out = new Uint8Array(Number(decompressedSize));
+    const n = lz4.decompressFrame(buffer, out);
+    if (BigInt(n) !== decompressedSize) {
+      throw new Error(`lz4 chunk: ${n} bytes, the chunk says ${decompressedSize}`);
     }
     return out;
   },

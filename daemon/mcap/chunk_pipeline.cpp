@@ -1,0 +1,143 @@
+#include "daemon/mcap/chunk_pipeline.hpp"
+
+#include <pthread.h>
+#include <signal.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cstring>
+#include <exception>
+#include <stdexcept>
+#include <system_error>
+
+namespace pandarcap {
+namespace {
+
+// Idle, the thread wakes this often to look again (a notify is never missed; this only bounds
+// the cost of a bug to a delay).
+constexpr auto kIdleWait = std::chrono::seconds(1);
+
+}  // namespace
+
+void ChunkBuffer::clear() noexcept {
+  records.clear();
+  for (auto& entries : index)
+    entries.clear();
+  start_time = end_time = messages = 0;
+  compressed_bytes = 0;
+  crc = 0;
+  failed = false;
+  error[0] = '\0';
+}
+
+ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
+                             std::size_t index_entries, mcap::ChunkCompression compression,
+                             int level)
+    : compression_(compression),
+      // Room for every buffer and the stop marker.
+      to_compress_(std::bit_ceil(buffers + 1)),
+      done_(std::bit_ceil(buffers + 1)) {
+  if (buffers == 0) throw std::invalid_argument("an MCAP chunk pipeline needs a buffer");
+  if (compression != mcap::ChunkCompression::kNone) {
+    compressor_ = std::make_unique<mcap::ChunkCompressor>(compression, record_capacity, level);
+  }
+  buffers_.reserve(buffers);
+  free_.reserve(buffers);
+  for (std::size_t i = 0; i < buffers; ++i) {
+    auto chunk = std::make_unique<ChunkBuffer>();
+    chunk->records.reserve(record_capacity);
+    if (compressor_) {
+      chunk->compressed_capacity = compressor_->bound();
+      chunk->compressed = std::make_unique_for_overwrite<std::uint8_t[]>(compressor_->bound());
+    }
+    for (auto& entries : chunk->index)
+      entries.reserve(index_entries);
+    free_.push_back(chunk.get());
+    buffers_.push_back(std::move(chunk));
+  }
+  // Every signal blocked while the thread is made, so it starts with them all blocked.
+  sigset_t all, before;
+  sigfillset(&all);
+  pthread_sigmask(SIG_SETMASK, &all, &before);
+  try {
+    thread_ = std::thread([this] {
+      pthread_setname_np(pthread_self(), "pc-mcap-chunks");
+      run();
+    });
+  } catch (...) {
+    pthread_sigmask(SIG_SETMASK, &before, nullptr);
+    throw;
+  }
+  pthread_sigmask(SIG_SETMASK, &before, nullptr);
+}
+
+ChunkPipeline::~ChunkPipeline() {
+  to_compress_.try_push(nullptr);  // never full: it has room for every buffer and the marker
+  to_compress_.notify();
+  thread_.join();
+}
+
+ChunkBuffer* ChunkPipeline::take_free() noexcept {
+  if (free_.empty()) return nullptr;
+  ChunkBuffer* chunk = free_.back();
+  free_.pop_back();
+  return chunk;
+}
+
+void ChunkPipeline::submit(ChunkBuffer* chunk) noexcept {
+  to_compress_.try_push(chunk);  // never full: at most every buffer is queued
+  ++in_flight_;
+  to_compress_.notify();
+}
+
+ChunkBuffer* ChunkPipeline::take_done() noexcept {
+  ChunkBuffer* chunk = nullptr;
+  if (in_flight_ == 0 || !done_.try_pop(chunk)) return nullptr;
+  --in_flight_;
+  return chunk;
+}
+
+ChunkBuffer* ChunkPipeline::wait_done() noexcept {
+  if (in_flight_ == 0) return nullptr;
+  ChunkBuffer* chunk = nullptr;
+  while (!done_.try_pop(chunk))
+    done_.wait_for_data(kIdleWait);
+  --in_flight_;
+  return chunk;
+}
+
+void ChunkPipeline::give_back(ChunkBuffer* chunk) noexcept {
+  chunk->clear();
+  free_.push_back(chunk);  // within the reserved capacity: one slot per buffer
+}
+
+void ChunkPipeline::run() noexcept {
+  while (true) {
+    ChunkBuffer* chunk = nullptr;
+    if (!to_compress_.try_pop(chunk)) {
+      to_compress_.wait_for_data(kIdleWait);
+      continue;
+    }
+    if (chunk == nullptr) return;  // the destructor's stop marker
+    compress(*chunk);
+    done_.try_push(chunk);  // never full: room for every buffer
+    done_.notify();
+  }
+}
+
+void ChunkPipeline::compress(ChunkBuffer& chunk) noexcept {
+  chunk.crc = mcap::crc32(chunk.records);
+  if (!compressor_) return;
+  try {
+    chunk.compressed_bytes = compressor_->compress(
+        chunk.records, std::span(chunk.compressed.get(), chunk.compressed_capacity));
+  } catch (const std::exception& error) {
+    chunk.failed = true;
+    const std::size_t n = std::min(std::strlen(error.what()), chunk.error.size() - 1);
+    std::memcpy(chunk.error.data(), error.what(), n);
+    chunk.error[n] = '\0';
+  }
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,106 @@
+// The chunks of an MCAP file on their way to the disk: a fixed pool of chunk buffers and one
+// compression thread, so the writer thread only appends messages and never compresses.
+//
+//   writer thread (McapFile)                      compression thread ("pc-mcap-chunks")
+//   take_free(): a buffer, filled with messages
+//   submit(chunk)  ------- to_compress (SpscQueue) ------>  CRC-32 of the records, then
+//                                                           compressed into chunk.compressed
+//   take_done() / wait_done()  <------ done (SpscQueue) ---
+//   writes the chunk and its indexes, give_back(chunk)
+//
+// Who writes: the writer thread, always. It picks compressed chunks up without blocking as it
+// adds messages and at every flush, in the order it submitted them (one compression thread,
+// FIFO queues), so the file's offsets, its chunk index and its summary stay the writer's alone,
+// as when it compressed chunks itself. Only close() and abandon() wait (the drain: every chunk
+// handed over comes back), on the done queue's futex (SpscQueue::wait_for_data), never a sleep.
+//
+// A buffer belongs to exactly one side at a time: the writer from take_free() to submit() and
+// from take_done() to give_back(), the compression thread in between; the queues' acquire and
+// release make each side's writes visible to the other. When every buffer is in flight,
+// take_free() returns nullptr at once: the caller leaves the message out and counts it
+// (McapFile::messages_not_recorded), as the packet ring drops the newest when full.
+//
+// Everything is allocated here, at construction: `buffers` chunks of `record_capacity` bytes, a
+// compressed copy of each (the codec's bound; none without compression), `index_entries` index
+// entries per channel, and the compressor. The thread starts with every signal blocked (the
+// daemon's supervisor takes them with sigwait) and stops in the destructor, after compressing
+// whatever was still queued.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <thread>
+#include <vector>
+
+#include "core/mcap/chunk_codec.hpp"
+#include "core/mcap/mcap_records.hpp"
+#include "ringbuf/spsc_queue.hpp"
+
+namespace pandarcap {
+
+struct ChunkBuffer {
+  // Filled by the writer thread before submit().
+  std::vector<std::uint8_t> records;  // the chunk's Message records, uncompressed
+  std::array<std::vector<mcap::MessageIndexEntry>, mcap::kMaxChannels> index;
+  std::uint64_t start_time = 0, end_time = 0, messages = 0;
+  // Filled by the compression thread before it hands the chunk back.
+  // The codec's bound, left uninitialised (its pages count only once used); none without
+  // compression.
+  std::unique_ptr<std::uint8_t[]> compressed;
+  std::size_t compressed_capacity = 0, compressed_bytes = 0;
+  std::uint32_t crc = 0;  // of `records`
+  bool failed = false;    // the compressor threw (never expected): `error` says why
+  std::array<char, 160> error{};
+
+  // What goes into the file: the compressed records, or the records as they are.
+  std::span<const std::uint8_t> stored() const noexcept {
+    return compressed ? std::span<const std::uint8_t>(compressed.get(), compressed_bytes)
+                      : std::span<const std::uint8_t>(records);
+  }
+  // Empty again (capacity kept).
+  void clear() noexcept;
+};
+
+class ChunkPipeline {
+ public:
+  ChunkPipeline(std::size_t buffers, std::size_t record_capacity, std::size_t index_entries,
+                mcap::ChunkCompression compression, int level);
+  ~ChunkPipeline();
+  ChunkPipeline(const ChunkPipeline&) = delete;
+  ChunkPipeline& operator=(const ChunkPipeline&) = delete;
+
+  mcap::ChunkCompression compression() const noexcept { return compression_; }
+  std::size_t buffers() const noexcept { return buffers_.size(); }
+
+  // ---- The writer thread only -------------------------------------------------------------
+  // An empty buffer, or nullptr when all are in flight (never waits).
+  ChunkBuffer* take_free() noexcept;
+  // Hands a filled buffer to the compression thread.
+  void submit(ChunkBuffer* chunk) noexcept;
+  // The oldest compressed chunk, or nullptr when none is back yet (never waits).
+  ChunkBuffer* take_done() noexcept;
+  // The oldest chunk in flight once it is compressed (waits for it); nullptr when none is.
+  ChunkBuffer* wait_done() noexcept;
+  // A chunk from take_done()/wait_done(), written or discarded: free again.
+  void give_back(ChunkBuffer* chunk) noexcept;
+  // Submitted and not yet taken back.
+  std::size_t in_flight() const noexcept { return in_flight_; }
+
+ private:
+  void run() noexcept;  // the compression thread
+  void compress(ChunkBuffer& chunk) noexcept;
+
+  mcap::ChunkCompression compression_;
+  std::unique_ptr<mcap::ChunkCompressor> compressor_;  // null without compression
+  std::vector<std::unique_ptr<ChunkBuffer>> buffers_;
+  std::vector<ChunkBuffer*> free_;  // the writer's; capacity for every buffer
+  std::size_t in_flight_ = 0;
+  // nullptr in to_compress_ tells the thread to stop.
+  ringbuf::SpscQueue<ChunkBuffer*> to_compress_, done_;
+  std::thread thread_;
+};
+
+}  // namespace pandarcap
