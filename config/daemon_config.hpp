@@ -71,7 +71,7 @@ struct OutputSection {
   // calibration attached; optionally the raw packets. In mcap/ under the directory.
   bool mcap = false;
   bool mcap_packets = false;              // also each datagram (pandar_msgs/msg/PandarPacket)
-  std::string mcap_compression = "zstd";  // chunk compression: "zstd", "lz4" or "none"
+  std::string mcap_compression = "lz4";  // chunk compression: "lz4", "zstd" or "none"
   int mcap_compression_level = 1;         // zstd level: -7 (fastest) .. 19; 1 = zstd's fast default
                                           // (lz4: below 3 fast, 3..12 high compression)
   std::uint64_t mcap_chunk_bytes = 4u << 20;   // uncompressed messages per chunk, about

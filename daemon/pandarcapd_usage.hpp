@@ -78,8 +78,8 @@ Overrides (same names as the configuration keys):
   --decoder NAME         decoder: auto (default), scalar, sse4, avx2, avx512, neon, sve, sve2
   --mcap                 output.mcap = true: also write MCAP files (PointCloud2 frames, health)
   --mcap-packets         output.mcap_packets = true: every datagram into the MCAP files too
-  --mcap-compression C   output.mcap_compression: the MCAP chunks' zstd (default; smallest),
-                         lz4 (about a third of zstd's CPU, files ~1.2x larger) or none
+  --mcap-compression C   output.mcap_compression: the MCAP chunks' lz4 (default; about a
+                         third of zstd's CPU), zstd (files ~1.26x smaller) or none
   --mcap-only            output.mcap = true, output.frames = false, output.pcap = false; with
                          --replay FILE this converts a capture to MCAP
   --latency-budget-ms N  latency.budget_ms (default 5): how long a datagram may wait before the

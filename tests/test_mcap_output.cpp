@@ -333,8 +333,10 @@ TEST_CASE("a full disk under MCAP: what was written is finished for the reader, 
 TEST_CASE("every compression setting gives files the reader accepts",
           "[daemon][mcap][realtime][threads]") {
   for (const std::string setting :
-       {"mcap_compression = \"none\"", "mcap_compression_level = -7", "mcap_compression_level = 19",
-        "mcap_compression = \"lz4\"", "mcap_compression = \"lz4\"\nmcap_compression_level = 12"}) {
+       {"mcap_compression = \"none\"", "mcap_compression = \"zstd\"\nmcap_compression_level = -7",
+        "mcap_compression = \"zstd\"\nmcap_compression_level = 19",
+        "mcap_compression_level = 1",  // the default compression: lz4
+        "mcap_compression = \"lz4\"\nmcap_compression_level = 12"}) {
     test::ScratchDir dir("mcap-compression");
     const fs::path out = dir / "out";
     const auto r =
@@ -357,9 +359,9 @@ TEST_CASE("every compression setting gives files the reader accepts",
     if (!slow) {
       CHECK(test::health_counter(h, "mcap_messages_not_recorded") == 0);
     }
-    const char* expected = setting.find("none") != std::string::npos  ? ""
-                           : setting.find("lz4") != std::string::npos ? "lz4"
-                                                                      : "zstd";
+    const char* expected = setting.find("none") != std::string::npos   ? ""
+                           : setting.find("zstd") != std::string::npos ? "zstd"
+                                                                       : "lz4";
     CHECK(file["chunk_compression"] == json::array({expected}));
   }
 }
