@@ -8,6 +8,9 @@
 //     each cloud's points with the PCD file of the same revolution in FRAMES_DIR (same
 //     frame_reference_time as the message's header.stamp, same DATA bytes); prints one JSON
 //     object and exits 0 (1 on a protocol failure, 2 on a timeout).
+//   node live_client.mjs view URL SECONDS
+//     subscribes to every channel and reads everything for SECONDS, as Foxglove's app would;
+//     prints the messages and bytes received (for docs/live.md's cost measurement).
 //   node live_client.mjs stall URL
 //     subscribes to every channel, then never reads again (the socket paused); prints "stalled"
 //     once subscribed, and stays until killed.
@@ -66,6 +69,18 @@ if (mode === "stall") {
       console.log("stalled");
     }, 100);
   });
+} else if (mode === "view") {
+  let messages = 0;
+  let bytes = 0;
+  client.on("advertise", subscribeAll);
+  client.on("message", ({ data }) => {
+    messages += 1;
+    bytes += data.byteLength;
+  });
+  setTimeout(() => {
+    console.log(JSON.stringify({ messages, bytes }));
+    process.exit(0);
+  }, Number(framesDir) * 1000);
 } else if (mode === "watch") {
   const wanted = Number(cloudsArg);
   let reader;
@@ -145,6 +160,6 @@ if (mode === "stall") {
     process.exit(2);
   }, 20000);
 } else {
-  console.error("usage: live_client.mjs watch URL FRAMES_DIR CLOUDS | stall URL");
+  console.error("usage: live_client.mjs watch URL FRAMES_DIR CLOUDS | view URL SECONDS | stall URL");
   process.exit(64);
 }
