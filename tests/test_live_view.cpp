@@ -361,6 +361,11 @@ TEST_CASE("a viewer that never reads costs the capture nothing: 10 s at 3600 pac
   CHECK(test::health_counter(h, "datagrams_received") >= 35'000);
   // The stalled viewer's frames were dropped for it, and counted.
   CHECK(h["live"]["messages_dropped"].get<std::uint64_t>() > 0);
+  // Copying every frame for the viewers allocated nothing in the writer's loop (counted where
+  // allocations can be: not under sanitizers).
+  if (h["counters"].contains("hot_path_allocations_by_thread")) {
+    CHECK(h["counters"]["hot_path_allocations_by_thread"]["writer"] == 0);
+  }
 }
 
 TEST_CASE("the live view under abuse: churn, garbage, oversize frames, too many viewers",
