@@ -66,22 +66,38 @@ bool client_installed() {
   return false;
 }
 
-// pandarcapd --simulate with the live view on `port`.
-harness::ChildProcess start_daemon(const test::ScratchDir& dir, std::uint16_t port,
-                                   double duration_s, const std::string& config_text = "") {
-  std::vector<std::string> args{
-      "--allow-root",    "--simulate",         "--duration",   std::to_string(duration_s),
-      "--foxglove-port", std::to_string(port), "--output-dir", (dir / "out").string()};
-  if (!config_text.empty()) {
-    std::ofstream(dir / "live.toml") << config_text;
-    args.insert(args.begin(), {"-c", (dir / "live.toml").string()});
+// pandarcapd --simulate for `duration_s` with the live view on a free port (and `config_text`
+// as its configuration file), started and ready.
+struct LiveRun {
+  LiveRun(const std::string& tag, double duration_s, const std::string& config_text = "")
+      : dir(tag), port(free_tcp_port()), daemon(start(duration_s, config_text)) {
+    REQUIRE(
+        harness::wait_until([&] { return daemon.log().find("ready:") != std::string::npos; }, 20s));
   }
-  return harness::ChildProcess(test::binary("pandarcapd"), args, dir / "daemon.log");
-}
+  std::string url() const { return "ws://127.0.0.1:" + std::to_string(port); }
+  // Foxglove's client watching `clouds` frames (live_client.mjs watch): its JSON report.
+  test::CommandResult watch(int clouds) const {
+    return test::run_command("node '" + (client_dir() / "live_client.mjs").string() + "' watch " +
+                             url() + " '" + (dir / "out" / "frames").string() + "' " +
+                             std::to_string(clouds) + " 2>&1");
+  }
 
-bool wait_for_log(const harness::ChildProcess& p, const std::string& text) {
-  return harness::wait_until([&] { return p.log().find(text) != std::string::npos; }, 20s);
-}
+  test::ScratchDir dir;
+  std::uint16_t port;
+  harness::ChildProcess daemon;
+
+ private:
+  harness::ChildProcess start(double duration_s, const std::string& config_text) const {
+    std::vector<std::string> args{
+        "--allow-root",    "--simulate",         "--duration",   std::to_string(duration_s),
+        "--foxglove-port", std::to_string(port), "--output-dir", (dir / "out").string()};
+    if (!config_text.empty()) {
+      std::ofstream(dir / "live.toml") << config_text;
+      args.insert(args.begin(), {"-c", (dir / "live.toml").string()});
+    }
+    return harness::ChildProcess(test::binary("pandarcapd"), args, dir / "daemon.log");
+  }
+};
 
 // A raw WebSocket client, to send what Foxglove's client never would.
 class RawClient {
@@ -260,7 +276,7 @@ TEST_CASE("client requests: subscribe and unsubscribe parsed, the rest refused o
   }
 }
 
-TEST_CASE("[live] keys: ranges and addresses checked at their line", "[live][config]") {
+TEST_CASE("[live] keys: ranges and addresses checked at their line", "[live][config][threads]") {
   CHECK(parse_config("", "t.toml").live.foxglove == false);
   CHECK(parse_config("", "t.toml").live.address == "127.0.0.1");
   const DaemonConfig c =
@@ -285,14 +301,9 @@ TEST_CASE("[live] keys: ranges and addresses checked at their line", "[live][con
 TEST_CASE("Foxglove's client sees every channel live: PointCloud2 equal to the PCD frames, health",
           "[live][daemon][threads]") {
   if (!client_installed()) return;
-  test::ScratchDir dir("live-watch");
-  const std::uint16_t port = free_tcp_port();
-  harness::ChildProcess daemon = start_daemon(dir, port, 5);
-  REQUIRE(wait_for_log(daemon, "ready:"));
-  CHECK(daemon.log().find("ws://127.0.0.1:" + std::to_string(port)) != std::string::npos);
-  const auto r = test::run_command("node '" + (client_dir() / "live_client.mjs").string() +
-                                   "' watch ws://127.0.0.1:" + std::to_string(port) + " '" +
-                                   (dir / "out" / "frames").string() + "' 3 2>&1");
+  LiveRun run("live-watch", 5);
+  CHECK(run.daemon.log().find(run.url()) != std::string::npos);
+  const auto r = run.watch(3);
   INFO(r.out);
   REQUIRE(r.exit_code == 0);
   const json seen = json::parse(r.out);
@@ -318,37 +329,32 @@ TEST_CASE("Foxglove's client sees every channel live: PointCloud2 equal to the P
   CHECK(seen["health_state"] == "ok");
   CHECK(seen["status"].get<int>() >= 1);
   CHECK(seen["statuses"].empty());
-  REQUIRE(daemon.wait_exit(20s) == 0);
-  const json h = test::last_health_record(dir / "out");
+  REQUIRE(run.daemon.wait_exit(20s) == 0);
+  const json h = test::last_health_record(run.dir / "out");
   REQUIRE(h.contains("live"));
   CHECK(h["live"]["messages_sent"].get<std::uint64_t>() >= 5);
   CHECK(h["live"]["clients"] == 0);
-  const std::string prom = harness::read_file(dir / "out" / "health" / "pandarcap.prom");
+  const std::string prom = harness::read_file(run.dir / "out" / "health" / "pandarcap.prom");
   CHECK(prom.find("pandarcap_live_messages_sent_total{sensor=\"pandar40p\"}") != std::string::npos);
 }
 
 TEST_CASE("a viewer that never reads costs the capture nothing: 10 s at 3600 packets/s",
           "[live][daemon][threads]") {
   if (!client_installed()) return;
-  test::ScratchDir dir("live-stall");
-  const std::uint16_t port = free_tcp_port();
-  harness::ChildProcess daemon = start_daemon(dir, port, 10);
-  REQUIRE(wait_for_log(daemon, "ready:"));
-  harness::ChildProcess stalled("/usr/bin/env",
-                                {"node", (client_dir() / "live_client.mjs").string(), "stall",
-                                 "ws://127.0.0.1:" + std::to_string(port)},
-                                dir / "stalled.log");
-  REQUIRE(wait_for_log(stalled, "stalled"));
+  LiveRun run("live-stall", 10);
+  harness::ChildProcess stalled(
+      "/usr/bin/env", {"node", (client_dir() / "live_client.mjs").string(), "stall", run.url()},
+      run.dir / "stalled.log");
+  REQUIRE(
+      harness::wait_until([&] { return stalled.log().find("stalled") != std::string::npos; }, 20s));
   // While it is stalled, another viewer still gets frames.
-  const auto other = test::run_command("node '" + (client_dir() / "live_client.mjs").string() +
-                                       "' watch ws://127.0.0.1:" + std::to_string(port) + " '" +
-                                       (dir / "out" / "frames").string() + "' 2 2>&1");
+  const auto other = run.watch(2);
   INFO(other.out);
   CHECK(other.exit_code == 0);
-  const auto status = daemon.wait_exit(30s);
-  INFO(daemon.log());
+  const auto status = run.daemon.wait_exit(30s);
+  INFO(run.daemon.log());
   REQUIRE(status == 0);
-  const std::string log = daemon.log();
+  const std::string log = run.daemon.log();
   CHECK(log.find("0 ring overruns, 0 kernel drops") != std::string::npos);
   const std::size_t at = log.find("; frames ");
   REQUIRE(at != std::string::npos);
@@ -356,7 +362,7 @@ TEST_CASE("a viewer that never reads costs the capture nothing: 10 s at 3600 pac
   INFO(frames);
   CHECK(std::stoi(frames) >= 90);  // "N complete, ...": ten revolutions a second for 10 s
   CHECK(frames.find(" 0 dropped") != std::string::npos);
-  const json h = test::last_health_record(dir / "out");
+  const json h = test::last_health_record(run.dir / "out");
   CHECK(test::health_counter(h, "frames_dropped_no_arena") == 0);
   CHECK(test::health_counter(h, "datagrams_received") >= 35'000);
   // The stalled viewer's frames were dropped for it, and counted.
@@ -370,10 +376,8 @@ TEST_CASE("a viewer that never reads costs the capture nothing: 10 s at 3600 pac
 
 TEST_CASE("the live view under abuse: churn, garbage, oversize frames, too many viewers",
           "[live][daemon][threads]") {
-  test::ScratchDir dir("live-abuse");
-  const std::uint16_t port = free_tcp_port();
-  harness::ChildProcess daemon = start_daemon(dir, port, 30, "[live]\nmax_clients = 2\n");
-  REQUIRE(wait_for_log(daemon, "ready:"));
+  LiveRun run("live-abuse", 30, "[live]\nmax_clients = 2\n");
+  const std::uint16_t port = run.port;
 
   // 100 connections opened and closed in a row, each accepted.
   int accepted = 0;
@@ -440,9 +444,9 @@ TEST_CASE("the live view under abuse: churn, garbage, oversize frames, too many 
   // After all of it: a viewer is served, and the daemon stops cleanly, every viewer gone.
   CHECK(harness::wait_until(
       [&] { return RawClient(port).handshake().find(" 101 ") != std::string::npos; }, 10s));
-  daemon.signal(SIGTERM);
-  REQUIRE(daemon.wait_exit(30s) == 0);
-  const std::string log = daemon.log();
+  run.daemon.signal(SIGTERM);
+  REQUIRE(run.daemon.wait_exit(30s) == 0);
+  const std::string log = run.daemon.log();
   CHECK(log.find("0 ring overruns, 0 kernel drops") != std::string::npos);
   CHECK(log.find("refused: 2 viewers connected already (live.max_clients)") != std::string::npos);
 }
