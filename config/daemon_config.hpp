@@ -1,8 +1,8 @@
 // Everything pandarcapd can be configured with, and its defaults. The TOML file
 // (config/pandarcap.toml documents every key) maps onto this one-to-one: table [sensor] holds
-// the established LiDAR-driver parameter names, then [ring], [arenas], [output], [health] and
-// [threads]. The defaults are what `pandarcapd --replay FILE` runs with when no config file is
-// given.
+// the established LiDAR-driver parameter names, then [ring], [arenas], [output], [health],
+// [threads], [latency] and [live]. The defaults are what `pandarcapd --replay FILE` runs with
+// when no config file is given.
 #pragma once
 
 #include <cstdint>
