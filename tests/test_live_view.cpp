@@ -301,7 +301,8 @@ TEST_CASE("[live] keys: ranges and addresses checked at their line", "[live][con
 TEST_CASE("Foxglove's client sees every channel live: PointCloud2 equal to the PCD frames, health",
           "[live][daemon][threads]") {
   if (!client_installed()) return;
-  LiveRun run("live-watch", 5);
+  // Long enough for a node slow to start on a loaded machine; stopped once the client is done.
+  LiveRun run("live-watch", 30);
   CHECK(run.daemon.log().find(run.url()) != std::string::npos);
   const auto r = run.watch(3);
   INFO(r.out);
@@ -329,6 +330,7 @@ TEST_CASE("Foxglove's client sees every channel live: PointCloud2 equal to the P
   CHECK(seen["health_state"] == "ok");
   CHECK(seen["status"].get<int>() >= 1);
   CHECK(seen["statuses"].empty());
+  run.daemon.signal(SIGTERM);
   REQUIRE(run.daemon.wait_exit(20s) == 0);
   const json h = test::last_health_record(run.dir / "out");
   REQUIRE(h.contains("live"));
