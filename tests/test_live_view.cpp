@@ -452,3 +452,31 @@ TEST_CASE("the live view under abuse: churn, garbage, oversize frames, too many 
   CHECK(log.find("0 ring overruns, 0 kernel drops") != std::string::npos);
   CHECK(log.find("refused: 2 viewers connected already (live.max_clients)") != std::string::npos);
 }
+
+TEST_CASE("the live view: another address is warned about, a port in use fails the start",
+          "[live][daemon][threads]") {
+  {
+    LiveRun run("live-address", 0.5, "[live]\naddress = \"127.0.0.2\"\n");
+    REQUIRE(run.daemon.wait_exit(20s) == 0);
+    CHECK(run.daemon.log().find("[warning] live view: listening on 127.0.0.2:" +
+                                std::to_string(run.port) + ", not 127.0.0.1") != std::string::npos);
+  }
+  // The port held by a listening socket of the test's own.
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  REQUIRE(::listen(fd, 1) == 0);
+  socklen_t n = sizeof a;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
+  test::ScratchDir dir("live-port-in-use");
+  const auto r = test::run_command(
+      test::pandarcapd_command() + " --simulate --duration 1 --foxglove-port " +
+      std::to_string(ntohs(a.sin_port)) + " --output-dir '" + (dir / "out").string() + "' 2>&1");
+  ::close(fd);
+  INFO(r.out);
+  CHECK(r.exit_code == 1);
+  CHECK(r.out.find("live view: cannot listen on 127.0.0.1:" + std::to_string(ntohs(a.sin_port))) !=
+        std::string::npos);
+}
