@@ -115,6 +115,11 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("threads", "lock_memory", t.lock_memory, std::monostate{});
 
   v("latency", "budget_ms", c.latency.budget_ms, IntRange{0, 1000});
+
+  v("live", "foxglove", c.live.foxglove, std::monostate{});
+  v("live", "address", c.live.address, &ipv4);
+  v("live", "port", c.live.port, IntRange{1, 65535});
+  v("live", "max_clients", c.live.max_clients, IntRange{1, 64});
 }
 
 // "sensor.data_port"; a top-level key is its name alone.

@@ -1,8 +1,8 @@
 // Everything pandarcapd can be configured with, and its defaults. The TOML file
 // (config/pandarcap.toml documents every key) maps onto this one-to-one: table [sensor] holds
-// the established LiDAR-driver parameter names, then [ring], [arenas], [output], [health] and
-// [threads]. The defaults are what `pandarcapd --replay FILE` runs with when no config file is
-// given.
+// the established LiDAR-driver parameter names, then [ring], [arenas], [output], [health],
+// [threads], [latency] and [live]. The defaults are what `pandarcapd --replay FILE` runs with
+// when no config file is given.
 #pragma once
 
 #include <cstdint>
@@ -123,6 +123,16 @@ struct LatencySection {
   std::uint32_t budget_ms = 5;  // 0..1000
 };
 
+// The live view: a Foxglove WebSocket server (foxglove.websocket.v1) showing the frames, the
+// health record and the sensor's status as they are made (daemon/live/). Read-only; off unless
+// asked for. An address other than 127.0.0.1 is logged as a warning at start.
+struct LiveSection {
+  bool foxglove = false;
+  std::string address = "127.0.0.1";  // the IPv4 address the server listens on
+  std::uint16_t port = 8765;          // 1..65535
+  std::uint32_t max_clients = 4;      // connections beyond this are refused; 1..64
+};
+
 struct DaemonConfig {
   std::string log_level = "info";  // trace, debug, info, warn, error, critical, off
   // Packet decoder: "auto" (the fastest SIMD target this CPU runs), "scalar" (the reference),
@@ -136,6 +146,7 @@ struct DaemonConfig {
   HealthSection health;
   ThreadsSection threads;
   LatencySection latency;
+  LiveSection live;
 };
 
 }  // namespace pandarcap

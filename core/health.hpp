@@ -247,6 +247,15 @@ struct HealthGauges {
   std::string reason;  // one line saying why the state is not ok ("" when ok)
 };
 
+// The live view (daemon/live/, [live] foxglove): its viewers now and what they were sent or not.
+struct LiveViewHealth {
+  std::uint64_t clients = 0;
+  std::uint64_t messages_sent = 0;
+  // A viewer's queue was full (one per viewer and message), or a frame was replaced by the next
+  // before the server thread took it.
+  std::uint64_t messages_dropped = 0;
+};
+
 struct HotPathAllocations {
   std::uint64_t receive = 0, decode = 0, writer = 0;
   std::uint64_t total() const noexcept { return receive + decode + writer; }
@@ -268,6 +277,8 @@ struct HealthSnapshot {
   // Heap allocations made by the receive, decode and writer loops after warm-up; absent where
   // they cannot be counted (sanitizer builds).
   std::optional<HotPathAllocations> hot_path_allocations;
+  // Present while the live view is on.
+  std::optional<LiveViewHealth> live;
 };
 
 }  // namespace pandarcap

@@ -442,6 +442,16 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
   }
 
   storage_prometheus(out, sensor, h.gauges.storage);
+  if (const auto& live = h.live) {
+    family(out, "live_clients", "gauge", "Foxglove viewers connected to the live view");
+    append("pandarcap_live_clients{{{}}} {}\n", sensor, live->clients);
+    family(out, "live_messages_sent_total", "counter", "Messages the live view sent its viewers");
+    append("pandarcap_live_messages_sent_total{{{}}} {}\n", sensor, live->messages_sent);
+    family(
+        out, "live_messages_dropped_total", "counter",
+        "Messages a live viewer did not get: its send queue full, or a frame replaced by the next");
+    append("pandarcap_live_messages_dropped_total{{{}}} {}\n", sensor, live->messages_dropped);
+  }
 
   if (const auto& a = h.hot_path_allocations) {
     family(out, "hot_path_allocations_total", "counter",
@@ -523,6 +533,10 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
 
   sensor_json(out, h);
   storage_json(out, h.gauges.storage);
+  if (const auto& live = h.live) {
+    append(R"(,"live":{{"clients":{},"messages_sent":{},"messages_dropped":{}}})", live->clients,
+           live->messages_sent, live->messages_dropped);
+  }
   latency_json(out, "latency", h.latency, "us", 1e3);
   latency_json(out, "frame_latency", h.frame_latency, "ms", 1e6);
   out += "}\n";

@@ -1,9 +1,14 @@
 #include "daemon/daemon_options.hpp"
 
+#include <fmt/format.h>
+
 #include <cstdlib>
 #include <filesystem>
 
 #include "config/command_line.hpp"
+#include "core/mcap/ros2_messages.hpp"
+#include "daemon/live/live_publish.hpp"
+#include "daemon/mcap/mcap_file.hpp"
 
 namespace pandarcap {
 
@@ -150,6 +155,28 @@ SyntheticSensorConfig simulated_sensor_config(const RunSource& source, std::int6
   sc.udp_sequence = source.simulated_udp_sequence;
   sc.start_unix_ns = start_unix_ns;
   return sc;
+}
+
+live::LiveOptions live_options(const DaemonConfig& config, std::string_view version) {
+  live::LiveOptions o;
+  o.address = config.live.address;
+  o.port = config.live.port;
+  o.max_clients = config.live.max_clients;
+  o.name = fmt::format("pandarcap {} ({})", version, config.health.sensor_name);
+  o.points_topic = config.output.mcap_points_topic;
+  o.health_topic = config.output.mcap_health_topic;
+  o.points_schema_name = std::string(mcap::kPointCloud2Name);
+  o.points_schema = std::string(mcap::kPointCloud2Schema);
+  o.health_schema = std::string(kHealthJsonSchema);
+  // Two of the largest frames queued per viewer (one being written, one waiting), and room for
+  // the health and status messages beside them.
+  o.client_queue_bytes = 2 * live_points_capacity(config) + live::kHealthMessageCapacity;
+  return o;
+}
+
+std::size_t live_points_capacity(const DaemonConfig& config) {
+  return live::points_message_bytes(pcd_format(config).layout, config.output.mcap_frame_id.size(),
+                                    config.arenas.points_per_frame);
 }
 
 }  // namespace pandarcap

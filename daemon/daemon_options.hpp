@@ -13,6 +13,7 @@
 #include "core/packet.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/decode_worker.hpp"
+#include "daemon/live/foxglove_server.hpp"
 #include "daemon/output/writer.hpp"
 #include "daemon/ptc/ptc_client.hpp"
 #include "daemon/run_source.hpp"
@@ -53,6 +54,11 @@ std::optional<PtcClientOptions> ptc_client_options(const DaemonConfig& config,
 // status_interval_seconds > 0.
 bool status_polled(const DaemonConfig& config, const RunSource& source,
                    const std::optional<PtcClientOptions>& ptc);
+
+// The live view's server ([live]; the points and health topics are the MCAP's), and the bytes of
+// the largest frame's message, which the hand-over reserves.
+live::LiveOptions live_options(const DaemonConfig& config, std::string_view version);
+std::size_t live_points_capacity(const DaemonConfig& config);
 
 // The simulated sensor's settings, starting now (`start_unix_ns`).
 SyntheticSensorConfig simulated_sensor_config(const RunSource& source, std::int64_t start_unix_ns);

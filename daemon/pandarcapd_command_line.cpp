@@ -41,6 +41,14 @@ CommandLine parse_command_line(int argc, char** argv) {
       o.overrides.emplace_back("output.mcap", "true");
       o.overrides.emplace_back("output.frames", "false");
       o.overrides.emplace_back("output.pcap", "false");
+    } else if (arg == "--foxglove-port") {
+      // The live view on, at this port (live.port's range).
+      const std::string text(args.value(arg));
+      if (const auto problem = key_option_problem(KeyOption{arg, "live.port"}, text)) {
+        args.usage_error(*problem);
+      }
+      o.overrides.emplace_back("live.foxglove", "true");
+      o.overrides.emplace_back("live.port", text);
     } else if (const KeyOption* key = find_key_option(arg)) {
       // A configuration key: its type and range are the file's (config/command_line.hpp).
       const std::string text(key->flag ? "true" : args.value(arg));

@@ -40,6 +40,8 @@
 #include "core/log_text.hpp"
 #include "daemon/daemon_options.hpp"
 #include "daemon/decode_worker.hpp"
+#include "daemon/live/foxglove_server.hpp"
+#include "daemon/live/live_handover.hpp"
 #include "daemon/output/writer.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pandarcapd_command_line.hpp"
@@ -242,6 +244,19 @@ int run(const CommandLine& options) {
   const auto lock = claim_outputs(config.output.directory);
   Writer writer(wo, pipe.to_writer, pipe.free_arenas, pipe.free_raw, pipe.receive, pipe.live,
                 pipe.sensor_status);
+  // The live view: its memory and its listening socket now, before READY=1.
+  std::unique_ptr<live::LiveHandover> live_handover;
+  std::unique_ptr<live::FoxgloveServer> live_server;
+  if (config.live.foxglove) {
+    live_handover = std::make_unique<live::LiveHandover>(live_points_capacity(config));
+    try {
+      live_server =
+          std::make_unique<live::FoxgloveServer>(live_options(config, kVersion), *live_handover);
+    } catch (const std::exception& error) {
+      throw StartupError{1, error.what()};  // as a data port in use is
+    }
+    writer.attach_live(*live_handover);
+  }
   try {
     writer.prepare();
   } catch (const std::exception& error) {
@@ -263,6 +278,10 @@ int run(const CommandLine& options) {
         place_this_thread("writer", {placement.writer_cpu, placement.writer_priority});
       },
       [&] { writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status); });
+  if (live_server) {
+    threads.start(
+        "pc-live", {}, [&] { live_server->run(); }, [&] { live_server->stop(); });
+  }
   threads.start(
       "pc-decode",
       [&] {

@@ -82,6 +82,9 @@ Overrides (same names as the configuration keys):
                          third of zstd's CPU), zstd (files ~1.26x smaller) or none
   --mcap-only            output.mcap = true, output.frames = false, output.pcap = false; with
                          --replay FILE this converts a capture to MCAP
+  --foxglove-port N      live.foxglove = true, live.port = N: a live view for Foxglove (Open
+                         connection, ws://HOST:N) of the frames, health and sensor status, on
+                         live.address (default 127.0.0.1)
   --latency-budget-ms N  latency.budget_ms (default 5): how long a datagram may wait before the
                          receive thread drains the socket; 0 = wake for every datagram
   --log-level LEVEL      trace, debug, info, warn, error, critical, off

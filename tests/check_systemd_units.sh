@@ -3,7 +3,9 @@
 #   1. systemd-analyze verify of an instance of every unit (syntax, directives, binaries);
 #   2. systemd-analyze security --offline: the exposure score must be <= 1.5 ("OK");
 #   3. the sysctl drop-in allows at least the receive buffer the default config requests;
-#   4. the sysusers entry creates the user the unit runs as, and the tmpfiles entries apply.
+#   4. the sysusers entry creates the user the unit runs as, and the tmpfiles entries apply;
+#   5. the unit binds UDP ports only: no TCP listening port (the live view's) unless a drop-in
+#      allows it, and such a drop-in verifies clean.
 # Usage: check_systemd_units.sh UNIT_DIR SOURCE_DIR   (UNIT_DIR: units configured for this build)
 set -euo pipefail
 unit_dir=$1
@@ -32,6 +34,15 @@ for template in "$unit_dir"/*@.service; do
   [ -n "$score" ] || fail "no exposure score for $name: $report"
   echo "security $name: exposure $score"
   awk -v s="$score" 'BEGIN { exit !(s <= 1.5) }' || fail "$name exposure $score > 1.5: $report"
+
+  binds=$(sed -n 's/^SocketBind\(Allow\|Deny\)=\(.*\)/\1 \2/p' "$template" | tr '\n' ';')
+  [ "$binds" = "Allow udp;Deny any;" ] || fail "$name binds more than UDP ports: '$binds'"
+  mkdir -p "$instance.d"
+  printf '[Service]\nSocketBindAllow=tcp:8765\n' >"$instance.d/live.conf"
+  if ! out=$(systemd-analyze verify --man=no "$instance" 2>&1) || [ -n "$out" ]; then
+    fail "systemd-analyze verify $name with the live view's drop-in: $out"
+  fi
+  echo "socket binds $name: UDP only; a drop-in allowing tcp:8765 verifies clean"
 done
 
 rmem_max=$(sed -n 's/^net\.core\.rmem_max *= *\([0-9]*\)$/\1/p' "$source_dir/systemd/60-pandarcap.conf")

@@ -24,6 +24,8 @@ constexpr std::size_t kTailBytesPerChunk = 160;
 
 }  // namespace
 
+const std::string_view kHealthJsonSchema = kHealthSchema;
+
 McapFile::McapFile(const McapFileOptions& options)
     : options_(options),
       max_message_bytes_(

@@ -43,6 +43,8 @@ namespace pandarcap {
 
 // Channel ids in pandarcap's files.
 inline constexpr std::uint16_t kPointsChannel = 1, kHealthChannel = 2, kPacketsChannel = 3;
+// The health channel's JSON schema ("pandarcap.Health"), which the live view advertises too.
+extern const std::string_view kHealthJsonSchema;
 
 class McapFile {
  public:

@@ -71,6 +71,11 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
                                                 alloc::hot_allocations(alloc::HotThread::kDecode),
                                                 alloc::hot_allocations(alloc::HotThread::kWriter)};
   }
+  if (sources.live != nullptr) {
+    h.live = LiveViewHealth{sources.live->clients.load(std::memory_order_relaxed),
+                            sources.live->messages_sent.load(std::memory_order_relaxed),
+                            sources.live->messages_dropped.load(std::memory_order_relaxed)};
+  }
   c.datagrams_received = receive.datagrams.load(std::memory_order_relaxed);
   c.bytes_received = receive.bytes.load(std::memory_order_relaxed);
   c.foreign_datagrams = receive.foreign.load(std::memory_order_relaxed);

@@ -26,6 +26,7 @@
 #include "core/health.hpp"
 #include "core/storage_rate.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/live/live_handover.hpp"
 #include "daemon/output/frame_output.hpp"
 #include "daemon/output/mcap_recorder.hpp"
 #include "daemon/output/output_accounting.hpp"
@@ -57,6 +58,8 @@ struct HealthSources {
   const StorageInputs& storage;
   std::uint64_t files_removed_for_space;
   std::uint64_t bytes_removed_for_space;
+  // The live view's counters (daemon/live/live_handover.hpp); null while it is off.
+  const live::LiveCounters* live = nullptr;
 };
 
 class HealthPublisher {

@@ -13,6 +13,7 @@
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/live/live_publish.hpp"
 #include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 
@@ -133,7 +134,8 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
       .sensor_status_implausible = sensor_status_.implausible.load(std::memory_order_relaxed),
       .storage = storage_,
       .files_removed_for_space = floor_.files_removed(),
-      .bytes_removed_for_space = floor_.bytes_removed()};
+      .bytes_removed_for_space = floor_.bytes_removed(),
+      .live = live_view_ != nullptr ? &live_view_->counters : nullptr};
 }
 
 void Writer::take_sensor_status() noexcept {
@@ -157,6 +159,7 @@ void Writer::write_health() {
   if (options_.mcap) {
     mcap_.write_health(health_.json_line(), realtime_ns());
   }
+  if (live_view_ != nullptr) live::offer_health(*live_view_, health_.json_line(), realtime_ns());
 }
 
 void Writer::log_fragments(std::int64_t now) {
@@ -209,6 +212,12 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
         case WriterMessage::Kind::kFrame:
           if (options_.frames) frames_.write(*message->arena);
           if (options_.mcap) mcap_.write_frame(*message->arena);
+          if (live_view_ != nullptr) {
+            live::offer_frame(*live_view_, message->arena->frame, options_.mcap_file.frame_id,
+                              message->arena->completed_log_ns > 0
+                                  ? message->arena->completed_log_ns
+                                  : message->arena->frame.info.start_ns);
+          }
           arenas_back_.try_push(message->arena);  // room for every arena: cannot fail
           arenas_back_.notify();                  // a replaying decoder may be waiting for it
           break;

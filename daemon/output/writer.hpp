@@ -31,6 +31,7 @@
 #include <cstdint>
 
 #include "core/health.hpp"
+#include "daemon/live/live_handover.hpp"
 #include "daemon/output/frame_output.hpp"
 #include "daemon/output/health_publisher.hpp"
 #include "daemon/output/mcap_recorder.hpp"
@@ -68,6 +69,10 @@ class Writer {
   void run(std::atomic<std::uint64_t>& heartbeat,
            const std::atomic<std::uint32_t>& rotate_generation,
            ringbuf::SpscQueue<StatusLine>& status_out);
+
+  // The live view ([live] foxglove): every frame and health record is offered to it too
+  // (daemon/live/live_publish.hpp). Before run(); `live` outlives it.
+  void attach_live(live::LiveHandover& live) noexcept { live_view_ = &live; }
 
   // Valid after run() returns.
   const HealthSnapshot& final_health() const noexcept { return health_.snapshot(); }
@@ -109,6 +114,7 @@ class Writer {
   std::uint64_t wakeups_ = 0;
   std::uint64_t fragments_logged_ = 0;
   std::int64_t last_fragment_log_ns_ = -1;
+  live::LiveHandover* live_view_ = nullptr;
 };
 
 }  // namespace pandarcap
