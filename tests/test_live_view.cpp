@@ -357,16 +357,21 @@ TEST_CASE("a viewer that never reads costs the capture nothing: 10 s at 3600 pac
   INFO(run.daemon.log());
   REQUIRE(status == 0);
   const std::string log = run.daemon.log();
-  CHECK(log.find("0 ring overruns, 0 kernel drops") != std::string::npos);
   const std::size_t at = log.find("; frames ");
   REQUIRE(at != std::string::npos);
   const std::string frames = log.substr(at + 9, log.find(';', at + 1) - at - 9);
   INFO(frames);
-  CHECK(std::stoi(frames) >= 90);  // "N complete, ...": ten revolutions a second for 10 s
-  CHECK(frames.find(" 0 dropped") != std::string::npos);
   const json h = test::last_health_record(run.dir / "out");
-  CHECK(test::health_counter(h, "frames_dropped_no_arena") == 0);
-  CHECK(test::health_counter(h, "datagrams_received") >= 35'000);
+  // A sanitizer build runs every thread several times slower: the stream's rate is not kept
+  // there (the simulator falls behind, the ring overflows, counted), so only the release build
+  // can show the capture lost nothing; the sanitizers look at the threads' hand-overs.
+  if (!test::kSanitizerBuild) {
+    CHECK(log.find("0 ring overruns, 0 kernel drops") != std::string::npos);
+    CHECK(std::stoi(frames) >= 90);  // "N complete, ...": ten revolutions a second for 10 s
+    CHECK(frames.find(" 0 dropped") != std::string::npos);
+    CHECK(test::health_counter(h, "frames_dropped_no_arena") == 0);
+    CHECK(test::health_counter(h, "datagrams_received") >= 35'000);
+  }
   // The stalled viewer's frames were dropped for it, and counted.
   CHECK(h["live"]["messages_dropped"].get<std::uint64_t>() > 0);
   // Copying every frame for the viewers allocated nothing in the writer's loop (counted where

@@ -351,9 +351,10 @@ TEST_CASE("every compression setting gives files the reader accepts",
     // Live, a compression slower than the sensor (zstd 19, lz4 12) leaves messages out, counted,
     // rather than hold the writer thread back: written or counted, every frame is there.
     const json h = test::last_health_record(out);
+    // (A sanitizer build's simulator sends less than a second's packets in its second.)
     CHECK(file["topics"]["/pandar/points"]["count"].get<std::uint64_t>() +
               test::health_counter(h, "mcap_messages_not_recorded") >=
-          5);
+          (test::kSanitizerBuild ? 2u : 5u));
     const bool slow = setting.find("= 19") != std::string::npos ||
                       setting.find("level = 12") != std::string::npos;
     if (!slow) {
