@@ -48,6 +48,11 @@ struct ZeroLossOptions {
   // output.mcap (and output.mcap_packets) on, with the bytes each wrote, so the extra CPU can be
   // set against the extra bytes.
   bool compare_mcap = false;
+  // tcpdump -w beside the daemon at the sensor's rate, in this many trials (0 = none): the CPU
+  // each takes to record the same packets in the same seconds, and their ratio
+  // (`tcpdump_comparison`). Give the daemon `[output] frames = false` (--config) to compare
+  // recording with recording.
+  int tcpdump_rounds = 0;
   // Any other receiver, measured under the same traffic at the sensor's rate: started with
   // /bin/sh -c 'exec COMMAND', sent to 127.0.0.1:receiver_port; if it prints a line
   // "received N" (the last one counts), its loss is reported too.

@@ -168,6 +168,41 @@ std::string not_done(const ordered_json& t) {
   return out.empty() ? "-" : out;
 }
 
+// A count a sensor-rate summary carries, "-" in a report from before it did.
+std::string count(const ordered_json& t, const char* key) {
+  return t.contains(key) ? t.at(key).dump() : std::string("-");
+}
+
+// The daemon against tcpdump -w recording the same packets beside it ("" without it).
+std::string tcpdump_section(const ordered_json& r) {
+  if (!r.contains("tcpdump_comparison")) return {};
+  const auto& c = r.at("tcpdump_comparison");
+  std::string md = fmt::format(
+      "Recording against `tcpdump -w` beside it (the same packets, the same seconds; config: "
+      "{}):\n\n| round | pandarcapd CPU (% of a core) | tcpdump CPU | ratio | pcap bytes "
+      "(pandarcapd, tcpdump) | lost, not recorded (pandarcapd) | dropped (tcpdump) |\n"
+      "|---:|---:|---:|---:|---:|---:|---:|\n",
+      r.at("environment").at("daemon_config").get<std::string>());
+  int round = 0;
+  for (const auto& t : c.at("rounds")) {
+    md += fmt::format("| {} | {:.2f} | {:.2f} | {:.2f}x | {}, {} | {}, {} | {} |\n", ++round,
+                      100 * t.at("daemon_cpu_fraction_of_one_core").get<double>(),
+                      100 * t.at("tcpdump_cpu_fraction_of_one_core").get<double>(),
+                      t.at("daemon_vs_tcpdump_cpu").get<double>(), t.at("daemon_pcap_bytes").dump(),
+                      t.at("tcpdump_file_bytes").dump(), t.at("daemon_lost").dump(),
+                      t.at("daemon_pcap_not_recorded").dump(),
+                      t.at("tcpdump_dropped_by_kernel").dump());
+  }
+  md += fmt::format(
+      "\nOver all rounds: pandarcapd {:.2f} %, tcpdump {:.2f} % of a core: **{:.2f}x** (goal "
+      "<= 1: {}).\n\n",
+      100 * c.at("daemon_cpu_fraction_of_one_core").get<double>(),
+      100 * c.at("tcpdump_cpu_fraction_of_one_core").get<double>(),
+      c.at("daemon_vs_tcpdump_cpu").get<double>(),
+      yes_no(r.at("goals").at("cpu_recording_at_most_tcpdump_w")));
+  return md;
+}
+
 // Where the daemon's search stopped, in CPU: at the lowest rate it failed, what the generator
 // and the daemon's threads used against the cores there are. On a machine whose cores the sender
 // shares, this is the budget the daemon ran out of.
@@ -254,23 +289,25 @@ std::string zero_loss_markdown(const ordered_json& r) {
   const double bare = s.value("bare_recvmmsg_cpu_fraction_of_one_core", 0.0);
   md +=
       "| receiver | latency budget | CPU (% of a core) | µs/packet | vs bare loop | wake-ups/s "
-      "(receive, decode, writer) | frame latency p99 | receive→decoded p99 | lost |\n"
-      "|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+      "(receive, decode, writer) | frame latency p99 | receive→decoded p99 | lost | frames "
+      "dropped | pcap not recorded |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const ordered_json* t : {&s, &s.at("budget_0")}) {
     const auto& w = (*t).at("wakeups_per_second");
     md += fmt::format(
         "| pandarcapd | {} ms | {:.2f} | {:.2f} | {:.2f}x | {:.0f}, {:.0f}, {:.0f} | {:.1f} ms | "
-        "{:.2f} ms | {} |\n",
+        "{:.2f} ms | {} | {} | {} |\n",
         (*t).at("budget_ms").dump(), 100 * (*t).at("cpu_fraction_of_one_core").get<double>(),
         (*t).at("cpu_us_per_packet").get<double>(), (*t).at("daemon_vs_bare_cpu").get<double>(),
         w.value("receive", 0.0), w.value("decode", 0.0), w.value("writer", 0.0),
         (*t).at("frame_latency_p99_ms").get<double>(),
-        (*t).at("latency_p99_us").get<double>() / 1e3, (*t).at("lost").dump());
+        (*t).at("latency_p99_us").get<double>() / 1e3, (*t).at("lost").dump(),
+        count(*t, "frames_dropped"), count(*t, "pcap_not_recorded"));
   }
   if (bare > 0) {
     md += fmt::format(
         "| bare recvmmsg loop (wakes per datagram, does nothing else) | - | {:.2f} | "
-        "- | 1x | - | - | - | - |\n",
+        "- | 1x | - | - | - | - | - | - |\n",
         100 * bare);
   }
   if (s.contains("mcap_on")) {
@@ -278,17 +315,17 @@ std::string zero_loss_markdown(const ordered_json& r) {
     const auto& w = t.at("wakeups_per_second");
     md += fmt::format(
         "| pandarcapd, MCAP on (frames and packets) | {} ms | {:.2f} | {:.2f} | {:.2f}x | "
-        "{:.0f}, {:.0f}, {:.0f} | {:.1f} ms | {:.2f} ms | {} |\n",
+        "{:.0f}, {:.0f}, {:.0f} | {:.1f} ms | {:.2f} ms | {} | {} | {} |\n",
         t.at("budget_ms").dump(), 100 * t.at("cpu_fraction_of_one_core").get<double>(),
         t.at("cpu_us_per_packet").get<double>(), t.at("daemon_vs_bare_cpu").get<double>(),
         w.value("receive", 0.0), w.value("decode", 0.0), w.value("writer", 0.0),
         t.at("frame_latency_p99_ms").get<double>(), t.at("latency_p99_us").get<double>() / 1e3,
-        t.at("lost").dump());
+        t.at("lost").dump(), count(t, "frames_dropped"), count(t, "pcap_not_recorded"));
   }
   if (s.contains("other_receiver")) {
     const auto& o = s.at("other_receiver");
     md += fmt::format(
-        "| `{}` | - | {:.2f} | {:.2f} | {} | - | - | - | {} |\n",
+        "| `{}` | - | {:.2f} | {:.2f} | {} | - | - | - | {} | - | - |\n",
         o.at("command").get<std::string>(), 100 * o.at("cpu_fraction_of_one_core").get<double>(),
         o.at("cpu_us_per_packet").get<double>(),
         bare > 0 ? fmt::format("{:.2f}x", o.at("cpu_fraction_of_one_core").get<double>() / bare)
@@ -319,6 +356,7 @@ std::string zero_loss_markdown(const ordered_json& r) {
     }
     md += ".\n\n";
   }
+  md += tcpdump_section(r);
   md += fmt::format(
       "- CPU with the budget: **{:.2f} %** of one core (goal <= the bare loop's: {}; <= 2 %: {})",
       100 * s.at("cpu_fraction_of_one_core").get<double>(),

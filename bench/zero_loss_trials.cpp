@@ -111,6 +111,61 @@ std::optional<std::uint64_t> last_received_line(const std::string& log) {
   return n;
 }
 
+// N of tcpdump's closing line "N <what>" ("12 packets captured"); nullopt when it printed none.
+std::optional<std::uint64_t> tcpdump_count(const std::string& log, const std::string& what) {
+  const auto at = log.rfind(" " + what);
+  if (at == std::string::npos) return std::nullopt;
+  auto start = at;
+  while (start > 0 && log[start - 1] >= '0' && log[start - 1] <= '9')
+    --start;
+  if (start == at) return std::nullopt;
+  return std::strtoull(log.c_str() + start, nullptr, 10);
+}
+
+// tcpdump recording the trial's packets beside the daemon: started once the daemon is ready,
+// measured over the same traffic, stopped before it.
+class TcpdumpBeside {
+ public:
+  TcpdumpBeside(const fs::path& dir, std::uint16_t port)
+      : file_(dir / "tcpdump.pcap"),
+        // -Z root: as root it would switch to the tcpdump user before opening the file, which
+        // could not write in the harness's directory.
+        process_(fs::exists("/usr/bin/tcpdump") ? "/usr/bin/tcpdump" : "/usr/sbin/tcpdump",
+                 {"-i", "lo", "-n", "-Z", "root", "-w", file_.string(), "udp", "dst", "port",
+                  std::to_string(port)},
+                 dir / "tcpdump.log") {
+    if (!harness::wait_until(
+            [&] { return process_.log().find("listening on") != std::string::npos; }, 15s)) {
+      throw std::runtime_error("tcpdump did not start listening:\n" + process_.log());
+    }
+  }
+  int pid() const { return process_.pid(); }
+  // Stops it; its counts and file, with the CPU it used between the two readings.
+  ordered_json finish(ordered_json cpu, double seconds, std::uint64_t sent) {
+    const std::uint64_t rss = harness::process_memory_bytes(process_.pid(), "VmHWM");
+    process_.signal(SIGTERM);
+    const std::optional<int> status = process_.wait_exit(10s);
+    const std::string log = process_.log();
+    std::error_code ec;
+    const auto bytes = fs::file_size(file_, ec);
+    cpu["cpu_us_per_packet"] =
+        ratio(cpu["cpu_fraction_of_one_core"].get<double>() * seconds * 1e6, sent);
+    cpu["exit_status"] = status ? ordered_json(*status) : ordered_json(nullptr);
+    const auto captured = tcpdump_count(log, "packets captured");
+    const auto dropped = tcpdump_count(log, "packets dropped by kernel");
+    cpu["captured"] = captured ? ordered_json(*captured) : ordered_json(nullptr);
+    cpu["dropped_by_kernel"] = dropped ? ordered_json(*dropped) : ordered_json(nullptr);
+    cpu["file_bytes"] = ec ? 0 : bytes;
+    cpu["peak_rss_bytes"] = rss;
+    fs::remove(file_, ec);
+    return cpu;
+  }
+
+ private:
+  fs::path file_;
+  harness::ChildProcess process_;
+};
+
 fs::path default_daemon() {
   std::error_code ec;
   const fs::path self = fs::read_symlink("/proc/self/exe", ec);
@@ -128,7 +183,8 @@ ZeroLossTrials::ZeroLossTrials(const ZeroLossOptions& options, const TrafficSour
 
 ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
                                           std::optional<std::uint32_t> budget_ms,
-                                          const std::vector<std::string>& extra_args) {
+                                          const std::vector<std::string>& extra_args,
+                                          bool beside_tcpdump) {
   const fs::path dir = work_ / fmt::format("daemon_{:03d}", trials_++);
   fs::create_directories(dir);
   const fs::path out = dir / "out";
@@ -160,13 +216,19 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
       daemon_socket_buffer = log.substr(at + 23, log.find('\n', at) - at - 23);
     }
   }
+  std::optional<TcpdumpBeside> tcpdump;
+  if (beside_tcpdump) tcpdump.emplace(dir, port);
   const auto cpu_before = harness::thread_cpu_ticks(process.pid());
+  const auto tcpdump_before =
+      tcpdump ? harness::thread_cpu_ticks(tcpdump->pid()) : std::map<std::string, std::uint64_t>{};
   GeneratorOptions g = o_.traffic;
   g.port = port;
   g.rate_pps = rate;
   g.seconds = seconds;
   const GeneratorResult sent = run_generator(source_, g);
   const auto cpu_after = harness::thread_cpu_ticks(process.pid());
+  const auto tcpdump_after =
+      tcpdump ? harness::thread_cpu_ticks(tcpdump->pid()) : std::map<std::string, std::uint64_t>{};
   const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
   // A health record written in the traffic's last half second or after it: its per-second
   // wake-up rates cover the traffic. (The latest record on disk may be older on a slow machine:
@@ -189,6 +251,12 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
         return h && counter(*h, "datagrams_received") + counter(*h, "kernel_drops") >= sent.sent;
       },
       3s);
+  // tcpdump has had as long to take the last packets; stopped before the daemon.
+  ordered_json tcpdump_result;
+  if (tcpdump) {
+    tcpdump_result = tcpdump->finish(
+        cpu_use(tcpdump_before, tcpdump_after, sent.seconds, sent.sent), sent.seconds, sent.sent);
+  }
   process.signal(SIGTERM);
   const std::optional<int> status = process.wait_exit(30s);
   const auto health = last_health(out);
@@ -231,6 +299,10 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
       {"accepted", accepted},
       {"delivered_pps", static_cast<double>(accepted) / sent.seconds},
       {"lost", lost},
+      // What fell behind without losing the packet: frames not written for want of an arena,
+      // packets left out of the pcap because the writer was behind (also in loss_by_stage).
+      {"frames_dropped", stages["frames_dropped"]},
+      {"pcap_not_recorded", stages["pcap_packets_not_recorded"]},
       {"loss_fraction", ratio(static_cast<double>(failed), sent.sent)},
       {"zero_loss", clean},
       {"loss_by_stage", stages},
@@ -247,6 +319,7 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
                                    ? ordered_json(counter(h, "hot_path_allocations"))
                                    : ordered_json(nullptr)}};
   t.update(cpu_use(cpu_before, cpu_after, sent.seconds, sent.sent));
+  if (tcpdump) t["tcpdump"] = tcpdump_result;
   std::error_code ec;
   fs::remove_all(out, ec);
   return t;

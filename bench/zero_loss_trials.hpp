@@ -36,10 +36,13 @@ class ZeroLossTrials {
   std::string daemon_socket_buffer;
 
   // One trial of the real daemon at `rate`; its outputs are removed afterwards (a fast trial
-  // writes gigabytes of pcap).
+  // writes gigabytes of pcap). With `beside_tcpdump`, `tcpdump -i lo -w FILE udp dst port P`
+  // records the same packets in the same seconds (key "tcpdump": its CPU, what it captured and
+  // dropped, its file's bytes), for the comparison of what recording costs.
   nlohmann::ordered_json daemon_trial(double rate, double seconds,
                                       std::optional<std::uint32_t> budget_ms = std::nullopt,
-                                      const std::vector<std::string>& extra_args = {});
+                                      const std::vector<std::string>& extra_args = {},
+                                      bool beside_tcpdump = false);
 
   // Any receiver the user names, under the same traffic: its CPU (all threads), peak RSS and,
   // when it prints "received N", its loss.

@@ -269,6 +269,13 @@ struct HealthSnapshot {
   SensorIdentity sensor_identity;  // the pandarcap_sensor_info gauge's labels
   HealthCounters counters;
   HealthGauges gauges;
+  // Whether points were decoded and frames cut: false when nothing consumes them (output.frames
+  // and output.mcap off; the decoder then does only what the health needs). Then the counters
+  // points, points_dropped_frame_full, frames_complete, frames_partial, frames_decimated and
+  // frames_fragment, the filtered points by reason and the frame_rate_hz gauge are left out of
+  // both renderings (not counted is not 0); every other counter, frames_dropped_no_arena and
+  // frames_written included (no frame is cut, so none is lost or written), keeps its meaning.
+  bool points_counted = true;
   // Kernel receive timestamp -> decoded, since start-up; empty when replaying a file.
   LatencyHistogram latency;
   // Kernel receive timestamp of the packet that completed a frame -> its PCD renamed into place,

@@ -67,6 +67,23 @@ constexpr GaugeField kGauges[] = {
      &HealthGauges::writer_wakeups_per_second, "Writer thread wake-ups, last second"},
 };
 
+// The counters the decoder does not count when nothing consumes points
+// (HealthSnapshot::points_counted false): left out rather than rendered as 0.
+constexpr bool counts_points(std::uint64_t HealthCounters::*member) {
+  return member == &HealthCounters::points ||
+         member == &HealthCounters::points_dropped_frame_full ||
+         member == &HealthCounters::frames_complete || member == &HealthCounters::frames_partial ||
+         member == &HealthCounters::frames_decimated || member == &HealthCounters::frames_fragment;
+}
+
+// Whether a counter or gauge is in this record (see counts_points).
+bool rendered(const HealthSnapshot& h, std::uint64_t HealthCounters::*member) {
+  return h.points_counted || !counts_points(member);
+}
+bool rendered(const HealthSnapshot& h, double HealthGauges::*member) {
+  return h.points_counted || member != &HealthGauges::frame_rate_hz;
+}
+
 constexpr const char* kReturnModes[] = {"last", "strongest", "dual"};
 
 void family(std::string& out, std::string_view name, std::string_view type, std::string_view help,
@@ -408,7 +425,12 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
   out += "\"} 1\n";
   sensor_prometheus(out, sensor, h);
 
+  family(out, "points_counted", "gauge",
+         "1 when points are decoded and frames cut; 0 when nothing consumes them (output.frames "
+         "and output.mcap off): the point and frame counters are then left out");
+  append("pandarcap_points_counted{{{}}} {}\n", sensor, h.points_counted ? 1 : 0);
   for (const CounterField& f : kCounters) {
+    if (!rendered(h, f.member)) continue;
     family(out, f.prometheus, "counter", f.help, "_total");
     append("pandarcap_{}_total{{{}}} {}\n", f.prometheus, sensor, h.counters.*f.member);
   }
@@ -417,13 +439,16 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
     append("pandarcap_packets_rejected_total{{{},reason=\"{}\"}} {}\n", sensor,
            to_string(static_cast<RejectReason>(i)), h.counters.rejects[i]);
   }
-  family(out, "points_filtered_total", "counter", "Points filtered out, by reason");
-  for (std::size_t i = 0; i < kFilterReasonCount; ++i) {
-    append("pandarcap_points_filtered_total{{{},reason=\"{}\"}} {}\n", sensor,
-           to_string(static_cast<FilterReason>(i)), h.counters.filtered_points[i]);
+  if (h.points_counted) {
+    family(out, "points_filtered_total", "counter", "Points filtered out, by reason");
+    for (std::size_t i = 0; i < kFilterReasonCount; ++i) {
+      append("pandarcap_points_filtered_total{{{},reason=\"{}\"}} {}\n", sensor,
+             to_string(static_cast<FilterReason>(i)), h.counters.filtered_points[i]);
+    }
   }
 
   for (const GaugeField& f : kGauges) {
+    if (!rendered(h, f.member)) continue;
     family(out, f.prometheus, "gauge", f.help);
     append("pandarcap_{}{{{}}} {}\n", f.prometheus, sensor, h.gauges.*f.member);
   }
@@ -489,10 +514,12 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   append_json_string(out, h.decoder);
   append(",\"state\":\"{}\",\"reason\":", to_string(h.gauges.state));
   append_json_string(out, h.gauges.reason);
+  append(",\"points_counted\":{}", h.points_counted);
 
   out += ",\"counters\":{";
   bool first = true;
   for (const CounterField& f : kCounters) {
+    if (!rendered(h, f.member)) continue;
     append("{}\"{}\":{}", first ? "" : ",", f.json, h.counters.*f.member);
     first = false;
   }
@@ -508,16 +535,21 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
     append("{}\"{}\":{}", i == 1 ? "" : ",", to_string(static_cast<RejectReason>(i)),
            h.counters.rejects[i]);
   }
-  out += "},\"filtered_points\":{";
-  for (std::size_t i = 0; i < kFilterReasonCount; ++i) {
-    append("{}\"{}\":{}", i == 0 ? "" : ",", to_string(static_cast<FilterReason>(i)),
-           h.counters.filtered_points[i]);
+  out += '}';
+  if (h.points_counted) {
+    out += ",\"filtered_points\":{";
+    for (std::size_t i = 0; i < kFilterReasonCount; ++i) {
+      append("{}\"{}\":{}", i == 0 ? "" : ",", to_string(static_cast<FilterReason>(i)),
+             h.counters.filtered_points[i]);
+    }
+    out += '}';
   }
-  out += "}}";
+  out += '}';
 
   out += ",\"gauges\":{";
   first = true;
   for (const GaugeField& f : kGauges) {
+    if (!rendered(h, f.member)) continue;
     append("{}\"{}\":", first ? "" : ",", f.json);
     append_json_number(out, h.gauges.*f.member);
     first = false;

@@ -90,7 +90,8 @@ void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns
 StreamDecoder::StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
                              FrameSink& sink)
     : decoder_(calibration, config.decoder, config.decoder_target),
-      assembler_(assembler_config(decoder_.scalar(), config.cut_angle_deg), sink) {}
+      assembler_(assembler_config(decoder_.scalar(), config.cut_angle_deg), sink),
+      decode_points_(config.decode_points) {}
 
 bool StreamDecoder::duplicate(std::span<const std::uint8_t> payload) noexcept {
   const std::uint64_t print = fingerprint(payload);
@@ -213,6 +214,10 @@ void StreamDecoder::drop_held_as_outlier() noexcept {
 }
 
 void StreamDecoder::place(std::span<const std::uint8_t> payload, const Admitted& admitted) {
+  if (!decode_points_) {  // the health needs only where the rotation is
+    last_placed_ = admitted.rotation;
+    return;
+  }
   const PacketView packet = PacketView::assume_valid(payload);
   const DecodedPacket decoded =
       decoder_.decode(packet, admitted.time.t0_ns, points_, stats_.filtered);

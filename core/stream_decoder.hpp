@@ -22,6 +22,8 @@
 // Counting rules (so every payload is accounted for):
 //   packets = accepted + sum(rejects) + duplicates
 //   every channel slot of an accepted packet is a point or a filtered count (by reason).
+// With decode_points off (StreamDecoderConfig) the first identity still holds; the second is
+// not counted.
 // Not thread-safe; one per decode thread. No allocation after construction.
 #pragma once
 
@@ -45,6 +47,12 @@ struct StreamDecoderConfig {
   DecoderConfig decoder;
   DecoderTarget decoder_target = DecoderTarget::kScalar;  // callers resolve "auto"
   double cut_angle_deg = 0.0;
+  // false: nothing consumes points (the daemon with output.frames and output.mcap off). Only
+  // what the health needs is done: validation, duplicates and the UDP sequence, the tail (status,
+  // RPM, time, return mode), azimuth tracking and the outlier rule; no point is decoded and no
+  // frame cut. stats().points, stats().filtered and frames() then mean "not counted", not
+  // "none" (the health leaves them out: docs/daemon.md, "Recording only").
+  bool decode_points = true;
 };
 
 // Consecutive packets are 0.28 to 0.56 ms apart; a second is far more than any loss the sequence
@@ -147,6 +155,7 @@ class StreamDecoder {
 
   PacketDecoder decoder_;
   FrameAssembler assembler_;
+  bool decode_points_;
   PacketClock clock_;
   SequenceTracker sequence_;
   StreamStats stats_;

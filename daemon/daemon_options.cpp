@@ -18,6 +18,11 @@ PcdFormat pcd_format(const DaemonConfig& config) {
                    parse_axes(config.sensor.frame).value_or(Axes::kHesai)};
 }
 
+bool points_decoded(const DaemonConfig& config) {
+  // MCAP and the live view take the same frames (and packets) as the PCD files (and the pcap).
+  return config.output.frames || config.output.mcap || config.live.foxglove;
+}
+
 WriterOptions writer_options(const DaemonConfig& config) {
   const std::filesystem::path output_dir = config.output.directory;
   WriterOptions wo;
@@ -33,6 +38,7 @@ WriterOptions writer_options(const DaemonConfig& config) {
   }
 #endif
   wo.frames = config.output.frames;
+  wo.points_counted = points_decoded(config);
   wo.frames_max_files = config.output.frames_max_files;
   wo.frames_max_bytes = config.output.frames_max_bytes;
   wo.pcap = config.output.pcap;
@@ -86,8 +92,8 @@ DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTar
   dopt.decoder = stream_decoder_config(config);
   dopt.decoder.decoder_target = target;
   dopt.frame_decimation = config.output.frame_decimation;
-  // MCAP takes the same frames (and packets) as the PCD files (and the pcap).
-  dopt.write_frames = config.output.frames || config.output.mcap;
+  dopt.write_frames = points_decoded(config);
+  dopt.decoder.decode_points = dopt.write_frames;
   dopt.min_frame_fraction = config.output.frames_min_fraction;
   dopt.expected_rpm = config.sensor.rotation_speed;
   dopt.record_raw = config.output.pcap || (config.output.mcap && config.output.mcap_packets);

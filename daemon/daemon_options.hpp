@@ -22,6 +22,12 @@
 
 namespace pandarcap {
 
+// Whether anything consumes points: output.frames (PCD), output.mcap (its frames) or the live
+// view (live.foxglove). Without any the decoder decodes only what the health needs, and the health
+// leaves the point and frame counters out (StreamDecoderConfig::decode_points,
+// HealthSnapshot::points_counted).
+bool points_decoded(const DaemonConfig& config);
+
 // The writer's options. The decoder's name, the calibration and the recorded destination port
 // are known only at start (the caller fills them in); the test hook only in builds with
 // PANDARCAP_TEST_HOOKS (the test builds; never the package).

@@ -64,6 +64,7 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   h.sensor = options_.sensor_name;
   h.version = options_.version;
   h.decoder = options_.decoder;
+  h.points_counted = options_.points_counted;
   HealthCounters& c = h.counters;
   h.latency = decode.latency;
   if (alloc::counting_available()) {

@@ -18,6 +18,9 @@ struct WriterOptions {
   std::filesystem::path health_dir;       // health.jsonl
   std::filesystem::path prometheus_file;  // the .prom textfile
   bool frames = true;
+  // The decoder decodes points and cuts frames (daemon_options.hpp, points_decoded()); false:
+  // the health leaves the point and frame counters out.
+  bool points_counted = true;
   PcdFormat pcd_format;  // output.pcd_fields and sensor.frame (the arenas, PCD and MCAP)
   std::uint64_t frames_max_files = 0;
   std::uint64_t frames_max_bytes = 0;

@@ -1,0 +1,165 @@
+// Recording only (output.frames and output.mcap off): the decoder decodes only what the health
+// needs. The health keeps every count it can still know, identical to a run that decodes
+// points, leaves out what it no longer counts (points, frames, filtered points) instead of
+// saying 0, and the pcap is byte for byte the same.
+#include <signal.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "bench/child_process.hpp"
+#include "support/test_support.hpp"
+
+using namespace pandarcap;
+using nlohmann::json;
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string quoted(const fs::path& path) {
+  return "'" + path.string() + "'";
+}
+
+// The counters the decoder no longer counts with nothing consuming points.
+constexpr const char* kPointCounters[] = {"points",           "points_dropped_frame_full",
+                                          "frames_complete",  "frames_partial",
+                                          "frames_decimated", "frames_fragment"};
+
+// Every counter both modes count: all but the point and frame ones.
+const char* const kSharedCounters[] = {"datagrams_received",
+                                       "packets_accepted",
+                                       "packets_rejected",
+                                       "duplicate_packets",
+                                       "outlier_packets",
+                                       "sequence_gaps",
+                                       "sequence_lost",
+                                       "sequence_duplicates",
+                                       "sequence_reordered",
+                                       "sequence_resets",
+                                       "azimuth_gaps",
+                                       "static_timestamp_packets",
+                                       "backward_timestamp_packets",
+                                       "timestamp_jump_packets",
+                                       "invalid_time_packets",
+                                       "high_temperature_packets",
+                                       "return_mode_changes",
+                                       "pcap_packets_written",
+                                       "pcap_packets_not_recorded",
+                                       "frames_dropped_no_arena"};
+
+std::string file_bytes(const fs::path& path) {
+  return harness::read_file(path);
+}
+
+// A replay of `capture` with `config`; the final health record.
+json replay(const fs::path& capture, const fs::path& config, const fs::path& out) {
+  const auto r =
+      test::run_command(test::pandarcapd_command() + " -c " + quoted(config) + " --replay " +
+                        quoted(capture) + " --output-dir " + quoted(out) + " 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  return test::last_health_record(out);
+}
+
+void check_identity(const json& h) {
+  using test::health_counter;
+  CHECK(health_counter(h, "datagrams_received") ==
+        health_counter(h, "packets_accepted") + health_counter(h, "packets_rejected") +
+            health_counter(h, "duplicate_packets") + health_counter(h, "foreign_datagrams") +
+            health_counter(h, "ring_overruns"));
+}
+
+}  // namespace
+
+TEST_CASE("recording only: the health counts what it can, leaves out points, the pcap is the same",
+          "[daemon][health][threads]") {
+  test::ScratchDir dir("record-only");
+  const fs::path frames_off = dir / "frames-off.toml";
+  std::ofstream(frames_off) << "[output]\nframes = false\n";
+  const fs::path frames_on = dir / "frames-on.toml";
+  std::ofstream(frames_on) << "[output]\nframes = true\n";
+
+  // Live, with frames off: a stream with copies, clock glitches and malformed datagrams.
+  const std::uint16_t port = harness::free_udp_port();
+  harness::ChildProcess daemon(
+      test::binary("pandarcapd"),
+      {"--allow-root", "-c", frames_off.string(), "--host-ip", "127.0.0.1", "--port",
+       std::to_string(port), "--output-dir", (dir / "live").string()},
+      dir / "daemon.txt");
+  REQUIRE(
+      harness::wait_until([&] { return daemon.log().find("ready:") != std::string::npos; }, 30s));
+  const auto sent = test::run_command(
+      test::binary("pandarcap-bench").string() + " send --json --rate 3600 --seconds 1 --port " +
+      std::to_string(port) +
+      " --duplicate-fraction 0.01 --glitch-fraction 0.005 --malformed-fraction 0.005");
+  REQUIRE(sent.exit_code == 0);
+  const json traffic = json::parse(sent.out);
+  const std::uint64_t datagrams = traffic.at("sent").get<std::uint64_t>() +
+                                  traffic.value("duplicates_sent", std::uint64_t{0}) +
+                                  traffic.value("malformed_sent", std::uint64_t{0});
+  REQUIRE(harness::wait_until(
+      [&] {
+        return test::health_counter(test::last_health_record(dir / "live"), "datagrams_received") >=
+               datagrams;
+      },
+      10s));
+  daemon.signal(SIGTERM);
+  REQUIRE(daemon.wait_exit(30s) == 0);
+  const json live = test::last_health_record(dir / "live");
+  INFO(live.dump());
+  check_identity(live);
+  CHECK(test::health_counter(live, "duplicate_packets") > 0);
+  CHECK(test::health_counter(live, "packets_rejected") > 0);
+  CHECK(test::health_counter(live, "outlier_packets") > 0);
+  CHECK(test::health_counter(live, "pcap_packets_written") == datagrams);
+  CHECK(live.at("points_counted") == false);
+  for (const char* key : kPointCounters) {
+    INFO(key);
+    CHECK_FALSE(live.at("counters").contains(key));
+  }
+  CHECK_FALSE(live.at("counters").contains("filtered_points"));
+  CHECK_FALSE(live.at("gauges").contains("frame_rate_hz"));
+  CHECK(live.at("gauges").at("rpm_measured").get<double>() > 0);
+  CHECK(live.at("gauges").at("return_mode") == "dual");
+  const auto prom = test::prom_samples(file_bytes(dir / "live" / "health" / "pandarcap.prom"));
+  CHECK(prom.at("pandarcap_points_counted{sensor=\"pandar40p\"}") == "0");
+  for (const auto& [sample, value] : prom) {
+    INFO(sample);
+    CHECK(sample.rfind("pandarcap_points_total", 0) == std::string::npos);
+    CHECK(sample.rfind("pandarcap_frames_complete_total", 0) == std::string::npos);
+    CHECK(sample.rfind("pandarcap_points_filtered_total", 0) == std::string::npos);
+    CHECK(sample.rfind("pandarcap_frame_rate_hertz", 0) == std::string::npos);
+  }
+  // The loss alert's terms are all there, at 0.
+  CHECK(prom.at("pandarcap_frames_dropped_no_arena_total{sensor=\"pandar40p\"}") == "0");
+  CHECK(prom.at("pandarcap_packets_not_recorded_total{sensor=\"pandar40p\"}") == "0");
+
+  // That recording replayed both ways: the same counts, the same pcap.
+  const auto recordings = test::files_ending(dir / "live" / "raw", ".pcap");
+  REQUIRE(recordings.size() == 1);
+  const json off = replay(recordings.front(), frames_off, dir / "off");
+  const json on = replay(recordings.front(), frames_on, dir / "on");
+  check_identity(off);
+  check_identity(on);
+  for (const char* key : kSharedCounters) {
+    INFO(key);
+    CHECK(test::health_counter(off, key) == test::health_counter(on, key));
+  }
+  CHECK(test::health_counter(off, "packets_accepted") ==
+        test::health_counter(live, "packets_accepted"));
+  CHECK(off.at("counters").at("rejects") == on.at("counters").at("rejects"));
+  CHECK(on.at("points_counted") == true);
+  CHECK(test::health_counter(on, "points") > 0);
+  CHECK(test::health_counter(on, "frames_complete") > 0);
+  const auto pcap_off = test::files_ending(dir / "off" / "raw", ".pcap");
+  const auto pcap_on = test::files_ending(dir / "on" / "raw", ".pcap");
+  REQUIRE(pcap_off.size() == 1);
+  REQUIRE(pcap_on.size() == 1);
+  CHECK(fs::file_size(pcap_off.front()) > 1'000'000);
+  CHECK(file_bytes(pcap_off.front()) == file_bytes(pcap_on.front()));
+}
