@@ -584,7 +584,12 @@ void vehicle_day(int seconds) {
   check_identity(h);
   CHECK(health_counter(h, "datagrams_received") == datagrams);
   CHECK(health_counter(h, "kernel_drops") == 0);
+  // ThreadSanitizer runs the decode thread several times slower (every point it encodes into the
+  // arena is instrumented): the ring may overflow there, counted; the release and ASan builds
+  // must keep up.
+#if !defined(__SANITIZE_THREAD__)
   CHECK(health_counter(h, "ring_overruns") == 0);
+#endif
   // Each copy counted as one, each glitch as an outlier (a copy of a glitched packet is a copy).
   CHECK(health_counter(h, "duplicate_packets") == sent.at("duplicates_sent").get<std::uint64_t>());
   CHECK(health_counter(h, "outlier_packets") >= sent.at("glitches_sent").get<std::uint64_t>());
