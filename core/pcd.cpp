@@ -36,33 +36,8 @@ constexpr LayoutSpec kLayouts[] = {
      "4 4 4 1 1 2 4 4 4 4", "F F F U U U F F F U", "1 1 1 1 1 1 1 1 1 1"},
 };
 
-// A SIZE line as numbers (every size is one digit: 1, 2, 4 or 8).
-struct FieldSizes {
-  std::array<std::uint8_t, 10> bytes{};
-  std::size_t count = 0;
-  std::size_t total = 0;
-};
-constexpr FieldSizes parse_sizes(std::string_view line) {
-  FieldSizes f;
-  for (const char c : line) {
-    if (c == ' ') continue;
-    f.bytes[f.count++] = static_cast<std::uint8_t>(c - '0');
-    f.total += static_cast<std::size_t>(c - '0');
-  }
-  return f;
-}
-constexpr FieldSizes kFieldSizes[] = {
-    parse_sizes(kLayouts[0].sizes), parse_sizes(kLayouts[1].sizes), parse_sizes(kLayouts[2].sizes),
-    parse_sizes(kLayouts[3].sizes)};
-constexpr bool sizes_add_up() {
-  for (std::size_t i = 0; i < std::size(kLayouts); ++i) {
-    if (kFieldSizes[i].total != kLayouts[i].point_bytes) return false;
-  }
-  return std::size(kFieldSizes) == std::size(kLayouts);
-}
-static_assert(sizes_add_up(), "each layout's SIZE line adds up to its point size");
-
-// The FIELDS, SIZE and TYPE lines as one PcdField per field.
+// The FIELDS, SIZE and TYPE lines as one PcdField per field (every size is one digit: 1, 2, 4
+// or 8).
 struct FieldList {
   std::array<PcdField, 10> fields{};
   std::size_t count = 0;
@@ -88,8 +63,15 @@ constexpr FieldList parse_fields(const LayoutSpec& s) {
 }
 constexpr FieldList kFieldLists[] = {parse_fields(kLayouts[0]), parse_fields(kLayouts[1]),
                                      parse_fields(kLayouts[2]), parse_fields(kLayouts[3])};
-static_assert(kFieldLists[3].fields[9].name == "time_stamp" &&
-              kFieldLists[3].fields[9].offset == 28);
+constexpr bool sizes_add_up() {
+  for (std::size_t i = 0; i < std::size(kLayouts); ++i) {
+    const FieldList& f = kFieldLists[i];
+    const PcdField& last = f.fields[f.count - 1];
+    if (last.offset + last.size != kLayouts[i].point_bytes) return false;
+  }
+  return std::size(kFieldLists) == std::size(kLayouts);
+}
+static_assert(sizes_add_up(), "each layout's SIZE line adds up to its point size");
 
 const LayoutSpec& spec(PcdLayout layout) noexcept {
   return kLayouts[static_cast<std::size_t>(layout)];
@@ -134,11 +116,6 @@ std::size_t pcd_point_bytes(PcdLayout layout) noexcept {
   return spec(layout).point_bytes;
 }
 
-std::span<const std::uint8_t> pcd_field_sizes(PcdLayout layout) noexcept {
-  const FieldSizes& f = kFieldSizes[static_cast<std::size_t>(layout)];
-  return std::span(f.bytes).first(f.count);
-}
-
 std::span<const PcdField> pcd_fields(PcdLayout layout) noexcept {
   const FieldList& f = kFieldLists[static_cast<std::size_t>(layout)];
   return std::span(f.fields).first(f.count);
@@ -146,22 +123,23 @@ std::span<const PcdField> pcd_fields(PcdLayout layout) noexcept {
 
 void rebase_pcd_times(std::span<std::uint8_t> rows, PcdLayout layout,
                       std::int64_t shift_ns) noexcept {
+  if (layout != PcdLayout::kVelodyne && layout != PcdLayout::kAutoware) return;
+  // The relative time is each of these layouts' last field: velodyne's `time` (F4 seconds),
+  // autoware's `time_stamp` (U4 ns, kept modulo 2^32 as encoded).
   const std::size_t step = pcd_point_bytes(layout);
-  if (layout == PcdLayout::kVelodyne) {
-    const double shift_s = static_cast<double>(shift_ns) * 1e-9;
-    for (std::size_t at = 18; at + 4 <= rows.size(); at += step) {
+  const std::size_t time_at = pcd_fields(layout).back().offset;
+  const double shift_s = static_cast<double>(shift_ns) * 1e-9;
+  const auto shift_u4 = static_cast<std::uint32_t>(shift_ns);
+  for (std::size_t at = time_at; at + 4 <= rows.size(); at += step) {
+    std::uint8_t* field = rows.data() + at;
+    if (layout == PcdLayout::kVelodyne) {
       float t;
-      std::memcpy(&t, rows.data() + at, 4);
-      t = static_cast<float>(t + shift_s);
-      std::memcpy(rows.data() + at, &t, 4);
-    }
-  } else if (layout == PcdLayout::kAutoware) {
-    const auto shift = static_cast<std::uint32_t>(shift_ns);  // modulo 2^32, as encoded
-    for (std::size_t at = 28; at + 4 <= rows.size(); at += step) {
+      std::memcpy(&t, field, 4);
+      put(field, static_cast<float>(t + shift_s));
+    } else {
       std::uint32_t t;
-      std::memcpy(&t, rows.data() + at, 4);
-      t += shift;
-      std::memcpy(rows.data() + at, &t, 4);
+      std::memcpy(&t, field, 4);
+      put(field, static_cast<std::uint32_t>(t + shift_u4));
     }
   }
 }

@@ -72,10 +72,8 @@ inline constexpr std::size_t kPcdPointBytes = 3 * 4 + 3 * 1 + 8;  // 23: the pan
 inline constexpr std::size_t kMaxPcdPointBytes = 32;              // the autoware layout
 std::size_t pcd_point_bytes(PcdLayout layout) noexcept;
 
-// The byte size of each of a layout's fields, in their order (they add up to pcd_point_bytes).
-std::span<const std::uint8_t> pcd_field_sizes(PcdLayout layout) noexcept;
-
-// A field of a layout, where it sits in a point: what a PointCloud2's PointField says.
+// A field of a layout, where it sits in a point: what a PointCloud2's PointField says. A layout's
+// fields come in order, and their sizes add up to pcd_point_bytes.
 struct PcdField {
   std::string_view name;
   std::uint32_t offset = 0;

@@ -80,12 +80,11 @@ void PcdCompressor::scatter(std::span<const std::uint8_t> rows, std::size_t firs
   const std::size_t step = pcd_point_bytes(layout);
   const std::size_t count = rows.size() / step;
   // Field f's column starts after the columns before it: `total` values of each.
-  std::size_t row_offset = 0, column_start = 0;
-  for (const std::uint8_t size : pcd_field_sizes(layout)) {
-    gather(size, rows.data() + row_offset, step, count,
-           columns_.data() + column_start + first * size);
-    row_offset += size;
-    column_start += total * size;
+  std::size_t column_start = 0;
+  for (const PcdField& field : pcd_fields(layout)) {
+    gather(field.size, rows.data() + field.offset, step, count,
+           columns_.data() + column_start + first * field.size);
+    column_start += total * field.size;
   }
 }
 
