@@ -27,14 +27,15 @@
 #include "core/packet.hpp"
 #include "core/point.hpp"
 #include "core/stream_decoder.hpp"
+#include "daemon/io/file_output.hpp"
 #include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {
 
 struct FrameArena {
-  // Page-aligned, so the writer can hand the points to the kernel without a copy (O_DIRECT).
-  static constexpr std::size_t kAlignment = 4096;
+  // Aligned to O_DIRECT's blocks, so the writer can hand the points to the kernel without a copy.
+  static constexpr std::size_t kAlignment = kDirectIoBlock;
   struct AlignedDelete {
     void operator()(std::uint8_t* p) const noexcept {
       ::operator delete[](p, std::align_val_t{kAlignment});
