@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
@@ -599,9 +600,13 @@ void vehicle_day(int seconds) {
   CHECK(health_counter(h, "duplicate_packets") + overruns >= duplicates_sent);
   CHECK(health_counter(h, "outlier_packets") + overruns >= glitches_sent);
   CHECK(health_counter(h, "outlier_packets") <= sent.at("glitches_sent").get<std::uint64_t>() + 2);
-  // Revolutions stay whole through all of it: 10 a second, less the first and last.
+  // Revolutions stay whole through all of it: 10 a second, less the first and last. A revolution
+  // that lost a datagram to a ring overrun (ThreadSanitizer only, above) closes partial, counted:
+  // each such frame lost at least one datagram, so there are no more of them than overruns.
   const double revolutions = seconds * 10.0;
-  CHECK(static_cast<double>(health_counter(h, "frames_complete")) >= 0.95 * revolutions - 2);
+  const std::uint64_t partial_by_overruns = std::min(health_counter(h, "frames_partial"), overruns);
+  CHECK(static_cast<double>(health_counter(h, "frames_complete") + partial_by_overruns) >=
+        0.95 * revolutions - 2);
   // The sensor's garbage was seen, left out, and its flapping counted.
   CHECK(health_counter(h, "sensor_status_implausible") >= 1);
   CHECK(health_counter(h, "ptc_errors") >= 1);
