@@ -105,16 +105,25 @@ TEST_CASE(
   for (const Run* run : {&budget, &zero}) {
     const json& h = run->final_record;
     INFO(h.dump());
-    CHECK(health_counter(h, "packets_accepted") == run->sent);
+    // ThreadSanitizer runs the decode thread several times slower (every point it encodes is
+    // instrumented): on a busy machine the ring may overflow there, counted, and a datagram it
+    // overflowed is neither accepted nor recorded. Release and ASan builds: none.
+#if defined(__SANITIZE_THREAD__)
+    const std::uint64_t overruns = health_counter(h, "ring_overruns");
+#else
+    const std::uint64_t overruns = 0;
+#endif
+    CHECK(health_counter(h, "ring_overruns") == overruns);
+    CHECK(health_counter(h, "packets_accepted") + overruns == run->sent);
     CHECK(health_counter(h, "kernel_drops") == 0);
-    CHECK(health_counter(h, "ring_overruns") == 0);
-    CHECK(health_counter(h, "sequence_lost") == 0);
+    CHECK(health_counter(h, "sequence_lost") <= overruns);
     CHECK(health_counter(h, "sequence_reordered") == 0);
     CHECK(health_counter(h, "sequence_duplicates") == 0);
     // Sequence-exact: every datagram recorded once, in the order sent (sanitizer builds: or
-    // counted as not recorded, and those recorded once each, in order; see kSanitizerBuild).
+    // counted as not recorded or overrun, and those recorded once each, in order; see
+    // kSanitizerBuild).
     const std::uint64_t not_recorded =
-        test::kSanitizerBuild ? health_counter(h, "pcap_packets_not_recorded") : 0;
+        test::kSanitizerBuild ? health_counter(h, "pcap_packets_not_recorded") + overruns : 0;
     REQUIRE(run->recorded.size() + not_recorded == run->sent);
     for (std::size_t i = 0; i < run->recorded.size(); ++i) {
       const bool in_place = not_recorded == 0 ? run->recorded[i] == i
