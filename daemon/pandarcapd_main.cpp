@@ -271,7 +271,24 @@ int run(const CommandLine& options) {
 
   const ThreadsSection& placement = config.threads;
   std::atomic<bool> stop_simulator{false};
+  // Declared before the threads: it outlives them.
+  std::optional<SensorStatusPoller> status_poller;
   PipelineThreads threads;
+  // The status poller starts first so that it stops last (stop_all: the last started first):
+  // it keeps asking while the decoder drains the ring and the writer finishes its files, and
+  // the final health record has a status as fresh as any other second's, not one aged by
+  // the shutdown.
+  if (wo.status_polled) {
+    const auto interval = std::chrono::milliseconds(
+        static_cast<std::int64_t>(config.sensor.status_interval_seconds * 1000));
+    status_poller.emplace(
+        *ptc, interval, pipe.sensor_status,
+        sensor.settings ? std::optional(sensor.settings->clock_source) : std::nullopt);
+    spdlog::info("sensor status: asking {}:{} every {} s", ptc->address, ptc->port,
+                 config.sensor.status_interval_seconds);
+    threads.start(
+        "pc-sensorstat", {}, [&] { status_poller->run(); }, [&] { status_poller->stop(); });
+  }
   threads.start(
       "pc-writer",
       [&] {
@@ -302,18 +319,6 @@ int run(const CommandLine& options) {
     threads.start(
         "pc-simsensor", {}, [&] { source->run_simulator(stop_simulator); },
         [&] { stop_simulator.store(true, std::memory_order_relaxed); });
-  }
-  std::optional<SensorStatusPoller> status_poller;
-  if (wo.status_polled) {
-    const auto interval = std::chrono::milliseconds(
-        static_cast<std::int64_t>(config.sensor.status_interval_seconds * 1000));
-    status_poller.emplace(
-        *ptc, interval, pipe.sensor_status,
-        sensor.settings ? std::optional(sensor.settings->clock_source) : std::nullopt);
-    spdlog::info("sensor status: asking {}:{} every {} s", ptc->address, ptc->port,
-                 config.sensor.status_interval_seconds);
-    threads.start(
-        "pc-sensorstat", {}, [&] { status_poller->run(); }, [&] { status_poller->stop(); });
   }
   if (config.threads.lock_memory) lock_all_memory();
   systemd::ready();

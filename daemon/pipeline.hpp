@@ -6,7 +6,8 @@
 // (config: ring.slots, arenas.count, arenas.points_per_frame, arenas.packets_per_frame).
 // PipelineThreads starts them and, whatever way run() leaves (a return, a throw between two
 // starts), asks each to stop and joins it, last started first: the simulator, the source, then
-// the decoder drains the ring and the writer finishes the files.
+// the decoder drains the ring and the writer finishes the files; the sensor status poller, started
+// first, stops last, so the final health record's status is not aged by the drain.
 #pragma once
 
 #include <atomic>
