@@ -80,20 +80,25 @@ ordered_json effective_budget_ms(const std::string& log) {
   return std::strtod(log.c_str() + at + 15, nullptr);
 }
 
-// Whether a UDP socket is bound to `port` on this machine (/proc/net/udp and udp6).
-bool udp_port_bound(std::uint16_t port) {
+// The bytes waiting in the receive queue of the UDP socket bound to `port` on this machine
+// (/proc/net/udp and udp6: "sl local_address rem_address st tx_queue:rx_queue ..."); nothing when
+// no socket is bound to it.
+std::optional<std::uint64_t> udp_port_queued_bytes(std::uint16_t port) {
   const std::string needle = fmt::format(":{:04X} ", port);
   for (const char* table : {"/proc/net/udp", "/proc/net/udp6"}) {
     std::istringstream lines(read_file(table));
     std::string line;
     while (std::getline(lines, line)) {
-      // "  sl  local_address rem_address ...": the local address is the second field.
       std::istringstream fields(line);
-      std::string slot, local;
-      if (fields >> slot >> local && (local + " ").find(needle) != std::string::npos) return true;
+      std::string slot, local, remote, state, queues;
+      if (!(fields >> slot >> local >> remote >> state >> queues)) continue;
+      if ((local + " ").find(needle) == std::string::npos) continue;
+      const auto colon = queues.find(':');
+      if (colon == std::string::npos) return 0;
+      return std::strtoull(queues.c_str() + colon + 1, nullptr, 16);
     }
   }
-  return false;
+  return std::nullopt;
 }
 
 // N of the last line "received N" a receiver printed.
@@ -328,7 +333,8 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
 ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
   const fs::path log = work_ / "other_receiver.log";
   harness::ChildProcess process("/bin/sh", {"-c", "exec " + o_.receiver_command}, log);
-  if (!harness::wait_until([&] { return udp_port_bound(o_.receiver_port); }, 15s)) {
+  if (!harness::wait_until([&] { return udp_port_queued_bytes(o_.receiver_port).has_value(); },
+                           15s)) {
     throw std::runtime_error(fmt::format("'{}' did not bind UDP port {} within 15 s:\n{}",
                                          o_.receiver_command, o_.receiver_port, process.log()));
   }
@@ -340,6 +346,9 @@ ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
   const GeneratorResult sent = run_generator(source_, g);
   const auto cpu_after = harness::thread_cpu_ticks(process.pid());
   const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
+  // Datagrams still queued in its socket are not lost, only not read yet: the receiver is given
+  // up to 5 s to read them before it is asked to stop and say what it received.
+  harness::wait_until([&] { return udp_port_queued_bytes(o_.receiver_port).value_or(0) == 0; }, 5s);
   process.signal(SIGTERM);
   const std::optional<int> status = process.wait_exit(10s);
   const std::optional<std::uint64_t> received = last_received_line(process.log());
