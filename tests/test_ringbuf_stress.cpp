@@ -12,6 +12,7 @@
 #include <string>
 
 #include "support/ringbuf_stress.hpp"
+#include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace pandarcap::test;
@@ -27,11 +28,7 @@ std::uint64_t total_items() {
   if (const char* env = std::getenv("PANDARCAP_STRESS_ITEMS")) {
     return std::strtoull(env, nullptr, 10);
   }
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-  return 2'000'000;
-#else
-  return 10'000'000;
-#endif
+  return kSanitizerBuild ? 2'000'000 : 10'000'000;
 }
 
 // Splits the total over `rounds` random capacities 2^0..2^12 and random batch limits.

@@ -27,6 +27,11 @@ inline constexpr std::int64_t kCircle = 36000;
 // live: it drops and counts (pcap_packets_not_recorded, frames_dropped_no_arena, kernel_drops).
 // The release job requires zero loss in the tests that stream in real time; the sanitizer jobs,
 // which are there for memory errors and races, require that every loss is counted.
+#if defined(__SANITIZE_THREAD__)
+inline constexpr bool kThreadSanitizerBuild = true;
+#else
+inline constexpr bool kThreadSanitizerBuild = false;
+#endif
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 inline constexpr bool kSanitizerBuild = true;
 #else
@@ -95,12 +100,7 @@ std::uint64_t health_counter(const nlohmann::json& record, std::string_view name
 // accepted nor recorded. Tests put it in their identities, and check
 // `health_counter(h, "ring_overruns") == tsan_ring_overruns(h)`.
 inline std::uint64_t tsan_ring_overruns(const nlohmann::json& record) {
-#if defined(__SANITIZE_THREAD__)
-  return health_counter(record, "ring_overruns");
-#else
-  (void)record;
-  return 0;
-#endif
+  return kThreadSanitizerBuild ? health_counter(record, "ring_overruns") : 0;
 }
 
 // Health records come once a second: consecutive ones are more than `min_gap_s` and at most
