@@ -320,8 +320,8 @@ TEST_CASE(
       },
       5s));
   const auto to_no_data = std::chrono::steady_clock::now() - stopped;
-  INFO("no_data after " << std::chrono::duration<double>(to_no_data).count() << " s; its record: "
-                        << silent_for << " s since the last packet");
+  INFO("no_data after " << std::chrono::duration<double>(to_no_data).count()
+                        << " s; its record: " << silent_for << " s since the last packet");
   CHECK(to_no_data <= 1500ms + kDecoderLag);
   CHECK(silent_for >= 1.0);  // the no-data timeout, 1 s by default
   CHECK(silent_for <= 1.5);
