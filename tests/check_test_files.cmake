@@ -1,7 +1,8 @@
 # Checks that FILES (test file names, "|"-separated) are exactly the files that hold the tests
-# SPECS ("|"-separated Catch2 test specs) select in TESTS (the whole test binary): the files
-# the ARM64 CI test binary is built from (tests/CMakeLists.txt, arm64_ci_test_files).
-# cmake -DTESTS=... -DSPECS=... -DFILES=... -P check_arm64_ci_files.cmake
+# SPECS ("|"-separated Catch2 test specs) select in TESTS (the whole test binary). FILES is the
+# list LIST in tests/CMakeLists.txt that a smaller test binary is built from: CI's ARM64 tests
+# (arm64_ci_test_files) or the TSan job's (tsan_test_files).
+# cmake -DTESTS=... -DSPECS=... -DFILES=... -DLIST=... -P check_test_files.cmake
 string(REPLACE "|" ";" specs "${SPECS}")
 string(REPLACE "|" ";" listed "${FILES}")
 set(needed "")
@@ -25,13 +26,13 @@ set(unused ${listed})
 list(REMOVE_ITEM unused ${needed})
 if(missing)
   list(JOIN missing ", " missing)
-  message(FATAL_ERROR "tests/CMakeLists.txt, arm64_ci_test_files: CI's ARM64 tests are also in "
+  message(FATAL_ERROR "tests/CMakeLists.txt, ${LIST}: the tests '${SPECS}' are also in "
                       "${missing}; add them to the list")
 endif()
 if(unused)
   list(JOIN unused ", " unused)
-  message(FATAL_ERROR "tests/CMakeLists.txt, arm64_ci_test_files: ${unused} hold none of CI's "
-                      "ARM64 tests; remove them from the list")
+  message(FATAL_ERROR "tests/CMakeLists.txt, ${LIST}: ${unused} hold none of the tests "
+                      "'${SPECS}'; remove them from the list")
 endif()
 list(LENGTH needed count)
-message(STATUS "the ${count} files of CI's ARM64 tests are the ones listed")
+message(STATUS "${LIST}: the ${count} files of the tests '${SPECS}' are the ones listed")
