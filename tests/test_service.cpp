@@ -233,9 +233,10 @@ TEST_CASE("[threads]: pinning and SCHED_FIFO as granted, refusals logged, health
 
 namespace {
 
-// The state in the last line of OUT/health/health.jsonl ("" before the first), and how many lines
-// there are.
+// The last line of OUT/health/health.jsonl (null before the first), its state ("" before the
+// first), and how many lines there are.
 struct HealthTail {
+  nlohmann::json last;
   std::string state;
   std::size_t lines = 0;
 };
@@ -243,7 +244,10 @@ HealthTail health_tail(const fs::path& out) {
   const auto records = test::health_records(out);
   HealthTail tail;
   tail.lines = records.size();
-  if (!records.empty()) tail.state = records.back().value("state", "");
+  if (!records.empty()) {
+    tail.last = records.back();
+    tail.state = tail.last.value("state", "");
+  }
   return tail;
 }
 
@@ -313,9 +317,9 @@ TEST_CASE(
   double silent_for = -1;  // the first no_data record's seconds_since_last_packet
   REQUIRE(notify.wait_for(
       [&] {
-        const auto records = test::health_records(out);
-        if (records.empty() || records.back().value("state", "") != "no_data") return false;
-        silent_for = records.back().at("gauges").at("seconds_since_last_packet").get<double>();
+        const HealthTail tail = health_tail(out);
+        if (tail.state != "no_data") return false;
+        silent_for = tail.last.at("gauges").at("seconds_since_last_packet").get<double>();
         return true;
       },
       5s));
