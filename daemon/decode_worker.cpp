@@ -154,7 +154,6 @@ DecodeSnapshot DecodeWorker::snapshot() const {
   s.frames_decimated = frames_decimated_;
   s.frames_fragment = frames_fragment_;
   s.raw_packets_dropped = raw_dropped_;
-  s.wakeups = wakeups_;
   s.monotonic_ns = coarse_monotonic_ns();
   s.latency = latency_;
   s.sensor_clock_offset_ns = clock_offset_ns_;
@@ -177,7 +176,7 @@ void DecodeWorker::send_snapshot(WriterMessage::Kind kind) {
 }
 
 void DecodeWorker::run(const std::atomic<bool>& producer_done,
-                       std::atomic<std::uint64_t>& heartbeat, LiveClock& live) {
+                       std::atomic<std::uint64_t>& heartbeat, DecodeLive& live) {
   std::int64_t next_snapshot_ns = coarse_monotonic_ns();
   std::int64_t next_raw_flush_ns = next_snapshot_ns;
   const std::int64_t warm_ns = next_snapshot_ns + kWarmUpNs;
@@ -191,7 +190,7 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
     if (batch.empty()) {
       if (done) break;
       ring_.wait_for_data(std::chrono::milliseconds(100));
-      ++wakeups_;
+      live.wakeups.store(++wakeups_, std::memory_order_relaxed);
     } else {
       for (const PacketSlot& slot : batch)
         process(slot);

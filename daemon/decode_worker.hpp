@@ -54,9 +54,9 @@ class DecodeWorker final : public FrameSink {
 
   // Runs until `producer_done` is set and the ring is empty; then finishes open frames as
   // partial, flushes the raw batch and sends the writer a final snapshot and kEnd.
-  // `live` gets the time of each batch taken.
+  // `live` gets the time of each batch taken and the count of wake-ups from the wait.
   void run(const std::atomic<bool>& producer_done, std::atomic<std::uint64_t>& heartbeat,
-           LiveClock& live);
+           DecodeLive& live);
 
   // FrameSink (called by the assembler on this thread).
   Frame* acquire_frame() override;

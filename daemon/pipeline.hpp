@@ -42,7 +42,7 @@ struct Pipeline {
   ringbuf::SpscQueue<StatusLine> status;  // the writer's STATUS= lines for the main thread
   ReceiveCounters receive;
   SensorStatusChannel sensor_status;  // the status poller's answers, for the health record
-  LiveClock live;
+  DecodeLive live;
   Heartbeats heartbeats;
   std::atomic<bool> stop_source{false};
   std::atomic<bool> source_done{false};             // set by the source thread as it ends

@@ -88,8 +88,7 @@ struct DecodeSnapshot {
   std::uint64_t frames_decimated = 0;
   std::uint64_t frames_fragment = 0;      // partial frames too small to write
   std::uint64_t raw_packets_dropped = 0;  // no empty RawBatch: not recorded to pcap
-  std::uint64_t wakeups = 0;              // returns from the decoder's wait on the ring
-  std::int64_t monotonic_ns = 0;  // when it was taken (the last packet's time is in LiveClock)
+  std::int64_t monotonic_ns = 0;  // when it was taken (the last packet's time is in DecodeLive)
   LatencyHistogram latency;       // kernel receive timestamp -> decoded (live sources only)
   // The last accepted packet's time minus its receive time (see HealthGauges); none before one.
   std::optional<std::int64_t> sensor_clock_offset_ns;
@@ -116,12 +115,17 @@ struct Heartbeats {
   std::atomic<std::uint64_t> writer{0};
 };
 
-// When the decoder last took a packet (CLOCK_MONOTONIC ns, 0 = never), stored once per batch. The
-// writer reads it at every wake-up (at least every 100 ms) rather than from the once-a-second
-// counter snapshot, so silence and its end show in the health within a tenth of a second of
-// the no-data timeout instead of up to a second later.
-struct LiveClock {
+// What the writer reads from the decoder at its own moments rather than from the once-a-second
+// counter snapshot. Written only by the decode thread.
+// - When the decoder last took a packet (CLOCK_MONOTONIC ns, 0 = never), stored once per batch:
+//   the writer reads it at every wake-up (at least every 100 ms), so silence and its end show in
+//   the health within a tenth of a second of the no-data timeout instead of up to a second later.
+// - The decoder's returns from its wait on the ring: read at each health tick, so its wake-ups
+//   per second cover the same second as the receive thread's and the writer's. (From the
+//   snapshot, the window lagged the tick by up to a second and could miss a short burst.)
+struct DecodeLive {
   std::atomic<std::int64_t> last_packet_monotonic_ns{0};
+  std::atomic<std::uint64_t> wakeups{0};
 };
 
 // Written only by the receive (or replay) thread, read by the writer for health.

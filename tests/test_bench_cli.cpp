@@ -297,9 +297,16 @@ TEST_CASE(
   CHECK(s["budget_0"]["budget_ms"] == 0);
   for (const json* t : {&s, &s["budget_0"]}) {
     CHECK((*t)["lost"] == 0);
-    for (const char* thread : {"receive", "decode", "writer"}) {
+    for (const std::string thread : {"receive", "decode", "writer"}) {
       INFO(thread);
-      CHECK((*t)["wakeups_per_second"][thread].get<double>() > 0);
+      const double wakeups = (*t)["wakeups_per_second"][thread].get<double>();
+      // A decoder that is behind for the whole second never finds the ring empty, so never
+      // waits: under TSan on a busy machine it is (frame latency in the hundreds of ms).
+      if (thread == "decode" && test::kThreadSanitizerBuild) {
+        CHECK(wakeups >= 0);
+      } else {
+        CHECK(wakeups > 0);
+      }
     }
     CHECK((*t)["frame_latency_p99_ms"].get<double>() > 0);
     CHECK((*t)["daemon_vs_bare_cpu"].get<double>() ==

@@ -127,7 +127,7 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.files_removed_for_space = sources.files_removed_for_space;
   c.bytes_removed_for_space = sources.bytes_removed_for_space;
   c.receive_wakeups = receive.wakeups.load(std::memory_order_relaxed);
-  c.decode_wakeups = decode.wakeups;
+  c.decode_wakeups = sources.decode_wakeups;
   c.writer_wakeups = sources.writer_wakeups;
   h.frame_latency = sources.frames.latency();
 
@@ -145,23 +145,20 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   // final tick at shutdown can be a fraction of a second long (and sees the flushed partials),
   // so a window under half a second keeps the previous second's rate.
   const auto complete = decode.frames.frames_complete - decode_prev_.frames.frames_complete;
-  if (span_s >= 0.5) {
-    g.frame_rate_hz = static_cast<double>(complete) / span_s;
-    g.decode_wakeups_per_second =
-        static_cast<double>(decode.wakeups - decode_prev_.wakeups) / span_s;
-  }
+  if (span_s >= 0.5) g.frame_rate_hz = static_cast<double>(complete) / span_s;
   g.seconds_since_last_packet = sources.seconds_since_last_packet;
   g.sensor_clock_offset_known = decode.sensor_clock_offset_ns.has_value();
   g.sensor_clock_offset_seconds =
       static_cast<double>(decode.sensor_clock_offset_ns.value_or(0)) / 1e9;
-  // Per second of the writer's own ticks; the decoder's over the span of its last two snapshots
-  // (they arrive about once a second, not in step with the ticks). A final tick shorter than
-  // half a second keeps the last rates.
+  // Per second of the writer's own ticks, all three over the same window (the decoder's count is
+  // read live, not from its snapshot). A final tick shorter than half a second keeps the last
+  // rates.
   const double tick_s = static_cast<double>(now - last_tick_ns_) / 1e9;
   if (tick_s >= 0.5) {
     const HealthCounters& a = counters_a_second_ago_;
     g.receive_wakeups_per_second =
         static_cast<double>(c.receive_wakeups - a.receive_wakeups) / tick_s;
+    g.decode_wakeups_per_second = static_cast<double>(c.decode_wakeups - a.decode_wakeups) / tick_s;
     g.writer_wakeups_per_second = static_cast<double>(c.writer_wakeups - a.writer_wakeups) / tick_s;
   }
 

@@ -46,6 +46,7 @@ struct HealthSources {
   const PcapRecorder& pcap;
   const McapRecorder& mcap;
   const OutputAccounting& accounting;
+  std::uint64_t decode_wakeups;  // DecodeLive's, read at this tick
   std::uint64_t writer_wakeups;
   double seconds_since_last_packet;         // -1: none yet
   bool silent;                              // no packet yet, or none for the no-data timeout

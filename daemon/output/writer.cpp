@@ -32,7 +32,7 @@ void probe_writable(const std::filesystem::path& dir) {
 }  // namespace
 
 Writer::Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQueue& arenas_back,
-               RawQueue& raw_back, const ReceiveCounters& receive, const LiveClock& live,
+               RawQueue& raw_back, const ReceiveCounters& receive, const DecodeLive& live,
                SensorStatusChannel& sensor_status)
     : options_(options),
       from_decoder_(from_decoder),
@@ -125,6 +125,7 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
       .pcap = pcap_,
       .mcap = mcap_,
       .accounting = accounting_,
+      .decode_wakeups = live_.wakeups.load(std::memory_order_relaxed),
       .writer_wakeups = wakeups_,
       .seconds_since_last_packet = seconds_since_last_packet(now),
       .silent = silent(now),

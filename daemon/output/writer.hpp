@@ -56,7 +56,7 @@ struct StatusLine {
 class Writer {
  public:
   Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQueue& arenas_back,
-         RawQueue& raw_back, const ReceiveCounters& receive, const LiveClock& live,
+         RawQueue& raw_back, const ReceiveCounters& receive, const DecodeLive& live,
          SensorStatusChannel& sensor_status);
   ~Writer();
 
@@ -95,7 +95,7 @@ class Writer {
   ArenaQueue& arenas_back_;
   RawQueue& raw_back_;
   const ReceiveCounters& receive_;
-  const LiveClock& live_;
+  const DecodeLive& live_;
   // The parts, which count their failures in accounting_ and read options_ (declared first).
   OutputAccounting accounting_;
   SpaceGuard space_;  // the health files' room, whatever fills their disk
