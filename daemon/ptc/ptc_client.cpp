@@ -18,20 +18,27 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// Milliseconds left until `deadline` for poll(), at least 0.
-int remaining_ms(Clock::time_point deadline) {
+// Milliseconds left until `deadline` for poll(), at least 0 and at most `cap_ms`.
+int remaining_ms(Clock::time_point deadline, long long cap_ms) {
   const auto left =
       std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
-  return left <= 0 ? 0 : static_cast<int>(std::min<long long>(left, 60'000));
+  return left <= 0 ? 0 : static_cast<int>(std::min<long long>(left, cap_ms));
 }
 
+// The longest a cancellable wait sleeps before looking at `cancel` again. A signal's EINTR
+// usually brings it back at once, but one that lands between the look and the poll (or on
+// another thread, or deferred by a sanitizer's signal handling) would not: without a cap, SIGTERM
+// during the start could wait out a whole PTC deadline.
+constexpr long long kCancelCheckMs = 100;
+
 // Waits for `events` on `fd` until `deadline`: true when ready, false at the deadline or when
-// `cancel` is raised (a signal's EINTR brings the wait back to look).
+// `cancel` is raised (seen within kCancelCheckMs).
 bool wait_for(int fd, short events, Clock::time_point deadline, const std::atomic<bool>* cancel) {
   for (;;) {
     if (cancel != nullptr && cancel->load(std::memory_order_relaxed)) return false;
     pollfd p{fd, events, 0};
-    const int n = ::poll(&p, 1, remaining_ms(deadline));
+    const int n =
+        ::poll(&p, 1, remaining_ms(deadline, cancel != nullptr ? kCancelCheckMs : 60'000));
     if (n > 0) return true;
     if (n == 0) {
       if (Clock::now() >= deadline) return false;
