@@ -620,4 +620,11 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   CHECK(files_ending(out / "frames", ".pcd").size() == health_counter(h, "frames_written"));
   // Fixed memory: the stall grew nothing (the queues and arenas are preallocated).
   CHECK(rss_stalled <= rss_before + (2u << 20));
+  // Nor did saying so: the health's reason ("N frames dropped (no free arena)"), first written
+  // long after the loops are warm, allocated nothing (counted where allocations can be).
+  if (h.at("counters").contains("hot_path_allocations_by_thread")) {
+    const json& allocations = h.at("counters").at("hot_path_allocations_by_thread");
+    CHECK(allocations.at("writer") == 0);
+    CHECK(allocations.at("decode") == 0);
+  }
 }

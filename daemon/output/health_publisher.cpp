@@ -28,6 +28,11 @@ void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
   health_.sensor_identity = options_.sensor_identity;  // found at start-up, constant after
   prom_text_.reserve(64 * 1024);
   json_text_.reserve(8 * 1024);
+  // The reasons are rebuilt in place every second; room for every problem at once (a write
+  // error's message with its path included), so the first degraded second, long after the loop
+  // is warm, does not allocate.
+  health_.gauges.reason.reserve(8 * 1024);
+  health_.gauges.sensor_status.implausible_reason.reserve(1024);
 }
 
 namespace {
