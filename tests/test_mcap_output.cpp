@@ -130,9 +130,13 @@ TEST_CASE(
   REQUIRE(pcaps.size() == 1);
   const auto [status, records] = test::read_capture(pcaps[0]);
   CHECK(file["topics"]["/pandar/packets"]["count"] == records);
-  // Sanitizer builds: less what was counted as not recorded (see kSanitizerBuild).
+  // Sanitizer builds: less what was counted as not recorded (see kSanitizerBuild) and, under
+  // ThreadSanitizer, overrun by the ring (tsan_ring_overruns).
+  const std::uint64_t overruns = test::tsan_ring_overruns(h);
+  CHECK(test::health_counter(h, "ring_overruns") == overruns);
   CHECK(file["topics"]["/pandar/packets"]["count"].get<std::uint64_t>() +
-            (test::kSanitizerBuild ? test::health_counter(h, "pcap_packets_not_recorded") : 0) ==
+            (test::kSanitizerBuild ? test::health_counter(h, "pcap_packets_not_recorded") : 0) +
+            overruns ==
         test::health_counter(h, "datagrams_received"));
   CHECK(file["topics"]["/pandar/packets"]["messages"][0]["size"] == 1262);
   CHECK(file["topics"]["/pandar/packets"]["messages"][0]["first_bytes"] ==
@@ -416,7 +420,9 @@ TEST_CASE("MCAP points are the PCD files' bytes in the layout and axes chosen an
     const json& messages = file["topics"]["/pandar/points"]["messages"];
     const auto pcds = test::files_ending(out / "frames", ".pcd");
     REQUIRE(messages.size() == pcds.size());
-    REQUIRE(pcds.size() >= 10);
+    // Two seconds at 10 Hz; under ThreadSanitizer on a busy machine the decoder falls behind and
+    // fewer frames are whole (each still compared byte for byte below).
+    REQUIRE(pcds.size() >= (test::kThreadSanitizerBuild ? 5u : 10u));
     const std::size_t step = pcd_point_bytes(layout);
     const auto fields = pcd_fields(layout);
     for (std::size_t i = 0; i < pcds.size(); ++i) {
