@@ -190,7 +190,7 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
     if (batch.empty()) {
       if (done) break;
       ring_.wait_for_data(std::chrono::milliseconds(100));
-      live.wakeups.store(++wakeups_, std::memory_order_relaxed);
+      ReceiveCounters::add(live.wakeups, 1);
     } else {
       for (const PacketSlot& slot : batch)
         process(slot);

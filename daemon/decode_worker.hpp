@@ -87,7 +87,6 @@ class DecodeWorker final : public FrameSink {
   std::uint64_t frames_finished_ = 0;
   std::uint64_t frames_decimated_ = 0;
   std::uint64_t frames_fragment_ = 0;
-  std::uint64_t wakeups_ = 0;
   std::int64_t current_receive_ns_ = 0;  // the packet being decoded (frame latency's start)
   std::int64_t last_receive_ns_ = 0;     // the latest packet's, kept through the shutdown
   // The sensor's clock minus the host's, at the last accepted packet with a valid time and a
