@@ -88,6 +88,12 @@ std::string pandarcapd_command() {
   return binary("pandarcapd").string() + " --allow-root";
 }
 
+std::uint64_t check_ring_overruns(const nlohmann::json& record) {
+  const std::uint64_t allowed = kThreadSanitizerBuild ? health_counter(record, "ring_overruns") : 0;
+  CHECK(health_counter(record, "ring_overruns") == allowed);
+  return allowed;
+}
+
 std::uint64_t health_counter(const nlohmann::json& record, std::string_view name) {
   if (!record.is_object() || !record.contains("counters")) return 0;
   return record["counters"].value(std::string(name), std::uint64_t{0});
