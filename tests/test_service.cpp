@@ -233,21 +233,18 @@ TEST_CASE("[threads]: pinning and SCHED_FIFO as granted, refusals logged, health
 
 namespace {
 
-// The last line of OUT/health/health.jsonl (null before the first), its state ("" before the
-// first), and how many lines there are.
+// The last line of OUT/health/health.jsonl (null before the first), and how many lines there are.
 struct HealthTail {
   nlohmann::json last;
-  std::string state;
   std::size_t lines = 0;
+  // The last line's state ("" before the first).
+  std::string state() const { return last.is_object() ? last.value("state", "") : ""; }
 };
 HealthTail health_tail(const fs::path& out) {
   const auto records = test::health_records(out);
   HealthTail tail;
   tail.lines = records.size();
-  if (!records.empty()) {
-    tail.last = records.back();
-    tail.state = tail.last.value("state", "");
-  }
+  if (!records.empty()) tail.last = records.back();
   return tail;
 }
 
@@ -298,13 +295,13 @@ TEST_CASE(
   INFO(daemon.log());
   REQUIRE(notify.wait_for(
       [&] { return notify.count("READY=1") == 1 && health_tail(out).lines >= 1; }, 15s));
-  CHECK(health_tail(out).state == "no_data");  // nothing sent yet
+  CHECK(health_tail(out).state() == "no_data");  // nothing sent yet
 
   PacedSensor sensor(port);
   // The listener keeps reading meanwhile, as systemd does: a full notify socket would block the
   // daemon's sd_notify (libsystemd sends blocking), and with it the daemon's main thread.
   sensor.send_for(1500ms, [&] { notify.receive(false); });
-  REQUIRE(notify.wait_for([&] { return health_tail(out).state == "ok"; }, 5s));
+  REQUIRE(notify.wait_for([&] { return health_tail(out).state() == "ok"; }, 5s));
 
   // The decoder stamps a packet's time when it decodes it. Under TSan on a busy machine it can
   // trail the sender by most of a second (CI once saw no_data 1.95 s after the last send), so
@@ -318,7 +315,7 @@ TEST_CASE(
   REQUIRE(notify.wait_for(
       [&] {
         const HealthTail tail = health_tail(out);
-        if (tail.state != "no_data") return false;
+        if (tail.state() != "no_data") return false;
         silent_for = tail.last.at("gauges").at("seconds_since_last_packet").get<double>();
         return true;
       },
@@ -334,7 +331,7 @@ TEST_CASE(
   const std::size_t lines = health_tail(out).lines;
   const std::size_t pings = notify.count("WATCHDOG=1");
   REQUIRE(notify.wait_for([&] { return health_tail(out).lines >= lines + 2; }, 5s));
-  CHECK(health_tail(out).state == "no_data");
+  CHECK(health_tail(out).state() == "no_data");
   CHECK(notify.count("WATCHDOG=1") >= pings + 4);
   CHECK(notify.all().find("STATUS=no_data") != std::string::npos);
 
@@ -345,7 +342,7 @@ TEST_CASE(
     resume_done = true;
   });
   const auto resumed = std::chrono::steady_clock::now();
-  const bool ok_again = notify.wait_for([&] { return health_tail(out).state == "ok"; }, 5s);
+  const bool ok_again = notify.wait_for([&] { return health_tail(out).state() == "ok"; }, 5s);
   const auto to_ok = std::chrono::steady_clock::now() - resumed;
   notify.wait_for([&] { return resume_done.load(); }, 10s);
   resume.join();
