@@ -6,6 +6,7 @@
 
 #include "core/ptc/ptc_messages.hpp"
 #include "core/ptc/status_plausibility.hpp"
+#include "core/text_encoding.hpp"
 #include "core/utc_time.hpp"
 
 namespace pandarcap {
@@ -92,83 +93,6 @@ void family(std::string& out, std::string_view name, std::string_view type, std:
                  name, suffix, help, name, suffix, type);
 }
 
-// Appends `value` escaped as a Prometheus label value: to a std::string, or to the stack buffer
-// the sensor label is built in.
-template <typename Buffer>
-void append_label_value(Buffer& out, std::string_view value) {
-  for (const char c : value) {
-    if (c == '\\' || c == '"') {
-      out.push_back('\\');
-      out.push_back(c);
-    } else if (c == '\n') {
-      out.push_back('\\');
-      out.push_back('n');
-    } else {
-      out.push_back(c);
-    }
-  }
-}
-
-// Length of the valid UTF-8 sequence starting at s[i], or 0 when it is not valid.
-std::size_t utf8_sequence(std::string_view s, std::size_t i) {
-  const auto b = static_cast<unsigned char>(s[i]);
-  std::size_t n = 0;
-  unsigned min = 0;
-  if (b >= 0xC2 && b <= 0xDF) {
-    n = 2, min = 0x80;
-  } else if (b >= 0xE0 && b <= 0xEF) {
-    n = 3, min = 0x800;
-  } else if (b >= 0xF0 && b <= 0xF4) {
-    n = 4, min = 0x10000;
-  } else {
-    return 0;
-  }
-  if (i + n > s.size()) return 0;
-  unsigned code = b & (0x7F >> n);
-  for (std::size_t k = 1; k < n; ++k) {
-    const auto c = static_cast<unsigned char>(s[i + k]);
-    if ((c & 0xC0) != 0x80) return 0;
-    code = (code << 6) | (c & 0x3F);
-  }
-  if (code < min || code > 0x10FFFF || (code >= 0xD800 && code <= 0xDFFF)) return 0;
-  return n;
-}
-
-// A JSON string. Bytes that are not valid UTF-8 (an error message may carry some) become U+FFFD.
-void append_json_string(std::string& out, std::string_view s) {
-  out += '"';
-  for (std::size_t i = 0; i < s.size();) {
-    const auto c = static_cast<unsigned char>(s[i]);
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += static_cast<char>(c);
-      ++i;
-    } else if (c < 0x20) {
-      fmt::format_to(std::back_inserter(out), "\\u{:04x}", c);
-      ++i;
-    } else if (c < 0x80) {
-      out += static_cast<char>(c);
-      ++i;
-    } else if (const std::size_t n = utf8_sequence(s, i); n != 0) {
-      out.append(s.substr(i, n));
-      i += n;
-    } else {
-      out += "\\ufffd";
-      ++i;
-    }
-  }
-  out += '"';
-}
-
-// A JSON number; JSON has no NaN or infinity, so those become null.
-void append_json_number(std::string& out, double v) {
-  if (std::isfinite(v)) {
-    fmt::format_to(std::back_inserter(out), "{}", v);
-  } else {
-    out += "null";
-  }
-}
-
 // A LatencyHistogram as a Prometheus histogram with buckets at 2^first .. 2^last ns (exact
 // bucket edges of the histogram).
 void histogram(std::string& out, std::string_view sensor, std::string_view name,
@@ -202,13 +126,6 @@ void latency_json(std::string& out, std::string_view key, const LatencyHistogram
 }
 
 }  // namespace
-
-std::string escape_label_value(std::string_view value) {
-  std::string out;
-  out.reserve(value.size());
-  append_label_value(out, value);
-  return out;
-}
 
 namespace {
 
@@ -467,6 +384,10 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
   }
 
   storage_prometheus(out, sensor, h.gauges.storage);
+  family(out, "health_fallback", "gauge",
+         "1 while the health files are written to health.fallback_directory (their own directory "
+         "cannot be written)");
+  append("pandarcap_health_fallback{{{}}} {}\n", sensor, h.gauges.health_fallback.active ? 1 : 0);
   if (const auto& live = h.live) {
     family(out, "live_clients", "gauge", "Foxglove viewers connected to the live view");
     append("pandarcap_live_clients{{{}}} {}\n", sensor, live->clients);
@@ -565,6 +486,15 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
 
   sensor_json(out, h);
   storage_json(out, h.gauges.storage);
+  const HealthFallbackGauges& fallback = h.gauges.health_fallback;
+  append(R"(,"health_fallback":{{"active":{})", fallback.active);
+  if (fallback.active) {
+    out += ",\"directory\":";
+    append_json_string(out, fallback.directory);
+    out += ",\"error\":";
+    append_json_string(out, fallback.error);
+  }
+  out += '}';
   if (const auto& live = h.live) {
     append(R"(,"live":{{"clients":{},"messages_sent":{},"messages_dropped":{}}})", live->clients,
            live->messages_sent, live->messages_dropped);

@@ -32,7 +32,4 @@ std::string to_json_line(const HealthSnapshot& snapshot);
 void render_prometheus(const HealthSnapshot& snapshot, std::string& out);
 void render_json_line(const HealthSnapshot& snapshot, std::string& out);
 
-// Escapes a Prometheus label value (backslash, double quote, newline).
-std::string escape_label_value(std::string_view value);
-
 }  // namespace pandarcap

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "core/health_format.hpp"
+#include "core/text_encoding.hpp"
 #include "core/utc_time.hpp"
 #include "support/test_support.hpp"
 
