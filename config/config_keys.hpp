@@ -91,6 +91,8 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("output", "mcap_packets_topic", o.mcap_packets_topic, &topic);
   v("output", "min_free_bytes", o.min_free_bytes, IntRange{0, kI64});
   v("output", "min_free_percent", o.min_free_percent, RealRange{0.0, false, 90.0, false});
+  v("output", "sync_interval_seconds", o.sync_interval_seconds,
+    RealRange{0.0, false, 3600.0, false});
 
   auto& h = c.health;
   v("health", "sensor_name", h.sensor_name, &label);
@@ -104,6 +106,7 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("health", "directory", h.directory, &any_string);
   v("health", "prometheus_file", h.prometheus_file, &prom_file_or_empty);
   v("health", "min_hours_left", h.min_hours_left, RealRange{0.0, false, 100'000.0, false});
+  v("health", "fallback_directory", h.fallback_directory, &any_string);
 
   auto& t = c.threads;
   v("threads", "receive_cpu", t.receive_cpu, IntRange{-1, kMaxCpu});

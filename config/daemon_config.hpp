@@ -88,6 +88,10 @@ struct OutputSection {
   // the larger of the two.
   std::uint64_t min_free_bytes = 0;
   double min_free_percent = 0;  // of the file system's size; 0..90
+  // A recording still being written (pcap, pcap.zst, MCAP) and health.jsonl have their data
+  // synced to the disk this often, so a power cut loses at most about this much of them. Finished
+  // files are always synced before they get their final name. 0 = only then.
+  double sync_interval_seconds = 2.0;
 };
 
 struct HealthSection {
@@ -101,6 +105,10 @@ struct HealthSection {
   std::string prometheus_file;  // the .prom file; "" = HEALTH-DIR/pandarcap.prom
   // Fewer hours of disk left than this at the last minute's write rate: degraded. 0 = off.
   double min_hours_left = 0;
+  // Where the health files go while their own directory cannot be written (a read-only or failing
+  // disk): "" = the systemd unit's RuntimeDirectory ($RUNTIME_DIRECTORY), else
+  // $XDG_RUNTIME_DIR/pandarcap, else /tmp/pandarcap-UID (daemon_options.cpp).
+  std::string fallback_directory;
 };
 
 // Optional placement of the threads on a dedicated PC (best effort: what the limits refuse is

@@ -224,6 +224,14 @@ struct StorageGauges {
   double hours_left = std::numeric_limits<double>::infinity();
 };
 
+// Where the health files are while their own directory cannot be written (a disk gone read-only
+// or failing): health.fallback_directory. Inactive (the strings empty) while they are home.
+struct HealthFallbackGauges {
+  bool active = false;
+  std::string directory;  // where they are written now
+  std::string error;      // why their own directory cannot take them
+};
+
 struct HealthGauges {
   double rpm_tail = 0;            // mean motor speed reported in the tails over the last second
   double rpm_measured = 0;        // from azimuth progression over packet time, last second
@@ -243,6 +251,7 @@ struct HealthGauges {
   double writer_wakeups_per_second = 0;
   SensorStatusGauges sensor_status;
   StorageGauges storage;
+  HealthFallbackGauges health_fallback;
   HealthState state = HealthState::kNoData;
   std::string reason;  // one line saying why the state is not ok ("" when ok)
 };

@@ -83,6 +83,9 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
       problem("sensor status: motor at {:.0f} RPM (expected {})", sensor.motor_rpm, expected.rpm);
     }
   }
+  if (g.health_fallback.active) {
+    problem("health written to {} ({})", g.health_fallback.directory, g.health_fallback.error);
+  }
   const StorageGauges& storage = g.storage;
   if (expected.min_hours_left > 0 && storage.free_known &&
       storage.hours_left < expected.min_hours_left) {

@@ -17,8 +17,11 @@
 //               answer over PTC for 16 s"), or PTP configured but not locked ("sensor clock
 //               source is PTP but PTP is tracking (not locked)"). A sensor that never answered
 //               PTC does not degrade: it is reported (age -1, ptc_errors), not assumed broken.
-//               Last, fewer hours of disk left than health.min_hours_left ("0.8 hours of disk
-//               left (3072 MiB free at 1.1 MB/s written; health.min_hours_left 1)").
+//               Then the health files' own directory failing ("health written to
+//               /run/pandarcap/front (cannot write '/var/log/pandarcap/front/health.jsonl':
+//               Read-only file system)"). Last, fewer hours of disk left than health.min_hours_left
+//               ("0.8 hours of disk left (3072 MiB free at 1.1 MB/s written; health.min_hours_left
+//               1)").
 //   - ok:       none of these; the reason is "".
 // Example: "2 kernel drops; return mode dual (expected last)".
 #pragma once

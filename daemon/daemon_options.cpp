@@ -1,9 +1,11 @@
 #include "daemon/daemon_options.hpp"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
+#include <string_view>
 
 #include "config/command_line.hpp"
 #include "core/mcap/ros2_messages.hpp"
@@ -53,6 +55,8 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.min_free_bytes = config.output.min_free_bytes;
   wo.min_free_percent = config.output.min_free_percent;
   wo.min_hours_left = config.health.min_hours_left;
+  wo.sync_interval_seconds = config.output.sync_interval_seconds;
+  wo.health_fallback_dir = health_fallback_directory(config.health);
   const OutputSection& o = config.output;
   wo.mcap = o.mcap;
   wo.pcd_format = pcd_format(config);
@@ -83,6 +87,22 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.expected_return_mode = config.sensor.return_mode;
   wo.expected_rpm = config.sensor.rotation_speed;
   return wo;
+}
+
+std::filesystem::path health_fallback_directory(const HealthSection& health) {
+  if (!health.fallback_directory.empty()) return health.fallback_directory;
+  // systemd's RuntimeDirectory= (the packaged unit: /run/pandarcap/NAME): a tmpfs of the
+  // instance's own, which a failing disk cannot take with it.
+  if (const char* runtime = std::getenv("RUNTIME_DIRECTORY"); runtime != nullptr && *runtime) {
+    // Several directories are separated by ':'; the first is the instance's.
+    const std::string_view all(runtime);
+    return std::filesystem::path(all.substr(0, all.find(':')));
+  }
+  // Outside systemd, one directory per sensor label (unique per sensor, as its metrics are).
+  if (const char* user = std::getenv("XDG_RUNTIME_DIR"); user != nullptr && *user) {
+    return std::filesystem::path(user) / "pandarcap" / health.sensor_name;
+  }
+  return std::filesystem::path(fmt::format("/tmp/pandarcap-{}", ::getuid())) / health.sensor_name;
 }
 
 DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTarget target,

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 
@@ -32,6 +33,8 @@ bool points_decoded(const DaemonConfig& config);
 // are known only at start (the caller fills them in); the test hook only in builds with
 // PANDARCAP_TEST_HOOKS (the test builds; never the package).
 WriterOptions writer_options(const DaemonConfig& config);
+// health.fallback_directory, or where it defaults to (config/daemon_config.hpp).
+std::filesystem::path health_fallback_directory(const HealthSection& health);
 
 // The frames' layout and axes (output.pcd_fields, sensor.frame), which the arenas hold, the PCD
 // files and MCAP write.

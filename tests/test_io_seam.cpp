@@ -17,9 +17,6 @@
 #include "daemon/io/errors.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/io/syscalls.hpp"
-#include "daemon/output/frame_output.hpp"
-#include "daemon/output/output_accounting.hpp"
-#include "daemon/output/space_guard.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
 #include "daemon/pipeline_types.hpp"
@@ -150,33 +147,6 @@ TEST_CASE("throw_errno names what failed, and never reports errno 0 as success",
   CHECK_THROWS_WITH(io::throw_errno("cannot open"), Catch::Contains("cannot open"));
 }
 
-namespace {
-
-// Writes refused with EINVAL while the file is open O_DIRECT, as a file system that takes the
-// open but not the writes would.
-std::size_t direct_writes = 0, direct_refusals = 0;
-bool refuse_direct = false;
-ssize_t direct_aware_write(int fd, const void* data, std::size_t size) {
-  const int flags = ::fcntl(fd, F_GETFL);
-  if (flags >= 0 && (flags & O_DIRECT) != 0) {
-    ++direct_writes;
-    if (refuse_direct) {
-      ++direct_refusals;
-      errno = EINVAL;
-      return -1;
-    }
-  }
-  return ::write(fd, data, size);
-}
-
-// The data section of a PCD file: what follows "DATA binary\n".
-std::string pcd_data(const std::string& file) {
-  const std::size_t at = file.find("DATA binary\n");
-  return at == std::string::npos ? std::string() : file.substr(at + 12);
-}
-
-}  // namespace
-
 TEST_CASE("OutputFile O_DIRECT: whole aligned blocks past the page cache, then the tail", "[io]") {
   test::ScratchDir dir("io-direct");
   FrameArena memory(1000, PcdFormat{PcdLayout::kPandarcap, Axes::kHesai});  // page-aligned
@@ -192,53 +162,4 @@ TEST_CASE("OutputFile O_DIRECT: whole aligned blocks past the page cache, then t
   file.close();
   CHECK(contents(dir / "direct.bin") == std::string(bytes.begin(), bytes.end()));
   INFO("O_DIRECT on the scratch directory's file system: " << direct);
-}
-
-TEST_CASE("frames go past the page cache, and through it once a file system refuses that",
-          "[io][outputs]") {
-  test::ScratchDir dir("io-direct-frames");
-  WriterOptions options;
-  options.output_dir = dir / "out";
-  options.pcd_format = PcdFormat{PcdLayout::kPcl, Axes::kHesai};
-  fs::create_directories(options.output_dir / "frames");
-  fs::create_directories(options.output_dir / "health");
-  OutputAccounting accounting;
-  SpaceGuard space(options.output_dir / "health");
-  FrameOutput output(options, accounting, space);
-  FrameArena arena(2000, options.pcd_format);
-  arena.frame.size = 1500;  // 40 500 bytes: 9 whole blocks and a tail
-  arena.frame.info.start_ns = 1'795'348'800'000'000'000;
-  const auto rows = arena.frame.encoded.first(arena.frame.used_bytes().size());
-  for (std::size_t i = 0; i < rows.size(); ++i)
-    rows[i] = static_cast<std::uint8_t>(i * 7 % 253);
-  const std::string expected(rows.begin(), rows.end());
-
-  io::FileSyscalls calls = io::real_file_syscalls();
-  calls.write = direct_aware_write;
-  const io::ScopedFileSyscalls seam(calls);
-  direct_writes = direct_refusals = 0;
-  refuse_direct = false;
-  for (int round = 0; round < 3; ++round) {
-    INFO("round " << round);
-    // Round 1: the file system starts refusing direct writes (after opening with O_DIRECT).
-    refuse_direct = round >= 1;
-    const std::size_t refusals_before = direct_refusals;
-    arena.frame.info.sequence = static_cast<std::uint64_t>(round);
-    output.write(arena);
-    CHECK(accounting.write_errors() == 0);
-    CHECK(output.frames_written() == static_cast<std::uint64_t>(round + 1));
-    const auto files = test::files_ending(options.output_dir / "frames", ".pcd");
-    REQUIRE(files.size() == static_cast<std::size_t>(round + 1));
-    const std::string file = contents(files.back());
-    CHECK(pcd_data(file) == expected);  // every point, whichever way it went
-    const std::size_t header = file.size() - expected.size();
-    if (round == 0 && direct_writes > 0) CHECK(header == kDirectIoBlock);  // padded
-    if (round == 2) CHECK(direct_refusals == refusals_before);             // not tried again
-  }
-  CHECK(output.bytes_written() == 3 * expected.size() + 0 + [&] {
-    std::uintmax_t headers = 0;
-    for (const auto& f : test::files_ending(options.output_dir / "frames", ".pcd"))
-      headers += fs::file_size(f) - expected.size();
-    return headers;
-  }());
 }

@@ -614,5 +614,22 @@ TEST_CASE("a run with another calibration keeps the earlier recordings' table be
   // Recording 0000 was made with the nominal table, 0001 with the other one.
   CHECK(harness::read_file(out / "raw" / "calibration_before_0001.csv") == nominal.out);
   replay(" --calibration " + quoted(dir / "other.csv"));  // the same again: nothing new kept
-  CHECK(files_ending(out / "raw", ".csv").size() == 2);
+  std::size_t tables = 0;
+  for (const fs::path& csv : files_ending(out / "raw", ".csv"))
+    if (!csv.filename().string().starts_with("pandarcap_")) ++tables;
+  CHECK(tables == 2);
+  // Each recording carries the table it was made with beside it, whatever came later.
+  const std::vector<fs::path> recordings = files_ending(out / "raw", ".pcap");
+  REQUIRE(recordings.size() == 3);
+  for (std::size_t i = 0; i < recordings.size(); ++i) {
+    const std::string stem = recordings[i].string().substr(0, recordings[i].string().size() - 5);
+    INFO(stem);
+    CHECK(harness::read_file(stem + ".calibration.csv") ==
+          (i == 0 ? nominal.out : harness::read_file(dir / "other.csv")));
+    // The sensor facts of that run (the last run's are raw/sensor.json too).
+    const std::string facts = harness::read_file(stem + ".sensor.json");
+    CHECK(facts.find(i == 0 ? "\"calibration_source\": \"nominal\"" : "other.csv") !=
+          std::string::npos);
+    if (i + 1 == recordings.size()) CHECK(facts == harness::read_file(out / "raw" / "sensor.json"));
+  }
 }

@@ -42,6 +42,10 @@ void OutputFile::open(std::string_view path, Mode mode) {
   }
 }
 
+void OutputFile::sync() {
+  sync_data(fd_, path_);
+}
+
 void OutputFile::end_direct() noexcept {
   if (fd_ < 0 || !direct_) return;
   const int flags = ::fcntl(fd_, F_GETFL);
@@ -173,6 +177,64 @@ void write_file_replacing(const std::string& path, const std::string& temporary,
     throw;
   }
   rename_replacing(temporary, path);
+}
+
+void write_file_durably(const std::filesystem::path& path, std::string_view text) {
+  const std::filesystem::path temporary = temporary_name(path);
+  try {
+    OutputFile file(temporary, OutputFile::Mode::kCreate);
+    file.write(text);
+    file.sync();
+    file.close();
+  } catch (...) {
+    std::error_code ignored;
+    std::filesystem::remove(temporary, ignored);
+    throw;
+  }
+  rename_replacing(temporary.native(), path.native());
+  std::string directory;
+  assign_directory_of(directory, path.native());
+  sync_directory(directory);
+}
+
+void sync_data(int fd, std::string_view path) {
+  while (io::file_syscalls().fdatasync(fd) != 0) {
+    if (errno != EINTR) throw_errno("cannot sync", path);
+  }
+}
+
+void sync_directory(std::string_view directory) {
+  const std::string name(directory);
+  const io::UniqueFd fd(::open(name.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
+  if (!fd) throw_errno("cannot open the directory", name);
+  while (::fsync(fd.get()) != 0) {
+    if (errno == EINVAL) return;  // a file system with nothing to sync for a directory
+    if (errno != EINTR) throw_errno("cannot sync the directory", name);
+  }
+}
+
+void assign_directory_of(std::string& out, std::string_view path) {
+  const std::size_t slash = path.rfind('/');
+  if (slash == std::string_view::npos) {
+    out.assign(".");
+  } else {
+    out.assign(path.substr(0, slash == 0 ? 1 : slash));
+  }
+}
+
+void sync_file(const std::string& path) {
+  const io::UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW));
+  if (!fd) throw_errno("cannot open", path);
+  sync_data(fd.get(), path);
+}
+
+bool place_durably(const std::string& from, std::string& to) {
+  sync_file(from);
+  const bool renamed = place_without_replacing(from, to);
+  std::string directory;
+  assign_directory_of(directory, to);
+  sync_directory(directory);
+  return renamed;
 }
 
 std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis) {

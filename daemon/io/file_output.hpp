@@ -2,6 +2,13 @@
 // std::system_error carrying errno and the path ("cannot write 'x'"), EINTR and short writes are
 // retried in one place, and finished files appear only under their final name (written under a
 // temporary name in the same directory, then renamed: readers never see half a file).
+//
+// Durable before visible: a power cut must not leave a file under its final name with less in it
+// than it was written with. A rename reaches the disk's journal independently of the file's data
+// (ext4's delayed allocation writes the data seconds later), so a file's data is synced
+// (sync_data) before its rename, and its directory (sync_directory) after, or the new name may
+// not survive either. In the writer's loop that is the finisher thread's job
+// (daemon/output/file_finisher.hpp); at start-up, write_file_durably() and place_durably().
 #pragma once
 
 #include <cstdint>
@@ -37,6 +44,9 @@ class OutputFile {
     write(std::span(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
   }
   bool direct() const noexcept { return direct_; }
+  // fdatasync(2): what was written is on the disk (at start-up; the writer's loop leaves this to
+  // the finisher thread). Throws std::system_error.
+  void sync();
   // Back to writes through the page cache (for a file's unaligned tail). Best effort: no throw.
   void end_direct() noexcept;
   // Closes, reporting a failed close (a deferred write error on some file systems).
@@ -81,6 +91,29 @@ bool place_without_replacing(const std::string& from, std::string& to);
 
 // Writes `text` to `path` through a temporary file in the same directory and a rename.
 void write_file_replacing(const std::filesystem::path& path, std::string_view text);
+// The same, durable: the data synced before the rename and the directory after, so a power cut
+// leaves either the old file whole or the new one whole (raw/calibration.csv, raw/sensor.json, at
+// start-up). Throws std::system_error.
+void write_file_durably(const std::filesystem::path& path, std::string_view text);
+
+// fdatasync(2) of `fd` (`path` names it in the error), through the test seam. Throws
+// std::system_error.
+void sync_data(int fd, std::string_view path);
+// The same for the file named `path` (opened read-only, never through a link: fdatasync flushes
+// the file, whichever descriptor asks). Throws std::system_error.
+void sync_file(const std::string& path);
+// fsync(2) of the directory `directory`, so the names made, renamed or removed in it survive a
+// power cut. A file system that cannot sync a directory (EINVAL: some FUSE, NFS) has nothing to
+// sync: not an error. Throws std::system_error.
+void sync_directory(std::string_view directory);
+// The directory part of `path` ("a/b/c.pcap" -> "a/b"; "c.pcap" -> ".") into `out`, its capacity
+// reused.
+void assign_directory_of(std::string& out, std::string_view path);
+
+// put_in_place's durable form for start-up (a recording an interrupted run left, finished): the
+// file's data synced, then renamed without replacing (see place_without_replacing), then its
+// directory synced. Returns whether the name had to differ. Throws std::system_error.
+bool place_durably(const std::string& from, std::string& to);
 // The same with the temporary name and the file object given, for a file rewritten every second:
 // nothing is allocated.
 void write_file_replacing(const std::string& path, const std::string& temporary,

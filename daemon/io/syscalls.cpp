@@ -5,7 +5,7 @@
 namespace pandarcap::io {
 namespace {
 
-const FileSyscalls kReal{::write, ::ftruncate, ::close};
+const FileSyscalls kReal{::write, ::ftruncate, ::close, ::fdatasync};
 std::atomic<const FileSyscalls*> current{&kReal};
 
 }  // namespace

@@ -19,6 +19,9 @@ struct FileSyscalls {
   ssize_t (*write)(int fd, const void* data, std::size_t size);
   int (*ftruncate)(int fd, off_t size);
   int (*close)(int fd);
+  // What makes a file's data durable (daemon/output/file_finisher): a disk that fails here (EIO)
+  // lost what the page cache held, and the file must not get its final name.
+  int (*fdatasync)(int fd);
 };
 
 // The kernel's own calls.

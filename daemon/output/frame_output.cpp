@@ -16,9 +16,10 @@
 
 namespace pandarcap {
 FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& accounting,
-                         SpaceGuard& space)
+                         SpaceGuard& space, FileFinisher& finisher)
     : accounting_(accounting),
       space_(space),
+      finisher_(finisher),
       dir_(options.output_dir / "frames"),
       volume_(space.watch(dir_)),
       retention_(options.frames_max_files, options.frames_max_bytes),
@@ -80,17 +81,32 @@ void FrameOutput::write(const FrameArena& arena) {
       file_.write(data);
     }
     file_.close();
-    accounting_.put_in_place(temporary_path_, path_);
-    ++frames_written_;
-    bytes_written_ += file_.size();
-    if (arena.completed_receive_ns > 0) {
-      latency_.record(realtime_ns() - arena.completed_receive_ns);
-    }
-    retention_.add(path_, file_.size());
   } catch (const std::exception& error) {
     ::unlink(temporary_path_.c_str());
     accounting_.write_failed(error, expected);
+    return;
   }
+  FinishJob& job = finisher_.take();
+  job.kind = FinishJob::Kind::kPlace;
+  job.owner = FinishOwner::kFrames;
+  job.from.assign(temporary_path_);
+  job.to.assign(path_);
+  job.remove_on_failure = true;
+  job.bytes = file_.size();
+  job.stamp_ns = arena.completed_receive_ns;
+  finisher_.submit(job);
+}
+
+void FrameOutput::finished(const FinishJob& job) {
+  if (job.name_taken) accounting_.name_collision(job.from, job.to);
+  if (job.placed) {
+    ++frames_written_;
+    bytes_written_ += job.bytes;
+    if (job.stamp_ns > 0) latency_.record(realtime_ns() - job.stamp_ns);
+    retention_.add(job.to, job.bytes);
+  }
+  // Not on the disk whole (its temporary file removed), or in place but its name not synced.
+  if (job.failed) accounting_.write_failed(job.error_text(), job.placed ? 0 : job.bytes);
 }
 
 void FrameOutput::write_direct(std::span<const std::uint8_t> rows) {

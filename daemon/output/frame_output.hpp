@@ -2,12 +2,15 @@
 //
 // Each frame is written as frames/.<name>.tmp and renamed into place without replacing anything
 // (a taken name becomes "_dupN", counted), so a reader never sees half a frame; a failed write
-// removes the temporary file and is counted (OutputAccounting). A frame is not written while its
-// file system is down to the space kept for the health files (SpaceGuard: counted as a failed
-// write, said in the health), and a frames/ removed while running is made again. N continues across
-// runs: it starts after the highest number found at start-up (adopt_earlier_files), and is that
-// base plus the frame's sequence number. Retention (frames_max_files / frames_max_bytes) counts
-// earlier runs' frames too.
+// removes the temporary file and is counted (OutputAccounting). The rename is the finisher
+// thread's (daemon/output/file_finisher.hpp), after it synced the frame's data, and the
+// directory is synced after it: a frame has its final name only once it is on the disk whole,
+// and is counted written (frames_written, retention, its latency) then. A frame is not written
+// while its file system is down to the space kept for the health files (SpaceGuard: counted as a
+// failed write, said in the health), and a frames/ removed while running is made again. N continues
+// across runs: it starts after the highest number found at start-up (adopt_earlier_files), and is
+// that base plus the frame's sequence number. Retention (frames_max_files / frames_max_bytes)
+// counts earlier runs' frames too.
 //
 // With output.pcd_compression = "lzf" a frame is compressed whole (DATA binary_compressed,
 // core/pcd_compressed.hpp) before it is written, in buffers sized at start-up for the largest
@@ -33,6 +36,7 @@
 #include "core/latency_histogram.hpp"
 #include "core/pcd_compressed.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/output/file_finisher.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/retention.hpp"
 #include "daemon/output/space_guard.hpp"
@@ -43,7 +47,8 @@ namespace pandarcap {
 
 class FrameOutput {
  public:
-  FrameOutput(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space);
+  FrameOutput(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space,
+              FileFinisher& finisher);
 
   const std::filesystem::path& directory() const noexcept { return dir_; }
   // At start-up, after the leftovers are cleaned: earlier runs' frames numbered and listed for
@@ -51,8 +56,10 @@ class FrameOutput {
   void adopt_earlier_files();
   void reserve();
 
-  // Writes the arena's frame; a failure is counted, never thrown.
+  // Writes the arena's frame and hands it to the finisher; a failure is counted, never thrown.
   void write(const FrameArena& arena);
+  // The finisher's word on a frame: in place (counted written), or why not (a write error).
+  void finished(const FinishJob& job);
   // A frame removed by the free-space floor (space_floor.hpp): off the retention list.
   void removed_for_space(std::string_view path) noexcept { retention_.forget(path); }
 
@@ -64,6 +71,7 @@ class FrameOutput {
  private:
   OutputAccounting& accounting_;
   SpaceGuard& space_;
+  FileFinisher& finisher_;
   std::filesystem::path dir_;
   int volume_;  // dir_'s file system, for space_
   Retention retention_;

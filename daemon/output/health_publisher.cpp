@@ -1,8 +1,14 @@
 #include "daemon/output/health_publisher.hpp"
 
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <filesystem>
+#include <initializer_list>
+#include <string_view>
 #include <system_error>
 
 #include "core/health_format.hpp"
@@ -10,21 +16,35 @@
 #include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/io/errors.hpp"
 #include "daemon/output/output_directories.hpp"
 
 namespace pandarcap {
 HealthPublisher::HealthPublisher(const WriterOptions& options, OutputAccounting& accounting,
-                                 SpaceGuard& space)
-    : options_(options), accounting_(accounting), space_(space) {}
+                                 SpaceGuard& space, FileFinisher& finisher)
+    : options_(options), accounting_(accounting), space_(space), finisher_(finisher) {}
 
 void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
   start_monotonic_ns_ = start_monotonic_ns;
   last_tick_ns_ = start_monotonic_ns;
   decode_prev_.monotonic_ns = start_monotonic_ns;
   prom_path_ = options_.prometheus_file.native();
-  assign_temporary_name(prom_temporary_path_, prom_path_);
+  // Names of one length: the file object reusing its path buffer for both allocates nothing.
+  assign_temporary_name(prom_temporary_paths_[0], prom_path_ + ".0");
+  assign_temporary_name(prom_temporary_paths_[1], prom_path_ + ".1");
   jsonl_path_ = (options_.health_dir / "health.jsonl").native();
   jsonl_rotated_path_ = jsonl_path_ + ".1";
+  // The probe of a health directory that failed: the name the start-up's writability probe uses.
+  probe_path_ = (options_.health_dir / kProbeFileName).native();
+  prom_probe_path_ = (options_.prometheus_file.parent_path() / kProbeFileName).native();
+  const std::filesystem::path& fallback = options_.health_fallback_dir;
+  fallback_prom_path_ = (fallback / options_.prometheus_file.filename()).native();
+  assign_temporary_name(fallback_prom_temporary_path_, fallback_prom_path_);
+  fallback_jsonl_path_ = (fallback / "health.jsonl").native();
+  fallback_jsonl_rotated_path_ = fallback_jsonl_path_ + ".1";
+  health_.gauges.health_fallback.directory.reserve(fallback.native().size() + 1);
+  health_.gauges.health_fallback.error.reserve(1024);
+  home_error_.reserve(1024);
   health_.sensor_identity = options_.sensor_identity;  // found at start-up, constant after
   prom_text_.reserve(64 * 1024);
   json_text_.reserve(8 * 1024);
@@ -178,11 +198,20 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
                                                   c.mcap_bytes_written, jsonl_bytes_written_});
   fill_storage(write_rates_, sources.storage, g.storage);
 
+  silent_ = sources.silent;
+  reclassify();
+}
+
+void HealthPublisher::reclassify() {
+  HealthCounters& c = health_.counters;
+  c.write_errors = accounting_.write_errors();
+  c.bytes_not_written = accounting_.bytes_not_written();
   classify_health(
       c, previous_counters_,
       HealthExpectations{options_.expected_return_mode, options_.expected_rpm,
                          options_.max_sensor_clock_offset_seconds, options_.min_hours_left},
-      sources.silent, sources.accounting.last_error(), g);
+      silent_, accounting_.last_error(), health_.gauges);
+  json_text_current_ = false;
 }
 
 void HealthPublisher::remember(const DecodeSnapshot& decode, std::int64_t now) {
@@ -195,25 +224,47 @@ void HealthPublisher::remember(const DecodeSnapshot& decode, std::int64_t now) {
 }
 
 void HealthPublisher::write_first() {
-  if (options_.prometheus) write_prometheus();
-  if (options_.jsonl) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
+  if (options_.prometheus) {
+    render_prometheus(health_, prom_text_);
+    write_file_durably(prom_path_, prom_text_);
+  }
+  if (options_.jsonl) {
+    jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
+    jsonl_directory_synced_ = false;
+  }
 }
 
-void HealthPublisher::write() {
+void HealthPublisher::write(std::int64_t now) {
+  if (health_.gauges.health_fallback.active) {
+    // The record says "fallback"; the health directory gets the next one once a probe file goes
+    // in again (a read-only disk remounted, a subvolume made writable).
+    if (!probe_home()) {
+      write_fallback(now);
+      return;
+    }
+    leave_fallback();
+  } else if (!home_error_.empty()) {
+    enter_fallback(now);  // the finisher could not sync or rename the last one
+    return;
+  }
+  if (!write_home(now)) enter_fallback(now);
+}
+
+bool HealthPublisher::write_home(std::int64_t now) {
   bool prometheus_done = !options_.prometheus, jsonl_done = !options_.jsonl;
   // A few attempts: a piece of the reserve given back, a removed directory made again.
   for (int attempt = 0; attempt < 4; ++attempt) {
     const bool at_prometheus = !prometheus_done;
     try {
       if (!prometheus_done) {
-        write_prometheus();
+        write_prometheus(now);
         prometheus_done = true;
       }
       if (!jsonl_done) {
-        write_jsonl_line();
+        append_jsonl(jsonl_file_, jsonl_path_, jsonl_rotated_path_);
         jsonl_done = true;
       }
-      return;
+      return true;
     } catch (const std::system_error& error) {
       const int code = error.code().value();
       if ((code == ENOSPC || code == EDQUOT) && space_.release_piece()) continue;
@@ -221,17 +272,147 @@ void HealthPublisher::write() {
           at_prometheus ? options_.prometheus_file.parent_path() : options_.health_dir;
       if (code == ENOENT && make_again_if_removed(dir)) continue;
       accounting_.write_failed(error, 0);
-      return;
+      home_error_.assign(error.what());
+      return false;
     } catch (const std::exception& error) {
       accounting_.write_failed(error, 0);
+      home_error_.assign(error.what());
+      return false;
+    }
+  }
+  return true;  // still short of space after every piece: counted above, nothing else is wrong
+}
+
+void HealthPublisher::write_prometheus(std::int64_t now) {
+  // A temporary name the finisher is not holding. Both held: the finisher has not synced the last
+  // two yet (a slow disk); this one is skipped, and after 2 s the disk is failing them.
+  const std::size_t slot = prom_pending_[0] ? 1 : 0;
+  if (prom_pending_[slot]) {
+    const std::int64_t oldest = std::min(prom_submitted_ns_[0], prom_submitted_ns_[1]);
+    if (now - oldest < 2 * kNsPerSecond) return;
+    io::throw_error(ETIMEDOUT, "no sync of the health file for 2 s:", prom_path_);
+  }
+  const std::string& temporary = prom_temporary_paths_[slot];
+  render_prometheus(health_, prom_text_);
+  try {
+    prom_file_.open(temporary, OutputFile::Mode::kCreate);
+    prom_file_.write(prom_text_);
+    prom_file_.close();
+  } catch (...) {
+    ::unlink(temporary.c_str());
+    throw;
+  }
+  FinishJob& job = finisher_.take();
+  job.kind = FinishJob::Kind::kReplace;
+  job.owner = FinishOwner::kHealth;
+  job.from.assign(temporary);
+  job.to.assign(prom_path_);
+  job.remove_on_failure = true;
+  job.items = slot;
+  finisher_.submit(job);
+  // In order: the finisher renames them as they were submitted, so the newest replaces the last.
+  prom_pending_[slot] = true;
+  prom_submitted_ns_[slot] = now;
+}
+
+void HealthPublisher::sync_jsonl() {
+  if (!options_.jsonl || !jsonl_file_.is_open() || health_.gauges.health_fallback.active) return;
+  FinishJob& job = finisher_.take();
+  job.kind = FinishJob::Kind::kSync;
+  job.owner = FinishOwner::kHealth;
+  job.from.assign(jsonl_path_);
+  job.sync_directory = !jsonl_directory_synced_;
+  jsonl_directory_synced_ = true;
+  finisher_.submit(job);
+}
+
+void HealthPublisher::finished(const FinishJob& job) {
+  if (job.kind == FinishJob::Kind::kReplace) prom_pending_[job.items] = false;
+  if (!job.failed) return;
+  // health.jsonl gone (its directory removed): reopened and made again at the next write.
+  if (job.kind == FinishJob::Kind::kSync && job.error_code == ENOENT) return;
+  accounting_.write_failed(job.error_text(), 0);
+  home_error_.assign(job.error_text());
+}
+
+bool HealthPublisher::probe_home() {
+  for (const std::string* probe : {&probe_path_, &prom_probe_path_}) {
+    if (probe == &probe_path_ ? !options_.jsonl : !options_.prometheus) continue;
+    try {
+      probe_file_.open(*probe, OutputFile::Mode::kCreate);
+      probe_file_.write(std::string_view("1"));
+      probe_file_.close();
+      ::unlink(probe->c_str());
+    } catch (const std::exception& error) {
+      ::unlink(probe->c_str());
+      // Still failing: counted (the health files were not written home this second).
+      accounting_.write_failed(error, 0);
+      health_.gauges.health_fallback.error.assign(error.what());
+      return false;
+    }
+  }
+  return true;
+}
+
+void HealthPublisher::enter_fallback(std::int64_t now) {
+  HealthFallbackGauges& fallback = health_.gauges.health_fallback;
+  fallback.active = true;
+  fallback.directory.assign(options_.health_fallback_dir.native());
+  fallback.error.assign(home_error_);
+  home_error_.clear();
+  jsonl_file_.close();  // reopened, and checked, when home again
+  fallback_logged_ns_ = -1;
+  reclassify();
+  write_fallback(now);
+}
+
+void HealthPublisher::write_fallback(std::int64_t now) {
+  const HealthFallbackGauges& fallback = health_.gauges.health_fallback;
+  const std::filesystem::path& dir = options_.health_fallback_dir;
+  std::string_view problem;
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    try {
+      if (options_.prometheus) {
+        render_prometheus(health_, prom_text_);
+        write_file_replacing(fallback_prom_path_, fallback_prom_temporary_path_, prom_text_,
+                             fallback_prom_file_);
+      }
+      if (options_.jsonl) {
+        append_jsonl(fallback_jsonl_file_, fallback_jsonl_path_, fallback_jsonl_rotated_path_);
+      }
+      problem = {};
+      break;
+    } catch (const std::exception& error) {
+      // Its directory is made at the first need (a tmpfs under /run starts empty).
+      std::error_code ignored;
+      if (attempt == 0 && std::filesystem::create_directories(dir, ignored)) continue;
+      problem = error.what();
+      // The message is logged now: `error` goes with this scope.
+      if (fallback_logged_ns_ < 0 || now - fallback_logged_ns_ >= 10 * kNsPerSecond) {
+        spdlog::error("health: {} ({}); and the fallback {} cannot be written either: {}",
+                      fallback.error, options_.health_dir.string(), dir.string(), problem);
+        fallback_logged_ns_ = now;
+      }
       return;
     }
   }
+  if (fallback_logged_ns_ < 0 || now - fallback_logged_ns_ >= 10 * kNsPerSecond) {
+    spdlog::error("health: {}; writing the health files to {} until {} takes them again",
+                  fallback.error, dir.string(), options_.health_dir.string());
+    fallback_logged_ns_ = now;
+  }
 }
 
-void HealthPublisher::write_prometheus() {
-  render_prometheus(health_, prom_text_);
-  write_file_replacing(prom_path_, prom_temporary_path_, prom_text_, prom_file_);
+void HealthPublisher::leave_fallback() {
+  HealthFallbackGauges& fallback = health_.gauges.health_fallback;
+  fallback.active = false;
+  fallback.directory.clear();
+  fallback.error.clear();
+  fallback_jsonl_file_.close();
+  ::unlink(fallback_prom_path_.c_str());  // no monitor keeps reading a frozen copy
+  reclassify();
+  spdlog::info("health: {} takes writes again; the health files are back there ({} removed)",
+               options_.health_dir.string(), fallback_prom_path_);
 }
 
 const std::string& HealthPublisher::json_line() {
@@ -242,26 +423,31 @@ const std::string& HealthPublisher::json_line() {
   return json_text_;
 }
 
-void HealthPublisher::write_jsonl_line() {
+void HealthPublisher::append_jsonl(OutputFile& file, const std::string& path,
+                                   const std::string& rotated) {
   json_line();
   // Kept open between ticks (appending); reopened after rotation, a failed write, or when it is
   // no longer at its path (removed with its directory: lines written there would reach nobody).
-  if (jsonl_file_.is_open() && !jsonl_file_.at_its_path()) jsonl_file_.close();
-  if (!jsonl_file_.is_open()) jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
-  if (options_.jsonl_rotate_bytes != 0 &&
-      jsonl_file_.size() + json_text_.size() > options_.jsonl_rotate_bytes) {
-    jsonl_file_.close();
-    rename_replacing(jsonl_path_, jsonl_rotated_path_);
-    jsonl_file_.open(jsonl_path_, OutputFile::Mode::kAppend);
+  if (file.is_open() && !file.at_its_path()) file.close();
+  if (!file.is_open()) {
+    file.open(path, OutputFile::Mode::kAppend);
+    if (&file == &jsonl_file_) jsonl_directory_synced_ = false;
   }
-  const std::uint64_t before = jsonl_file_.size();
+  if (options_.jsonl_rotate_bytes != 0 &&
+      file.size() + json_text_.size() > options_.jsonl_rotate_bytes) {
+    file.close();
+    rename_replacing(path, rotated);
+    file.open(path, OutputFile::Mode::kAppend);
+    if (&file == &jsonl_file_) jsonl_directory_synced_ = false;
+  }
+  const std::uint64_t before = file.size();
   try {
-    jsonl_file_.write(json_text_);
+    file.write(json_text_);
     jsonl_bytes_written_ += json_text_.size();
   } catch (...) {
     // A line cut short (a full disk) would glue itself to the next one: take it back.
-    jsonl_file_.truncate(before);
-    jsonl_file_.close();  // reopen next time (the file may have been removed)
+    file.truncate(before);
+    file.close();  // reopen next time (the file may have been removed)
     throw;
   }
 }

@@ -9,17 +9,27 @@
 //     (a preallocated window of per-second samples, core/storage_rate.hpp) and the hours of disk
 //     left at that pace, which health.min_hours_left checks.
 //   - write(): DIR/pandarcap.prom replaced whole (temporary file + rename: node_exporter never
-//     reads half a file), one line appended to health.jsonl (kept open; rotated to
+//     reads half a file; the rename is the finisher thread's, after the data is synced:
+//     daemon/output/file_finisher.hpp), one line appended to health.jsonl (kept open; rotated to
 //     health.jsonl.1 past jsonl_rotate_bytes; a line cut short by a failed write is taken back so
-//     it cannot glue itself to the next). A failure is counted (OutputAccounting), not thrown.
-//     Neither may freeze (docs/reliability.md): a write that fails for want of space takes a
-//     piece of the health reserve (SpaceGuard) and is tried again; a health directory removed
-//     while running is made again; health.jsonl is reopened when it is no longer at its path.
+//     it cannot glue itself to the next; synced every output.sync_interval_seconds, sync_jsonl()).
+//     A failure is counted (OutputAccounting), not thrown. Neither may freeze
+//     (docs/reliability.md): a write that fails for want of space takes a piece of the health
+//     reserve (SpaceGuard) and is tried again; a health directory removed while running is made
+//     again; health.jsonl is reopened when it is no longer at its path.
+//   - The fallback: any other failure of the health files (a disk gone read-only: EROFS; failing:
+//     EIO, at the write or at the finisher's sync) sends them to health.fallback_directory
+//     (normally the unit's RuntimeDirectory, a tmpfs) until their own directory takes a probe
+//     file again. The record then says so (gauges.health_fallback; degraded, "health written to
+//     DIR (why)"), re-decided the moment the failure is seen, so the first record there is
+//     already true; the journal says so at once and every 10 s. Back home, the fallback's .prom
+//     is removed (a monitor must not read a frozen copy) and its health.jsonl kept.
 //
 // Once warm nothing here allocates (names and rendered text are built in place; see
 // docs/performance.md, "Zero allocations"). Owned by the writer thread.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 
@@ -27,6 +37,7 @@
 #include "core/storage_rate.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/live/live_handover.hpp"
+#include "daemon/output/file_finisher.hpp"
 #include "daemon/output/frame_output.hpp"
 #include "daemon/output/mcap_recorder.hpp"
 #include "daemon/output/output_accounting.hpp"
@@ -66,23 +77,34 @@ struct HealthSources {
 class HealthPublisher {
  public:
   // `options` must outlive the publisher.
-  HealthPublisher(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space);
+  HealthPublisher(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space,
+                  FileFinisher& finisher);
 
   // At start-up: the file names, the clock the uptime and rates count from, and the buffers.
   void prepare(std::int64_t start_monotonic_ns);
-  const std::string& prometheus_temporary_path() const noexcept { return prom_temporary_path_; }
+  // The .prom's temporary names (two: one can be with the finisher while the next is written).
+  const std::array<std::string, 2>& prometheus_temporary_paths() const noexcept {
+    return prom_temporary_paths_;
+  }
   const std::string& jsonl_path() const noexcept { return jsonl_path_; }
 
   // The record as of `now_monotonic_ns`, into snapshot().
   void build(const HealthSources& sources, std::int64_t now_monotonic_ns);
-  // After a record is published: it becomes the base of the next one's "what grew" and rates.
+  // After a record is published (write()): it becomes the base of the next one's "what grew" and
+  // rates.
   void remember(const DecodeSnapshot& decode, std::int64_t now_monotonic_ns);
 
-  // The first record, before READY=1: proves the health outputs are writable. Throws
-  // std::system_error.
+  // The first record, before READY=1: proves the health outputs are writable (and puts it on the
+  // disk durably). Throws std::system_error.
   void write_first();
-  // Every later record; a failure is counted, never thrown.
-  void write();
+  // Every later record, to the health directory or while that fails to the fallback; a failure
+  // is counted, never thrown.
+  void write(std::int64_t now_monotonic_ns);
+  // health.jsonl's data synced, off this thread (output.sync_interval_seconds).
+  void sync_jsonl();
+  // The finisher's word on a .prom or a sync of health.jsonl.
+  void finished(const FinishJob& job);
+  const std::string& probe_path() const noexcept { return probe_path_; }
 
   const HealthSnapshot& snapshot() const noexcept { return health_; }
   // snapshot() as one JSON line, rendered once per record whoever asks first (health.jsonl,
@@ -95,13 +117,27 @@ class HealthPublisher {
   std::uint64_t jsonl_bytes_written() const noexcept { return jsonl_bytes_written_; }
 
  private:
-  void write_prometheus();  // throws
-  void write_jsonl_line();  // throws
+  // The health directory: true when both files were written (the .prom handed to the finisher).
+  bool write_home(std::int64_t now);
+  void write_prometheus(std::int64_t now);  // throws
+  // The record's line appended to `file` (opened at `path` if need be; rotated to `rotated`).
+  // Throws.
+  void append_jsonl(OutputFile& file, const std::string& path, const std::string& rotated);
+  // Whether the health directory (and the .prom's) takes a new file again, now.
+  bool probe_home();
+  // The state and reason decided again from the counters as they are now (a write just failed,
+  // the fallback was entered or left): the record written next is true already.
+  void reclassify();
+  void enter_fallback(std::int64_t now);
+  void write_fallback(std::int64_t now);
+  void leave_fallback();
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
   SpaceGuard& space_;
+  FileFinisher& finisher_;
   HealthSnapshot health_;
+  bool silent_ = true;  // the last build()'s, for reclassify()
   std::int64_t start_monotonic_ns_ = 0;
   std::int64_t last_tick_ns_ = 0;
   HealthCounters counters_a_second_ago_{};  // for the per-second wake-up rates
@@ -109,10 +145,23 @@ class HealthPublisher {
   DecodeSnapshot decode_prev_;              // the decoder's counters of the last record, for rates
   WriteRateWindow write_rates_;             // the outputs' bytes, a sample a second
   std::uint64_t jsonl_bytes_written_ = 0;
-  std::string prom_path_, prom_temporary_path_, jsonl_path_, jsonl_rotated_path_;
+  std::string prom_path_, jsonl_path_, jsonl_rotated_path_;
+  std::array<std::string, 2> prom_temporary_paths_;
   std::string prom_text_, json_text_;
   bool json_text_current_ = false;  // json_text_ is health_ as it is now
   OutputFile prom_file_, jsonl_file_;
+  // Which temporary names are with the finisher, since when (monotonic): the records of two ticks
+  // in a row (packets stop) can both be on their way.
+  std::array<bool, 2> prom_pending_{};
+  std::array<std::int64_t, 2> prom_submitted_ns_{};
+  bool jsonl_directory_synced_ = false;  // since health.jsonl was last opened
+  // Why the health directory failed (this thread's write, or the finisher's sync); "" = fine.
+  std::string home_error_;
+  std::string probe_path_, prom_probe_path_;
+  std::string fallback_prom_path_, fallback_prom_temporary_path_, fallback_jsonl_path_,
+      fallback_jsonl_rotated_path_;
+  OutputFile probe_file_, fallback_prom_file_, fallback_jsonl_file_;
+  std::int64_t fallback_logged_ns_ = -1;
 };
 
 }  // namespace pandarcap

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <span>
 #include <system_error>
 
@@ -24,10 +25,11 @@ constexpr std::uint64_t kMcapMessageOverheadBytes = 128;
 }  // namespace
 
 McapRecorder::McapRecorder(const WriterOptions& options, OutputAccounting& accounting,
-                           SpaceGuard& space)
+                           SpaceGuard& space, FileFinisher& finisher)
     : options_(options),
       accounting_(accounting),
       space_(space),
+      finisher_(finisher),
       dir_(options.output_dir / "mcap"),
       volume_(space.watch(dir_)),
       retention_(options.mcap_max_files, options.mcap_max_bytes) {}
@@ -74,8 +76,9 @@ bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
   }
   if (file_->is_open()) return true;
   final_path_.assign(dir_.native());
+  // The number is taken only by a file that opens (a read-only disk does not make it climb).
   fmt::format_to(std::back_inserter(final_path_), "/pandarcap_{}_{:04}.mcap",
-                 utc_file_stamp(static_cast<std::int64_t>(log_time), false), next_index_++);
+                 utc_file_stamp(static_cast<std::int64_t>(log_time), false), next_index_);
   part_path_.assign(final_path_);
   part_path_ += ".part";
   try {
@@ -93,6 +96,8 @@ bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
     accounting_.write_failed(error, 0);
     return false;
   }
+  ++next_index_;
+  directory_synced_ = false;
   opened_monotonic_ns_ = monotonic_ns();
   return true;
 }
@@ -255,11 +260,45 @@ void McapRecorder::place_finished(std::uint64_t messages) {
     return;
   }
   const std::uint64_t bytes = std::filesystem::file_size(part_path_);
-  accounting_.put_in_place(part_path_, final_path_);
   messages_closed_ += messages;
   bytes_closed_ += bytes;
-  retention_.add(final_path_, bytes);
-  recorded_.add(final_path_, messages, retention_);
+  FinishJob& job = finisher_.take();
+  job.kind = FinishJob::Kind::kPlace;
+  job.owner = FinishOwner::kMcap;
+  job.from.assign(part_path_);
+  job.to.assign(final_path_);
+  job.bytes = bytes;
+  job.items = messages;
+  finisher_.submit(job);
+}
+
+void McapRecorder::sync_open_file() {
+  if (!file_ || !file_->is_open()) return;
+  FinishJob& job = finisher_.take();
+  job.kind = FinishJob::Kind::kSync;
+  job.owner = FinishOwner::kMcap;
+  job.from.assign(part_path_);
+  job.sync_directory = !directory_synced_;
+  directory_synced_ = true;
+  finisher_.submit(job);
+}
+
+void McapRecorder::finished(const FinishJob& job) {
+  if (job.name_taken) accounting_.name_collision(job.from, job.to);
+  if (job.kind == FinishJob::Kind::kPlace && job.placed) {
+    retention_.add(job.to, job.bytes);
+    recorded_.add(job.to, job.items, retention_);
+  }
+  if (!job.failed) return;
+  // A file that went while open is counted lost at its next flush (lose_open_file).
+  if (job.kind == FinishJob::Kind::kSync && job.error_code == ENOENT) return;
+  accounting_.write_failed(job.error_text(), 0);
+  if (job.kind == FinishJob::Kind::kPlace && !job.placed) {
+    // Not known to be on the disk: not counted as recorded; the next start finishes the .part.
+    messages_lost_ += job.items;
+    spdlog::warn("{}: not put in place ({}); its {} messages are not counted as recorded", job.from,
+                 job.error_text(), job.items);
+  }
 }
 
 void McapRecorder::rotate() {

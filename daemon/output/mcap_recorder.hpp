@@ -9,7 +9,9 @@
 // for live sources and the capture's times for replays, so a file plays back at the pace it was
 // recorded; a PointCloud2's header.stamp is its first firing time by the sensor's clock.
 //
-// As with the pcap: written as NAME.mcap.part and renamed (never over anything) when finished; a
+// As with the pcap: written as NAME.mcap.part and renamed (never over anything) when finished, by
+// the finisher thread once its data is synced (daemon/output/file_finisher.hpp), and synced
+// while open every output.sync_interval_seconds (sync_open_file()); a
 // new file at mcap_rotate_bytes / mcap_rotate_seconds, on SIGHUP, when a file's chunk index is
 // full, and at the end; retention (mcap_max_files / mcap_max_bytes) counts earlier runs' files;
 // N continues across runs; a leftover .part is finished at the next start
@@ -34,6 +36,7 @@
 #include <utility>
 
 #include "daemon/mcap/mcap_file.hpp"
+#include "daemon/output/file_finisher.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/retention.hpp"
 #include "daemon/output/space_guard.hpp"
@@ -45,7 +48,8 @@ namespace pandarcap {
 class McapRecorder {
  public:
   // `options` must outlive the recorder.
-  McapRecorder(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space);
+  McapRecorder(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space,
+               FileFinisher& finisher);
   ~McapRecorder();
 
   const std::filesystem::path& directory() const noexcept { return dir_; }
@@ -68,6 +72,10 @@ class McapRecorder {
   void close();
   // SIGHUP: the open file finished.
   void rotate();
+  // The open file's data synced, off this thread (output.sync_interval_seconds).
+  void sync_open_file();
+  // The finisher's word on a file.
+  void finished(const FinishJob& job);
 
   // This run's finished files no longer on disk: their messages counted as lost. At the end.
   void verify_on_disk();
@@ -96,13 +104,15 @@ class McapRecorder {
   void lose_open_file();
   void failed(const std::exception& error);
   void finish_file();
-  // The finished .part holding `messages`: put in place under its final name, counted and listed
-  // for retention (removed when it holds none). Throws std::system_error.
+  // The finished .part holding `messages`: handed to the finisher to be put in place under its
+  // final name, counted (listed for retention once in place); removed when it holds none. Throws
+  // std::system_error.
   void place_finished(std::uint64_t messages);
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
   SpaceGuard& space_;
+  FileFinisher& finisher_;
   std::filesystem::path dir_;
   int volume_;  // dir_'s file system, for space_
   Retention retention_;
@@ -110,6 +120,7 @@ class McapRecorder {
   std::string refusal_;
   std::unique_ptr<McapFile> file_;
   std::string final_path_, part_path_;
+  bool directory_synced_ = false;  // the open file's name is on the disk
   std::int64_t opened_monotonic_ns_ = 0;
   std::uint64_t next_index_ = 0;
   std::uint64_t last_log_time_ = 0;  // of the latest frame or packet: replays' health times

@@ -19,9 +19,12 @@ void OutputAccounting::write_failed(std::string_view reason, std::uint64_t bytes
 }
 
 void OutputAccounting::put_in_place(const std::string& from, std::string& to) {
-  if (!place_without_replacing(from, to)) return;
+  if (place_without_replacing(from, to)) name_collision(from, to);
+}
+
+void OutputAccounting::name_collision(std::string_view from, std::string_view used) {
   ++name_collisions_;
-  spdlog::warn("{}: a file of that name exists; kept as {} instead of replacing it", from, to);
+  spdlog::warn("{}: a file of that name exists; kept as {} instead of replacing it", from, used);
 }
 
 }  // namespace pandarcap

@@ -28,6 +28,9 @@ class OutputAccounting {
   // Renames a finished file from `from` to `to` without replacing anything (see file_output);
   // on a collision `to` becomes the name used, counted and logged.
   void put_in_place(const std::string& from, std::string& to);
+  // A file put in place under `used` because the name it was meant for was taken (a name that
+  // repeated, which it should not): counted and logged.
+  void name_collision(std::string_view from, std::string_view used);
 
   std::uint64_t write_errors() const noexcept { return write_errors_; }
   std::uint64_t bytes_not_written() const noexcept { return bytes_not_written_; }

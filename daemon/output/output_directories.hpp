@@ -26,6 +26,11 @@
 
 namespace pandarcap {
 
+// The file a directory is proven writable with (created and removed at once): at start-up, and
+// while the health directory fails, every second (health_publisher.hpp). Hidden, and named as
+// the temporaries a start removes.
+inline constexpr std::string_view kProbeFileName = ".pandarcapd-probe.tmp";
+
 // One line per problem ("frames directory '/x/frames': '/x' is not a directory"); empty: fine.
 std::vector<std::string> output_problems(const WriterOptions& options);
 

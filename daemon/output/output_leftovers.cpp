@@ -9,8 +9,10 @@
 #include <optional>
 #include <string_view>
 #include <system_error>
+#include <utility>
 #include <vector>
 
+#include "daemon/io/file_output.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
 
@@ -66,11 +68,36 @@ Finished finish_mcap(const std::string& part) {
   return {r.ours, r.messages, r.cut_bytes};
 }
 
+// A finished recording's sidecars (pcap_recorder.hpp), for one an interrupted run left: its
+// directory's calibration.csv and sensor.json, which this start has not replaced yet, as
+// NAME.calibration.csv and NAME.sensor.json; durable, and never over a file of that name.
+void write_recovered_sidecars(const fs::path& dir, const std::string& recording,
+                              std::string_view suffix) {
+  const std::string stem = recording.substr(0, recording.size() - suffix.size());
+  for (const auto& [source, sidecar] : {std::pair{"calibration.csv", ".calibration.csv"},
+                                        std::pair{"sensor.json", ".sensor.json"}}) {
+    const fs::path from = dir / source;
+    const std::string to = stem + sidecar;
+    std::error_code ec;
+    if (fs::exists(to, ec) || !fs::is_regular_file(from, ec) || fs::file_size(from, ec) == 0) {
+      continue;
+    }
+    try {
+      std::ifstream in(from, std::ios::binary);
+      const std::string text((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
+      write_file_durably(to, text);
+    } catch (const std::exception& error) {
+      spdlog::warn("{}: cannot write its sidecar {}: {}", recording, to, error.what());
+    }
+  }
+}
+
 // Recordings left open (NAME`suffix`.part): cut back to their last whole part, finished and
 // given their final name.
 void finish_interrupted_recordings(const fs::path& dir, std::string_view suffix,
                                    Finished (*finish)(const std::string&),
-                                   OutputAccounting& accounting) {
+                                   OutputAccounting& accounting, bool sidecars) {
   const std::string part_suffix = std::string(suffix) + ".part";
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
@@ -94,7 +121,8 @@ void finish_interrupted_recordings(const fs::path& dir, std::string_view suffix,
         continue;
       }
       std::string finished = part.substr(0, part.size() - 5);  // without ".part"
-      accounting.put_in_place(part, finished);
+      if (sidecars) write_recovered_sidecars(dir, finished, suffix);
+      if (place_durably(part, finished)) accounting.name_collision(part, finished);
       spdlog::warn(
           "{}: left by an interrupted run; finished as {} ({} whole records, {} bytes of "
           "a cut record removed)",
@@ -197,19 +225,24 @@ std::uint64_t adopt(const fs::path& dir, std::string_view prefix, std::string_vi
 
 void finish_leftovers(const OutputLeftovers& where, OutputAccounting& accounting) {
   if (!where.raw_dir.empty()) {
-    finish_interrupted_recordings(where.raw_dir, ".pcap", &finish_pcap, accounting);
-    finish_interrupted_recordings(where.raw_dir, ".pcap.zst", &finish_pcap_zst, accounting);
+    finish_interrupted_recordings(where.raw_dir, ".pcap", &finish_pcap, accounting, true);
+    finish_interrupted_recordings(where.raw_dir, ".pcap.zst", &finish_pcap_zst, accounting, true);
   }
   if (!where.mcap_dir.empty()) {
-    finish_interrupted_recordings(where.mcap_dir, ".mcap", &finish_mcap, accounting);
+    // An MCAP file carries its calibration inside (an attachment).
+    finish_interrupted_recordings(where.mcap_dir, ".mcap", &finish_mcap, accounting, false);
   }
   if (!where.frames_dir.empty()) remove_temporaries(where.frames_dir);
   if (!where.raw_dir.empty()) remove_temporaries(where.raw_dir);
   // The health directory may be shared (node_exporter's): only our own temporary name.
   std::error_code ec;
-  if (!where.prometheus_temporary_path.empty() && fs::remove(where.prometheus_temporary_path, ec)) {
-    spdlog::info("{}: temporary file of an interrupted run removed",
-                 where.prometheus_temporary_path);
+  for (const std::string& temporary : where.prometheus_temporary_paths) {
+    if (fs::remove(temporary, ec)) {
+      spdlog::info("{}: temporary file of an interrupted run removed", temporary);
+    }
+  }
+  if (!where.health_probe_path.empty() && fs::remove(where.health_probe_path, ec)) {
+    spdlog::info("{}: writability probe of an interrupted run removed", where.health_probe_path);
   }
   if (!where.jsonl_path.empty()) drop_cut_health_line(where.jsonl_path);
 }

@@ -7,7 +7,9 @@
 #include <cerrno>
 #include <span>
 #include <stdexcept>
+#include <string_view>
 #include <system_error>
+#include <utility>
 
 #include "core/text_file.hpp"
 #include "daemon/clocks.hpp"
@@ -18,10 +20,11 @@
 
 namespace pandarcap {
 PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting,
-                           SpaceGuard& space)
+                           SpaceGuard& space, FileFinisher& finisher)
     : options_(options),
       accounting_(accounting),
       space_(space),
+      finisher_(finisher),
       dir_(options.output_dir / "raw"),
       volume_(space.watch(dir_)),
       retention_(options.pcap_max_files, options.pcap_max_bytes),
@@ -46,11 +49,11 @@ void PcapRecorder::save_calibration(std::string_view csv) {
     spdlog::info("{}: the calibration of earlier recordings differs from this run's; kept as {}",
                  current.string(), std::filesystem::path(kept).filename().string());
   }
-  write_file_replacing(current, csv);
+  write_file_durably(current, csv);
 }
 
 void PcapRecorder::save_sensor_info(std::string_view json) {
-  write_file_replacing(dir_ / "sensor.json", json);
+  write_file_durably(dir_ / "sensor.json", json);
 }
 
 std::uint64_t PcapRecorder::bytes_written() const noexcept {
@@ -58,9 +61,11 @@ std::uint64_t PcapRecorder::bytes_written() const noexcept {
 }
 
 void PcapRecorder::open(std::int64_t first_packet_ns) {
+  // The number is taken only by a recording that opens: a disk that refuses every open (read-only)
+  // does not make the numbers climb.
   final_path_ =
       (dir_ / fmt::format("pandarcap_{}_{:04}.pcap{}", utc_file_stamp(first_packet_ns, false),
-                          next_index_++, compressor_ ? ".zst" : ""))
+                          next_index_, compressor_ ? ".zst" : ""))
           .native();
   const std::filesystem::path part = final_path_ + ".part";
   try {
@@ -76,6 +81,8 @@ void PcapRecorder::open(std::int64_t first_packet_ns) {
     std::filesystem::remove(part, ignored);
     throw;
   }
+  ++next_index_;
+  directory_synced_ = false;
   opened_monotonic_ns_ = monotonic_ns();
 }
 
@@ -151,20 +158,91 @@ void PcapRecorder::abandon(const std::exception& error, std::uint64_t failed_byt
 }
 
 void PcapRecorder::finish_file() {
-  const std::string part = pcap_->path();
-  try {
-    if (pcap_->flushed_records() == 0) {
+  const std::string& part = pcap_->path();
+  if (pcap_->flushed_records() == 0) {
+    try {
       std::filesystem::remove(part);  // not even one record: nothing worth keeping
-    } else {
-      accounting_.put_in_place(part, final_path_);
-      bytes_closed_ += pcap_->flushed_bytes();
-      retention_.add(final_path_, pcap_->flushed_bytes());
-      recorded_.add(final_path_, pcap_->flushed_records(), retention_);
+    } catch (const std::exception& error) {
+      accounting_.write_failed(error, 0);
     }
-  } catch (const std::exception& error) {
-    accounting_.write_failed(error, 0);
+    pcap_.reset();
+    return;
   }
+  bytes_closed_ += pcap_->flushed_bytes();
+  write_sidecars();
+  FinishJob& job = finisher_.take();
+  job.kind = FinishJob::Kind::kPlace;
+  job.owner = FinishOwner::kRecordings;
+  job.from.assign(part);
+  job.to.assign(final_path_);
+  job.bytes = pcap_->flushed_bytes();
+  job.items = pcap_->flushed_records();
+  finisher_.submit(job);
   pcap_.reset();
+}
+
+void PcapRecorder::write_sidecars() {
+  const std::size_t stem_end = final_path_.rfind(".pcap");
+  const std::pair<std::string_view, std::string_view> sidecars[] = {
+      {".calibration.csv", options_.calibration_csv}, {".sensor.json", options_.sensor_json}};
+  for (const auto& [suffix, text] : sidecars) {
+    if (text.empty()) continue;
+    sidecar_path_.assign(final_path_, 0, stem_end);
+    sidecar_path_ += suffix;
+    assign_temporary_name(sidecar_temporary_, sidecar_path_);
+    if (!space_.allows(volume_, text.size(), refusal_)) {
+      accounting_.write_failed(refusal_, text.size());
+      continue;
+    }
+    try {
+      sidecar_file_.open(sidecar_temporary_, OutputFile::Mode::kCreate);
+      sidecar_file_.write(text);
+      sidecar_file_.close();
+    } catch (const std::exception& error) {
+      ::unlink(sidecar_temporary_.c_str());
+      accounting_.write_failed(error, text.size());
+      continue;
+    }
+    FinishJob& job = finisher_.take();
+    job.kind = FinishJob::Kind::kPlace;
+    job.owner = FinishOwner::kSidecars;
+    job.from.assign(sidecar_temporary_);
+    job.to.assign(sidecar_path_);
+    job.remove_on_failure = true;
+    job.bytes = text.size();
+    finisher_.submit(job);
+  }
+}
+
+void PcapRecorder::sync_open_file() {
+  if (!pcap_) return;
+  FinishJob& job = finisher_.take();
+  job.kind = FinishJob::Kind::kSync;
+  job.owner = FinishOwner::kRecordings;
+  job.from.assign(pcap_->path());
+  job.sync_directory = !directory_synced_;
+  directory_synced_ = true;
+  finisher_.submit(job);
+}
+
+void PcapRecorder::finished(const FinishJob& job) {
+  if (job.name_taken) accounting_.name_collision(job.from, job.to);
+  const bool recording = job.owner == FinishOwner::kRecordings;
+  if (recording && job.kind == FinishJob::Kind::kPlace && job.placed) {
+    retention_.add(job.to, job.bytes);
+    recorded_.add(job.to, job.items, retention_);
+  }
+  if (!job.failed) return;
+  // A recording that went while open is counted lost at its next flush (lose_open_file).
+  if (job.kind == FinishJob::Kind::kSync && job.error_code == ENOENT) return;
+  accounting_.write_failed(job.error_text(), 0);
+  if (recording && job.kind == FinishJob::Kind::kPlace && !job.placed) {
+    // Not known to be on the disk: not counted as recorded. What did reach it stays as the
+    // .part, which the next start finishes.
+    packets_lost_ += job.items;
+    spdlog::warn("{}: not put in place ({}); its {} packets are not counted as recorded", job.from,
+                 job.error_text(), job.items);
+  }
 }
 
 void PcapRecorder::write(const RawBatch& batch) {

@@ -4,10 +4,16 @@
 // holds for both; sizes (rotation, retention, bytes written) are the files' bytes on disk.
 //
 // A recording is written as NAME.pcap.part and renamed to NAME.pcap when closed (without
-// replacing anything: a taken name becomes "_dupN", counted). It is closed and a new one begun
-// when it reaches pcap_rotate_bytes or pcap_rotate_seconds, on SIGHUP (rotate()) and at the end;
-// one that holds no record is removed instead. N continues across runs, and retention
-// (pcap_max_files / pcap_max_bytes) counts earlier runs' recordings too.
+// replacing anything: a taken name becomes "_dupN", counted). Durable before visible: the rename
+// is the finisher thread's (daemon/output/file_finisher.hpp), after the data is synced; the open
+// recording's data is synced every output.sync_interval_seconds (sync_open_file(); its directory
+// the first time, so its .part name survives too), so a power cut loses at most that much, and
+// the next start finishes the .part. Beside each finished recording go its sidecars,
+// NAME.calibration.csv and NAME.sensor.json (the calibration and the sensor facts it was made
+// with: a recording uploaded on its own still decodes right), put in place before it. It is closed
+// and a new one begun when it reaches pcap_rotate_bytes or pcap_rotate_seconds, on SIGHUP
+// (rotate()) and at the end; one that holds no record is removed instead. N continues across runs,
+// and retention (pcap_max_files / pcap_max_bytes) counts earlier runs' recordings too.
 //
 // Failures: a packet pcap cannot hold (a time outside its range) is counted and skipped. A failed
 // write (a full disk) cuts the file back to the last flush, which ends on a whole record, and
@@ -37,6 +43,7 @@
 #include <utility>
 #include <vector>
 
+#include "daemon/output/file_finisher.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/retention.hpp"
 #include "daemon/output/space_guard.hpp"
@@ -49,7 +56,8 @@ namespace pandarcap {
 class PcapRecorder {
  public:
   // `options` must outlive the recorder.
-  PcapRecorder(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space);
+  PcapRecorder(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space,
+               FileFinisher& finisher);
   ~PcapRecorder();
 
   const std::filesystem::path& directory() const noexcept { return dir_; }
@@ -72,6 +80,10 @@ class PcapRecorder {
   void close();
   // SIGHUP: logged, and the open recording finished.
   void rotate();
+  // The open recording's data synced, off this thread (output.sync_interval_seconds).
+  void sync_open_file();
+  // The finisher's word on a recording or a sidecar.
+  void finished(const FinishJob& job);
 
   // This run's finished recordings that are no longer on disk (removed by someone else): their
   // packets counted as lost. At the end, after close().
@@ -98,10 +110,14 @@ class PcapRecorder {
   // After a failed write: cut the file back to whole records, count what was lost, close it.
   void abandon(const std::exception& error, std::uint64_t failed_bytes);
   void finish_file();  // rename .part (or remove it if it holds no record)
+  // The sidecars of the recording about to be put in place as final_path_, written as temporary
+  // files and handed to the finisher before it.
+  void write_sidecars();
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
   SpaceGuard& space_;
+  FileFinisher& finisher_;
   std::filesystem::path dir_;
   int volume_;  // dir_'s file system, for space_
   Retention retention_;
@@ -111,6 +127,9 @@ class PcapRecorder {
   std::unique_ptr<ZstdStreamCompressor> compressor_;  // output.pcap_compression = "zstd"
   std::unique_ptr<PcapWriter> pcap_;
   std::string final_path_;
+  std::string sidecar_path_, sidecar_temporary_;
+  OutputFile sidecar_file_;
+  bool directory_synced_ = false;  // the open recording's name is on the disk
   std::int64_t opened_monotonic_ns_ = 0;
   std::uint64_t next_index_ = 0;  // the next recording's number (continues across runs)
   std::uint64_t packets_written_ = 0, packets_not_written_ = 0, packets_lost_ = 0;

@@ -23,7 +23,7 @@ namespace {
 // Proves `dir` takes a new file (permissions, a read-only mount, a full inode table) by creating
 // and removing one: READY=1 promises writable outputs. Throws std::system_error.
 void probe_writable(const std::filesystem::path& dir) {
-  const std::filesystem::path probe = dir / ".pandarcapd-probe.tmp";
+  const std::filesystem::path probe = dir / kProbeFileName;
   OutputFile file(probe, OutputFile::Mode::kCreate);
   file.close();
   ::unlink(probe.c_str());
@@ -41,10 +41,11 @@ Writer::Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQue
       receive_(receive),
       live_(live),
       space_(options_.prometheus || options_.jsonl ? options_.health_dir : std::filesystem::path()),
-      frames_(options_, accounting_, space_),
-      pcap_(options_, accounting_, space_),
-      mcap_(options_, accounting_, space_),
-      health_(options_, accounting_, space_),
+      finisher_(*this),
+      frames_(options_, accounting_, space_, finisher_),
+      pcap_(options_, accounting_, space_, finisher_),
+      mcap_(options_, accounting_, space_, finisher_),
+      health_(options_, accounting_, space_, finisher_),
       floor_(options_.min_free_bytes, options_.min_free_percent),
       sensor_status_(sensor_status) {}
 
@@ -75,8 +76,10 @@ void Writer::prepare() {
   if (options_.pcap) leftovers.raw_dir = pcap_.directory();
   if (options_.mcap) leftovers.mcap_dir = mcap_.directory();
   if (options_.prometheus)
-    leftovers.prometheus_temporary_path = health_.prometheus_temporary_path();
+    leftovers.prometheus_temporary_paths.assign(health_.prometheus_temporary_paths().begin(),
+                                                health_.prometheus_temporary_paths().end());
   if (options_.jsonl) leftovers.jsonl_path = health_.jsonl_path();
+  leftovers.health_probe_path = health_.probe_path();
   finish_leftovers(leftovers, accounting_);
   if (options_.frames) frames_.adopt_earlier_files();
   if (options_.pcap) {
@@ -145,18 +148,44 @@ void Writer::take_sensor_status() noexcept {
     latest_sensor_status_ = sample;
 }
 
+void Writer::finished(const FinishJob& job) {
+  switch (job.owner) {
+    case FinishOwner::kFrames:
+      frames_.finished(job);
+      break;
+    case FinishOwner::kRecordings:
+    case FinishOwner::kSidecars:
+      pcap_.finished(job);
+      break;
+    case FinishOwner::kMcap:
+      mcap_.finished(job);
+      break;
+    case FinishOwner::kHealth:
+      health_.finished(job);
+      break;
+  }
+}
+
 void Writer::write_health() {
   const std::int64_t now = monotonic_ns();
   pcap_.flush();  // the recordings on disk are at most a second behind
   if (options_.mcap) mcap_.flush();
+  // ... and on the disk at most output.sync_interval_seconds behind (the finisher syncs them).
+  if (options_.sync_interval_seconds > 0 && now >= next_sync_ns_) {
+    if (options_.pcap) pcap_.sync_open_file();
+    if (options_.mcap) mcap_.sync_open_file();
+    health_.sync_jsonl();
+    next_sync_ns_ = now + static_cast<std::int64_t>(options_.sync_interval_seconds * 1e9);
+  }
+  finisher_.collect();
   take_sensor_status();
   tend_floor(now);
   health_.build(sources(now), now);
-  health_.remember(decode_, now);
   log_fragments(now);
   reported_silent_ = silent(now);
   space_.tend();
-  health_.write();
+  health_.write(now);
+  health_.remember(decode_, now);
   if (options_.mcap) {
     mcap_.write_health(health_.json_line(), realtime_ns());
   }
@@ -208,6 +237,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       alloc::mark_this_thread_hot(alloc::HotThread::kWriter);
       hot = true;
     }
+    finisher_.collect();  // files put in place since: counted, listed for retention
     if (WriterMessage* message = from_decoder_.front()) {
       switch (message->kind) {
         case WriterMessage::Kind::kFrame:
@@ -259,10 +289,13 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       StatusLine status;
       const HealthSnapshot& h = health_.snapshot();
       const HealthCounters& c = h.counters;
+      // The health files' whereabouts first when they are not home: a long reason is cut to fit.
+      const HealthFallbackGauges& fallback = h.gauges.health_fallback;
       fmt::format_to_n(status.text, sizeof status.text - 1,
-                       "{}: {} packets, {} frames written, {:.0f} RPM, {} dropped{}{}",
-                       to_string(h.gauges.state), c.datagrams_received, c.frames_written,
-                       h.gauges.rpm_tail,
+                       "{}{}{}: {} packets, {} frames written, {:.0f} RPM, {} dropped{}{}",
+                       to_string(h.gauges.state), fallback.active ? ", health written to " : "",
+                       fallback.active ? fallback.directory : std::string_view(),
+                       c.datagrams_received, c.frames_written, h.gauges.rpm_tail,
                        c.kernel_drops + c.ring_overruns + c.frames_dropped_no_arena,
                        h.gauges.reason.empty() ? "" : " - ", h.gauges.reason);
       status.state = h.gauges.state;
@@ -273,12 +306,14 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
   }
   alloc::mark_this_thread_cold();
   pcap_.close();
+  finisher_.drain();  // every file of this run in place (or its failure counted)
   // What the recordings hold on disk now, not what was written to them: files of this run
   // removed while it ran are counted as lost.
   pcap_.verify_on_disk();
   if (options_.mcap) mcap_.drain();  // every message handed over counted in the final record
   write_health();  // the final record goes into the MCAP file too, before it is closed
   mcap_.close();
+  finisher_.drain();  // the last MCAP file and the final .prom synced and in place
   mcap_.verify_on_disk();
   // The exit summary (final_health) counts that last message too; health.jsonl's last line,
   // written before it, cannot.

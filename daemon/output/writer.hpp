@@ -19,6 +19,11 @@
 // and retention counts them, so restarts and crash loops can neither repeat a name nor fill the
 // disk. Nothing is ever replaced.
 //
+// Durable before visible: every file the writer finishes is synced and renamed into place by the
+// finisher thread (daemon/output/file_finisher.hpp), which hands back its result at the writer's
+// next wake-up; the recordings being written and health.jsonl are synced by it every
+// output.sync_interval_seconds. The writer never waits for a sync, only for a free finisher job
+// when the disk is slower than the outputs (as it waits for a slow write).
 // Arenas and batches go back to the decoder as soon as they are written. A write error is
 // counted (write_errors, bytes_not_written; daemon/output/output_accounting.hpp), logged at most
 // every 10 s, and makes the state "degraded" with the error as the reason; the thread carries on
@@ -32,6 +37,7 @@
 
 #include "core/health.hpp"
 #include "daemon/live/live_handover.hpp"
+#include "daemon/output/file_finisher.hpp"
 #include "daemon/output/frame_output.hpp"
 #include "daemon/output/health_publisher.hpp"
 #include "daemon/output/mcap_recorder.hpp"
@@ -53,7 +59,7 @@ struct StatusLine {
   char reason[400] = {};  // cut to fit
 };
 
-class Writer {
+class Writer final : private FinishReceiver {
  public:
   Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQueue& arenas_back,
          RawQueue& raw_back, const ReceiveCounters& receive, const DecodeLive& live,
@@ -85,6 +91,8 @@ class Writer {
   void tend_floor(std::int64_t now_monotonic_ns) noexcept;
   void take_sensor_status() noexcept;  // the poller's latest answer, if any came
   void log_fragments(std::int64_t now_monotonic_ns);
+  // A finished job back from the finisher, to the part whose file it was.
+  void finished(const FinishJob& job) override;
   void stall_while_test_file_exists() const;
   // Seconds since the decoder's last packet (-1: none yet), and whether that is silence.
   double seconds_since_last_packet(std::int64_t now_monotonic_ns) const noexcept;
@@ -98,7 +106,8 @@ class Writer {
   const DecodeLive& live_;
   // The parts, which count their failures in accounting_ and read options_ (declared first).
   OutputAccounting accounting_;
-  SpaceGuard space_;  // the health files' room, whatever fills their disk
+  SpaceGuard space_;       // the health files' room, whatever fills their disk
+  FileFinisher finisher_;  // the syncs and renames, on their own thread
   FrameOutput frames_;
   PcapRecorder pcap_;
   McapRecorder mcap_;
@@ -112,6 +121,7 @@ class Writer {
   std::optional<SensorStatusSample> latest_sensor_status_;
   bool reported_silent_ = true;  // the last health written said "no data"
   std::uint64_t wakeups_ = 0;
+  std::int64_t next_sync_ns_ = 0;  // the recordings' and health.jsonl's next sync
   std::uint64_t fragments_logged_ = 0;
   std::int64_t last_fragment_log_ns_ = -1;
   live::LiveHandover* live_view_ = nullptr;

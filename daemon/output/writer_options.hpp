@@ -46,8 +46,12 @@ struct WriterOptions {
   // The floor of free space on each output file system (the larger of the two; 0 = none).
   std::uint64_t min_free_bytes = 0;
   double min_free_percent = 0;
+  // A recording being written and health.jsonl are synced this often (0: only when finished).
+  double sync_interval_seconds = 2.0;
   bool prometheus = true;
   bool jsonl = true;
+  // Where the health files go while health_dir (or the .prom's directory) cannot be written.
+  std::filesystem::path health_fallback_dir;
   std::uint64_t jsonl_rotate_bytes = 0;
   std::string sensor_name;
   std::string version;

@@ -46,7 +46,12 @@ std::optional<std::uint32_t> pcap_record_captured_bytes(
     const std::uint8_t* record_header) noexcept {
   const std::uint32_t captured = u32_at(record_header + 8);
   const std::uint32_t original = u32_at(record_header + 12);
-  if (captured > kPcapSnaplen || captured > original) return std::nullopt;
+  // Every record PcapWriter writes holds at least the headers it synthesises (Ethernet, IP, UDP):
+  // a shorter one is not ours, e.g. the zeros a power cut can leave past the last sync.
+  constexpr std::uint32_t kLeastRecordBytes = kPcapRecordOverheadBytes - kPcapRecordHeaderBytes;
+  if (captured < kLeastRecordBytes || captured > kPcapSnaplen || captured > original) {
+    return std::nullopt;
+  }
   return captured;
 }
 

@@ -137,6 +137,7 @@ PcapRecovery finish_interrupted_pcap_zst(const std::string& path) {
       return result;
     }
     out.write(compressor.compress({}, ZstdStreamCompressor::Step::kEnd));
+    out.sync();  // whole on the disk before it replaces the .part (which is whole until then)
     out.close();
     rename_replacing(temporary, path);
     result.kept_bytes = out.size();

@@ -1,0 +1,266 @@
+// daemon/output/file_finisher: the writer's files synced and put in place on a thread of their own
+// (durable before visible), and what each part of the writer learns back; the frames' way
+// through it, past the page cache.
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <catch2/catch.hpp>
+#include <cerrno>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "daemon/io/file_output.hpp"
+#include "daemon/io/syscalls.hpp"
+#include "daemon/output/file_finisher.hpp"
+#include "daemon/output/frame_output.hpp"
+#include "daemon/output/output_accounting.hpp"
+#include "daemon/output/space_guard.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "support/test_support.hpp"
+
+using namespace pandarcap;
+namespace fs = std::filesystem;
+
+namespace {
+
+// Writes refused with EINVAL while the file is open O_DIRECT, as a file system that takes the
+// open but not the writes would.
+std::size_t direct_writes = 0, direct_refusals = 0;
+bool refuse_direct = false;
+ssize_t direct_aware_write(int fd, const void* data, std::size_t size) {
+  const int flags = ::fcntl(fd, F_GETFL);
+  if (flags >= 0 && (flags & O_DIRECT) != 0) {
+    ++direct_writes;
+    if (refuse_direct) {
+      ++direct_refusals;
+      errno = EINVAL;
+      return -1;
+    }
+  }
+  return ::write(fd, data, size);
+}
+
+// The data section of a PCD file: what follows "DATA binary\n".
+std::string pcd_data(const std::string& file) {
+  const std::size_t at = file.find("DATA binary\n");
+  return at == std::string::npos ? std::string() : file.substr(at + 12);
+}
+
+// The writer's part: finished frames go back to the FrameOutput that wrote them.
+struct ToFrames final : FinishReceiver {
+  FrameOutput* frames = nullptr;
+  void finished(const FinishJob& job) override { frames->finished(job); }
+};
+
+std::string contents(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Everything the finisher hands back, kept for the test to read.
+struct Collected final : FinishReceiver {
+  std::vector<FinishJob> jobs;
+  void finished(const FinishJob& job) override {
+    FinishJob copy;
+    copy.kind = job.kind;
+    copy.owner = job.owner;
+    copy.from = job.from;
+    copy.to = job.to;
+    copy.bytes = job.bytes;
+    copy.items = job.items;
+    copy.stamp_ns = job.stamp_ns;
+    copy.placed = job.placed;
+    copy.name_taken = job.name_taken;
+    copy.failed = job.failed;
+    copy.error_code = job.error_code;
+    copy.error = job.error;
+    jobs.push_back(std::move(copy));
+  }
+};
+
+void write_file(const fs::path& path, std::string_view text) {
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+// fdatasync through the seam: fails with EIO while `failing_syncs` says so, and counts.
+std::atomic<int> syncs{0};
+std::atomic<bool> failing_syncs{false};
+int counting_fdatasync(int fd) {
+  ++syncs;
+  if (failing_syncs) {
+    errno = EIO;
+    return -1;
+  }
+  return ::fdatasync(fd);
+}
+
+}  // namespace
+
+TEST_CASE("the finisher syncs, then renames without replacing, and says what it did",
+          "[io][threads]") {
+  test::ScratchDir dir("finisher-place");
+  Collected receiver;
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.fdatasync = counting_fdatasync;
+  const io::ScopedFileSyscalls seam(calls);
+  syncs = 0;
+  failing_syncs = false;
+  {
+    FileFinisher finisher(receiver, 4);
+    // More jobs than the finisher holds: take() waits for one to come back.
+    for (int i = 0; i < 10; ++i) {
+      const fs::path from = dir / fmt::format(".f{}.tmp", i), to = dir / fmt::format("f{}", i);
+      write_file(from, fmt::format("file {}", i));
+      FinishJob& job = finisher.take();
+      job.kind = FinishJob::Kind::kPlace;
+      job.owner = FinishOwner::kRecordings;
+      job.from = from.native();
+      job.to = to.native();
+      job.items = static_cast<std::uint64_t>(i);
+      finisher.submit(job);
+      CHECK(finisher.in_flight() <= 4);
+    }
+    // A name that is taken: kept under "_dup1", never over the file there.
+    write_file(dir / "taken.pcap", "first");
+    write_file(dir / ".taken.pcap.tmp", "second");
+    FinishJob& taken = finisher.take();
+    taken.kind = FinishJob::Kind::kPlace;
+    taken.from = (dir / ".taken.pcap.tmp").native();
+    taken.to = (dir / "taken.pcap").native();
+    finisher.submit(taken);
+    // A file replaced whole (health's .prom).
+    write_file(dir / "health.prom", "old");
+    write_file(dir / ".health.prom.tmp", "new");
+    FinishJob& replace = finisher.take();
+    replace.kind = FinishJob::Kind::kReplace;
+    replace.owner = FinishOwner::kHealth;
+    replace.from = (dir / ".health.prom.tmp").native();
+    replace.to = (dir / "health.prom").native();
+    finisher.submit(replace);
+    // A file synced where it is; and one that is not there.
+    FinishJob& sync = finisher.take();
+    sync.from = (dir / "f0").native();
+    sync.sync_directory = true;
+    finisher.submit(sync);
+    FinishJob& missing = finisher.take();
+    missing.from = (dir / "missing").native();
+    finisher.submit(missing);
+    finisher.drain();
+    CHECK(finisher.in_flight() == 0);
+  }
+  REQUIRE(receiver.jobs.size() == 14);
+  for (int i = 0; i < 10; ++i) {
+    const FinishJob& job = receiver.jobs[static_cast<std::size_t>(i)];  // in the order submitted
+    CHECK(job.placed);
+    CHECK_FALSE(job.failed);
+    CHECK(job.items == static_cast<std::uint64_t>(i));
+    CHECK(contents(job.to) == fmt::format("file {}", i));
+    CHECK_FALSE(fs::exists(job.from));
+  }
+  CHECK(receiver.jobs[10].name_taken);
+  CHECK(receiver.jobs[10].to == (dir / "taken_dup1.pcap").native());
+  CHECK(contents(dir / "taken.pcap") == "first");
+  CHECK(contents(dir / "taken_dup1.pcap") == "second");
+  CHECK(receiver.jobs[11].placed);
+  CHECK(contents(dir / "health.prom") == "new");
+  CHECK_FALSE(receiver.jobs[12].failed);
+  CHECK(receiver.jobs[13].failed);
+  CHECK(receiver.jobs[13].error_code == ENOENT);
+  // Every file's data was synced before it was renamed or reported: 10 + 2 + 1 (the missing one
+  // never reached fdatasync).
+  CHECK(syncs == 13);
+}
+
+TEST_CASE("a sync that fails keeps the file from its final name", "[io][threads]") {
+  test::ScratchDir dir("finisher-eio");
+  Collected receiver;
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.fdatasync = counting_fdatasync;
+  const io::ScopedFileSyscalls seam(calls);
+  failing_syncs = true;
+  {
+    FileFinisher finisher(receiver);
+    for (const bool remove : {true, false}) {
+      const fs::path from = dir / (remove ? ".frame.pcd.tmp" : "rec.pcap.part");
+      write_file(from, "data");
+      FinishJob& job = finisher.take();
+      job.kind = FinishJob::Kind::kPlace;
+      job.from = from.native();
+      job.to = (dir / (remove ? "frame.pcd" : "rec.pcap")).native();
+      job.remove_on_failure = remove;
+      finisher.submit(job);
+    }
+    finisher.drain();
+  }
+  failing_syncs = false;
+  REQUIRE(receiver.jobs.size() == 2);
+  for (const FinishJob& job : receiver.jobs) {
+    CHECK(job.failed);
+    CHECK_FALSE(job.placed);
+    CHECK(job.error_code == EIO);
+    CHECK(std::string(job.error_text()).find("cannot sync") != std::string::npos);
+    CHECK_FALSE(fs::exists(job.to));
+  }
+  CHECK_FALSE(fs::exists(receiver.jobs[0].from));  // a frame's temporary file: removed
+  CHECK(fs::exists(receiver.jobs[1].from));        // a recording's .part: for the next start
+}
+
+TEST_CASE("frames go past the page cache, and through it once a file system refuses that",
+          "[io][outputs][threads]") {
+  test::ScratchDir dir("io-direct-frames");
+  WriterOptions options;
+  options.output_dir = dir / "out";
+  options.pcd_format = PcdFormat{PcdLayout::kPcl, Axes::kHesai};
+  fs::create_directories(options.output_dir / "frames");
+  fs::create_directories(options.output_dir / "health");
+  OutputAccounting accounting;
+  SpaceGuard space(options.output_dir / "health");
+  ToFrames receiver;
+  FileFinisher finisher(receiver);
+  FrameOutput output(options, accounting, space, finisher);
+  receiver.frames = &output;
+  FrameArena arena(2000, options.pcd_format);
+  arena.frame.size = 1500;  // 40 500 bytes: 9 whole blocks and a tail
+  arena.frame.info.start_ns = 1'795'348'800'000'000'000;
+  const auto rows = arena.frame.encoded.first(arena.frame.used_bytes().size());
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    rows[i] = static_cast<std::uint8_t>(i * 7 % 253);
+  const std::string expected(rows.begin(), rows.end());
+
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = direct_aware_write;
+  const io::ScopedFileSyscalls seam(calls);
+  direct_writes = direct_refusals = 0;
+  refuse_direct = false;
+  for (int round = 0; round < 3; ++round) {
+    INFO("round " << round);
+    // Round 1: the file system starts refusing direct writes (after opening with O_DIRECT).
+    refuse_direct = round >= 1;
+    const std::size_t refusals_before = direct_refusals;
+    arena.frame.info.sequence = static_cast<std::uint64_t>(round);
+    output.write(arena);
+    finisher.drain();
+    CHECK(accounting.write_errors() == 0);
+    CHECK(output.frames_written() == static_cast<std::uint64_t>(round + 1));
+    const auto files = test::files_ending(options.output_dir / "frames", ".pcd");
+    REQUIRE(files.size() == static_cast<std::size_t>(round + 1));
+    const std::string file = contents(files.back());
+    CHECK(pcd_data(file) == expected);  // every point, whichever way it went
+    const std::size_t header = file.size() - expected.size();
+    if (round == 0 && direct_writes > 0) CHECK(header == kDirectIoBlock);  // padded
+    if (round == 2) CHECK(direct_refusals == refusals_before);             // not tried again
+  }
+  CHECK(output.bytes_written() == 3 * expected.size() + 0 + [&] {
+    std::uintmax_t headers = 0;
+    for (const auto& f : test::files_ending(options.output_dir / "frames", ".pcd"))
+      headers += fs::file_size(f) - expected.size();
+    return headers;
+  }());
+}

@@ -1,0 +1,152 @@
+// Health that stays true when its own disk cannot be written (docs/reliability.md, "Health on a
+// failing disk"): the daemon in its default layout on a file system of the test's own, which then
+// fails as a vehicle's disk does: ext4 forced read-only by an error (EROFS), ext4 shut down (EIO),
+// a btrfs subvolume set read-only and then read-write again. Each time the health goes to
+// health.fallback_directory, fresh (never more than 2 s old) and saying degraded with why, the
+// supervisor's STATUS= carries it, and it comes home when the disk does. Root only.
+#include <signal.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "bench/child_process.hpp"
+#include "support/loop_file_system.hpp"
+#include "support/notify_listener.hpp"
+#include "support/test_support.hpp"
+
+using namespace pandarcap;
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+namespace {
+
+// Seconds since `file` was last replaced or written; nullopt when it is not there.
+std::optional<double> age_seconds(const fs::path& file) {
+  std::error_code ec;
+  const auto written = fs::last_write_time(file, ec);
+  if (ec) return std::nullopt;
+  return std::chrono::duration<double>(fs::file_time_type::clock::now() - written).count();
+}
+
+enum class Failure { kReadOnly, kShutDown, kSubvolumeReadOnly };
+
+struct Case {
+  const char* name;
+  const char* type;
+  const char* mount_options;
+  Failure failure;
+  bool comes_back;  // the disk takes writes again (btrfs: the subvolume set read-write)
+};
+
+void fallback_case(const Case& c) {
+  INFO(c.name);
+  test::ScratchDir dir(std::string("health-fallback-") + c.name);
+  test::LoopFileSystem disk(dir / "disk.img", dir / "mnt", 512ull << 20, c.type, c.mount_options);
+  if (!disk.available()) return;
+  fs::path base = disk.mount_point();
+  if (c.failure == Failure::kSubvolumeReadOnly) {
+    base /= "sub";
+    REQUIRE(test::shell("btrfs subvolume create '" + base.string() + "'"));
+  }
+  const fs::path out = base / "o";
+  const fs::path fallback = dir / "fallback";  // not there yet: made at the first need
+  const fs::path config = dir / "health.toml";
+  std::ofstream(config) << "[health]\nfallback_directory = \"" << fallback.string() << "\"\n";
+  test::NotifyListener notify(dir / "notify.sock");
+  harness::ChildProcess daemon(
+      test::binary("pandarcapd"),
+      {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
+      dir / "log.txt", {"NOTIFY_SOCKET=" + (dir / "notify.sock").string()});
+  INFO(daemon.log());
+  const fs::path home_prom = out / "health" / "pandarcap.prom";
+  REQUIRE(notify.wait_for(
+      [&] {
+        const auto record = test::last_health_record(out);
+        return !record.is_null() && record.at("state") == "ok";
+      },
+      20s));
+  CHECK_FALSE(fs::exists(fallback / "pandarcap.prom"));
+
+  switch (c.failure) {
+    case Failure::kReadOnly:
+      REQUIRE(disk.force_read_only());
+      break;
+    case Failure::kShutDown:
+      REQUIRE(disk.shut_down());
+      break;
+    case Failure::kSubvolumeReadOnly:
+      REQUIRE(test::shell("btrfs property set -ts '" + base.string() + "' ro true"));
+      break;
+  }
+  const auto failed_at = std::chrono::steady_clock::now();
+  const fs::path prom = fallback / "pandarcap.prom";
+  // Within 2 s the fallback holds the health, and says why.
+  REQUIRE(notify.wait_for([&] { return fs::exists(prom); }, 2500ms));
+  CHECK(std::chrono::steady_clock::now() - failed_at < 2500ms);
+  // And stays fresh and true for the next seconds: never more than 2 s old, degraded, naming it.
+  while (std::chrono::steady_clock::now() - failed_at < 6s) {
+    notify.receive();
+    const std::optional<double> age = age_seconds(prom);
+    REQUIRE(age.has_value());
+    CHECK(*age <= 2.0);
+    const auto samples = test::prom_samples(harness::read_file(prom));
+    CHECK(samples.at("pandarcap_state{sensor=\"pandar40p\",state=\"degraded\"}") == "1");
+    CHECK(samples.at("pandarcap_health_fallback{sensor=\"pandar40p\"}") == "1");
+    std::this_thread::sleep_for(200ms);  // the probe's period, not a synchronisation
+  }
+  const auto lines = test::json_lines(fallback / "health.jsonl");
+  REQUIRE_FALSE(lines.empty());
+  const std::string reason = lines.back().at("reason");
+  CHECK(reason.find("health written to " + fallback.string()) != std::string::npos);
+  CHECK(lines.back().at("health_fallback").at("active") == true);
+  // The supervisor is told too: systemctl status shows it.
+  CHECK(notify.count("STATUS=degraded") >= 1);
+  CHECK(notify.count("health written to") >= 1);
+  // The journal says so at once, and every 10 s after.
+  CHECK(daemon.log().find("writing the health files to " + fallback.string()) != std::string::npos);
+
+  if (c.comes_back) {
+    REQUIRE(test::shell("btrfs property set -ts '" + base.string() + "' ro false"));
+    // Home again: the home file fresh, the fallback's .prom gone, the state ok once the
+    // outputs' own write errors are a second old.
+    REQUIRE(notify.wait_for(
+        [&] {
+          const std::optional<double> age = age_seconds(home_prom);
+          return !fs::exists(prom) && age && *age < 1.5;
+        },
+        5s));
+    REQUIRE(notify.wait_for(
+        [&] {
+          const auto record = test::last_health_record(out);
+          return !record.is_null() && record.at("state") == "ok" &&
+                 record.at("health_fallback").at("active") == false;
+        },
+        5s));
+    CHECK(daemon.log().find("the health files are back there") != std::string::npos);
+  }
+  daemon.signal(SIGTERM);
+  // Ends whatever its disk does (a shut-down one fails every write and sync).
+  CHECK(daemon.wait_exit(30s).has_value());
+}
+
+}  // namespace
+
+TEST_CASE("health on a disk that fails: ext4 forced read-only by an error (EROFS)",
+          "[health][reliability][threads]") {
+  fallback_case({"ext4-errors-read-only", "ext4", "errors=remount-ro", Failure::kReadOnly, false});
+}
+
+TEST_CASE("health on a disk that fails: ext4 shut down (EIO from every call)",
+          "[health][reliability][threads]") {
+  fallback_case({"ext4-shut-down", "ext4", "", Failure::kShutDown, false});
+}
+
+TEST_CASE("health on a disk that fails: a btrfs subvolume read-only, then read-write: home again",
+          "[health][reliability][threads]") {
+  fallback_case({"btrfs-subvolume-read-only", "btrfs", "", Failure::kSubvolumeReadOnly, true});
+}
