@@ -12,6 +12,7 @@
 #include <exception>
 #include <system_error>
 
+#include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
 
 namespace pandarcap {
@@ -105,7 +106,7 @@ FinishJob& FileFinisher::take() noexcept {
   job.sync_directory = false;
   job.remove_on_failure = false;
   job.bytes = job.items = 0;
-  job.stamp_ns = 0;
+  job.stamp_ns = job.done_realtime_ns = 0;
   job.placed = job.name_taken = job.failed = false;
   job.error_code = 0;
   job.error[0] = '\0';
@@ -208,8 +209,11 @@ void FileFinisher::end_batch() noexcept {
       }
     }
   }
-  for (FinishJob* job : batch_)
+  const std::int64_t done_ns = realtime_ns();
+  for (FinishJob* job : batch_) {
+    job->done_realtime_ns = done_ns;
     done_.try_push(job);  // never full: room for every job
+  }
   batch_.clear();
   done_.notify();
 }

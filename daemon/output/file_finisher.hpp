@@ -74,10 +74,11 @@ struct FinishJob {
   std::int64_t stamp_ns = 0;
 
   // The result, set by the finisher.
-  bool placed = false;      // kPlace / kReplace: renamed (the file has its final name)
-  bool name_taken = false;  // kPlace: the name asked for existed; `to` is the one used
-  bool failed = false;      // a sync or rename failed: `error` says which and why
-  int error_code = 0;       // its errno
+  bool placed = false;                // kPlace / kReplace: renamed (the file has its final name)
+  bool name_taken = false;            // kPlace: the name asked for existed; `to` is the one used
+  std::int64_t done_realtime_ns = 0;  // when it was done (CLOCK_REALTIME): a frame's latency
+  bool failed = false;                // a sync or rename failed: `error` says which and why
+  int error_code = 0;                 // its errno
   std::array<char, 256> error{};
 
   std::string_view error_text() const noexcept { return error.data(); }

@@ -102,7 +102,8 @@ void FrameOutput::finished(const FinishJob& job) {
   if (job.placed) {
     ++frames_written_;
     bytes_written_ += job.bytes;
-    if (job.stamp_ns > 0) latency_.record(realtime_ns() - job.stamp_ns);
+    // Until the finisher put it in place, not until this thread heard of it.
+    if (job.stamp_ns > 0) latency_.record(job.done_realtime_ns - job.stamp_ns);
     retention_.add(job.to, job.bytes);
   }
   // Not on the disk whole (its temporary file removed), or in place but its name not synced.
