@@ -137,16 +137,16 @@ void fallback_case(const Case& c) {
 }  // namespace
 
 TEST_CASE("health on a disk that fails: ext4 forced read-only by an error (EROFS)",
-          "[health][reliability][threads]") {
+          "[fallback][reliability][threads]") {
   fallback_case({"ext4-errors-read-only", "ext4", "errors=remount-ro", Failure::kReadOnly, false});
 }
 
 TEST_CASE("health on a disk that fails: ext4 shut down (EIO from every call)",
-          "[health][reliability][threads]") {
+          "[fallback][reliability][threads]") {
   fallback_case({"ext4-shut-down", "ext4", "", Failure::kShutDown, false});
 }
 
 TEST_CASE("health on a disk that fails: a btrfs subvolume read-only, then read-write: home again",
-          "[health][reliability][threads]") {
+          "[fallback][reliability][threads]") {
   fallback_case({"btrfs-subvolume-read-only", "btrfs", "", Failure::kSubvolumeReadOnly, true});
 }
