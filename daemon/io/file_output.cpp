@@ -152,11 +152,16 @@ void assign_temporary_name(std::string& out, std::string_view path) {
   out += ".tmp";
 }
 
-void write_file_replacing(const std::filesystem::path& path, std::string_view text) {
+namespace {
+
+// `text` to `path` through its temporary name, its data synced first when `durable`.
+void write_through_temporary(const std::filesystem::path& path, std::string_view text,
+                             bool durable) {
   const std::filesystem::path temporary = temporary_name(path);
   try {
     OutputFile file(temporary, OutputFile::Mode::kCreate);
     file.write(text);
+    if (durable) file.sync();
     file.close();
   } catch (...) {
     std::error_code ignored;
@@ -164,6 +169,12 @@ void write_file_replacing(const std::filesystem::path& path, std::string_view te
     throw;
   }
   rename_replacing(temporary.native(), path.native());
+}
+
+}  // namespace
+
+void write_file_replacing(const std::filesystem::path& path, std::string_view text) {
+  write_through_temporary(path, text, false);
 }
 
 void write_file_replacing(const std::string& path, const std::string& temporary,
@@ -180,18 +191,7 @@ void write_file_replacing(const std::string& path, const std::string& temporary,
 }
 
 void write_file_durably(const std::filesystem::path& path, std::string_view text) {
-  const std::filesystem::path temporary = temporary_name(path);
-  try {
-    OutputFile file(temporary, OutputFile::Mode::kCreate);
-    file.write(text);
-    file.sync();
-    file.close();
-  } catch (...) {
-    std::error_code ignored;
-    std::filesystem::remove(temporary, ignored);
-    throw;
-  }
-  rename_replacing(temporary.native(), path.native());
+  write_through_temporary(path, text, true);
   std::string directory;
   assign_directory_of(directory, path.native());
   sync_directory(directory);

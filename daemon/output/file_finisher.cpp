@@ -119,6 +119,30 @@ void FileFinisher::submit(FinishJob& job) noexcept {
   to_finish_.notify();
 }
 
+void FileFinisher::place(FinishOwner owner, std::string_view from, std::string_view to,
+                         const Placing& placing) noexcept {
+  FinishJob& job = take();
+  job.kind = FinishJob::Kind::kPlace;
+  job.owner = owner;
+  job.from.assign(from);  // within the reserved length: no allocation
+  job.to.assign(to);
+  job.bytes = placing.bytes;
+  job.items = placing.items;
+  job.stamp_ns = placing.stamp_ns;
+  job.remove_on_failure = placing.remove_on_failure;
+  submit(job);
+}
+
+void FileFinisher::sync(FinishOwner owner, std::string_view path, bool& directory_synced) noexcept {
+  FinishJob& job = take();
+  job.kind = FinishJob::Kind::kSync;
+  job.owner = owner;
+  job.from.assign(path);
+  job.sync_directory = !directory_synced;
+  directory_synced = true;
+  submit(job);
+}
+
 std::size_t FileFinisher::collect() noexcept {
   std::size_t n = 0;
   FinishJob* job = nullptr;

@@ -111,6 +111,17 @@ class FileFinisher {
   // job is in flight.
   FinishJob& take() noexcept;
   void submit(FinishJob& job) noexcept;
+  // The two jobs the writer's parts hand over, taken and submitted in one call:
+  // `from` synced and put in place as `to` (kPlace), with what its owner wants back;
+  struct Placing {
+    std::uint64_t bytes = 0, items = 0;
+    std::int64_t stamp_ns = 0;
+    bool remove_on_failure = false;
+  };
+  void place(FinishOwner owner, std::string_view from, std::string_view to,
+             const Placing& placing) noexcept;
+  // `path` synced where it is (kSync), its directory too unless `directory_synced` (then set).
+  void sync(FinishOwner owner, std::string_view path, bool& directory_synced) noexcept;
   // Hands each finished job to the receiver; returns how many. Never waits.
   std::size_t collect() noexcept;
   // Waits until every submitted job is finished and collected (the end of a run, a test).

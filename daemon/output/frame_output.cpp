@@ -86,15 +86,9 @@ void FrameOutput::write(const FrameArena& arena) {
     accounting_.write_failed(error, expected);
     return;
   }
-  FinishJob& job = finisher_.take();
-  job.kind = FinishJob::Kind::kPlace;
-  job.owner = FinishOwner::kFrames;
-  job.from.assign(temporary_path_);
-  job.to.assign(path_);
-  job.remove_on_failure = true;
-  job.bytes = file_.size();
-  job.stamp_ns = arena.completed_receive_ns;
-  finisher_.submit(job);
+  finisher_.place(
+      FinishOwner::kFrames, temporary_path_, path_,
+      {.bytes = file_.size(), .stamp_ns = arena.completed_receive_ns, .remove_on_failure = true});
 }
 
 void FrameOutput::finished(const FinishJob& job) {

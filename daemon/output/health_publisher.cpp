@@ -317,13 +317,7 @@ void HealthPublisher::write_prometheus(std::int64_t now) {
 
 void HealthPublisher::sync_jsonl() {
   if (!options_.jsonl || !jsonl_file_.is_open() || health_.gauges.health_fallback.active) return;
-  FinishJob& job = finisher_.take();
-  job.kind = FinishJob::Kind::kSync;
-  job.owner = FinishOwner::kHealth;
-  job.from.assign(jsonl_path_);
-  job.sync_directory = !jsonl_directory_synced_;
-  jsonl_directory_synced_ = true;
-  finisher_.submit(job);
+  finisher_.sync(FinishOwner::kHealth, jsonl_path_, jsonl_directory_synced_);
 }
 
 void HealthPublisher::finished(const FinishJob& job) {

@@ -262,25 +262,11 @@ void McapRecorder::place_finished(std::uint64_t messages) {
   const std::uint64_t bytes = std::filesystem::file_size(part_path_);
   messages_closed_ += messages;
   bytes_closed_ += bytes;
-  FinishJob& job = finisher_.take();
-  job.kind = FinishJob::Kind::kPlace;
-  job.owner = FinishOwner::kMcap;
-  job.from.assign(part_path_);
-  job.to.assign(final_path_);
-  job.bytes = bytes;
-  job.items = messages;
-  finisher_.submit(job);
+  finisher_.place(FinishOwner::kMcap, part_path_, final_path_, {.bytes = bytes, .items = messages});
 }
 
 void McapRecorder::sync_open_file() {
-  if (!file_ || !file_->is_open()) return;
-  FinishJob& job = finisher_.take();
-  job.kind = FinishJob::Kind::kSync;
-  job.owner = FinishOwner::kMcap;
-  job.from.assign(part_path_);
-  job.sync_directory = !directory_synced_;
-  directory_synced_ = true;
-  finisher_.submit(job);
+  if (file_ && file_->is_open()) finisher_.sync(FinishOwner::kMcap, part_path_, directory_synced_);
 }
 
 void McapRecorder::finished(const FinishJob& job) {

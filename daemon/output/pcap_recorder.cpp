@@ -170,14 +170,8 @@ void PcapRecorder::finish_file() {
   }
   bytes_closed_ += pcap_->flushed_bytes();
   write_sidecars();
-  FinishJob& job = finisher_.take();
-  job.kind = FinishJob::Kind::kPlace;
-  job.owner = FinishOwner::kRecordings;
-  job.from.assign(part);
-  job.to.assign(final_path_);
-  job.bytes = pcap_->flushed_bytes();
-  job.items = pcap_->flushed_records();
-  finisher_.submit(job);
+  finisher_.place(FinishOwner::kRecordings, part, final_path_,
+                  {.bytes = pcap_->flushed_bytes(), .items = pcap_->flushed_records()});
   pcap_.reset();
 }
 
@@ -203,26 +197,13 @@ void PcapRecorder::write_sidecars() {
       accounting_.write_failed(error, text.size());
       continue;
     }
-    FinishJob& job = finisher_.take();
-    job.kind = FinishJob::Kind::kPlace;
-    job.owner = FinishOwner::kSidecars;
-    job.from.assign(sidecar_temporary_);
-    job.to.assign(sidecar_path_);
-    job.remove_on_failure = true;
-    job.bytes = text.size();
-    finisher_.submit(job);
+    finisher_.place(FinishOwner::kSidecars, sidecar_temporary_, sidecar_path_,
+                    {.bytes = text.size(), .remove_on_failure = true});
   }
 }
 
 void PcapRecorder::sync_open_file() {
-  if (!pcap_) return;
-  FinishJob& job = finisher_.take();
-  job.kind = FinishJob::Kind::kSync;
-  job.owner = FinishOwner::kRecordings;
-  job.from.assign(pcap_->path());
-  job.sync_directory = !directory_synced_;
-  directory_synced_ = true;
-  finisher_.submit(job);
+  if (pcap_) finisher_.sync(FinishOwner::kRecordings, pcap_->path(), directory_synced_);
 }
 
 void PcapRecorder::finished(const FinishJob& job) {
