@@ -352,8 +352,8 @@ void sensor_json(std::string& out, const HealthSnapshot& h) {
   out += "}";
 }
 
-// The storage gauges (docs/storage.md). hours_left is +Inf while nothing is written; free space
-// and hours are left out when no output file system could be asked.
+// The storage gauges (docs/storage.md). The time left is +Inf while nothing is written; free space
+// and time left are left out when no output file system could be asked.
 void storage_prometheus(std::string& out, std::string_view sensor, const StorageGauges& st) {
   const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
     fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
@@ -371,13 +371,14 @@ void storage_prometheus(std::string& out, std::string_view sensor, const Storage
            kStorageOutputNames[i], st.written_bytes_per_second[i]);
   }
   if (st.free_known) {
-    family(out, "storage_hours_left", "gauge",
-           "Hours until the output file system is full at the last minute's write rate; +Inf "
+    // In seconds, Prometheus's base unit (the JSON line keeps hours_left).
+    family(out, "storage_time_left_seconds", "gauge",
+           "Seconds until the output file system is full at the last minute's write rate; +Inf "
            "while nothing is written");
     if (std::isfinite(st.hours_left)) {
-      append("pandarcap_storage_hours_left{{{}}} {}\n", sensor, st.hours_left);
+      append("pandarcap_storage_time_left_seconds{{{}}} {}\n", sensor, st.hours_left * 3600);
     } else {
-      append("pandarcap_storage_hours_left{{{}}} +Inf\n", sensor);
+      append("pandarcap_storage_time_left_seconds{{{}}} +Inf\n", sensor);
     }
   }
 }

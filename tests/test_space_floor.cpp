@@ -401,7 +401,7 @@ TEST_CASE("Hours left: the storage gauges in the JSON line and the .prom", "[hea
   CHECK(prom.at("pandarcap_files_removed_for_space_total{sensor=\"front\"}") == "7");
   CHECK(prom.at("pandarcap_removed_for_space_bytes_total{sensor=\"front\"}") == "7000");
   CHECK(prom.at("pandarcap_storage_free_bytes{sensor=\"front\"}") == "7200000000");
-  CHECK(prom.at("pandarcap_storage_hours_left{sensor=\"front\"}") == "2.5");
+  CHECK(prom.at("pandarcap_storage_time_left_seconds{sensor=\"front\"}") == "9000");  // 2.5 h
   CHECK(prom.at("pandarcap_storage_written_bytes_per_second{sensor=\"front\",output=\"pcap\"}") ==
         "500000");
   CHECK(prom.count(
@@ -412,7 +412,7 @@ TEST_CASE("Hours left: the storage gauges in the JSON line and the .prom", "[hea
   j = json::parse(to_json_line(h));
   CHECK(j.at("storage").at("hours_left").is_null());
   prom = test::prom_samples(to_prometheus(h));
-  CHECK(prom.at("pandarcap_storage_hours_left{sensor=\"front\"}") == "+Inf");
+  CHECK(prom.at("pandarcap_storage_time_left_seconds{sensor=\"front\"}") == "+Inf");
   if (test::run_command("command -v promtool >/dev/null").exit_code == 0) {
     test::ScratchDir dir("storage-prom");
     std::ofstream(dir / "pandarcap.prom") << to_prometheus(h);
@@ -427,7 +427,7 @@ TEST_CASE("Hours left: the storage gauges in the JSON line and the .prom", "[hea
   CHECK(j.at("storage").at("free_bytes").is_null());
   CHECK(j.at("storage").at("hours_left").is_null());
   prom = test::prom_samples(to_prometheus(h));
-  CHECK(prom.count("pandarcap_storage_hours_left{sensor=\"front\"}") == 0);
+  CHECK(prom.count("pandarcap_storage_time_left_seconds{sensor=\"front\"}") == 0);
   CHECK(prom.count("pandarcap_storage_free_bytes{sensor=\"front\"}") == 0);
 }
 
@@ -523,7 +523,7 @@ TEST_CASE("Space floor: a daemon on a small disk with earlier runs' files and a 
   const auto prom = test::prom_samples(harness::read_file(health / "pandarcap.prom"));
   CHECK(prom.at("pandarcap_files_removed_for_space_total{sensor=\"pandar40p\"}") ==
         std::to_string(removed));
-  CHECK(prom.count("pandarcap_storage_hours_left{sensor=\"pandar40p\"}") == 1);
+  CHECK(prom.count("pandarcap_storage_time_left_seconds{sensor=\"pandar40p\"}") == 1);
   CHECK(log.find(fmt::format("free-space floor: {} of the oldest files", removed)) !=
         std::string::npos);
   std::smatch m;
