@@ -91,6 +91,8 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("output", "mcap_packets_topic", o.mcap_packets_topic, &topic);
   v("output", "min_free_bytes", o.min_free_bytes, IntRange{0, kI64});
   v("output", "min_free_percent", o.min_free_percent, RealRange{0.0, false, 90.0, false});
+  v("output", "upload", o.upload, std::monostate{});
+  v("output", "upload_frames", o.upload_frames, std::monostate{});
 
   auto& h = c.health;
   v("health", "sensor_name", h.sensor_name, &label);

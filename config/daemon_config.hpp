@@ -84,10 +84,15 @@ struct OutputSection {
   std::string mcap_health_topic = "/pandar/health";
   std::string mcap_packets_topic = "/pandar/packets";
   // A floor of free space on each output file system: below it the oldest of pandarcap's own
-  // files (frames, recordings, MCAP; earlier runs' too) are deleted. 0 = no floor. The floor is
-  // the larger of the two.
+  // files (frames, recordings, MCAP; earlier runs' too) are deleted. The floor is the larger of
+  // the two, and never less than the health files' 32 MiB plus 2 s of writing (0: that alone).
   std::uint64_t min_free_bytes = 0;
   double min_free_percent = 0;  // of the file system's size; 0..90
+  // Recordings leave the vehicle by upload (systemd/pandarcap-upload@.service): the health says
+  // how far it is behind, and a file removed before it was uploaded is counted and named. With
+  // upload_frames, frames/ is an upload directory too.
+  bool upload = false;
+  bool upload_frames = false;
 };
 
 struct HealthSection {

@@ -36,6 +36,7 @@ WriterOptions writer_options(const DaemonConfig& config) {
   if (const char* stall = std::getenv("PANDARCAP_TEST_STALL_WRITER_FILE")) {
     wo.test_stall_file = stall;
   }
+  wo.test_no_floor_minimum = std::getenv("PANDARCAP_TEST_NO_FLOOR_MINIMUM") != nullptr;
 #endif
   wo.frames = config.output.frames;
   wo.points_counted = points_decoded(config);
@@ -52,6 +53,8 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.max_frame_points = config.arenas.points_per_frame;
   wo.min_free_bytes = config.output.min_free_bytes;
   wo.min_free_percent = config.output.min_free_percent;
+  wo.upload = config.output.upload;
+  wo.upload_frames = config.output.upload_frames;
   wo.min_hours_left = config.health.min_hours_left;
   const OutputSection& o = config.output;
   wo.mcap = o.mcap;

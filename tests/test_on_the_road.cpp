@@ -152,9 +152,12 @@ TEST_CASE("health never freezes: the default layout on a small disk, full and fr
   fs::create_directories(mount_point);
   const fs::path config = dir / "full.toml";
   std::ofstream(config) << "[output]\npcap_rotate_bytes = 1048576\n";
+  // No floor under the outputs (PANDARCAP_TEST_NO_FLOOR_MINIMUM): the daemon's own files fill
+  // the disk, as they would with the floor unable to remove them.
   const auto args = test::tmpfs_run_args(
-      mount_point, "64m", test::binary("pandarcapd"),
-      {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", mount_point.string()},
+      mount_point, "64m", "/usr/bin/env",
+      {"PANDARCAP_TEST_NO_FLOOR_MINIMUM=1", test::binary("pandarcapd").string(), "--allow-root",
+       "-c", config.string(), "--simulate", "--output-dir", mount_point.string()},
       true);
   if (args.empty()) {
     WARN("cannot create a mount namespace here (no root, no user namespaces): not tested");
@@ -509,9 +512,14 @@ void vehicle_day(int seconds) {
                         << "data_port = " << port << "\nptc_port = " << sensor_port.port()
                         << "\nptc_timeout_ms = 300\nstatus_interval_seconds = 0.5\n"
                         << "[output]\npcap_rotate_seconds = 2\n";
+  // No floor under the outputs (PANDARCAP_TEST_NO_FLOOR_MINIMUM): recorded stays what is on
+  // disk (the floor's removals are on purpose, not counted as lost), and the filled disk refuses
+  // writes.
   const auto args = test::tmpfs_run_args(
-      mount_point, "64m", test::binary("pandarcapd"),
-      {"--allow-root", "-c", config.string(), "--output-dir", mount_point.string()}, true);
+      mount_point, "64m", "/usr/bin/env",
+      {"PANDARCAP_TEST_NO_FLOOR_MINIMUM=1", test::binary("pandarcapd").string(), "--allow-root",
+       "-c", config.string(), "--output-dir", mount_point.string()},
+      true);
   if (args.empty()) {
     WARN("cannot create a mount namespace here (no root, no user namespaces): not tested");
     return;

@@ -369,9 +369,12 @@ TEST_CASE(
   const fs::path config = dir / "full.toml";
   // Small recordings: several are finished before the disk fills, one is open when it does.
   std::ofstream(config) << "[output]\npcap_rotate_bytes = 262144\npcap_compression = \"zstd\"\n";
+  // No floor under the outputs (PANDARCAP_TEST_NO_FLOOR_MINIMUM): the daemon's own files fill
+  // the disk.
   const auto args = test::tmpfs_run_args(
-      mount_point, "48m", test::binary("pandarcapd"),
-      {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", mount_point.string()},
+      mount_point, "48m", "/usr/bin/env",
+      {"PANDARCAP_TEST_NO_FLOOR_MINIMUM=1", test::binary("pandarcapd").string(), "--allow-root",
+       "-c", config.string(), "--simulate", "--output-dir", mount_point.string()},
       true);
   if (args.empty()) {
     WARN("cannot create a mount namespace here (no root, no user namespaces): not tested");

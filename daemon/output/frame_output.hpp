@@ -53,6 +53,8 @@ class FrameOutput {
 
   // Writes the arena's frame; a failure is counted, never thrown.
   void write(const FrameArena& arena);
+  // Its retention list: the writer hears of each removal (the upload backlog counts it).
+  Retention& retention() noexcept { return retention_; }
   // A frame removed by the free-space floor (space_floor.hpp): off the retention list.
   void removed_for_space(std::string_view path) noexcept { retention_.forget(path); }
 

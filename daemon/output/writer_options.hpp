@@ -46,6 +46,9 @@ struct WriterOptions {
   // The floor of free space on each output file system (the larger of the two; 0 = none).
   std::uint64_t min_free_bytes = 0;
   double min_free_percent = 0;
+  // output.upload: raw/ and mcap/ leave by upload (frames/ too with upload_frames).
+  bool upload = false;
+  bool upload_frames = false;
   bool prometheus = true;
   bool jsonl = true;
   std::uint64_t jsonl_rotate_bytes = 0;
@@ -69,6 +72,10 @@ struct WriterOptions {
   // next once-a-second tick, without a heartbeat, as a writer stuck on a dead disk would. Lets
   // the tests see the watchdog stop and frames drop (counted) behind a stalled writer. "" = off.
   std::string test_stall_file;
+  // Test hook (PANDARCAP_TEST_NO_FLOOR_MINIMUM set): the free-space floor is only what is
+  // configured (0: none), without the health files' room plus 2 s of writing under it, so the
+  // disk-full tests can fill a disk with the daemon's own files and see the writes refused.
+  bool test_no_floor_minimum = false;
 };
 
 }  // namespace pandarcap
