@@ -47,11 +47,24 @@ std::string_view recording_stem(std::string_view name) noexcept {
   return {};
 }
 
-bool upload_file_is_ours(FloorKind kind, std::string_view name) noexcept {
-  if (floor_file_is_ours(kind, name)) return true;
-  if (kind != FloorKind::kRecordings) return false;
-  for (const std::string_view suffix : kSidecarSuffixes) {
-    if (named_like(name, "pandarcap_", suffix, 1)) return true;
+bool upload_file_is_ours(std::string_view name) noexcept {
+  const auto digit = [](char c) { return c >= '0' && c <= '9'; };
+  // frame_[0-9]*.pcd
+  if (name.starts_with("frame_") && name.ends_with(".pcd")) {
+    return name.size() > 10 && digit(name[6]);
+  }
+  // pandarcap_*_[0-9]*.EXT: after the prefix and before ".EXT", an underscore followed by a
+  // digit somewhere.
+  if (!name.starts_with("pandarcap_")) return false;
+  for (const std::string_view extension :
+       {std::string_view(".pcap"), std::string_view(".pcap.zst"),
+        std::string_view(".calibration.csv"), std::string_view(".sensor.json"),
+        std::string_view(".mcap")}) {
+    if (!name.ends_with(extension) || name.size() < 10 + extension.size()) continue;
+    const std::string_view middle = name.substr(10, name.size() - 10 - extension.size());
+    for (std::size_t i = 0; i + 1 < middle.size(); ++i) {
+      if (middle[i] == '_' && digit(middle[i + 1])) return true;
+    }
   }
   return false;
 }

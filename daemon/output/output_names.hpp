@@ -33,9 +33,14 @@ inline constexpr std::array<std::string_view, 2> kSidecarSuffixes = {".calibrati
 // "pandarcap_20261127T220805Z_0003.pcap.zst"); empty when `name` is not a recording of ours.
 std::string_view recording_stem(std::string_view name) noexcept;
 
-// Whether `name` is a finished file of ours that leaves by upload from a directory of `kind`
-// (systemd/pandarcap-upload@.service moves exactly these): floor_file_is_ours, and in raw/ the
-// recordings' sidecars too.
-bool upload_file_is_ours(FloorKind kind, std::string_view name) noexcept;
+// Whether `name` is a finished file that leaves by upload from an upload directory: exactly what
+// systemd/pandarcap-upload@.service's rclone filter moves (tests/upload/names.txt holds the
+// names both are tested on), in any of the upload directories alike:
+//   pandarcap_*_[0-9]*.{pcap,pcap.zst,calibration.csv,sensor.json,mcap}   (recordings, sidecars,
+//                                                                           MCAP files)
+//   frame_[0-9]*.pcd                                                        (frames)
+// in rclone's glob (`*` any characters, `[0-9]` a digit). Every file floor_file_is_ours accepts
+// is one (the glob is a little wider); never a hidden file or a NAME.part.
+bool upload_file_is_ours(std::string_view name) noexcept;
 
 }  // namespace pandarcap

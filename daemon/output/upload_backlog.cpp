@@ -12,8 +12,8 @@ namespace pandarcap {
 UploadBacklog::UploadBacklog(bool enabled)
     : enabled_(enabled), dirent_buffer_(32 * 1024), reader_(dirent_buffer_) {}
 
-void UploadBacklog::watch(const std::filesystem::path& directory, FloorKind kind) {
-  directories_.push_back(Directory{directory, kind});
+void UploadBacklog::watch(const std::filesystem::path& directory) {
+  directories_.push_back(directory);
 }
 
 void UploadBacklog::prepare() {
@@ -29,18 +29,14 @@ void UploadBacklog::step(std::int64_t budget_ns) noexcept {
   }
   std::uint32_t since_clock = 0;
   while (directory_ < directories_.size()) {
-    const Directory& directory = directories_[directory_];
     // A directory that is not there (removed, not made yet) holds nothing to upload.
-    if (!reader_.is_open() && !reader_.open(directory.path.c_str())) {
+    if (!reader_.is_open() && !reader_.open(directories_[directory_].c_str())) {
       ++directory_;
       continue;
     }
-    const auto ours = [&directory](std::string_view name) {
-      return upload_file_is_ours(directory.kind, name);
-    };
+    const auto ours = [](std::string_view name) { return upload_file_is_ours(name); };
     DirectoryReader::File file;
-    bool more = false;
-    while ((more = reader_.next(file, ours))) {
+    while (reader_.next(file, ours)) {
       const std::int64_t mtime =
           static_cast<std::int64_t>(file.info.st_mtim.tv_sec) * kNsPerSecond +
           file.info.st_mtim.tv_nsec;
@@ -65,8 +61,8 @@ void UploadBacklog::removed(std::string_view path, std::uint64_t bytes, Remover 
   const std::size_t slash = path.rfind('/');
   if (slash == std::string_view::npos) return;
   const std::string_view directory = path.substr(0, slash), name = path.substr(slash + 1);
-  for (const Directory& d : directories_) {
-    if (d.path.native() != directory || !upload_file_is_ours(d.kind, name)) continue;
+  for (const std::filesystem::path& d : directories_) {
+    if (d.native() != directory || !upload_file_is_ours(name)) continue;
     // It leaves the figures now, not at the end of the next pass.
     if (published_.files > 0) --published_.files;
     published_.bytes -= std::min(published_.bytes, bytes);

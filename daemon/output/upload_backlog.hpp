@@ -6,7 +6,8 @@
 // deleted here only once it has arrived whole). The daemon does not upload; it watches what is
 // waiting. The directories are raw/ and mcap/, and frames/ with output.upload_frames; the files
 // counted are exactly those the unit moves (upload_file_is_ours: finished files of ours and the
-// recordings' sidecars; never NAME.part, a hidden file, or another program's file).
+// recordings' sidecars; never NAME.part, a hidden file, or another program's file), in each
+// directory alike.
 //
 // Counted off the writer's hot path and without holding it up: step() is called once a second
 // (the health tick) and reads the directories for at most kStepBudgetNs (getdents64 into a buffer
@@ -40,8 +41,8 @@ class UploadBacklog {
 
   explicit UploadBacklog(bool enabled);
 
-  // At start-up: an upload directory and the naming its files follow.
-  void watch(const std::filesystem::path& directory, FloorKind kind);
+  // At start-up: an upload directory.
+  void watch(const std::filesystem::path& directory);
   // At start-up, once the directories are watched: a whole pass, so the first health record has
   // the figures.
   void prepare();
@@ -61,17 +62,13 @@ class UploadBacklog {
   std::uint64_t bytes_removed_before_upload() const noexcept { return bytes_removed_; }
 
  private:
-  struct Directory {
-    std::filesystem::path path;
-    FloorKind kind;
-  };
   struct Figures {
     std::uint64_t bytes = 0, files = 0;
     std::int64_t oldest_mtime_ns = 0;  // meaningful when files > 0
   };
 
   bool enabled_;
-  std::vector<Directory> directories_;
+  std::vector<std::filesystem::path> directories_;
   std::vector<char> dirent_buffer_;  // allocated with the object (start-up)
   DirectoryReader reader_;
   std::size_t directory_ = 0;  // the pass's current directory

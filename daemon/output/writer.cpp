@@ -120,10 +120,9 @@ void Writer::prepare() {
 void Writer::watch_uploads() {
   // raw/ and mcap/ (frames/ with output.upload_frames), watched whether or not upload is on:
   // without it the figures are the recordings kept here.
-  if (options_.pcap) upload_.watch(pcap_.directory(), FloorKind::kRecordings);
-  if (options_.mcap) upload_.watch(mcap_.directory(), FloorKind::kMcap);
-  if (options_.frames && options_.upload_frames)
-    upload_.watch(frames_.directory(), FloorKind::kFrames);
+  if (options_.pcap) upload_.watch(pcap_.directory());
+  if (options_.mcap) upload_.watch(mcap_.directory());
+  if (options_.frames && options_.upload_frames) upload_.watch(frames_.directory());
   const auto by_retention = [this](std::string_view path, std::uint64_t bytes) {
     upload_.removed(path, bytes, UploadBacklog::Remover::kRetention);
   };
