@@ -185,7 +185,7 @@ TEST_CASE("Upload: the backlog over the upload directories, read a little at a t
 }
 
 TEST_CASE("Upload: the reason names the file removed before it was uploaded, and the formats",
-          "[health][upload]") {
+          "[upload]") {
   HealthCounters before, now;
   now.files_removed_before_upload = 1;
   now.bytes_removed_before_upload = 9'000'000;

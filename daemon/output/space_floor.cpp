@@ -129,10 +129,10 @@ void SpaceFloor::log_minimum(std::int64_t now_ns) noexcept {
           configured_floor(volume.space) >> 20, at, reserve_bytes_ >> 20, minimum_ >> 20);
     } else {
       last_minimum_log_ns_ = now_ns;
+      // Short (the writer's loop logs it): spdlog formats up to 250 bytes without allocating.
       spdlog::info(
-          "free-space floor: raised to {} MiB on the file system of {}: {} MiB kept for the health "
-          "files plus 2 s of writing at {:.1f} MB/s (output.min_free_bytes / min_free_percent: {} "
-          "MiB there)",
+          "free-space floor: raised to {} MiB on {}: {} MiB for the health files plus 2 s at "
+          "{:.1f} MB/s (configured: {} MiB)",
           minimum_ >> 20, at, reserve_bytes_ >> 20, rate_ / 1e6,
           configured_floor(volume.space) >> 20);
     }
