@@ -59,6 +59,11 @@ while IFS= read -r line; do
   unit_environment+=("$value")
 done < <(grep '^Environment=' <<<"$unit_text")
 
+# Without a config file (the remote is the .conf's variables): an SFTP remote would otherwise
+# save what it detects into one, here somewhere outside the test's directory.
+printf '%s\n' "${unit_environment[@]}" | grep -qx 'RCLONE_CONFIG=' ||
+  fail "the unit names an rclone config file (RCLONE_CONFIG); it runs without one"
+
 conf=$work/front-upload.conf
 run_unit() { # run_unit LOG: the unit's command, in the unit's environment; its exit status
   (
