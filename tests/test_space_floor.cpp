@@ -730,12 +730,18 @@ TEST_CASE("Space floor: whatever the floor, earlier files of ours on a small dis
     INFO(records.back().dump());
     CHECK(test::health_counter(records.back(), "write_errors") == 0);
     CHECK(test::health_counter(records.back(), "bytes_not_written") == 0);
-    CHECK(test::health_counter(records.back(), "files_removed_for_space") >= earlier.size());
+    // The floor made the room: the earlier recordings went, oldest first (all five at full
+    // speed; a sanitizer build writes less in its 3 s and may need fewer).
     const std::set<std::string> left = files_left(run.mount_point);
-    for (const std::string& f : earlier) {
-      INFO(f);
-      CHECK(left.count(f) == 0);
+    std::size_t gone = 0;
+    while (gone < earlier.size() && left.count(earlier[gone]) == 0)
+      ++gone;
+    for (std::size_t i = gone; i < earlier.size(); ++i) {
+      INFO(earlier[i] << " is left, and so must every newer one be");
+      CHECK(left.count(earlier[i]) == 1);
     }
+    CHECK(gone >= (test::kSanitizerBuild ? 1 : earlier.size()));
+    CHECK(test::health_counter(records.back(), "files_removed_for_space") >= gone);
     // Below the health files' room plus 2 s of writing (at the start, or once the rate is
     // measured: every floor here), the log says it is raised.
     CHECK((log.find("the floor is raised to that") != std::string::npos ||
