@@ -37,6 +37,8 @@ inline constexpr std::array kKeyOptions{
     KeyOption{"--pcd-compression", "output.pcd_compression"},
     KeyOption{"--pcap-compression", "output.pcap_compression"},
     KeyOption{"--min-free-bytes", "output.min_free_bytes"},
+    KeyOption{"--upload", "output.upload", true},
+    KeyOption{"--upload-frames", "output.upload_frames", true},
     KeyOption{"--min-range", "sensor.min_range"},
     KeyOption{"--max-range", "sensor.max_range"},
     KeyOption{"--dual-return-distance-threshold", "sensor.dual_return_distance_threshold"},

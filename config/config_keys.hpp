@@ -93,6 +93,8 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("output", "min_free_percent", o.min_free_percent, RealRange{0.0, false, 90.0, false});
   v("output", "sync_interval_seconds", o.sync_interval_seconds,
     RealRange{0.0, false, 3600.0, false});
+  v("output", "upload", o.upload, std::monostate{});
+  v("output", "upload_frames", o.upload_frames, std::monostate{});
 
   auto& h = c.health;
   v("health", "sensor_name", h.sensor_name, &label);

@@ -84,14 +84,20 @@ struct OutputSection {
   std::string mcap_health_topic = "/pandar/health";
   std::string mcap_packets_topic = "/pandar/packets";
   // A floor of free space on each output file system: below it the oldest of pandarcap's own
-  // files (frames, recordings, MCAP; earlier runs' too) are deleted. 0 = no floor. The floor is
-  // the larger of the two.
+  // files (frames, recordings, MCAP; earlier runs' too) are deleted. The floor is the larger of
+  // the two, and never less than the health files' 32 MiB plus 2 s of writing, where it can act.
+  // Both 0 (the default): no floor; nothing of ours is removed but by retention.
   std::uint64_t min_free_bytes = 0;
   double min_free_percent = 0;  // of the file system's size; 0..90
   // A recording still being written (pcap, pcap.zst, MCAP) and health.jsonl have their data
   // synced to the disk this often, so a power cut loses at most about this much of them. Finished
   // files are always synced before they get their final name. 0 = only then.
   double sync_interval_seconds = 2.0;
+  // Recordings leave the vehicle by upload (systemd/pandarcap-upload@.service): the health says
+  // how far it is behind, and a file removed before it was uploaded is counted and named. With
+  // upload_frames, frames/ is an upload directory too.
+  bool upload = false;
+  bool upload_frames = false;
 };
 
 struct HealthSection {

@@ -38,8 +38,8 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
 // added in exactly one place. The help text is the field's documentation. Counters that feed the
 // health state: receive_errors makes it "error"; kernel_drops, ring_overruns,
 // frames_dropped_no_arena, pcap_packets_not_recorded, sequence_lost, azimuth_gaps,
-// packets_rejected, duplicate_packets, outlier_packets, the timestamp counters and write_errors
-// make it "degraded" while they grow
+// packets_rejected, duplicate_packets, outlier_packets, the timestamp counters, write_errors and
+// files_removed_before_upload make it "degraded" while they grow
 // (core/health_policy.hpp).
 // clang-format off
 #define PANDARCAP_HEALTH_COUNTERS(X)                                                               \
@@ -128,6 +128,11 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
     "output.min_free_bytes / min_free_percent free")                                               \
   X(bytes_removed_for_space, "removed_for_space_bytes",                                            \
     "Bytes of the files removed to keep the free-space floor")                                     \
+  X(files_removed_before_upload, "files_removed_before_upload",                                    \
+    "Finished files the free-space floor or retention removed before they were uploaded "          \
+    "(output.upload): gone from the vehicle, never arrived")                                       \
+  X(bytes_removed_before_upload, "removed_before_upload_bytes",                                    \
+    "Bytes of the files removed before they were uploaded")                                        \
   X(receive_wakeups, "receive_wakeups",                                                            \
     "Returns of the receive thread from its wait (socket or latency-budget timer)")                \
   X(decode_wakeups, "decode_wakeups", "Returns of the decode thread from its wait on the ring")    \
@@ -208,6 +213,24 @@ inline constexpr std::size_t kStorageOutputCount = 4;
 inline constexpr std::array<std::string_view, kStorageOutputCount> kStorageOutputNames = {
     "frames", "pcap", "mcap", "health"};
 
+// The finished files still waiting in the upload directories (output.upload: raw/ and mcap/, and
+// frames/ with output.upload_frames; docs/deploy.md), as the last pass over them found them:
+// what systemd/pandarcap-upload@.service will move (no .part, no hidden file, nothing not ours).
+// Counted whether or not output.upload is on (`enabled` says which): without it they are the
+// recordings kept on the vehicle.
+struct UploadGauges {
+  bool enabled = false;  // output.upload
+  bool known = false;    // a pass over the directories has finished
+  std::uint64_t backlog_bytes = 0, backlog_files = 0;
+  // Seconds since the oldest of them was finished (its modification time, by the host's clock);
+  // 0 when there is none, and never below 0 (a clock set back).
+  double oldest_seconds = 0;
+  // The last file the floor or retention removed before it was uploaded (its name, no
+  // directory; cut to fit), and which of the two removed it: the state's reason names it.
+  char last_removed[128] = {};
+  bool last_removed_by_floor = false;
+};
+
 struct StorageGauges {
   // Free bytes (statvfs f_bavail) on the output file system that fills first at the current
   // rates (with every output on one file system, simply its free space); unknown when no output
@@ -222,6 +245,7 @@ struct StorageGauges {
   // of the outputs on it (the least over file systems). +infinity when nothing is written there,
   // or the free space is unknown (JSON null; the .prom says +Inf).
   double hours_left = std::numeric_limits<double>::infinity();
+  UploadGauges upload;
 };
 
 // Where the health files are while their own directory cannot be written (a disk gone read-only

@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "core/health_format_parts.hpp"
 #include "core/ptc/ptc_messages.hpp"
 #include "core/ptc/status_plausibility.hpp"
 #include "core/text_encoding.hpp"
@@ -24,6 +25,20 @@ std::string_view to_string(HealthState state) noexcept {
   }
   return "unknown";
 }
+
+namespace health_format {
+
+void family(std::string& out, std::string_view name, std::string_view type, std::string_view help,
+            std::string_view suffix) {
+  fmt::format_to(std::back_inserter(out), "# HELP pandarcap_{}{} {}\n# TYPE pandarcap_{}{} {}\n",
+                 name, suffix, help, name, suffix, type);
+}
+
+}  // namespace health_format
+
+using health_format::family;
+using health_format::storage_json;
+using health_format::storage_prometheus;
 
 namespace {
 
@@ -87,12 +102,6 @@ bool rendered(const HealthSnapshot& h, double HealthGauges::*member) {
 
 constexpr const char* kReturnModes[] = {"last", "strongest", "dual"};
 
-void family(std::string& out, std::string_view name, std::string_view type, std::string_view help,
-            std::string_view suffix = {}) {
-  fmt::format_to(std::back_inserter(out), "# HELP pandarcap_{}{} {}\n# TYPE pandarcap_{}{} {}\n",
-                 name, suffix, help, name, suffix, type);
-}
-
 // A LatencyHistogram as a Prometheus histogram with buckets at 2^first .. 2^last ns (exact
 // bucket edges of the histogram).
 void histogram(std::string& out, std::string_view sensor, std::string_view name,
@@ -126,6 +135,7 @@ void latency_json(std::string& out, std::string_view key, const LatencyHistogram
 }
 
 }  // namespace
+
 
 namespace {
 
@@ -267,56 +277,6 @@ void sensor_json(std::string& out, const HealthSnapshot& h) {
   if (st.clock_source_known)
     append(",\"clock_source\":\"{}\"", st.clock_source_ptp ? "ptp" : "gps");
   out += "}";
-}
-
-// The storage gauges (docs/storage.md). hours_left is +Inf while nothing is written; free space
-// and hours are left out when no output file system could be asked.
-void storage_prometheus(std::string& out, std::string_view sensor, const StorageGauges& st) {
-  const auto append = [&out]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
-    fmt::format_to(std::back_inserter(out), format, std::forward<Args>(args)...);
-  };
-  if (st.free_known) {
-    family(out, "storage_free_bytes", "gauge",
-           "Free bytes on the output file system that fills first at the last minute's write "
-           "rate");
-    append("pandarcap_storage_free_bytes{{{}}} {}\n", sensor, st.free_bytes);
-  }
-  family(out, "storage_written_bytes_per_second", "gauge",
-         "Bytes written per second over the last minute, by output (frames, pcap, mcap, health)");
-  for (std::size_t i = 0; i < kStorageOutputCount; ++i) {
-    append("pandarcap_storage_written_bytes_per_second{{{},output=\"{}\"}} {}\n", sensor,
-           kStorageOutputNames[i], st.written_bytes_per_second[i]);
-  }
-  if (st.free_known) {
-    family(out, "storage_hours_left", "gauge",
-           "Hours until the output file system is full at the last minute's write rate; +Inf "
-           "while nothing is written");
-    if (std::isfinite(st.hours_left)) {
-      append("pandarcap_storage_hours_left{{{}}} {}\n", sensor, st.hours_left);
-    } else {
-      append("pandarcap_storage_hours_left{{{}}} +Inf\n", sensor);
-    }
-  }
-}
-
-void storage_json(std::string& out, const StorageGauges& st) {
-  out += ",\"storage\":{\"free_bytes\":";
-  if (st.free_known) {
-    fmt::format_to(std::back_inserter(out), "{}", st.free_bytes);
-  } else {
-    out += "null";
-  }
-  out += ",\"written_bytes_per_second\":{";
-  for (std::size_t i = 0; i < kStorageOutputCount; ++i) {
-    fmt::format_to(std::back_inserter(out), "\"{}\":", kStorageOutputNames[i]);
-    append_json_number(out, st.written_bytes_per_second[i]);
-    out += ',';
-  }
-  out += "\"total\":";
-  append_json_number(out, st.written_bytes_per_second_total);
-  out += "},\"hours_left\":";
-  append_json_number(out, st.free_known ? st.hours_left : NAN);  // null: nothing written
-  out += '}';
 }
 
 }  // namespace

@@ -41,6 +41,16 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   grew(c.mcap_messages_not_recorded, p.mcap_messages_not_recorded,
        "MCAP messages not recorded (compression behind)");
   grew(c.mcap_messages_lost, p.mcap_messages_lost, "MCAP messages lost (file removed)");
+  if (c.files_removed_before_upload > p.files_removed_before_upload) {
+    const UploadGauges& upload = g.storage.upload;
+    const std::uint64_t files = c.files_removed_before_upload - p.files_removed_before_upload;
+    problem(
+        "{} file{} removed before {} uploaded ({:.1f} MB; the last by {}: {})", files,
+        files == 1 ? "" : "s", files == 1 ? "it was" : "they were",
+        static_cast<double>(c.bytes_removed_before_upload - p.bytes_removed_before_upload) / 1e6,
+        upload.last_removed_by_floor ? "the free-space floor" : "retention",
+        std::string_view(upload.last_removed));
+  }
   grew(c.sequence_lost, p.sequence_lost, "packets lost (sequence)");
   grew(c.azimuth_gaps, p.azimuth_gaps, "azimuth gaps");
   grew(c.packets_rejected, p.packets_rejected, "packets rejected");

@@ -9,6 +9,8 @@
 //   - degraded: data flows but something grew or looks wrong; every problem is named, joined by
 //               "; " in a fixed order: write errors first (with the last error's text), then
 //               kernel drops, ring overruns, frames dropped, packets not recorded, packets lost,
+//               files removed before they were uploaded ("1 file removed before it was uploaded
+//               (9.0 MB; the last by the free-space floor: pandarcap_..._0003.pcap.zst)"),
 //               azimuth gaps, rejects, timestamp troubles, the high-temperature flag, a return
 //               mode other than expected, a motor speed more than 10 % off, a sensor clock
 //               off from the host's by more than the bound ("sensor clock off by 168035162 s

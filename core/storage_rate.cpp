@@ -60,6 +60,7 @@ void fill_storage(const WriteRateWindow& window, const StorageInputs& inputs,
   storage.free_known = false;
   storage.free_bytes = 0;
   storage.hours_left = std::numeric_limits<double>::infinity();
+  storage.upload = inputs.upload;
   for (std::size_t i = 0; i < kStorageOutputCount; ++i) {
     if (!inputs.free_bytes[i]) continue;
     const std::uint64_t free = *inputs.free_bytes[i];

@@ -46,10 +46,14 @@ class WriteRateWindow {
 };
 
 // Free space per output (nothing: not known, or the output is off) and the file system each is
-// on (outputs with the same number share one), with the window's rates: `storage` filled in.
+// on (outputs with the same number share one), and the upload backlog, with the window's rates:
+// `storage` filled in.
 struct StorageInputs {
   std::array<std::optional<std::uint64_t>, kStorageOutputCount> free_bytes{};
   std::array<int, kStorageOutputCount> file_system{};  // an id: equal ids, one file system
+  UploadGauges upload;                                 // copied into the gauges as it is
+  // The upload backlog's counters (HealthCounters' files_ and bytes_removed_before_upload).
+  std::uint64_t files_removed_before_upload = 0, bytes_removed_before_upload = 0;
 };
 void fill_storage(const WriteRateWindow& window, const StorageInputs& inputs,
                   StorageGauges& storage) noexcept;

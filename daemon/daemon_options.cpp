@@ -54,6 +54,8 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.max_frame_points = config.arenas.points_per_frame;
   wo.min_free_bytes = config.output.min_free_bytes;
   wo.min_free_percent = config.output.min_free_percent;
+  wo.upload = config.output.upload;
+  wo.upload_frames = config.output.upload_frames;
   wo.min_hours_left = config.health.min_hours_left;
   wo.sync_interval_seconds = config.output.sync_interval_seconds;
   wo.health_fallback_dir = health_fallback_directory(config.health);

@@ -107,8 +107,13 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
     // given up, oldest first, for the floor of free space.
     fmt::print(
         "free-space floor: {} of the oldest files ({} MiB, earlier runs' included) removed to keep "
-        "output.min_free_bytes free\n",
+        "the floor of free space\n",
         c.files_removed_for_space, c.bytes_removed_for_space >> 20);
+  }
+  if (c.files_removed_before_upload > 0) {
+    fmt::print(
+        "upload: {} files ({} MiB) removed by the floor or retention before they were uploaded\n",
+        c.files_removed_before_upload, c.bytes_removed_before_upload >> 20);
   }
 }
 

@@ -136,6 +136,14 @@ int check_config(const DaemonConfig& config, const std::string& source_name) {
     problems.push_back(std::move(problem));
   for (const std::string& line : space)
     fmt::print("free space: {}\n", escaped_control(line));
+  for (const std::string& line : floor_report(outputs))
+    fmt::print("free-space floor: {}\n", escaped_control(line));
+  if (outputs.upload) {
+    fmt::print(
+        "upload: raw/ and mcap/{} leave by upload (output.upload): the health says how far it is "
+        "behind, and counts files removed before they were uploaded\n",
+        outputs.upload_frames ? " and frames/" : "");
+  }
   for (const std::string& problem : problems)
     std::fprintf(stderr, "pandarcapd: %s: outputs: %s\n", escaped_control(source_name).c_str(),
                  escaped_control(problem).c_str());

@@ -30,7 +30,8 @@ endif()
 # is the unit's ExecReload=.
 set(CPACK_DEBIAN_PACKAGE_DEPENDS "systemd, procps")
 set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "prometheus-node-exporter")
-set(CPACK_DEBIAN_PACKAGE_SUGGESTS "tcpdump, pcl-tools")
+# rclone: pandarcap-upload@NAME moves the recordings with it (docs/deploy.md).
+set(CPACK_DEBIAN_PACKAGE_SUGGESTS "rclone, tcpdump, pcl-tools")
 set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA
     "${PROJECT_SOURCE_DIR}/systemd/debian/postinst;${PROJECT_SOURCE_DIR}/systemd/debian/prerm;${PROJECT_SOURCE_DIR}/systemd/debian/postrm")
 set(CPACK_DEBIAN_PACKAGE_CONTROL_STRICT_PERMISSION ON)

@@ -4,8 +4,9 @@
 #   2. systemd-analyze security --offline: the exposure score must be <= 1.5 ("OK");
 #   3. the sysctl drop-in allows at least the receive buffer the default config requests;
 #   4. the sysusers entry creates the user the unit runs as, and the tmpfiles entries apply;
-#   5. the unit binds UDP ports only: no TCP listening port (the live view's) unless a drop-in
-#      allows it, and such a drop-in verifies clean.
+#   5. the daemon's unit binds UDP ports only: no TCP listening port (the live view's) unless a
+#      drop-in allows it, and such a drop-in verifies clean, as does the upload's drop-in for it;
+#      the upload's unit binds nothing, and its timer verifies clean.
 # Usage: check_systemd_units.sh UNIT_DIR SOURCE_DIR   (UNIT_DIR: units configured for this build)
 set -euo pipefail
 unit_dir=$1
@@ -36,14 +37,31 @@ for template in "$unit_dir"/*@.service; do
   awk -v s="$score" 'BEGIN { exit !(s <= 1.5) }' || fail "$name exposure $score > 1.5: $report"
 
   binds=$(sed -n 's/^SocketBind\(Allow\|Deny\)=\(.*\)/\1 \2/p' "$template" | tr '\n' ';')
+  if [ "$name" = "pandarcap-upload@.service" ]; then
+    [ "$binds" = "Deny any;" ] || fail "$name may bind ports: '$binds'"
+    echo "socket binds $name: none"
+    continue
+  fi
   [ "$binds" = "Allow udp;Deny any;" ] || fail "$name binds more than UDP ports: '$binds'"
   mkdir -p "$instance.d"
   printf '[Service]\nSocketBindAllow=tcp:8765\n' >"$instance.d/live.conf"
   if ! out=$(systemd-analyze verify --man=no "$instance" 2>&1) || [ -n "$out" ]; then
     fail "systemd-analyze verify $name with the live view's drop-in: $out"
   fi
-  echo "socket binds $name: UDP only; a drop-in allowing tcp:8765 verifies clean"
+  cp "$source_dir/systemd/pandarcapd-upload.conf" "$instance.d/upload.conf"
+  if ! out=$(systemd-analyze verify --man=no "$instance" 2>&1) || [ -n "$out" ]; then
+    fail "systemd-analyze verify $name with the upload's drop-in: $out"
+  fi
+  echo "socket binds $name: UDP only; drop-ins allowing tcp:8765 and setting --upload verify clean"
 done
+
+# The upload's timer, with its service beside it (verify checks that the unit it starts exists).
+cp "$unit_dir/pandarcap-upload@.timer" "$work/pandarcap-upload@front.timer"
+if ! out=$(cd "$work" && systemd-analyze verify --man=no pandarcap-upload@front.timer 2>&1) ||
+  [ -n "$out" ]; then
+  fail "systemd-analyze verify pandarcap-upload@.timer: $out"
+fi
+echo "verify pandarcap-upload@.timer: clean"
 
 rmem_max=$(sed -n 's/^net\.core\.rmem_max *= *\([0-9]*\)$/\1/p' "$source_dir/systemd/60-pandarcap.conf")
 requested=$(sed -n 's/^udp_socket_receive_buffer_size_bytes *= *\([0-9]*\)$/\1/p' \

@@ -76,16 +76,18 @@ TEST_CASE("the Grafana dashboard imports: panels, targets, the sensor variable",
   }
   // What the issue asked the dashboard to show.
   for (const char* title : {"Health state", "Packets per second", "Drops per stage", "Motor speed",
-                            "Frame latency (receive to PCD in place)"})
+                            "Frame latency (receive to PCD in place)", "Upload behind"})
     CHECK(titles.count(title) == 1);
 }
 
 TEST_CASE("the dashboard's and the alert rules' metrics are in a real .prom file",
           "[monitoring][daemon][threads]") {
   test::ScratchDir dir("monitoring-metrics");
-  // A simulated sensor answering PTC: the sensor's status gauges are in the file too.
+  // A simulated sensor answering PTC: the sensor's status gauges are in the file too; with
+  // --upload, the upload backlog's.
   const auto r = test::run_command(test::pandarcapd_command() +
-                                   " --simulate --duration 3 --status-interval 0.5 --output-dir '" +
+                                   " --simulate --duration 3 --status-interval 0.5 --upload "
+                                   "--output-dir '" +
                                    (dir / "out").string() + "' 2>&1");
   INFO(r.out);
   REQUIRE(r.exit_code == 0);

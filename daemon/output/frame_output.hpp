@@ -60,6 +60,8 @@ class FrameOutput {
   void write(const FrameArena& arena);
   // The finisher's word on a frame: in place (counted written), or why not (a write error).
   void finished(const FinishJob& job);
+  // Its retention list: the writer hears of each removal (the upload backlog counts it).
+  Retention& retention() noexcept { return retention_; }
   // A frame removed by the free-space floor (space_floor.hpp): off the retention list.
   void removed_for_space(std::string_view path) noexcept { retention_.forget(path); }
 

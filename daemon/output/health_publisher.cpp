@@ -151,6 +151,8 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.output_name_collisions = sources.accounting.name_collisions();
   c.files_removed_for_space = sources.files_removed_for_space;
   c.bytes_removed_for_space = sources.bytes_removed_for_space;
+  c.files_removed_before_upload = sources.storage.files_removed_before_upload;
+  c.bytes_removed_before_upload = sources.storage.bytes_removed_before_upload;
   c.receive_wakeups = receive.wakeups.load(std::memory_order_relaxed);
   c.decode_wakeups = sources.decode_wakeups;
   c.writer_wakeups = sources.writer_wakeups;

@@ -13,6 +13,7 @@
 #include <system_error>
 
 #include "daemon/io/errors.hpp"
+#include "daemon/output/space_floor.hpp"
 #include "daemon/output/space_guard.hpp"
 
 namespace pandarcap {
@@ -102,32 +103,73 @@ OutputDirectoryLock::OutputDirectoryLock(const fs::path& directory) {
   }
 }
 
-std::vector<std::string> space_problems(const WriterOptions& o, std::vector<std::string>& report) {
-  std::vector<std::string> problems;
-  std::vector<dev_t> seen;  // one line per file system
-  const std::uint64_t needed = kOutputFloorBytes + kHealthReserveBytes;
-  const auto check = [&](const char* what, const fs::path& dir) {
-    // The nearest existing directory tells the file system (the rest is made at start).
+namespace {
+
+// Each output directory's file system once (the first directory on it names it): `check(what,
+// directory)`. The nearest existing directory tells the file system (the rest is made at start).
+template <typename Check>
+void for_each_output_file_system(const WriterOptions& o, Check&& check) {
+  std::vector<dev_t> seen;
+  const auto once = [&](const char* what, const fs::path& dir) {
     fs::path at = dir;
     struct stat info {};
     while (::stat(at.c_str(), &info) != 0 && at.has_parent_path() && at.parent_path() != at)
       at = at.parent_path();
     if (std::find(seen.begin(), seen.end(), info.st_dev) != seen.end()) return;
     seen.push_back(info.st_dev);
+    check(what, dir);
+  };
+  if (o.frames) once("frames directory", o.output_dir / "frames");
+  if (o.pcap) once("recording directory", o.output_dir / "raw");
+  if (o.mcap) once("MCAP directory", o.output_dir / "mcap");
+  if (o.jsonl || o.prometheus) once("health directory", o.health_dir);
+  if (o.prometheus && o.prometheus_file.has_parent_path())
+    once("textfile directory", o.prometheus_file.parent_path());
+}
+
+}  // namespace
+
+std::vector<std::string> space_problems(const WriterOptions& o, std::vector<std::string>& report) {
+  std::vector<std::string> problems;
+  const std::uint64_t needed = kOutputFloorBytes + kHealthReserveBytes;
+  for_each_output_file_system(o, [&](const char* what, const fs::path& dir) {
     const auto free = free_bytes_at(dir);
     if (!free) return;
     const std::string line = fmt::format("{} '{}': {} MiB free, {} MiB needed", what, dir.string(),
                                          *free >> 20, needed >> 20);
     report.push_back(line);
     if (*free < needed) problems.push_back(line + " (the rest is kept for the health files)");
-  };
-  if (o.frames) check("frames directory", o.output_dir / "frames");
-  if (o.pcap) check("recording directory", o.output_dir / "raw");
-  if (o.mcap) check("MCAP directory", o.output_dir / "mcap");
-  if (o.jsonl || o.prometheus) check("health directory", o.health_dir);
-  if (o.prometheus && o.prometheus_file.has_parent_path())
-    check("textfile directory", o.prometheus_file.parent_path());
+  });
   return problems;
+}
+
+std::vector<std::string> floor_report(const WriterOptions& o) {
+  std::vector<std::string> lines;
+  const bool any_output = o.frames || o.pcap || o.mcap;
+  if (!any_output) return lines;
+  WriterOptions outputs = o;  // the health directory holds none of the floor's files
+  outputs.jsonl = outputs.prometheus = false;
+  for_each_output_file_system(outputs, [&](const char* what, const fs::path& dir) {
+    const auto space = file_system_space_at(dir);
+    if (!space) return;
+    const auto percent =
+        static_cast<std::uint64_t>(static_cast<double>(space->size) * o.min_free_percent / 100.0);
+    const std::uint64_t configured = std::max(o.min_free_bytes, percent);
+    const std::uint64_t minimum = minimum_floor_bytes(kOutputFloorBytes, 0);
+    if (configured >= minimum) {
+      lines.push_back(fmt::format(
+          "{} '{}': {} MiB (output.min_free_bytes / min_free_percent), at least the {} MiB kept "
+          "for the health files plus 2 s of writing at the measured rate",
+          what, dir.string(), configured >> 20, kOutputFloorBytes >> 20));
+    } else {
+      lines.push_back(fmt::format(
+          "{} '{}': output.min_free_bytes / min_free_percent ({} MiB) is below the {} MiB kept "
+          "for the health files plus 2 s of writing: raised to that ({} MiB at the start, then "
+          "with the measured write rate)",
+          what, dir.string(), configured >> 20, kOutputFloorBytes >> 20, minimum >> 20));
+    }
+  });
+  return lines;
 }
 
 bool make_again_if_removed(const std::filesystem::path& directory) noexcept {

@@ -42,6 +42,11 @@ std::vector<std::string> output_problems(const WriterOptions& options);
 std::vector<std::string> space_problems(const WriterOptions& options,
                                         std::vector<std::string>& report);
 
+// The free-space floor on each output's file system, one line each for `--check-config`: the
+// configured one, or that it is raised to the health files' room plus 2 s of writing
+// (space_floor.hpp).
+std::vector<std::string> floor_report(const WriterOptions& options);
+
 // A directory of ours removed while the daemon runs (a USB disk pulled, a clean-up script): made
 // again and said in the log. True when it was missing and exists now; false when it was there
 // (the failure was something else) or cannot be made.

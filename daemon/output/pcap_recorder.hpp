@@ -88,6 +88,8 @@ class PcapRecorder {
   // This run's finished recordings that are no longer on disk (removed by someone else): their
   // packets counted as lost. At the end, after close().
   void verify_on_disk();
+  // Its retention list: the writer hears of each removal (the upload backlog counts it).
+  Retention& retention() noexcept { return retention_; }
   // A finished file of ours removed by the free-space floor (space_floor.hpp): removed on
   // purpose, as retention's are, so not counted as lost.
   void removed_for_space(std::string_view path) noexcept {

@@ -1,8 +1,30 @@
 #include "daemon/output/retention.hpp"
 
+#include <unistd.h>
+
+#include <array>
+#include <cstring>
 #include <system_error>
 
+#include "daemon/output/output_names.hpp"
+
 namespace pandarcap {
+
+void remove_sidecars(std::string_view recording_path) noexcept {
+  const std::size_t slash = recording_path.rfind('/');
+  const std::size_t name_at = slash == std::string_view::npos ? 0 : slash + 1;
+  const std::string_view stem = recording_stem(recording_path.substr(name_at));
+  if (stem.empty()) return;
+  std::array<char, 4096> path;  // on the stack: a path is at most PATH_MAX
+  for (const std::string_view suffix : kSidecarSuffixes) {
+    const std::size_t length = name_at + stem.size() + suffix.size();
+    if (length >= path.size()) return;
+    std::memcpy(path.data(), recording_path.data(), name_at + stem.size());
+    std::memcpy(path.data() + name_at + stem.size(), suffix.data(), suffix.size());
+    path[length] = '\0';
+    ::unlink(path.data());  // none there: nothing to do
+  }
+}
 
 std::size_t Retention::enforce() {
   const std::size_t before = files_.size();
@@ -12,8 +34,12 @@ std::size_t Retention::enforce() {
   while (!files_.empty() && ((max_files_ != 0 && files_.size() > max_files_) ||
                              (max_bytes_ != 0 && total > max_bytes_))) {
     std::error_code ignored;
-    std::filesystem::remove(files_.front().first, ignored);
-    total -= files_.front().second;
+    const auto& [path, bytes] = files_.front();
+    if (std::filesystem::remove(path, ignored)) {
+      remove_sidecars(path.native());
+      if (on_removed_) on_removed_(path.native(), bytes);
+    }
+    total -= bytes;
     files_.pop_front();
   }
   return before - files_.size();

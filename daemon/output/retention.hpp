@@ -1,6 +1,8 @@
 // Retention of one kind of output file (frames, recordings): at most max_files files and
 // max_bytes bytes, the oldest removed first. 0 means no limit; with neither limit set no list is
-// kept at all (it would only grow).
+// kept at all (it would only grow). A recording goes with its sidecars (STEM.calibration.csv,
+// STEM.sensor.json; output_names.hpp), and each removal is told to the owner (on_removed(): the
+// upload backlog counts a file that had not been uploaded).
 //
 // The list holds every file of ours, those of earlier runs included (adopted at start-up, oldest
 // first), so restarts and crash loops cannot fill the disk. Adding a file costs one allocation
@@ -12,11 +14,16 @@
 #include <cstdint>
 #include <deque>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <utility>
 
 namespace pandarcap {
+
+// Removes the sidecars of the recording at `recording_path` (a .pcap or .pcap.zst of ours; any
+// other name has none), those that are there. Allocates nothing.
+void remove_sidecars(std::string_view recording_path) noexcept;
 
 class Retention {
  public:
@@ -44,10 +51,15 @@ class Retention {
   // A listed file removed by the free-space floor (space_floor.hpp): off the list, its bytes no
   // longer counted. Searched from the oldest (the floor removes the oldest). Allocates nothing.
   void forget(std::string_view path) noexcept;
+  // Called with each file enforce() removed (its path, its bytes), its sidecars gone with it.
+  void on_removed(std::function<void(std::string_view, std::uint64_t)> callback) {
+    on_removed_ = std::move(callback);
+  }
 
  private:
   std::uint64_t max_files_, max_bytes_;
   std::deque<std::pair<std::filesystem::path, std::uint64_t>> files_;  // oldest first
+  std::function<void(std::string_view, std::uint64_t)> on_removed_;
 };
 
 // A recorder's finished files of this run still kept, each with what it holds (packets,

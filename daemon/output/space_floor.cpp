@@ -1,10 +1,7 @@
 #include "daemon/output/space_floor.hpp"
 
-#include <dirent.h>
-#include <fcntl.h>
 #include <spdlog/spdlog.h>
 #include <sys/stat.h>
-#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -12,28 +9,11 @@
 #include <cstring>
 
 #include "core/units.hpp"
+#include "daemon/output/directory_reader.hpp"
+#include "daemon/output/retention.hpp"
 
 namespace pandarcap {
 namespace {
-
-// `name` is `prefix`, `field` '_'-separated fields, a number followed by '_' or '.', ..., `suffix`.
-bool named_like(std::string_view name, std::string_view prefix, std::string_view suffix,
-                int field) noexcept {
-  if (!name.starts_with(prefix) || !name.ends_with(suffix)) return false;
-  if (name.size() < prefix.size() + suffix.size() + 1) return false;
-  name.remove_prefix(prefix.size());
-  name.remove_suffix(suffix.size());
-  for (int i = 0; i < field; ++i) {
-    const std::size_t underscore = name.find('_');
-    if (underscore == std::string_view::npos) return false;
-    name.remove_prefix(underscore + 1);
-  }
-  std::size_t digits = 0;
-  while (digits < name.size() && name[digits] >= '0' && name[digits] <= '9')
-    ++digits;
-  // The number ends the name (before the suffix) or is followed by more fields (_partial, _dupN).
-  return digits > 0 && (digits == name.size() || name[digits] == '_');
-}
 
 // Which of two candidates is older: by modification time, then by name.
 template <typename C>
@@ -42,34 +22,19 @@ bool older(const C& a, const C& b) noexcept {
   return std::strcmp(a.name, b.name) < 0;
 }
 
-// The kernel's directory entry (getdents64): read without opendir, which allocates.
-struct LinuxDirent64 {
-  std::uint64_t d_ino;
-  std::int64_t d_off;
-  unsigned short d_reclen;
-  unsigned char d_type;
-  char d_name[1];
-};
-
 }  // namespace
 
-bool floor_file_is_ours(FloorKind kind, std::string_view name) noexcept {
-  switch (kind) {
-    case FloorKind::kFrames:
-      return named_like(name, "frame_", ".pcd", 0);
-    case FloorKind::kRecordings:
-      return named_like(name, "pandarcap_", ".pcap", 1) ||
-             named_like(name, "pandarcap_", ".pcap.zst", 1);
-    case FloorKind::kMcap:
-      return named_like(name, "pandarcap_", ".mcap", 1);
-    case FloorKind::kNone:
-      return false;
-  }
-  return false;
+std::uint64_t minimum_floor_bytes(std::uint64_t reserve_bytes, double bytes_per_second) noexcept {
+  const double writing = std::max(bytes_per_second, 0.0) * 2;
+  return reserve_bytes + static_cast<std::uint64_t>(std::min(writing, 1e18));
 }
 
-SpaceFloor::SpaceFloor(std::uint64_t min_free_bytes, double min_free_percent)
-    : min_free_bytes_(min_free_bytes), min_free_percent_(min_free_percent) {}
+SpaceFloor::SpaceFloor(std::uint64_t min_free_bytes, double min_free_percent,
+                       std::uint64_t reserve_bytes)
+    : min_free_bytes_(min_free_bytes),
+      min_free_percent_(min_free_percent),
+      reserve_bytes_(reserve_bytes),
+      minimum_(minimum_floor_bytes(reserve_bytes, 0)) {}
 
 int SpaceFloor::watch(const std::filesystem::path& directory, FloorKind kind) {
   directories_.push_back(Directory{directory, kind});
@@ -118,10 +83,62 @@ int SpaceFloor::file_system(int handle) const noexcept {
   return directories_[static_cast<std::size_t>(handle)].volume;
 }
 
-std::uint64_t SpaceFloor::floor_of(const FileSystemSpace& space) const noexcept {
+std::uint64_t SpaceFloor::configured_floor(const FileSystemSpace& space) const noexcept {
   const auto percent =
       static_cast<std::uint64_t>(static_cast<double>(space.size) * min_free_percent_ / 100.0);
   return std::max(min_free_bytes_, percent);
+}
+
+std::uint64_t SpaceFloor::floor_of(const FileSystemSpace& space) const noexcept {
+  const std::uint64_t configured = configured_floor(space);
+  return reserve_bytes_ == 0 ? configured : std::max(configured, minimum_);
+}
+
+std::uint64_t SpaceFloor::floor_bytes(int handle) const noexcept {
+  const Directory& d = directories_[static_cast<std::size_t>(handle)];
+  if (d.volume < 0) return 0;
+  const Volume& v = volumes_[static_cast<std::size_t>(d.volume)];
+  return v.known ? floor_of(v.space) : 0;
+}
+
+void SpaceFloor::write_rate(double bytes_per_second, std::int64_t now_ns) noexcept {
+  if (reserve_bytes_ == 0) return;
+  const std::uint64_t minimum = minimum_floor_bytes(reserve_bytes_, bytes_per_second);
+  if (minimum <= minimum_) return;
+  minimum_ = minimum;
+  rate_ = bytes_per_second;
+  log_minimum(now_ns);
+}
+
+void SpaceFloor::log_minimum(std::int64_t now_ns) noexcept {
+  // Said at the start, then when it has grown by an eighth since last said (the rate wanders by a
+  // few per cent from second to second), at most every 10 s after the first rise; and only where
+  // it is above the configured floor.
+  const bool grown = minimum_ > minimum_logged_ + minimum_logged_ / 8;
+  const bool logged_lately =
+      last_minimum_log_ns_ >= 0 && now_ns - last_minimum_log_ns_ < 10 * kNsPerSecond;
+  if (!grown || logged_lately) return;
+  for (const Volume& volume : volumes_) {
+    if (!volume.known || configured_floor(volume.space) >= minimum_) continue;
+    const std::string& at = directories_[volume.first_directory].path.native();
+    if (rate_ == 0) {
+      spdlog::info(
+          "free-space floor: output.min_free_bytes / min_free_percent ({} MiB on the file system "
+          "of {}) is below the {} MiB kept for the health files plus 2 s of writing: the floor is "
+          "raised to that, {} MiB now, and rises with the measured write rate",
+          configured_floor(volume.space) >> 20, at, reserve_bytes_ >> 20, minimum_ >> 20);
+    } else {
+      last_minimum_log_ns_ = now_ns;
+      // Short (the writer's loop logs it): spdlog formats up to 250 bytes without allocating.
+      spdlog::info(
+          "free-space floor: raised to {} MiB on {}: {} MiB for the health files plus 2 s at "
+          "{:.1f} MB/s (configured: {} MiB)",
+          minimum_ >> 20, at, reserve_bytes_ >> 20, rate_ / 1e6,
+          configured_floor(volume.space) >> 20);
+    }
+    minimum_logged_ = minimum_;
+    return;
+  }
 }
 
 std::optional<FileSystemSpace> SpaceFloor::ask(const std::filesystem::path& at) const noexcept {
@@ -129,6 +146,8 @@ std::optional<FileSystemSpace> SpaceFloor::ask(const std::filesystem::path& at) 
 }
 
 void SpaceFloor::tend(std::int64_t now_ns) noexcept {
+  const bool first = !tended_;
+  tended_ = true;
   for (std::size_t v = 0; v < volumes_.size(); ++v) {
     Volume& volume = volumes_[v];
     const std::filesystem::path& at = directories_[volume.first_directory].path;
@@ -138,16 +157,7 @@ void SpaceFloor::tend(std::int64_t now_ns) noexcept {
     volume.space = *space;
     if (!enabled()) continue;
     const std::uint64_t floor = floor_of(volume.space);
-    bool unheld = false;
-    // A few passes at most (kCandidates files each); the rest waits for the next second.
-    for (int pass = 0; pass < 4 && volume.space.free < floor; ++pass) {
-      scan(static_cast<int>(v));
-      if (candidate_count_ == 0 || remove_oldest(static_cast<int>(v), floor) == 0) {
-        unheld = true;
-        break;
-      }
-      if (const auto after = ask(at)) volume.space = *after;
-    }
+    const bool unheld = !hold(static_cast<int>(v), floor);
     if (volume.files_unlogged != 0) log(volume, floor, now_ns, false);
     const bool unheld_logged_lately =
         volume.last_unheld_log_ns >= 0 && now_ns - volume.last_unheld_log_ns < 10 * kNsPerSecond;
@@ -155,57 +165,91 @@ void SpaceFloor::tend(std::int64_t now_ns) noexcept {
       volume.last_unheld_log_ns = now_ns;
       spdlog::warn(
           "free-space floor: {} MiB free on the file system of {}, under the floor of {} "
-          "MiB, and no file of ours left to remove: the disk is filled by something else",
+          "MiB, and no finished file of ours left to remove: the disk is filled by something "
+          "else, or by the open recordings (.part; see pcap_rotate_seconds)",
           volume.space.free >> 20, at.native(), floor >> 20);
     }
   }
+  if (first && reserve_bytes_ != 0) log_minimum(now_ns);
+}
+
+bool SpaceFloor::hold(int v, std::uint64_t floor) noexcept {
+  Volume& volume = volumes_[static_cast<std::size_t>(v)];
+  const std::filesystem::path& at = directories_[volume.first_directory].path;
+  // A few passes at most (kCandidates files each); the rest waits for the next second.
+  for (int pass = 0; pass < 4 && volume.space.free < floor; ++pass) {
+    // The oldest found by the last scan are still the oldest (what came since is newer): the
+    // directories are read again only when they are used up, or turn out to be gone.
+    bool fresh = false;
+    if (candidate_volume_ != v || next_candidate_ >= candidate_count_) {
+      scan(v);
+      fresh = true;
+    }
+    if (remove_oldest(v, floor) == 0) {
+      if (fresh) return false;  // none of ours left
+      candidate_count_ = 0;     // all gone already: read the directories again
+      continue;
+    }
+    if (const auto after = ask(at)) volume.space = *after;
+  }
+  return true;
+}
+
+bool SpaceFloor::make_room(std::string_view directory, std::uint64_t bytes,
+                           std::int64_t now_ns) noexcept {
+  if (!enabled()) return false;
+  for (const Directory& d : directories_) {
+    if (d.kind == FloorKind::kNone || d.volume < 0 || d.path.native() != directory) continue;
+    Volume& volume = volumes_[static_cast<std::size_t>(d.volume)];
+    const auto space = ask(directories_[volume.first_directory].path);
+    if (!space) return false;
+    volume.known = true;
+    volume.space = *space;
+    // Room for the write above the guard's reserve, with the floor's 2 s of writing too.
+    const std::uint64_t floor = std::max(floor_of(volume.space), minimum_ + bytes);
+    const std::uint64_t before = files_removed_;
+    hold(d.volume, floor);
+    if (volume.files_unlogged != 0) log(volume, floor, now_ns, false);
+    return files_removed_ != before;
+  }
+  return false;
 }
 
 void SpaceFloor::scan(int volume) noexcept {
   candidate_count_ = 0;
+  next_candidate_ = 0;
+  candidate_volume_ = volume;
   Candidate* const heap = candidates_.data();
   const auto newer = [](const Candidate& a, const Candidate& b) { return older(a, b); };
+  DirectoryReader reader(dirent_buffer_);
   for (std::size_t d = 0; d < directories_.size(); ++d) {
     const Directory& directory = directories_[d];
     if (directory.volume != volume || directory.kind == FloorKind::kNone) continue;
-    const int fd = ::open(directory.path.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0) continue;
-    for (;;) {
-      const long n = ::syscall(SYS_getdents64, fd, dirent_buffer_.data(), dirent_buffer_.size());
-      if (n <= 0) break;
-      for (long at = 0; at < n;) {
-        const auto* entry = reinterpret_cast<const LinuxDirent64*>(dirent_buffer_.data() + at);
-        at += entry->d_reclen;
-        const std::string_view name(entry->d_name);
-        // A link, a directory, a device: never ours, whatever its name.
-        if (entry->d_type != DT_REG && entry->d_type != DT_UNKNOWN) continue;
-        if (name.size() >= sizeof(Candidate::name) || !floor_file_is_ours(directory.kind, name))
-          continue;
-        struct stat info {};
-        if (::fstatat(fd, entry->d_name, &info, AT_SYMLINK_NOFOLLOW) != 0 ||
-            !S_ISREG(info.st_mode)) {
-          continue;
-        }
-        Candidate c;
-        c.mtime_ns =
-            static_cast<std::int64_t>(info.st_mtim.tv_sec) * kNsPerSecond + info.st_mtim.tv_nsec;
-        c.bytes = static_cast<std::uint64_t>(info.st_size);
-        c.blocks_bytes = static_cast<std::uint64_t>(info.st_blocks) * 512;
-        c.directory = static_cast<std::uint32_t>(d);
-        std::memcpy(c.name, name.data(), name.size());
-        c.name[name.size()] = '\0';
-        // The oldest kCandidates: a max-heap whose top is the newest kept.
-        if (candidate_count_ < kCandidates) {
-          heap[candidate_count_++] = c;
-          std::push_heap(heap, heap + candidate_count_, newer);
-        } else if (older(c, heap[0])) {
-          std::pop_heap(heap, heap + candidate_count_, newer);
-          heap[candidate_count_ - 1] = c;
-          std::push_heap(heap, heap + candidate_count_, newer);
-        }
+    if (!reader.open(directory.path.c_str())) continue;
+    const auto ours = [&directory](std::string_view name) {
+      return name.size() < sizeof(Candidate::name) && floor_file_is_ours(directory.kind, name);
+    };
+    DirectoryReader::File file;
+    while (reader.next(file, ours)) {
+      const struct stat& info = file.info;
+      Candidate c;
+      c.mtime_ns =
+          static_cast<std::int64_t>(info.st_mtim.tv_sec) * kNsPerSecond + info.st_mtim.tv_nsec;
+      c.bytes = static_cast<std::uint64_t>(info.st_size);
+      c.blocks_bytes = static_cast<std::uint64_t>(info.st_blocks) * 512;
+      c.directory = static_cast<std::uint32_t>(d);
+      std::memcpy(c.name, file.name.data(), file.name.size());
+      c.name[file.name.size()] = '\0';
+      // The oldest kCandidates: a max-heap whose top is the newest kept.
+      if (candidate_count_ < kCandidates) {
+        heap[candidate_count_++] = c;
+        std::push_heap(heap, heap + candidate_count_, newer);
+      } else if (older(c, heap[0])) {
+        std::pop_heap(heap, heap + candidate_count_, newer);
+        heap[candidate_count_ - 1] = c;
+        std::push_heap(heap, heap + candidate_count_, newer);
       }
     }
-    ::close(fd);
   }
   std::sort_heap(heap, heap + candidate_count_, newer);  // oldest first
 }
@@ -214,8 +258,9 @@ std::size_t SpaceFloor::remove_oldest(int v, std::uint64_t floor) noexcept {
   Volume& volume = volumes_[static_cast<std::size_t>(v)];
   std::uint64_t freed = 0;  // as the blocks the files held: what the file system gets back
   std::size_t removed = 0;
-  for (std::size_t i = 0; i < candidate_count_ && volume.space.free + freed < floor; ++i) {
-    const Candidate& c = candidates_[i];
+  for (; next_candidate_ < candidate_count_ && volume.space.free + freed < floor;
+       ++next_candidate_) {
+    const Candidate& c = candidates_[next_candidate_];
     const Directory& directory = directories_[c.directory];
     removed_path_.assign(directory.path.native());
     removed_path_ += '/';
@@ -223,7 +268,8 @@ std::size_t SpaceFloor::remove_oldest(int v, std::uint64_t floor) noexcept {
     if (::unlink(removed_path_.c_str()) != 0) continue;  // gone already, or not ours to remove
     freed += c.blocks_bytes;
     ++removed;
-    if (on_removed_) on_removed_(directory.kind, removed_path_);
+    if (directory.kind == FloorKind::kRecordings) remove_sidecars(removed_path_);
+    if (on_removed_) on_removed_(directory.kind, removed_path_, c.bytes);
     ++files_removed_;
     bytes_removed_ += c.bytes;
     ++volume.files_unlogged;

@@ -106,6 +106,16 @@ bool SpaceGuard::allows(int handle, std::uint64_t bytes, std::string& reason) no
     v.checked_ns = now;
   }
   if (!v.known) return true;  // cannot tell: the write itself will say
+  if (v.free < bytes + kOutputFloorBytes && make_room_) {
+    // The floor first (it removes the oldest of ours when the file system is short), then the
+    // file system asked again: the estimate may be up to 100 ms old.
+    make_room_(v.directory.native(), bytes);
+    const auto free = free_bytes_at(v.directory);
+    v.known = free.has_value();
+    v.free = free.value_or(0);
+    v.checked_ns = now;
+    if (!v.known) return true;
+  }
   if (v.free >= bytes + kOutputFloorBytes) {
     v.free -= bytes;
     return true;

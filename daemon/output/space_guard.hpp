@@ -5,7 +5,9 @@
 //   - The daemon's own outputs stop short: frames, recordings and MCAP are not written while
 //     their file system has less than kOutputFloorBytes free (allows(), checked before each
 //     write; a refused write is counted and said in the health like a failed one). Their disk
-//     never fills to the last block, and the health files keep the room they need.
+//     never fills to the last block, and the health files keep the room they need. Before it
+//     refuses, the free-space floor is asked to make room (make_room_with(): it removes the
+//     oldest of our files), so a write is refused only when none of ours is left.
 //   - Someone else fills the disk: a reserve file in the health directory,
 //     HEALTH_DIR/.pandarcap-health-reserve, holds kHealthReserveBytes allocated at start-up.
 //     When a health write fails for want of space (ENOSPC, EDQUOT), a piece of it is given back
@@ -17,8 +19,10 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace pandarcap {
@@ -61,6 +65,11 @@ class SpaceGuard {
   // what was allowed since. When not, `reason` says why ("12 MiB free on /data, 32 MiB kept for
   // health").
   bool allows(int handle, std::uint64_t bytes, std::string& reason) noexcept;
+  // Asked before allows() refuses: room for `bytes` under the watched `directory`, made by
+  // removing files (the free-space floor's oldest); the space is then asked again. Set at
+  // start-up; called on the writer thread.
+  using MakeRoom = std::function<bool(std::string_view directory, std::uint64_t bytes)>;
+  void make_room_with(MakeRoom make_room) { make_room_ = std::move(make_room); }
 
   // A health write failed for want of space: a piece of the reserve is given back. False when
   // none is left (the write then fails, counted).
@@ -88,6 +97,7 @@ class SpaceGuard {
   int reserve_fd_ = -1;
   std::uint64_t reserve_size_ = 0;
   std::vector<Volume> volumes_;
+  MakeRoom make_room_;
 };
 
 }  // namespace pandarcap

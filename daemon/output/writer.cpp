@@ -46,7 +46,11 @@ Writer::Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQue
       pcap_(options_, accounting_, space_, finisher_),
       mcap_(options_, accounting_, space_, finisher_),
       health_(options_, accounting_, space_, finisher_),
-      floor_(options_.min_free_bytes, options_.min_free_percent),
+      // A floor asked for is held at least where it can act (space_floor.hpp); none asked for,
+      // none held: nothing of ours is removed but by retention.
+      floor_(options_.min_free_bytes, options_.min_free_percent,
+             options_.min_free_bytes != 0 || options_.min_free_percent > 0 ? kOutputFloorBytes : 0),
+      upload_(options_.upload),
       sensor_status_(sensor_status) {}
 
 Writer::~Writer() = default;
@@ -81,6 +85,7 @@ void Writer::prepare() {
   if (options_.jsonl) leftovers.jsonl_path = health_.jsonl_path();
   leftovers.health_probe_path = health_.probe_path();
   finish_leftovers(leftovers, accounting_);
+  watch_uploads();
   if (options_.frames) frames_.adopt_earlier_files();
   if (options_.pcap) {
     pcap_.adopt_earlier_files();
@@ -98,12 +103,18 @@ void Writer::prepare() {
   if (options_.pcap) floor_handles_[1] = floor_.watch(pcap_.directory(), FloorKind::kRecordings);
   if (options_.mcap) floor_handles_[2] = floor_.watch(mcap_.directory(), FloorKind::kMcap);
   if (options_.jsonl) floor_handles_[3] = floor_.watch(options_.health_dir, FloorKind::kNone);
-  floor_.on_removed([this](FloorKind kind, std::string_view path) {
+  floor_.on_removed([this](FloorKind kind, std::string_view path, std::uint64_t bytes) {
     if (kind == FloorKind::kFrames) frames_.removed_for_space(path);
     if (kind == FloorKind::kRecordings) pcap_.removed_for_space(path);
     if (kind == FloorKind::kMcap) mcap_.removed_for_space(path);
+    upload_.removed(path, bytes, UploadBacklog::Remover::kFloor);
   });
   floor_.prepare();
+  // A write the guard would refuse for space asks the floor first.
+  space_.make_room_with([this](std::string_view directory, std::uint64_t bytes) {
+    return floor_.make_room(directory, bytes, monotonic_ns());
+  });
+  upload_.prepare();
   tend_floor(start);
   // Proves the health directories are writable before the daemon reports ready.
   take_sensor_status();
@@ -111,8 +122,28 @@ void Writer::prepare() {
   health_.write_first();
 }
 
+void Writer::watch_uploads() {
+  // raw/ and mcap/ (frames/ with output.upload_frames), watched whether or not upload is on:
+  // without it the figures are the recordings kept here.
+  if (options_.pcap) upload_.watch(pcap_.directory());
+  if (options_.mcap) upload_.watch(mcap_.directory());
+  if (options_.frames && options_.upload_frames) upload_.watch(frames_.directory());
+  const auto by_retention = [this](std::string_view path, std::uint64_t bytes) {
+    upload_.removed(path, bytes, UploadBacklog::Remover::kRetention);
+  };
+  pcap_.retention().on_removed(by_retention);
+  mcap_.retention().on_removed(by_retention);
+  frames_.retention().on_removed(by_retention);
+}
+
 void Writer::tend_floor(std::int64_t now) noexcept {
+  // The floor never below the health files' room plus 2 s of writing at the last record's rate.
+  floor_.write_rate(health_.snapshot().gauges.storage.written_bytes_per_second_total, now);
   floor_.tend(now);
+  upload_.step();
+  upload_.fill(realtime_ns(), storage_.upload);
+  storage_.files_removed_before_upload = upload_.files_removed_before_upload();
+  storage_.bytes_removed_before_upload = upload_.bytes_removed_before_upload();
   for (std::size_t i = 0; i < kStorageOutputCount; ++i) {
     storage_.free_bytes[i] =
         floor_handles_[i] < 0 ? std::nullopt : floor_.free_bytes(floor_handles_[i]);

@@ -12,8 +12,11 @@
 //     schedule, when packets stop for longer than the no-data timeout or start again (checked at
 //     every wake-up, at least every 100 ms), the schedule restarting from there.
 // Before each health record the free-space floor is held (daemon/output/space_floor.hpp: a
-// statvfs per output file system; below output.min_free_bytes / min_free_percent the oldest of our
-// files are removed), and its free space feeds the health record's storage gauges.
+// statvfs per output file system; below output.min_free_bytes / min_free_percent, or the health
+// files' room plus 2 s of writing, the oldest of our files are removed; a write that would be
+// refused for space asks it first), and its free space feeds the health record's storage gauges,
+// with the upload backlog (daemon/output/upload_backlog.hpp: a few milliseconds of directory
+// reading a second).
 // At start-up (prepare()) it deals with what an interrupted run left
 // (daemon/output/output_leftovers.hpp) and adopts earlier runs' files: numbers continue across runs
 // and retention counts them, so restarts and crash loops can neither repeat a name nor fill the
@@ -45,6 +48,7 @@
 #include "daemon/output/pcap_recorder.hpp"
 #include "daemon/output/space_floor.hpp"
 #include "daemon/output/space_guard.hpp"
+#include "daemon/output/upload_backlog.hpp"
 #include "daemon/output/writer_options.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/ptc/sensor_status_channel.hpp"
@@ -87,8 +91,11 @@ class Writer final : private FinishReceiver {
   // The health record now: built from everything's counters, published.
   void write_health();
   HealthSources sources(std::int64_t now_monotonic_ns) const noexcept;
-  // The floor held and the free space asked (once a second, and at start-up).
+  // The floor held and the free space asked, and the upload backlog read on (once a second, and
+  // at start-up).
   void tend_floor(std::int64_t now_monotonic_ns) noexcept;
+  // At start-up: the upload directories, and the recorders' retention heard.
+  void watch_uploads();
   void take_sensor_status() noexcept;  // the poller's latest answer, if any came
   void log_fragments(std::int64_t now_monotonic_ns);
   // A finished job back from the finisher, to the part whose file it was.
@@ -115,6 +122,7 @@ class Writer final : private FinishReceiver {
   SpaceFloor floor_;  // output.min_free_bytes, and the free space health reports
   std::array<int, kStorageOutputCount> floor_handles_{-1, -1, -1, -1};  // per storage output
   StorageInputs storage_;  // the free space of each output's file system, this second
+  UploadBacklog upload_;   // how far the upload is behind (output.upload)
 
   DecodeSnapshot decode_;  // the latest counters from the decoder
   SensorStatusChannel& sensor_status_;

@@ -48,6 +48,9 @@ struct WriterOptions {
   double min_free_percent = 0;
   // A recording being written and health.jsonl are synced this often (0: only when finished).
   double sync_interval_seconds = 2.0;
+  // output.upload: raw/ and mcap/ leave by upload (frames/ too with upload_frames).
+  bool upload = false;
+  bool upload_frames = false;
   bool prometheus = true;
   bool jsonl = true;
   // Where the health files go while health_dir (or the .prom's directory) cannot be written.

@@ -107,10 +107,8 @@ std::uint64_t check_ring_overruns(const nlohmann::json& record);
 // one before (the writer reports packets stopping or starting again at once).
 void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s);
 
-// `promtool check metrics` on a Prometheus text file: its exit status 0, or 3 (lint problems
-// only) when the one lint it reports is pandarcap_storage_hours_left's unit, an hours gauge by
-// the choice where Prometheus's convention is seconds (docs/storage.md). `output` gets
-// what promtool said.
+// `promtool check metrics` on a Prometheus text file: exit status 0 and nothing said, no lint
+// note either (every metric in base units). `output` gets what promtool said.
 bool promtool_accepts(const std::filesystem::path& file, std::string& output);
 
 // The samples of a Prometheus text ("name{labels} value" lines), keyed by "name{labels}";
