@@ -18,7 +18,10 @@
 //               source is PTP but PTP is tracking (not locked)"). A sensor that never answered
 //               PTC does not degrade: it is reported (age -1, ptc_errors), not assumed broken.
 //               Last, fewer hours of disk left than health.min_hours_left ("0.8 hours of disk
-//               left (3072 MiB free at 1.1 MB/s written; health.min_hours_left 1)").
+//               left (3072 MiB free at 1.1 MB/s written; health.min_hours_left 1)"), and
+//               the standing problems (gauges.standing: a replay's damaged recording, a live
+//               view that cannot listen), which hold until they end rather than while a
+//               counter grows.
 //   - ok:       none of these; the reason is "".
 // Example: "2 kernel drops; return mode dual (expected last)".
 #pragma once

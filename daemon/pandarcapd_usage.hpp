@@ -97,7 +97,9 @@ Overrides (same names as the configuration keys):
   --version              print the version and exit
   -h, --help             this text
 
-Exit status: 0 done, 1 runtime failure, 64 usage error, 66 capture file unreadable,
+Exit status: 0 done, 1 runtime failure, 64 usage error, 65 the replayed recording is not
+whole (damaged or cut short: what could be read was replayed, and the summary, the log and the
+last health record say what was not), 66 capture file unreadable,
 69 the sensor did not give its calibration (calibration_source = "sensor"), 73 output
 directory not writable or in use by another pandarcapd, 77 run as root without --allow-root,
 78 invalid configuration or calibration file.

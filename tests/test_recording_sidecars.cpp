@@ -22,8 +22,7 @@ TEST_CASE("a recording's sidecars share its stem, whatever its extension", "[rec
   REQUIRE(recording_stem(path) == stem);
   const auto sidecars = recording_sidecars(path);
   REQUIRE(sidecars);
-  const std::string directory =
-      path.substr(0, path.rfind('/') + (path.find('/') != std::string::npos));
+  const std::string directory = path.substr(0, path.rfind('/') + 1);  // npos + 1 == 0
   CHECK(sidecars->calibration_csv == directory + stem + ".calibration.csv");
   CHECK(sidecars->sensor_json == directory + stem + ".sensor.json");
 }
