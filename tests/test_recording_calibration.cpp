@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
+#include "core/progress_line.hpp"
 #include "daemon/pcap/recording_sidecars.hpp"
 #include "daemon/pcap/xxh64.hpp"
 #include "support/mcap_reader.hpp"
@@ -254,6 +255,22 @@ TEST_CASE("a replay's progress shows on a terminal, never in a pipe or the journ
     INFO(quiet.out);
     CHECK(quiet.exit_code == 0);
     CHECK(quiet.out.find(" packets/s") == std::string::npos);
-    CHECK(quiet.out.find('\r') == std::string::npos);
+    CHECK(quiet.out.find("% (") == std::string::npos);
   }
+}
+
+TEST_CASE("the progress line: quiet at first, then percent, rate and time left", "[replay]") {
+  ProgressLine progress(2.0, 0.5);
+  CHECK_FALSE(progress.update(1.9, 10, 100, 1000));
+  CHECK_FALSE(progress.shown());
+  const auto line = progress.update(2.0, 25'000'000, 100'000'000, 36'000);
+  REQUIRE(line);
+  CHECK(*line == "replay: 25% (25.0 of 100.0 MB), 18000 packets/s, 6 s left");
+  CHECK(progress.shown());
+  CHECK_FALSE(progress.update(2.4, 30'000'000, 100'000'000, 40'000));  // within the interval
+  CHECK(*progress.update(60.0, 20'000'000, 100'000'000, 36'000) ==
+        "replay: 20% (20.0 of 100.0 MB), 600 packets/s, 4 min left");
+  CHECK(*progress.update(61.0, 200, 100, 36'000) ==
+        "replay: 100% (0.0 of 0.0 MB), 590 packets/s, 0 s left");
+  CHECK_FALSE(ProgressLine().update(5.0, 0, 0, 0));  // no size: nothing to say
 }
