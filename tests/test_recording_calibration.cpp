@@ -213,7 +213,7 @@ void check_hostile_tables(Recorded& r) {
 
 // One TEST_CASE (one live run), in sections.
 TEST_CASE("recordings carry their calibration and where they were made",
-          "[daemon][replay][calibration][mcap][threads]") {
+          "[daemon][replay][recording][mcap][threads]") {
   Recorded& r = recorded();
   SECTION("a replay without --calibration takes the recording's own: frames equal the live run's") {
     replay_the_three(r);
