@@ -497,6 +497,17 @@ TEST_CASE("a live view port in use: the capture runs, degraded naming it, until 
   const std::string taken = "live view: port " + std::to_string(port) + " in use";
   test::ScratchDir dir("live-port-in-use");
   const std::string out = (dir / "out").string();
+  // The same port held on IPv6's loopback by another program (only there: IPV6_V6ONLY), where a
+  // viewer that opens ws://localhost may land.
+  const int fd6 = ::socket(AF_INET6, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  const int one = 1;
+  ::setsockopt(fd6, IPPROTO_IPV6, IPV6_V6ONLY, &one, sizeof one);
+  sockaddr_in6 a6{};
+  a6.sin6_family = AF_INET6;
+  a6.sin6_port = htons(port);
+  a6.sin6_addr = in6addr_loopback;
+  const bool ipv6 = ::bind(fd6, reinterpret_cast<sockaddr*>(&a6), sizeof a6) == 0 &&
+                    ::listen(fd6, 1) == 0;  // false: no IPv6 on this host
   // --check-config tries the bind: a taken port is a warning, and the check passes (the
   // capture would run; the live view would bind later).
   const auto check =
@@ -506,6 +517,11 @@ TEST_CASE("a live view port in use: the capture runs, degraded naming it, until 
   CHECK(check.exit_code == 0);
   CHECK(check.out.find("warning: " + taken) != std::string::npos);
   CHECK(check.out.find("configuration OK") != std::string::npos);
+  if (ipv6) {
+    CHECK(check.out.find("warning: live view: port " + std::to_string(port) +
+                         " is held on IPv6 (::1) by another program") != std::string::npos);
+  }
+  ::close(fd6);
 
   harness::ChildProcess daemon(test::binary("pandarcapd"),
                                {"--allow-root", "--simulate", "--duration", "60", "--foxglove-port",
