@@ -24,6 +24,7 @@
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
+#include "daemon/pcap/xxh64.hpp"
 #include "daemon/pcap/zstd_write_stream.hpp"
 #include "support/test_support.hpp"
 
@@ -448,4 +449,28 @@ TEST_CASE("the real capture recorded compressed: the same pcap stream in under 0
   INFO("compressed to " << ratio << " of the pcap's bytes");
   CHECK(ratio <= 0.30);
   if (have_tshark()) CHECK(tshark_packets(zst.front()) == 1439);
+}
+
+TEST_CASE("Xxh64 gives zstd's own content checksum, fed in any pieces", "[pcap][zstd]") {
+  std::vector<std::uint8_t> content(100'003);
+  for (std::size_t i = 0; i < content.size(); ++i)
+    content[i] = static_cast<std::uint8_t>((i * 2654435761u) >> 13);
+  ZSTD_CCtx* cctx = ZSTD_createCCtx();
+  ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
+  for (const std::size_t size : {0, 1, 3, 4, 5, 8, 31, 32, 33, 63, 64, 1000, 100'003}) {
+    for (const std::size_t piece :
+         {std::size_t{1}, std::size_t{7}, std::size_t{32}, std::size_t{1000}, size + 1}) {
+      INFO(size << " bytes in pieces of " << piece);
+      Xxh64 hash;
+      for (std::size_t at = 0; at < size; at += piece)
+        hash.update({content.data() + at, std::min(piece, size - at)});
+      std::vector<std::uint8_t> frame(ZSTD_compressBound(size) + 64);
+      const std::size_t n = ZSTD_compress2(cctx, frame.data(), frame.size(), content.data(), size);
+      REQUIRE_FALSE(ZSTD_isError(n));
+      const auto expected =
+          std::array<std::uint8_t, 4>{frame[n - 4], frame[n - 3], frame[n - 2], frame[n - 1]};
+      CHECK(zstd_content_checksum(hash) == expected);
+    }
+  }
+  ZSTD_freeCCtx(cctx);
 }
