@@ -47,6 +47,7 @@ void Xxh64::reset() noexcept {
 }
 
 void Xxh64::update(std::span<const std::uint8_t> bytes) noexcept {
+  if (bytes.empty()) return;  // its data() may be null, which memcpy must not get
   total_bytes_ += bytes.size();
   const std::uint8_t* p = bytes.data();
   std::size_t n = bytes.size();
