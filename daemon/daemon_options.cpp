@@ -201,6 +201,11 @@ live::LiveOptions live_options(const DaemonConfig& config, std::string_view vers
   o.address = config.live.address;
   o.port = config.live.port;
   o.max_clients = config.live.max_clients;
+#ifdef PANDARCAP_TEST_HOOKS
+  // Test hook: a port in use tried again this often (ms), so a test need not wait 10 s.
+  if (const char* retry = std::getenv("PANDARCAP_TEST_LIVE_RETRY_MS"))
+    o.listen_retry_ms = static_cast<std::uint32_t>(std::strtoul(retry, nullptr, 10));
+#endif
   o.name = fmt::format("pandarcap {} ({})", version, config.health.sensor_name);
   o.points_topic = config.output.mcap_points_topic;
   o.health_topic = config.output.mcap_health_topic;

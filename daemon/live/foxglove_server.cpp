@@ -97,6 +97,7 @@ void FoxgloveServer::Impl::set_up() {
   if (ec)
     throw std::runtime_error(fmt::format("live.address {}: {}", options.address, ec.message()));
   handover.counters.port.store(options.port, std::memory_order_relaxed);
+  handover.counters.listen_retry_ms.store(options.listen_retry_ms, std::memory_order_relaxed);
   info = server_info_json(
       options.name, fmt::format("{}", std::chrono::system_clock::now().time_since_epoch().count()));
   advertise = advertise_json({
@@ -126,14 +127,14 @@ bool FoxgloveServer::Impl::try_listen() {
     websocketpp::lib::error_code ignored;
     if (server.is_listening()) server.stop_listening(ignored);  // listening, but not accepting
     next_listen_attempt =
-        std::chrono::steady_clock::now() + std::chrono::seconds(kListenRetrySeconds);
+        std::chrono::steady_clock::now() + std::chrono::milliseconds(options.listen_retry_ms);
     const std::string message = error.message();
     if (message != last_listen_error) {
       // The capture goes on; the health says degraded, naming the port, until it is bound.
       spdlog::warn(
           "live view: cannot listen on {}:{}: {}; the capture goes on without it, trying again "
-          "every {} s",
-          options.address, options.port, message, kListenRetrySeconds);
+          "every {:g} s",
+          options.address, options.port, message, options.listen_retry_ms / 1000.0);
       last_listen_error = message;
     }
     return false;

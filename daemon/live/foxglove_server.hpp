@@ -36,6 +36,9 @@ struct LiveOptions {
   std::string points_schema;       // its ros2msg text
   std::string health_schema;       // the health record's JSON schema
   std::size_t client_queue_bytes = 16u << 20;
+  // How often a port that could not be bound is tried again (kListenRetrySeconds; a test hook
+  // shortens it).
+  std::uint32_t listen_retry_ms = kListenRetrySeconds * 1000;
 };
 
 class FoxgloveServer {

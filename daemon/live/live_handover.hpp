@@ -40,8 +40,9 @@ struct LiveCounters {
   // default is 8765 too) leaves the capture running: the server tries again every
   // kListenRetrySeconds, and the health is degraded, naming the port and listen_errno, until then.
   std::atomic<bool> listening{false};
-  std::atomic<std::uint16_t> port{0};  // asked for (the bound one once listening)
-  std::atomic<int> listen_errno{0};    // the last failure (EADDRINUSE: in use)
+  std::atomic<std::uint16_t> port{0};             // asked for (the bound one once listening)
+  std::atomic<int> listen_errno{0};               // the last failure (EADDRINUSE: in use)
+  std::atomic<std::uint32_t> listen_retry_ms{0};  // how often it tries again (LiveOptions)
 };
 
 inline constexpr int kListenRetrySeconds = 10;

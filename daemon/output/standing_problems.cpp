@@ -46,13 +46,13 @@ void describe_standing_problems(const ReceiveCounters& receive, const live::Live
     if (!out.empty()) out += "; ";
     const int error = live->listen_errno.load(std::memory_order_relaxed);
     const unsigned port = live->port.load(std::memory_order_relaxed);
+    const double retry_s = live->listen_retry_ms.load(std::memory_order_relaxed) / 1000.0;
     if (error == EADDRINUSE) {
-      fmt::format_to(to, "live view: port {} in use (retrying every {} s)", port,
-                     live::kListenRetrySeconds);
+      fmt::format_to(to, "live view: port {} in use (retrying every {:g} s)", port, retry_s);
     } else {
       const char* text = ::strerrordesc_np(error);
-      fmt::format_to(to, "live view: cannot listen on port {}: {} (retrying every {} s)", port,
-                     text != nullptr ? text : "unknown error", live::kListenRetrySeconds);
+      fmt::format_to(to, "live view: cannot listen on port {}: {} (retrying every {:g} s)", port,
+                     text != nullptr ? text : "unknown error", retry_s);
     }
   }
 }
