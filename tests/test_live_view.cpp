@@ -560,7 +560,7 @@ TEST_CASE("a live view port in use: the capture runs, degraded naming it, until 
     // Foxglove's client connects and is sent messages.
     const auto view =
         test::run_command("node '" + (client_dir() / "live_client.mjs").string() +
-                          "' view ws://127.0.0.1:" + std::to_string(port) + " 2 2>&1");
+                          "' view ws://127.0.0.1:" + std::to_string(port) + " 1 2>&1");
     INFO(view.out);
     CHECK(view.exit_code == 0);
     const json seen = json::parse(view.out, nullptr, false);
