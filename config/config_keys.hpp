@@ -62,6 +62,7 @@ inline void for_each_key(Config& c, Visitor&& v) {
 
   auto& o = c.output;
   v("output", "directory", o.directory, &non_empty);
+  v("output", "device_name", o.device_name, &device_name);
   v("output", "frames", o.frames, std::monostate{});
   v("output", "pcd_fields", o.pcd_fields, &pcd_fields);
   v("output", "pcd_compression", o.pcd_compression, &pcd_compression);

@@ -49,7 +49,11 @@ struct ArenaSection {
 
 struct OutputSection {
   std::string directory = "pandarcap-output";  // frames/, raw/, mcap/, health/ go under it
-  bool frames = true;                          // write frames as PCD
+  // The name the recordings give the machine they were made on: the MCAP files' "foxglove"
+  // metadata (deviceName, what Foxglove's importers file a recording under), their "pandarcap"
+  // metadata and sensor.json. "" = this host's name (gethostname), resolved at start.
+  std::string device_name;
+  bool frames = true;              // write frames as PCD
   std::string pcd_fields = "pcl";  // PCD field layout: "pcl", "pandarcap", "velodyne", "autoware"
   // PCD DATA encoding: "none" (binary) or "lzf" (binary_compressed, as PCL writes it).
   std::string pcd_compression = "none";

@@ -138,6 +138,15 @@ std::optional<std::string> label(const std::string& s) {
   return std::nullopt;
 }
 
+std::optional<std::string> device_name(const std::string& s) {
+  if (s.size() > 255) return "must be at most 255 bytes";
+  for (const char c : s) {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7F)
+      return "must not contain control characters";
+  }
+  return std::nullopt;
+}
+
 std::string describe(const RealRange& r) {
   if (std::isinf(r.hi)) return fmt::format("{} {}", r.lo_open ? ">" : ">=", r.lo);
   return fmt::format("{}{}, {}{}", r.lo_open ? '(' : '[', r.lo, r.hi, r.hi_open ? ')' : ']');

@@ -53,6 +53,9 @@ std::optional<std::string> log_level(const std::string& s);
 std::optional<std::string> decoder_name(const std::string& s);
 // A name that appears as a Prometheus label value and a JSON string as it is.
 std::optional<std::string> label(const std::string& s);
+// output.device_name: "" (the host name) or a name of at most 255 bytes without control
+// characters (it goes into MCAP metadata and JSON as it is).
+std::optional<std::string> device_name(const std::string& s);
 
 // "[0, 360)", "> 0": a range as its message says it.
 std::string describe(const RealRange& r);

@@ -203,7 +203,7 @@ inline void set_status_fields(SensorStatusGauges& gauges, const ptc::SensorStatu
 struct SensorIdentity {
   std::string serial;
   std::string firmware;            // the sensor firmware version
-  std::string calibration_source;  // "sensor", "file" or "nominal"
+  std::string calibration_source;  // "sensor", "file", "nominal" or "recording" (a replay)
 };
 
 // What the outputs write and how long their disk lasts at that pace (docs/storage.md). The
@@ -276,6 +276,9 @@ struct HealthGauges {
   SensorStatusGauges sensor_status;
   StorageGauges storage;
   HealthFallbackGauges health_fallback;
+  // Problems that hold until they end, not counters that grow (daemon/output/standing_problems):
+  // a replay that met damage in its file, a live view that cannot listen. "" when none.
+  std::string standing;
   HealthState state = HealthState::kNoData;
   std::string reason;  // one line saying why the state is not ok ("" when ok)
 };
@@ -287,6 +290,7 @@ struct LiveViewHealth {
   // A viewer's queue was full (one per viewer and message), or a frame was replaced by the next
   // before the server thread took it.
   std::uint64_t messages_dropped = 0;
+  bool listening = false;  // false: its port could not be bound yet (retrying)
 };
 
 struct HotPathAllocations {

@@ -349,6 +349,9 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
          "cannot be written)");
   append("pandarcap_health_fallback{{{}}} {}\n", sensor, h.gauges.health_fallback.active ? 1 : 0);
   if (const auto& live = h.live) {
+    family(out, "live_listening", "gauge",
+           "1 while the live view listens; 0 while its port cannot be bound (retrying)");
+    append("pandarcap_live_listening{{{}}} {}\n", sensor, live->listening ? 1 : 0);
     family(out, "live_clients", "gauge", "Foxglove viewers connected to the live view");
     append("pandarcap_live_clients{{{}}} {}\n", sensor, live->clients);
     family(out, "live_messages_sent_total", "counter", "Messages the live view sent its viewers");
@@ -456,8 +459,8 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   }
   out += '}';
   if (const auto& live = h.live) {
-    append(R"(,"live":{{"clients":{},"messages_sent":{},"messages_dropped":{}}})", live->clients,
-           live->messages_sent, live->messages_dropped);
+    append(R"(,"live":{{"listening":{},"clients":{},"messages_sent":{},"messages_dropped":{}}})",
+           live->listening, live->clients, live->messages_sent, live->messages_dropped);
   }
   latency_json(out, "latency", h.latency, "us", 1e3);
   latency_json(out, "frame_latency", h.frame_latency, "ms", 1e6);

@@ -104,6 +104,7 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
         storage.hours_left, storage.free_bytes >> 20, storage.written_bytes_per_second_total / 1e6,
         expected.min_hours_left);
   }
+  if (!g.standing.empty()) problem("{}", g.standing);
   // Failing writes degrade (capture goes on, and every byte not written is counted; they lead
   // the reason). A failing socket is an error: the daemon is not capturing.
   if (c.receive_errors > p.receive_errors) {

@@ -23,7 +23,9 @@
 //               /run/pandarcap/front (cannot write '/var/log/pandarcap/front/health.jsonl':
 //               Read-only file system)"). Last, fewer hours of disk left than health.min_hours_left
 //               ("0.8 hours of disk left (3072 MiB free at 1.1 MB/s written; health.min_hours_left
-//               1)").
+//               1)"), and the standing problems (gauges.standing: a replay's damaged recording, a
+//               live view that cannot listen), which hold until they end rather than while a
+//               counter grows.
 //   - ok:       none of these; the reason is "".
 // Example: "2 kernel drops; return mode dual (expected last)".
 #pragma once

@@ -8,9 +8,11 @@
 #include <string_view>
 
 #include "config/command_line.hpp"
+#include "config/config_loader.hpp"
 #include "core/mcap/ros2_messages.hpp"
 #include "daemon/live/live_publish.hpp"
 #include "daemon/mcap/mcap_file.hpp"
+#include "daemon/pcap/xxh64.hpp"
 
 namespace pandarcap {
 
@@ -25,10 +27,40 @@ bool points_decoded(const DaemonConfig& config) {
   return config.output.frames || config.output.mcap || config.live.foxglove;
 }
 
+std::string device_name(const DaemonConfig& config) {
+  if (!config.output.device_name.empty()) return config.output.device_name;
+  char host[256] = {};
+  if (::gethostname(host, sizeof host - 1) != 0 || host[0] == '\0') return "unknown";
+  return host;
+}
+
+std::string config_hash(const DaemonConfig& config) {
+  const std::string text = to_toml(config);
+  Xxh64 hash;
+  hash.update({reinterpret_cast<const std::uint8_t*>(text.data()), text.size()});
+  return fmt::format("xxh64:{:016x}", hash.digest());
+}
+
+bool replay_progress_wanted() {
+  return ::isatty(STDERR_FILENO) == 1 && std::getenv("JOURNAL_STREAM") == nullptr;
+}
+
+ProgressLine replay_progress_line() {
+#ifdef PANDARCAP_TEST_HOOKS
+  // Test hook: a quiet start this short (seconds), a line every tick, so that a replay of a
+  // second shows its progress.
+  if (const char* quiet = std::getenv("PANDARCAP_TEST_PROGRESS_QUIET_S"))
+    return ProgressLine(std::atof(quiet), 0.05);
+#endif
+  return ProgressLine();
+}
+
 WriterOptions writer_options(const DaemonConfig& config) {
   const std::filesystem::path output_dir = config.output.directory;
   WriterOptions wo;
   wo.output_dir = output_dir;
+  wo.device_name = device_name(config);
+  wo.config_hash = config_hash(config);
   wo.health_dir = config.health.directory.empty() ? output_dir / "health"
                                                   : std::filesystem::path(config.health.directory);
   wo.prometheus_file = config.health.prometheus_file.empty()
@@ -190,6 +222,11 @@ live::LiveOptions live_options(const DaemonConfig& config, std::string_view vers
   o.address = config.live.address;
   o.port = config.live.port;
   o.max_clients = config.live.max_clients;
+#ifdef PANDARCAP_TEST_HOOKS
+  // Test hook: a port in use tried again this often (ms), so a test need not wait 10 s.
+  if (const char* retry = std::getenv("PANDARCAP_TEST_LIVE_RETRY_MS"))
+    o.listen_retry_ms = static_cast<std::uint32_t>(std::strtoul(retry, nullptr, 10));
+#endif
   o.name = fmt::format("pandarcap {} ({})", version, config.health.sensor_name);
   o.points_topic = config.output.mcap_points_topic;
   o.health_topic = config.output.mcap_health_topic;

@@ -12,6 +12,7 @@
 #include "config/daemon_config.hpp"
 #include "core/decoder_target.hpp"
 #include "core/packet.hpp"
+#include "core/progress_line.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/live/foxglove_server.hpp"
@@ -35,6 +36,17 @@ bool points_decoded(const DaemonConfig& config);
 WriterOptions writer_options(const DaemonConfig& config);
 // health.fallback_directory, or where it defaults to (config/daemon_config.hpp).
 std::filesystem::path health_fallback_directory(const HealthSection& health);
+// A replay shows its progress (core/progress_line.hpp) on stderr when that is a terminal and not
+// systemd's journal (JOURNAL_STREAM): never in a pipe, a file or a service's log.
+bool replay_progress_wanted();
+ProgressLine replay_progress_line();
+// output.device_name, or this host's name when it is "" ("unknown" if the host has none).
+std::string device_name(const DaemonConfig& config);
+// The effective configuration's hash: "xxh64:" and 16 hex digits of XXH64 (seed 0) of the text
+// `pandarcapd --print-config` prints for it (to_toml), so `pandarcapd ... --print-config |
+// xxhsum -H1` gives the same digits. Stable: the same configuration, the same hash, on any host
+// (device_name is hashed as configured, "" when unset).
+std::string config_hash(const DaemonConfig& config);
 
 // The frames' layout and axes (output.pcd_fields, sensor.frame), which the arenas hold, the PCD
 // files and MCAP write.

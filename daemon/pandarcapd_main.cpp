@@ -11,7 +11,8 @@
 //   5. threads started, READY=1
 // Each step is a function of startup_steps.hpp; the command line is pandarcapd_command_line.hpp,
 // its --help text pandarcapd_usage.hpp.
-// Exit status: 0 done, 1 runtime failure, 64 usage, 66 capture unreadable, 69 the sensor did not
+// Exit status: 0 done, 1 runtime failure, 64 usage, 65 a replayed recording is damaged or cut
+// short (what could be read was replayed), 66 capture unreadable, 69 the sensor did not
 // give its calibration (calibration_source = "sensor"), 73 outputs cannot be created, 78
 // configuration (or calibration file) invalid.
 #include <fmt/format.h>
@@ -19,6 +20,7 @@
 #include <signal.h>
 #include <spdlog/spdlog.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -26,6 +28,7 @@
 #include <csignal>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <filesystem>
 #include <iterator>
@@ -38,10 +41,12 @@
 #include "config/daemon_config.hpp"
 #include "core/health_state_log.hpp"
 #include "core/log_text.hpp"
+#include "core/progress_line.hpp"
 #include "daemon/daemon_options.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/live/foxglove_server.hpp"
 #include "daemon/live/live_handover.hpp"
+#include "daemon/live/live_port_probe.hpp"
 #include "daemon/output/writer.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pandarcapd_command_line.hpp"
@@ -119,8 +124,28 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
 
 // The main thread while the pipeline runs: signals, --duration, the end of a replay, STATUS and
 // WATCHDOG. Returns when the daemon should stop.
-void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> duration_s) {
+// A replay's progress on a terminal (daemon_options.hpp: replay_progress_wanted): a line on
+// stderr, rewritten in place, for a replay that runs longer than a few seconds.
+void show_progress(ProgressLine& progress, const ReplaySource& replay, const Pipeline& pipe,
+                   double elapsed_s) {
+  if (auto line = progress.update(elapsed_s, replay.bytes_read(), replay.size_bytes(),
+                                  pipe.receive.datagrams.load(std::memory_order_relaxed))) {
+    std::fprintf(stderr, "\r%s\x1b[K", line->c_str());  // over the last one, the rest cleared
+  }
+}
+
+// `replay`: the replay whose progress to show, or null.
+void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> duration_s,
+               const ReplaySource* replay) {
   const auto start = std::chrono::steady_clock::now();
+  ProgressLine progress = replay_progress_line();
+  // The progress line ends with the run, whichever way supervise() returns.
+  struct EndLine {
+    ProgressLine& progress;
+    ~EndLine() {
+      if (progress.shown()) std::fputc('\n', stderr);
+    }
+  } end_line{progress};
   const auto watchdog = systemd::watchdog_interval();
   const auto tick = std::chrono::milliseconds(100);
   auto next_watchdog = start;
@@ -141,6 +166,7 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
     }
     if (pipe.source_done.load(std::memory_order_acquire)) return;  // replay finished
     const double since_start = std::chrono::duration<double>(now - start).count();
+    if (replay != nullptr) show_progress(progress, *replay, pipe, since_start);
     StatusLine status;
     while (pipe.status.try_pop(status)) {
       systemd::status(status.text);
@@ -165,7 +191,9 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
   }
 }
 
-// How a replay ended: 1 when the file turned out corrupt part-way, else 0.
+// How a replay ended: kExitDataDamaged when the file is not whole (damaged, or cut short: every
+// packet that could be read was replayed, and the summary, the log and the last health record
+// name what was not), else 0.
 int report_replay(const PacketSource& source, const RunSource& run_source) {
   if (!source.replayed()) return 0;
   const ReplayResult& result = source.replay_result();
@@ -176,6 +204,12 @@ int report_replay(const PacketSource& source, const RunSource& run_source) {
       "{} not UDP, {} IP fragments, {} malformed)\n",
       capture.records, capture.udp_datagrams, capture.ipv6_datagrams, capture.port_filtered,
       capture.skipped(), capture.non_ip, capture.non_udp, capture.ip_fragments, capture.malformed);
+  if (capture.chunks_skipped > 0 || capture.records_damaged > 0) {
+    fmt::print(
+        "replay: {} damaged MCAP chunks skipped ({} packets in them), {} damaged record lengths "
+        "read over\n",
+        capture.chunks_skipped, capture.packets_skipped, capture.records_damaged);
+  }
   if (capture.skipped() > 0) {
     spdlog::warn(
         "{}: {} of {} records skipped: {} not IP, {} not UDP, {} IP fragments (not reassembled), "
@@ -183,14 +217,20 @@ int report_replay(const PacketSource& source, const RunSource& run_source) {
         run_source.replay_path, capture.skipped(), capture.records, capture.non_ip, capture.non_udp,
         capture.ip_fragments, capture.malformed);
   }
+  // The reader's texts name the file already.
+  if (!result.first_damage.empty()) spdlog::error("damaged: {}", result.first_damage);
+  const bool damaged = !result.first_damage.empty() || capture.malformed > 0;
   if (result.status == CaptureStatus::kTruncated) {
-    spdlog::warn("{}: the file ends in the middle of a record (cut off while recording)",
-                 run_source.replay_path);
+    spdlog::error("cut short: {}", result.error);
   } else if (result.status == CaptureStatus::kError) {
-    spdlog::error("{}: {}", run_source.replay_path, result.error);
-    return 1;
+    spdlog::error("damaged: {}", result.error);
+  } else if (!damaged) {
+    return 0;
   }
-  return 0;
+  fmt::print("replay: {} is {}: exit status {}\n", run_source.replay_path,
+             result.status == CaptureStatus::kTruncated ? "cut short" : "damaged",
+             kExitDataDamaged);
+  return kExitDataDamaged;
 }
 
 // The daemon's life, in order; shutdown is the reverse (PipelineThreads).
@@ -237,7 +277,7 @@ int run(const CommandLine& options) {
   wo.sensor_identity = SensorIdentity{sensor.inventory ? sensor.inventory->serial : "",
                                       sensor.inventory ? sensor.inventory->sensor_firmware : "",
                                       sensor.calibration_source};
-  wo.sensor_json = sensor.to_json();
+  wo.sensor_json = sensor.to_json(wo.device_name, wo.config_hash);
   wo.status_polled = status_polled(config, options.source, ptc);
   wo.status_interval_seconds = config.sensor.status_interval_seconds;
   pipe.sensor_status.requests.store(sensor.ptc_requests);
@@ -261,6 +301,14 @@ int run(const CommandLine& options) {
       throw StartupError{1, error.what()};  // as a data port in use is
     }
     writer.attach_live(*live_handover);
+    // Bound: another program's IPv6 socket on the same port would still catch a viewer that
+    // opens ws://localhost (not bound: the server has said so and tries again).
+    if (live_server->port() != 0 && live::ipv6_loopback_port_taken(live_server->port())) {
+      spdlog::warn(
+          "live view: port {} is held on IPv6 (::1) by another program: a viewer that opens "
+          "ws://localhost:{} may reach that one; open ws://{}:{}",
+          live_server->port(), live_server->port(), config.live.address, live_server->port());
+    }
   }
   try {
     writer.prepare();
@@ -329,7 +377,8 @@ int run(const CommandLine& options) {
   systemd::ready();
   spdlog::info("ready: writing to {}", config.output.directory);
 
-  supervise(pipe, signals, options.duration_s);
+  supervise(pipe, signals, options.duration_s,
+            replay_progress_wanted() ? source->replay_source() : nullptr);
 
   systemd::stopping();
   threads.stop_all();  // the decoder drains the ring, the writer finishes every file

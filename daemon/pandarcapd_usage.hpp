@@ -23,8 +23,9 @@ Configuration:
                          defaults apply, and the options below override either
   --check-config         check everything the start checks without network: the configuration,
                          the calibration file, the decoder, and that every output directory is
-                         (or can be made) writable by this user; print the result and exit
-                         (0, 73 outputs, 78 configuration or calibration)
+                         (or can be made) writable by this user, and try the live view's port
+                         (one in use is a warning: the capture would run); print the result and
+                         exit (0, 73 outputs, 78 configuration or calibration)
   --print-config         print the effective configuration as TOML and exit
   --print-calibration    print the angle-correction table in effect (from the sensor, the
                          calibration file or the nominal table, as calibration_source says) as
@@ -44,7 +45,9 @@ Sources:
 
 Overrides (same names as the configuration keys):
   --output-dir DIR       output.directory (default pandarcap-output)
-  --calibration FILE     sensor.calibration_file (default: the nominal Pandar40P table)
+  --calibration FILE     sensor.calibration_file (default: the nominal Pandar40P table; with
+                         --replay, the recording's own first: NAME.calibration.csv beside a
+                         pcap, the attachment of an MCAP file)
   --calibration-source S sensor.calibration_source: auto (default: the sensor over PTC if it
                          answers, else the file, else nominal), sensor, file or nominal
   --ptc-port N           sensor.ptc_port (default 9347); with --simulate: ask this port on
@@ -89,7 +92,8 @@ Overrides (same names as the configuration keys):
                          --replay FILE this converts a capture to MCAP
   --foxglove-port N      live.foxglove = true, live.port = N: a live view for Foxglove (Open
                          connection, ws://HOST:N) of the frames, health and sensor status, on
-                         live.address (default 127.0.0.1)
+                         live.address (default 127.0.0.1); a port in use is tried again every
+                         10 s, the capture running and the health degraded until it binds
   --latency-budget-ms N  latency.budget_ms (default 5): how long a datagram may wait before the
                          receive thread drains the socket; 0 = wake for every datagram
   --log-level LEVEL      trace, debug, info, warn, error, critical, off
@@ -102,7 +106,9 @@ Overrides (same names as the configuration keys):
   --version              print the version and exit
   -h, --help             this text
 
-Exit status: 0 done, 1 runtime failure, 64 usage error, 66 capture file unreadable,
+Exit status: 0 done, 1 runtime failure, 64 usage error, 65 the replayed recording is not
+whole (damaged or cut short: what could be read was replayed, and the summary, the log and the
+last health record say what was not), 66 capture file unreadable,
 69 the sensor did not give its calibration (calibration_source = "sensor"), 73 output
 directory not writable or in use by another pandarcapd, 77 run as root without --allow-root,
 78 invalid configuration or calibration file.

@@ -142,6 +142,23 @@ struct ReceiveCounters {
   std::atomic<std::uint64_t> ring_overruns{0};
   std::atomic<std::uint64_t> receive_errors{0};
   std::atomic<std::uint64_t> wakeups{0};  // returns from the receive thread's wait
+  // A replay's damage (daemon/source/replay_source.hpp), for the health: a replay that met any
+  // says so in every record from then on, the last one included. Records whose headers are
+  // damaged (skipped), MCAP chunks skipped by the chunk index with the packets they held, and
+  // MCAP records read over (a damaged length).
+  std::atomic<std::uint64_t> capture_records_malformed{0};
+  std::atomic<std::uint64_t> capture_chunks_skipped{0};
+  std::atomic<std::uint64_t> capture_packets_skipped{0};
+  std::atomic<std::uint64_t> capture_records_damaged{0};
+  // The first damage read over, and how the file ended when it did not end whole: each written
+  // once, by the replay thread, before `capture_damage_named` (first) or `capture_end` (the end)
+  // is stored with release; read by the writer only after it loads that flag with acquire.
+  static constexpr std::size_t kDamageTextBytes = 384;
+  char capture_first_damage[kDamageTextBytes] = {};
+  std::atomic<bool> capture_damage_named{false};
+  enum class CaptureEnd : std::uint8_t { kRunning, kWhole, kTruncated, kDamaged };
+  char capture_end_text[kDamageTextBytes] = {};
+  std::atomic<CaptureEnd> capture_end{CaptureEnd::kRunning};
 
   // Single writer: a relaxed load + store is enough (no read-modify-write needed).
   static void add(std::atomic<std::uint64_t>& counter, std::uint64_t n) noexcept {

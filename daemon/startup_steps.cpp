@@ -8,8 +8,10 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <exception>
 #include <vector>
 
@@ -19,7 +21,10 @@
 #include "core/sim/simulated_unit.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/daemon_options.hpp"
+#include "daemon/live/live_handover.hpp"
+#include "daemon/live/live_port_probe.hpp"
 #include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/recording_calibration.hpp"
 
 namespace pandarcap {
 
@@ -113,6 +118,29 @@ void setup_logging(const std::string& level) {
   spdlog::set_default_logger(logger);
 }
 
+std::vector<std::string> live_port_warnings(const LiveSection& live) {
+  std::vector<std::string> warnings;
+  const int error = live::probe_ipv4_port(live.address, live.port);
+  if (error == EADDRINUSE) {
+    warnings.push_back(fmt::format(
+        "live view: port {} in use on {} (by another program: foxglove_bridge listens on 8765 "
+        "too); the capture runs without the view, which tries again every {} s",
+        live.port, live.address, live::kListenRetrySeconds));
+  } else if (error != 0) {
+    warnings.push_back(
+        fmt::format("live view: cannot listen on {}:{}: {}; the capture runs "
+                    "without the view, which tries again every {} s",
+                    live.address, live.port, std::strerror(error), live::kListenRetrySeconds));
+  }
+  if (live::ipv6_loopback_port_taken(live.port)) {
+    warnings.push_back(fmt::format(
+        "live view: port {} is held on IPv6 (::1) by another program: a viewer that opens "
+        "ws://localhost:{} may reach that one; open ws://{}:{}",
+        live.port, live.port, live.address, live.port));
+  }
+  return warnings;
+}
+
 int check_config(const DaemonConfig& config, const std::string& source_name) {
   try {
     // The file the start would read; the sensor is not asked (no network here).
@@ -148,6 +176,13 @@ int check_config(const DaemonConfig& config, const std::string& source_name) {
     std::fprintf(stderr, "pandarcapd: %s: outputs: %s\n", escaped_control(source_name).c_str(),
                  escaped_control(problem).c_str());
   if (!problems.empty()) return kExitCantCreate;
+  // The live view's port, tried: one another program holds is a warning, not a failure (the
+  // capture runs without the view, which binds once the port is free; docs/live.md).
+  if (config.live.foxglove) {
+    for (const std::string& warning : live_port_warnings(config.live))
+      std::fprintf(stderr, "pandarcapd: %s: warning: %s\n", escaped_control(source_name).c_str(),
+                   escaped_control(warning).c_str());
+  }
   fmt::print("{}: configuration OK\n", escaped_control(source_name));
   return 0;
 }
@@ -204,6 +239,29 @@ void log_sensor(const SensorAtStart& sensor, const DaemonConfig& config, const R
   }
 }
 
+namespace {
+
+// The calibration a replayed recording carries (daemon/pcap/recording_calibration.hpp), as the
+// sensor's facts at start: calibration_source "recording". None: nothing, said in the log (the
+// nominal table follows). One there but unusable: a CalibrationError (exit 78).
+std::optional<SensorAtStart> recording_sensor(const std::string& path) {
+  std::string looked_for;
+  std::optional<Calibration> table = recording_calibration(path, looked_for);
+  if (!table) {
+    spdlog::warn(
+        "calibration: the recording carries none (looked for {}): the nominal table is used; give "
+        "the sensor's with --calibration FILE",
+        looked_for);
+    return std::nullopt;
+  }
+  SensorAtStart sensor;
+  sensor.calibration = std::move(*table);
+  sensor.calibration_source = "recording";
+  return sensor;
+}
+
+}  // namespace
+
 SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
                            std::unique_ptr<SimulatedPtcServer>& simulated_ptc,
                            std::optional<PtcClientOptions>& ptc) {
@@ -216,6 +274,11 @@ SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
     }
     ptc = ptc_client_options(config, source, simulated_ptc ? simulated_ptc->port() : 0);
     if (ptc) ptc->cancel = &stop_requested();
+    // A replay given no calibration takes the recording's own, before the nominal table.
+    if (source.kind == RunSource::Kind::kReplay && config.sensor.calibration_source == "auto" &&
+        config.sensor.calibration_file.empty()) {
+      if (std::optional<SensorAtStart> own = recording_sensor(source.replay_path)) return *own;
+    }
     return resolve_sensor_at_start(config.sensor.calibration_source, config.sensor.calibration_file,
                                    ptc);
   } catch (const SensorUnavailable& error) {

@@ -12,6 +12,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "config/daemon_config.hpp"
 #include "core/decoder_target.hpp"
@@ -27,6 +28,8 @@ namespace pandarcap {
 
 // pandarcapd's exit statuses (sysexits.h's numbers; --help lists them).
 inline constexpr int kExitUsage = 64;  // taken by CliArgs itself
+// A replayed recording is not whole (damaged or cut short): sysexits' EX_DATAERR.
+inline constexpr int kExitDataDamaged = 65;
 inline constexpr int kExitNoInput = 66;
 inline constexpr int kExitUnavailable = 69;
 inline constexpr int kExitCantCreate = 73;
@@ -76,8 +79,12 @@ void setup_logging(const std::string& level);
 // 1. The configuration: the file, then the command line's keys, checked as a whole.
 DaemonConfig load_configuration(const CommandLine& options, const std::string& source_name);
 
-// --check-config: what the start would refuse, short of opening the socket or the capture.
-// Returns the exit status, having printed the result.
+// What --check-config says about the live view's port: in use, not bindable, or held over IPv6
+// by another program (warnings: the capture runs without the view). Empty when it is free.
+std::vector<std::string> live_port_warnings(const LiveSection& live);
+// --check-config: what the start would refuse, short of opening the socket or the capture (the
+// live view's port is tried: a taken one is a warning). Returns the exit status, having printed
+// the result.
 int check_config(const DaemonConfig& config, const std::string& source_name);
 
 // 2. The sensor: its calibration (by calibration_source), identity and configuration. A

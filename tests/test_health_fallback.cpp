@@ -84,6 +84,7 @@ void fallback_case(const Case& c) {
       break;
   }
   const auto failed_at = std::chrono::steady_clock::now();
+  INFO(daemon.log());
   const fs::path prom = fallback / "pandarcap.prom";
   // Within 2 s the fallback holds the health, and says why.
   REQUIRE(notify.wait_for([&] { return fs::exists(prom); }, 2500ms));
@@ -102,6 +103,7 @@ void fallback_case(const Case& c) {
   const auto lines = test::json_lines(fallback / "health.jsonl");
   REQUIRE_FALSE(lines.empty());
   const std::string reason = lines.back().at("reason");
+  INFO(lines.back().dump());
   CHECK(reason.find("health written to " + fallback.string()) != std::string::npos);
   CHECK(lines.back().at("health_fallback").at("active") == true);
   // The supervisor is told too: systemctl status shows it.

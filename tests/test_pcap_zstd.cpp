@@ -24,6 +24,7 @@
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
+#include "daemon/pcap/xxh64.hpp"
 #include "daemon/pcap/zstd_write_stream.hpp"
 #include "support/test_support.hpp"
 
@@ -201,9 +202,10 @@ TEST_CASE("a compressed recording the disk filled is a complete frame of its flu
   const PcapWriter::Dropped dropped = writer.abandon();
   CHECK(dropped.records == 500);
   CHECK(dropped.bytes == 500 * (kPcapRecordOverheadBytes + 1262));
-  // The 100 bytes of the failed flush were taken back; 3 bytes ended the frame.
+  // The 100 bytes of the failed flush were taken back; 3 bytes ended the frame, and 4 more are
+  // its content checksum, of the flushed records: zstd checks it.
   space = SIZE_MAX;
-  CHECK(fs::file_size(path) == writer.flushed_bytes() + kZstdEmptyLastBlock.size());
+  CHECK(fs::file_size(path) == writer.flushed_bytes() + kZstdEmptyLastBlock.size() + 4);
   const Decompressed back = decompress(contents(path));
   CHECK(back.complete);
   CHECK(back.bytes.size() == kPcapGlobalHeaderBytes + 40 * (kPcapRecordOverheadBytes + 1262));
@@ -447,4 +449,28 @@ TEST_CASE("the real capture recorded compressed: the same pcap stream in under 0
   INFO("compressed to " << ratio << " of the pcap's bytes");
   CHECK(ratio <= 0.30);
   if (have_tshark()) CHECK(tshark_packets(zst.front()) == 1439);
+}
+
+TEST_CASE("Xxh64 gives zstd's own content checksum, fed in any pieces", "[pcap][zstd]") {
+  std::vector<std::uint8_t> content(100'003);
+  for (std::size_t i = 0; i < content.size(); ++i)
+    content[i] = static_cast<std::uint8_t>((i * 2654435761u) >> 13);
+  ZSTD_CCtx* cctx = ZSTD_createCCtx();
+  ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
+  for (const std::size_t size : {0, 1, 3, 4, 5, 8, 31, 32, 33, 63, 64, 1000, 100'003}) {
+    for (const std::size_t piece :
+         {std::size_t{1}, std::size_t{7}, std::size_t{32}, std::size_t{1000}, size + 1}) {
+      INFO(size << " bytes in pieces of " << piece);
+      Xxh64 hash;
+      for (std::size_t at = 0; at < size; at += piece)
+        hash.update({content.data() + at, std::min(piece, size - at)});
+      std::vector<std::uint8_t> frame(ZSTD_compressBound(size) + 64);
+      const std::size_t n = ZSTD_compress2(cctx, frame.data(), frame.size(), content.data(), size);
+      REQUIRE_FALSE(ZSTD_isError(n));
+      const auto expected =
+          std::array<std::uint8_t, 4>{frame[n - 4], frame[n - 3], frame[n - 2], frame[n - 1]};
+      CHECK(zstd_content_checksum(hash) == expected);
+    }
+  }
+  ZSTD_freeCCtx(cctx);
 }

@@ -250,14 +250,15 @@ TEST_CASE("a cut .pcap.zst (a killed run's .part) gives every complete record, t
       REQUIRE(r.records[i].payload == whole.records[i].payload);
       REQUIRE(r.records[i].time_ns == whole.records[i].time_ns);
     }
-    // The daemon replays what is there and says the file was cut.
+    // The daemon replays what is there and says the file was cut: not whole, exit 65.
     const auto run = test::run_command(test::pandarcapd_command() + " --replay " +
                                        quoted(dir / "run.pcap.zst.part") + " --output-dir " +
                                        quoted(dir / "out") + " 2>&1");
     INFO(run.out);
-    CHECK(run.exit_code == 0);
+    CHECK(run.exit_code == 65);
     CHECK(run.out.find("1000 UDP datagrams") != std::string::npos);
     CHECK(run.out.find("cut off while recording") != std::string::npos);
+    CHECK(test::last_health_record(dir / "out").at("state") == "degraded");
   }
   SECTION("bytes cut off the end of a zstd -1 file") {
     const std::string zst = harness::read_file(zstd_command(pcap, dir / "capture.pcap.zst"));
@@ -351,7 +352,7 @@ TEST_CASE("an MCAP file without packets, cut or damaged says so", "[daemon][mcap
     for (std::size_t i = 0; i < r.records.size(); ++i)
       REQUIRE(r.records[i].payload == whole.records[i].payload);
   }
-  SECTION("a chunk claiming an absurd size: a clear error before any allocation") {
+  SECTION("a chunk claiming an absurd size: a clear error before any allocation, skipped") {
     std::string damaged = bytes;
     std::size_t chunks = 0;
     for (const auto& [at, op] : mcap_records(bytes)) {
@@ -363,11 +364,18 @@ TEST_CASE("an MCAP file without packets, cut or damaged says so", "[daemon][mcap
     }
     REQUIRE(chunks == 2);
     write_bytes(dir / "absurd.mcap", damaged);
-    const Read r = read_all(dir / "absurd.mcap");
-    CHECK(r.status == CaptureStatus::kError);
-    CHECK(r.records.size() > 0);
-    CHECK(r.error.find("absurd.mcap") != std::string::npos);
-    CHECK(r.error.find("claims 1099511627776 bytes uncompressed") != std::string::npos);
+    // Skipped by the chunk index: the packets before and after it are read.
+    CaptureReader reader((dir / "absurd.mcap").string());
+    CaptureRecord record;
+    std::size_t records = 0;
+    CaptureStatus status;
+    while ((status = reader.next(record)) == CaptureStatus::kRecord) ++records;
+    CHECK(status == CaptureStatus::kEnd);
+    CHECK(reader.stats().chunks_skipped == 1);
+    CHECK(records + reader.stats().packets_skipped == kPackets);
+    CHECK(reader.first_damage().find("absurd.mcap") != std::string::npos);
+    CHECK(reader.first_damage().find("claims 1099511627776 bytes uncompressed") !=
+          std::string::npos);
   }
   SECTION("--port and --sensor-ip cannot apply: replayed whole, with a warning") {
     const auto run = test::run_command(test::pandarcapd_command() + " --replay " + quoted(mcap) +

@@ -16,6 +16,7 @@
 #include "core/health_format.hpp"
 #include "core/health_policy.hpp"
 #include "daemon/output/upload_backlog.hpp"
+#include "daemon/pcap/recording_sidecars.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;
@@ -69,7 +70,7 @@ TEST_CASE("Upload: which files leave by upload, as the unit's rclone filter has 
         "pandarcap_20261127T220805Z_0003");
   CHECK(recording_stem("pandarcap_20261127T220805Z_0003_dup2.pcap") ==
         "pandarcap_20261127T220805Z_0003_dup2");
-  CHECK(recording_stem("pandarcap_20261127T220805Z_0003.mcap").empty());
+  CHECK_FALSE(recording_stem("pandarcap_20261127T220805Z_0003.mcap"));
 }
 
 TEST_CASE("Upload: the backlog over the upload directories, read a little at a time",

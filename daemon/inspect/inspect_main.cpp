@@ -1,9 +1,9 @@
 // pandarcap-inspect: per-packet field dump and summary of a Pandar40P capture (pcap / pcapng,
 // either compressed with zstd, or the PandarPacket messages of an MCAP file).
 //
-// Exit status: 0 the capture was read to its end (cleanly or truncated: see "capture_status"),
-// 1 the capture is corrupt part-way (what was read is still summarised), 2 the capture or the
-// calibration file cannot be used, 64 bad command line.
+// Exit status: 0 the capture was read whole, 1 it is not (damaged, cut short, or records with
+// damaged headers: what was read is still summarised), 2 the capture or the calibration file
+// cannot be used, 64 bad command line.
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -27,6 +27,7 @@
 #include "daemon/cli_args.hpp"
 #include "daemon/inspect/png_file.hpp"
 #include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/recording_calibration.hpp"
 
 namespace {
 
@@ -43,7 +44,9 @@ with output.mcap_packets = true); the kind is told by the file's first bytes.
 Options:
   --json                 one JSON object: {"packets": [...], "frames": [...], "summary": {...}}
   --summary              print only the summary (no per-packet lines)
-  --calibration FILE     angle-correction CSV (default: the nominal Pandar40P table)
+  --calibration FILE     angle-correction CSV (default: the recording's own, its
+                         NAME.calibration.csv sidecar or an MCAP file's attachment, else the
+                         nominal Pandar40P table)
   --port N               only UDP datagrams to destination port N (default: any port; an
                          MCAP file's packets have no ports: not applied)
   --cut-angle DEG        frame cut angle in degrees (default 0)
@@ -61,9 +64,10 @@ Options:
   --png-size PX          the picture's width and height in pixels (default 800)
   -h, --help             this text
 
-Exit status: 0 read to the end (see capture_status: "end" or "truncated"), 1 the capture is
-corrupt part-way (what was read is summarised), 2 the capture or calibration cannot be used,
-64 bad command line.
+Exit status: 0 the capture was read whole, 1 it is not whole: damaged (capture_status
+"error", or "end" with "damage" saying what was read over), cut short ("truncated"), or with
+records whose headers are damaged ("malformed"): what was read is summarised, 2 the capture or
+calibration cannot be used, 64 bad command line.
 )";
 
 struct Options {
@@ -230,8 +234,25 @@ std::string_view format_name(CaptureFormat format) {
 }
 
 int run(const Options& options) {
+  // --calibration, else the recording's own (its sidecar, an MCAP file's attachment), else the
+  // nominal table: as the replay takes it.
   Calibration calibration = Calibration::nominal();
-  if (options.calibration) calibration = Calibration::load(*options.calibration);
+  std::string calibration_source = "nominal";
+  if (options.calibration) {
+    calibration = Calibration::load(*options.calibration);
+    calibration_source = "file";
+  } else {
+    std::string looked_for;
+    if (std::optional<Calibration> own = recording_calibration(options.file, looked_for)) {
+      calibration = std::move(*own);
+      calibration_source = "recording";
+    } else {
+      std::fprintf(stderr,
+                   "pandarcap-inspect: the recording carries no calibration (looked for %s): the "
+                   "nominal table is used; give the sensor's with --calibration FILE\n",
+                   looked_for.c_str());
+    }
+  }
   CaptureReader reader(options.file, CaptureReader::Options{options.port});
   if (options.port && !reader.has_endpoints()) {
     std::fprintf(stderr,
@@ -306,6 +327,7 @@ int run(const Options& options) {
       {"capture_error", reader.error()},
       {"capture_format", format_name(reader.format())},
       {"calibration", calibration.source},
+      {"calibration_source", calibration_source},
       {"packets", s.packets},
       {"accepted", s.accepted},
       {"rejected", s.rejected()},
@@ -345,7 +367,11 @@ int run(const Options& options) {
         {"non_udp", cs.non_udp},
         {"ip_fragments", cs.ip_fragments},
         {"malformed", cs.malformed},
-        {"snapped", snapped}}},
+        {"snapped", snapped},
+        {"chunks_skipped", cs.chunks_skipped},
+        {"packets_skipped", cs.packets_skipped},
+        {"records_damaged", cs.records_damaged}}},
+      {"damage", reader.first_damage()},
   };
 
   if (options.png) {
@@ -380,8 +406,23 @@ int run(const Options& options) {
         "{}, IP fragments {}, malformed {})\n",
         cs.records, cs.udp_datagrams, cs.ipv6_datagrams, cs.port_filtered, cs.skipped(), cs.non_ip,
         cs.non_udp, cs.ip_fragments, cs.malformed);
+    if (!reader.first_damage().empty()) {
+      fmt::print("  damaged: {} ({} chunks skipped, {} packets in them; {} damaged lengths)\n",
+                 reader.first_damage(), cs.chunks_skipped, cs.packets_skipped, cs.records_damaged);
+    }
   }
-  return status == CaptureStatus::kError ? 1 : 0;
+  // Not whole: damaged (stopped, or read over), cut short, or records with damaged headers.
+  const bool whole =
+      status == CaptureStatus::kEnd && reader.first_damage().empty() && cs.malformed == 0;
+  if (!whole) {
+    const std::string& why = !reader.error().empty()          ? reader.error()
+                             : !reader.first_damage().empty() ? reader.first_damage()
+                                                              : std::string();
+    std::fprintf(
+        stderr, "pandarcap-inspect: %s is not whole: %s\n", options.file.c_str(),
+        why.empty() ? "records with damaged headers skipped (see malformed)" : why.c_str());
+  }
+  return whole ? 0 : 1;
 }
 
 }  // namespace

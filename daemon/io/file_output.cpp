@@ -113,7 +113,8 @@ void rename_replacing(const std::string& from, const std::string& to) {
 bool place_without_replacing(const std::string& from, std::string& to) {
   if (rename_no_replace(from.c_str(), to.c_str())) return false;
   const std::size_t name_at = to.rfind('/') + 1;
-  std::size_t dot = to.rfind('.');
+  // The extension the _dupN goes before: the last, or a compressed recording's two.
+  std::size_t dot = to.ends_with(".pcap.zst") ? to.size() - 9 : to.rfind('.');
   if (dot == std::string::npos || dot < name_at) dot = to.size();
   const std::string extension = to.substr(dot);  // ".pcap", ".pcd" (a collision is rare)
   to.resize(dot);

@@ -4,11 +4,14 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
+#include <string_view>
+#include <system_error>
 #include <vector>
 #include <websocketpp/config/asio_no_tls.hpp>
 #include <websocketpp/server.hpp>
@@ -44,7 +47,9 @@ struct FoxgloveServer::Impl {
 
   Impl(const LiveOptions& o, LiveHandover& h) : options(o), handover(h) {}
 
-  void listen();
+  void set_up();
+  // Binds and listens; false (counted, the errno kept) when the port cannot be bound.
+  bool try_listen();
   void poll();
   bool validate(Hdl hdl);
   void opened(Hdl hdl);
@@ -68,9 +73,12 @@ struct FoxgloveServer::Impl {
   std::string info, advertise;
   std::vector<std::uint8_t> health_message, status_message;  // this thread's, reused
   std::uint16_t port = 0;
+  asio::ip::address_v4 address;
+  std::chrono::steady_clock::time_point next_listen_attempt;
+  std::string last_listen_error;  // logged once until it changes or the port is bound
 };
 
-void FoxgloveServer::Impl::listen() {
+void FoxgloveServer::Impl::set_up() {
   server.clear_access_channels(websocketpp::log::alevel::all);
   server.clear_error_channels(websocketpp::log::elevel::all);
   server.init_asio();
@@ -85,17 +93,11 @@ void FoxgloveServer::Impl::listen() {
   server.set_message_handler(
       [this](Hdl hdl, const Server::message_ptr& message) { received(hdl, message); });
   asio::error_code ec;
-  const asio::ip::address_v4 address = asio::ip::make_address_v4(options.address, ec);
+  address = asio::ip::make_address_v4(options.address, ec);
   if (ec)
     throw std::runtime_error(fmt::format("live.address {}: {}", options.address, ec.message()));
-  websocketpp::lib::error_code error;
-  server.listen(asio::ip::tcp::endpoint(address, options.port), error);
-  if (!error) server.start_accept(error);
-  if (error) {
-    throw std::runtime_error(fmt::format("live view: cannot listen on {}:{}: {}", options.address,
-                                         options.port, error.message()));
-  }
-  port = server.get_local_endpoint(ec).port();
+  handover.counters.port.store(options.port, std::memory_order_relaxed);
+  handover.counters.listen_retry_ms.store(options.listen_retry_ms, std::memory_order_relaxed);
   info = server_info_json(
       options.name, fmt::format("{}", std::chrono::system_clock::now().time_since_epoch().count()));
   advertise = advertise_json({
@@ -107,7 +109,46 @@ void FoxgloveServer::Impl::listen() {
        "jsonschema"},
   });
   timer = std::make_unique<asio::steady_timer>(server.get_io_service());
+  // The first attempt is the constructor's, not the poll's.
+  next_listen_attempt = std::chrono::steady_clock::time_point::max();
   poll();
+}
+
+bool FoxgloveServer::Impl::try_listen() {
+  LiveCounters& counters = handover.counters;
+  websocketpp::lib::error_code error;
+  server.listen(asio::ip::tcp::endpoint(address, options.port), error);
+  if (!error) server.start_accept(error);
+  if (error) {
+    // websocketpp hands asio's error through: errno's value in asio's system category.
+    const std::string_view category = error.category().name();
+    const bool system = category == "asio.system" || category == "system" || category == "generic";
+    counters.listen_errno.store(system ? error.value() : EIO, std::memory_order_relaxed);
+    websocketpp::lib::error_code ignored;
+    if (server.is_listening()) server.stop_listening(ignored);  // listening, but not accepting
+    next_listen_attempt =
+        std::chrono::steady_clock::now() + std::chrono::milliseconds(options.listen_retry_ms);
+    const std::string message = error.message();
+    if (message != last_listen_error) {
+      // The capture goes on; the health says degraded, naming the port, until it is bound.
+      spdlog::warn(
+          "live view: cannot listen on {}:{}: {}; the capture goes on without it, trying again "
+          "every {:g} s",
+          options.address, options.port, message, options.listen_retry_ms / 1000.0);
+      last_listen_error = message;
+    }
+    return false;
+  }
+  asio::error_code ec;
+  port = server.get_local_endpoint(ec).port();
+  counters.port.store(port, std::memory_order_relaxed);
+  counters.listen_errno.store(0, std::memory_order_relaxed);
+  counters.listening.store(true, std::memory_order_relaxed);
+  if (!last_listen_error.empty()) {
+    spdlog::info("live view: port {} is free now: listening", port);
+    last_listen_error.clear();
+  }
+  return true;
 }
 
 bool FoxgloveServer::Impl::validate(Hdl hdl) {
@@ -253,6 +294,10 @@ void FoxgloveServer::Impl::poll() {
     broadcast(kPointsChannelId, *points);
   }
   if (const std::vector<std::uint8_t>* health = handover.health.take()) publish_health(*health);
+  if (!handover.counters.listening.load(std::memory_order_relaxed) &&
+      std::chrono::steady_clock::now() >= next_listen_attempt) {
+    try_listen();
+  }
   timer->expires_after(kPollInterval);
   timer->async_wait([this](const asio::error_code& ec) {
     if (!ec) poll();
@@ -261,7 +306,8 @@ void FoxgloveServer::Impl::poll() {
 
 FoxgloveServer::FoxgloveServer(const LiveOptions& options, LiveHandover& handover)
     : impl_(std::make_unique<Impl>(options, handover)) {
-  impl_->listen();
+  impl_->set_up();
+  if (!impl_->try_listen()) return;  // poll() tries again
   if (options.address != "127.0.0.1") {
     spdlog::warn(
         "live view: listening on {}:{}, not 127.0.0.1: anyone who reaches it sees the sensor "

@@ -36,17 +36,23 @@ struct LiveOptions {
   std::string points_schema;       // its ros2msg text
   std::string health_schema;       // the health record's JSON schema
   std::size_t client_queue_bytes = 16u << 20;
+  // How often a port that could not be bound is tried again (kListenRetrySeconds; a test hook
+  // shortens it).
+  std::uint32_t listen_retry_ms = kListenRetrySeconds * 1000;
 };
 
 class FoxgloveServer {
  public:
-  // Binds and listens now; throws std::runtime_error naming the address when it cannot.
+  // Binds and listens now. A port that cannot be bound (in use: another program's) is not an
+  // error: it is logged, handover.counters.listening stays false (the health names the port),
+  // and run() tries again every kListenRetrySeconds until it can. Throws std::runtime_error only
+  // for an address that is not an IPv4 address.
   FoxgloveServer(const LiveOptions& options, LiveHandover& handover);
   ~FoxgloveServer();
   FoxgloveServer(const FoxgloveServer&) = delete;
   FoxgloveServer& operator=(const FoxgloveServer&) = delete;
 
-  std::uint16_t port() const noexcept;  // the port listened on
+  std::uint16_t port() const noexcept;  // the port listened on; 0 while not listening
   // The server thread's body: serves until stop().
   void run();
   // From any thread: run() returns soon after.

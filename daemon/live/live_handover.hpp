@@ -36,7 +36,16 @@ struct LiveCounters {
   // Messages a client did not get: its send queue was full (one per client and message), or the
   // server thread had not taken a frame before the writer replaced it with the next.
   std::atomic<std::uint64_t> messages_dropped{0};
+  // Whether the server listens now. A port it cannot bind (another program's: foxglove_bridge's
+  // default is 8765 too) leaves the capture running: the server tries again every
+  // kListenRetrySeconds, and the health is degraded, naming the port and listen_errno, until then.
+  std::atomic<bool> listening{false};
+  std::atomic<std::uint16_t> port{0};             // asked for (the bound one once listening)
+  std::atomic<int> listen_errno{0};               // the last failure (EADDRINUSE: in use)
+  std::atomic<std::uint32_t> listen_retry_ms{0};  // how often it tries again (LiveOptions)
 };
+
+inline constexpr int kListenRetrySeconds = 10;
 
 struct LiveHandover {
   // `points_capacity_bytes`: the largest frame's whole binary message (live_publish.hpp).

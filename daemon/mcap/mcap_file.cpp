@@ -40,12 +40,15 @@ McapFile::McapFile(const McapFileOptions& options)
   // indexes (its records go to the file from its chunk buffer), or the tail.
   const std::size_t index_bytes =
       mcap::kMaxChannels * (mcap::kRecordPrefixBytes + 2 + 4 + max_index_entries_ * 16);
-  out_.reserve(kRecordSlack + options.calibration_csv.size() + index_bytes +
+  std::size_t metadata_bytes = options.device_name.size();
+  for (const auto& [key, value] : options.metadata)
+    metadata_bytes += key.size() + value.size();
+  out_.reserve(kRecordSlack + options.calibration_csv.size() + metadata_bytes + index_bytes +
                options.max_chunks * kTailBytesPerChunk);
   // What open() records, made here so that starting a file (a rotation) allocates nothing.
   for (const auto& [key, value] : options_.metadata)
     metadata_.emplace_back(key, value);
-  summary_.metadata.reserve(1);
+  summary_.metadata.reserve(2);  // "pandarcap", "foxglove"
   summary_.attachments.reserve(1);
   summary_.chunks.reserve(options.max_chunks);
   summary_.schemas.push_back(
@@ -86,6 +89,13 @@ void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
     const std::size_t at = w.size();
     mcap::write_metadata(w, "pandarcap", metadata_);
     summary_.metadata.push_back({at, w.size() - at, "pandarcap"});
+  }
+  if (!options_.device_name.empty()) {
+    const std::size_t at = w.size();
+    const std::pair<std::string_view, std::string_view> device[] = {
+        {"deviceName", options_.device_name}};
+    mcap::write_metadata(w, "foxglove", device);
+    summary_.metadata.push_back({at, w.size() - at, "foxglove"});
   }
   {
     const std::size_t at = w.size();

@@ -33,6 +33,9 @@ struct McapFileOptions {
   PcdFormat format{PcdLayout::kPandarcap, Axes::kHesai};
   std::string library;                                        // the Header's, "pandarcap <version>"
   std::vector<std::pair<std::string, std::string>> metadata;  // the "pandarcap" record
+  // The "foxglove" metadata record's deviceName (what Foxglove's importers file the recording
+  // under); "" = no such record.
+  std::string device_name;
   std::string calibration_csv;  // attached to every file as calibration.csv
 };
 

@@ -18,6 +18,7 @@
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
 #include "daemon/output/output_directories.hpp"
+#include "daemon/output/standing_problems.hpp"
 
 namespace pandarcap {
 HealthPublisher::HealthPublisher(const WriterOptions& options, OutputAccounting& accounting,
@@ -53,6 +54,7 @@ void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
   // is warm, does not allocate.
   health_.gauges.reason.reserve(8 * 1024);
   health_.gauges.sensor_status.implausible_reason.reserve(1024);
+  health_.gauges.standing.reserve(2 * ReceiveCounters::kDamageTextBytes + 512);
 }
 
 namespace {
@@ -100,7 +102,8 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   if (sources.live != nullptr) {
     h.live = LiveViewHealth{sources.live->clients.load(std::memory_order_relaxed),
                             sources.live->messages_sent.load(std::memory_order_relaxed),
-                            sources.live->messages_dropped.load(std::memory_order_relaxed)};
+                            sources.live->messages_dropped.load(std::memory_order_relaxed),
+                            sources.live->listening.load(std::memory_order_relaxed)};
   }
   c.datagrams_received = receive.datagrams.load(std::memory_order_relaxed);
   c.bytes_received = receive.bytes.load(std::memory_order_relaxed);
@@ -200,6 +203,7 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
                                                   c.mcap_bytes_written, jsonl_bytes_written_});
   fill_storage(write_rates_, sources.storage, g.storage);
 
+  describe_standing_problems(receive, sources.live, g.standing);
   silent_ = sources.silent;
   reclassify();
 }

@@ -48,7 +48,13 @@ void McapRecorder::prepare() {
                 {"decoder", options_.decoder},
                 {"calibration_source", options_.sensor_identity.calibration_source},
                 {"sensor_serial", options_.sensor_identity.serial},
-                {"sensor_firmware", options_.sensor_identity.firmware}};
+                {"sensor_firmware", options_.sensor_identity.firmware},
+                {"device_name", options_.device_name},
+                {"config_hash", options_.config_hash},
+                // The sensor facts, as raw/sensor.json holds them (identity, configuration,
+                // where the calibration came from); the calibration itself is the attachment.
+                {"sensor_json", options_.sensor_json}};
+  o.device_name = options_.device_name;
   o.calibration_csv = options_.calibration_csv;
   file_ = std::make_unique<McapFile>(o);
   final_path_.reserve(4096);

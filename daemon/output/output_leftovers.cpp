@@ -15,6 +15,7 @@
 #include "daemon/io/file_output.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
+#include "daemon/pcap/recording_sidecars.hpp"
 
 namespace pandarcap {
 namespace {
@@ -71,24 +72,23 @@ Finished finish_mcap(const std::string& part) {
 // A finished recording's sidecars (pcap_recorder.hpp), for one an interrupted run left: its
 // directory's calibration.csv and sensor.json, which this start has not replaced yet, as
 // NAME.calibration.csv and NAME.sensor.json; durable, and never over a file of that name.
-void write_recovered_sidecars(const fs::path& dir, const std::string& recording,
-                              std::string_view suffix) {
-  const std::string stem = recording.substr(0, recording.size() - suffix.size());
-  for (const auto& [source, sidecar] : {std::pair{"calibration.csv", ".calibration.csv"},
-                                        std::pair{"sensor.json", ".sensor.json"}}) {
+void write_recovered_sidecars(const fs::path& dir, const std::string& recording) {
+  const std::optional<RecordingSidecars> sidecars = recording_sidecars(recording);
+  if (!sidecars) return;
+  for (const auto& [source, to] : {std::pair{"calibration.csv", &sidecars->calibration_csv},
+                                   std::pair{"sensor.json", &sidecars->sensor_json}}) {
     const fs::path from = dir / source;
-    const std::string to = stem + sidecar;
     std::error_code ec;
-    if (fs::exists(to, ec) || !fs::is_regular_file(from, ec) || fs::file_size(from, ec) == 0) {
+    if (fs::exists(*to, ec) || !fs::is_regular_file(from, ec) || fs::file_size(from, ec) == 0) {
       continue;
     }
     try {
       std::ifstream in(from, std::ios::binary);
       const std::string text((std::istreambuf_iterator<char>(in)),
                              std::istreambuf_iterator<char>());
-      write_file_durably(to, text);
+      write_file_durably(*to, text);
     } catch (const std::exception& error) {
-      spdlog::warn("{}: cannot write its sidecar {}: {}", recording, to, error.what());
+      spdlog::warn("{}: cannot write its sidecar {}: {}", recording, *to, error.what());
     }
   }
 }
@@ -121,7 +121,7 @@ void finish_interrupted_recordings(const fs::path& dir, std::string_view suffix,
         continue;
       }
       std::string finished = part.substr(0, part.size() - 5);  // without ".part"
-      if (sidecars) write_recovered_sidecars(dir, finished, suffix);
+      if (sidecars) write_recovered_sidecars(dir, finished);
       if (place_durably(part, finished)) accounting.name_collision(part, finished);
       spdlog::warn(
           "{}: left by an interrupted run; finished as {} ({} whole records, {} bytes of "

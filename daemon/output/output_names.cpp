@@ -39,14 +39,6 @@ bool floor_file_is_ours(FloorKind kind, std::string_view name) noexcept {
   return false;
 }
 
-std::string_view recording_stem(std::string_view name) noexcept {
-  for (const std::string_view suffix : {std::string_view(".pcap"), std::string_view(".pcap.zst")}) {
-    if (named_like(name, "pandarcap_", suffix, 1))
-      return name.substr(0, name.size() - suffix.size());
-  }
-  return {};
-}
-
 bool upload_file_is_ours(std::string_view name) noexcept {
   const auto digit = [](char c) { return c >= '0' && c <= '9'; };
   // frame_[0-9]*.pcd

@@ -25,14 +25,6 @@ enum class FloorKind : std::uint8_t { kFrames, kRecordings, kMcap, kNone /* free
 // Sidecars are not: they go with their recording, never on their own.
 bool floor_file_is_ours(FloorKind kind, std::string_view name) noexcept;
 
-// A recording's sidecars: STEM + each of these.
-inline constexpr std::array<std::string_view, 2> kSidecarSuffixes = {".calibration.csv",
-                                                                     ".sensor.json"};
-
-// The stem of a recording's name ("pandarcap_20261127T220805Z_0003" for
-// "pandarcap_20261127T220805Z_0003.pcap.zst"); empty when `name` is not a recording of ours.
-std::string_view recording_stem(std::string_view name) noexcept;
-
 // Whether `name` is a finished file that leaves by upload from an upload directory: exactly what
 // systemd/pandarcap-upload@.service's rclone filter moves (tests/upload/names.txt holds the
 // names both are tested on), in any of the upload directories alike:

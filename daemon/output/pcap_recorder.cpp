@@ -17,6 +17,7 @@
 #include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 #include "daemon/output/rotation.hpp"
+#include "daemon/pcap/recording_sidecars.hpp"
 
 namespace pandarcap {
 PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting,
@@ -176,13 +177,16 @@ void PcapRecorder::finish_file() {
 }
 
 void PcapRecorder::write_sidecars() {
-  const std::size_t stem_end = final_path_.rfind(".pcap");
-  const std::pair<std::string_view, std::string_view> sidecars[] = {
-      {".calibration.csv", options_.calibration_csv}, {".sensor.json", options_.sensor_json}};
-  for (const auto& [suffix, text] : sidecars) {
+  // DIR/STEM.pcap[.zst] -> DIR/STEM.calibration.csv, DIR/STEM.sensor.json (recording_sidecars.hpp)
+  const std::string_view stem = recording_stem(final_path_).value_or(final_path_);
+  const auto stem_end = static_cast<std::size_t>(stem.data() - final_path_.data()) + stem.size();
+  const std::string_view texts[] = {options_.calibration_csv, options_.sensor_json};
+  static_assert(std::size(texts) == kSidecarSuffixes.size());
+  for (std::size_t i = 0; i < kSidecarSuffixes.size(); ++i) {
+    const std::string_view text = texts[i];
     if (text.empty()) continue;
     sidecar_path_.assign(final_path_, 0, stem_end);
-    sidecar_path_ += suffix;
+    sidecar_path_ += kSidecarSuffixes[i];
     assign_temporary_name(sidecar_temporary_, sidecar_path_);
     if (!space_.allows(volume_, text.size(), refusal_)) {
       accounting_.write_failed(refusal_, text.size());

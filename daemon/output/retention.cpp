@@ -4,17 +4,20 @@
 
 #include <array>
 #include <cstring>
+#include <optional>
 #include <system_error>
 
-#include "daemon/output/output_names.hpp"
+#include "daemon/pcap/recording_sidecars.hpp"
 
 namespace pandarcap {
 
 void remove_sidecars(std::string_view recording_path) noexcept {
   const std::size_t slash = recording_path.rfind('/');
   const std::size_t name_at = slash == std::string_view::npos ? 0 : slash + 1;
-  const std::string_view stem = recording_stem(recording_path.substr(name_at));
-  if (stem.empty()) return;
+  // A recording of ours (floor and retention list nothing else): its stem names its sidecars.
+  const std::optional<std::string_view> found = recording_stem(recording_path);
+  if (!found) return;
+  const std::string_view stem = *found;
   std::array<char, 4096> path;  // on the stack: a path is at most PATH_MAX
   for (const std::string_view suffix : kSidecarSuffixes) {
     const std::size_t length = name_at + stem.size() + suffix.size();

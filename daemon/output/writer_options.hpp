@@ -69,6 +69,10 @@ struct WriterOptions {
   // neighbour file raw/sensor.json saved beside the recordings (daemon/ptc/sensor_at_start.hpp).
   SensorIdentity sensor_identity;
   std::string sensor_json;
+  // output.device_name resolved (the host name when unset), and the effective configuration's
+  // hash (daemon_options.hpp, config_hash): in every MCAP file's metadata and in sensor.json.
+  std::string device_name;
+  std::string config_hash;
   // The sensor's status is polled over PTC every status_interval_seconds (status_polled).
   bool status_polled = false;
   double status_interval_seconds = 0;

@@ -224,6 +224,8 @@ CaptureReader::CaptureReader(const std::string& path, Options options)
                        "': not a regular file (a FIFO, socket, device or directory)");
   }
   ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+  size_bytes_ = static_cast<std::uint64_t>(info.st_size);
+  fd_ = fd;
   // The kind of file, by its first bytes (pread: the file position stays at 0 for libpcap).
   std::uint8_t magic[mcap::kMagic.size()] = {};
   const ssize_t got = ::pread(fd, magic, sizeof magic, 0);
@@ -302,6 +304,22 @@ void CaptureReader::open_mcap(int fd) {
   error_ = mcap_->error();
 }
 
+std::uint64_t CaptureReader::bytes_read() const noexcept {
+  if (mcap_) return mcap_->offset();
+  const off_t at = ::lseek(fd_, 0, SEEK_CUR);
+  return at < 0 ? 0 : static_cast<std::uint64_t>(at);
+}
+
+const std::string& CaptureReader::first_damage() const noexcept {
+  return mcap_ ? mcap_->first_damage() : first_damage_;
+}
+
+void CaptureReader::malformed(const char* what) {
+  ++stats_.malformed;
+  if (first_damage_.empty())
+    first_damage_ = path_ + ": record " + std::to_string(stats_.records) + " " + what;
+}
+
 CaptureReader::~CaptureReader() {
   if (handle_ != nullptr) pcap_close(handle_);
 }
@@ -328,8 +346,25 @@ CaptureStatus CaptureReader::next(CaptureRecord& out) {
     const int rc = pcap_next_ex(handle_, &header, &data);
     if (rc != 1) return finish(rc);
     ++stats_.records;
+    // A record header no capture tool writes: more bytes captured than the packet had, or a
+    // fraction of a second that is a whole second or more (libpcap scales microseconds to ns).
+    // Damage in the header, which libpcap does not check; its bytes are not trusted.
+    if (header->caplen > header->len || header->ts.tv_usec < 0 ||
+        header->ts.tv_usec >= (nanosecond_ ? 1'000'000'000 : 1'000'000)) {
+      malformed(
+          "has a record header no capture tool writes (caplen above len, or a sub-second "
+          "field of a second or more)");
+      continue;
+    }
     CaptureRecord record;
-    switch (parse_frame(link, {data, header->caplen}, record)) {
+    FrameKind kind = parse_frame(link, {data, header->caplen}, record);
+    // A datagram held whole in a record whose len says the packet was longer (by more than an
+    // Ethernet FCS the capture left out): the record header is damaged.
+    if (kind == FrameKind::kUdp && !record.snapped && header->len > header->caplen + 4) {
+      malformed("has a record header whose len is longer than the whole datagram it holds");
+      continue;
+    }
+    switch (kind) {
       case FrameKind::kNonIp:
         ++stats_.non_ip;
         continue;
@@ -340,7 +375,7 @@ CaptureStatus CaptureReader::next(CaptureRecord& out) {
         ++stats_.ip_fragments;
         continue;
       case FrameKind::kMalformed:
-        ++stats_.malformed;
+        malformed("has headers that do not hold together (damaged, or malformed when captured)");
         continue;
       case FrameKind::kUdp:
         break;
@@ -377,8 +412,14 @@ CaptureStatus CaptureReader::finish(int pcap_status) {
   if (zstd_ != nullptr && !zstd_->error().empty()) {
     error_ = path_ + ": " + zstd_->error();
     final_status_ = CaptureStatus::kError;
-  } else if (pcap_status == PCAP_ERROR_BREAK && zstd_ != nullptr && zstd_->unfinished_frame()) {
-    error_ = path_ + ": the zstd stream ends inside a frame (cut off while recording)";
+  } else if (zstd_ != nullptr && zstd_->unfinished_frame() &&
+             (pcap_status == PCAP_ERROR_BREAK ||
+              std::string_view(pcap_geterr(handle_)).find("truncated") != std::string_view::npos)) {
+    // libpcap may see the cut first, inside a record: the stream's end inside its frame says
+    // which it is.
+    error_ = path_ +
+             ": the zstd stream ends inside a frame: the file is cut short (cut off while "
+             "recording, or an unfinished copy)";
     final_status_ = CaptureStatus::kTruncated;
   } else if (pcap_status == PCAP_ERROR_BREAK) {
     final_status_ = CaptureStatus::kEnd;

@@ -74,6 +74,11 @@ struct CaptureStats {
   std::uint64_t ip_fragments = 0;    // IPv4 fragments and IPv6 fragment headers (not reassembled)
   std::uint64_t malformed = 0;       // headers cut short or inconsistent
   std::uint64_t snapped = 0;         // yielded datagrams with snapped == true
+  // MCAP: damaged chunks skipped by the chunk index, the packets their message indexes list, and
+  // damaged records read over (a damaged length, resumed at the next chunk).
+  std::uint64_t chunks_skipped = 0;
+  std::uint64_t packets_skipped = 0;
+  std::uint64_t records_damaged = 0;
 
   // Records read but not yielded for what they are (the port filter's are asked for).
   std::uint64_t skipped() const noexcept { return non_ip + non_udp + ip_fragments + malformed; }
@@ -99,7 +104,14 @@ class CaptureReader {
   const std::string& path() const noexcept { return path_; }
   // Human-readable reason for kTruncated / kError (includes the file name).
   const std::string& error() const noexcept { return error_; }
+  // The first damage read over without stopping (MCAP chunks skipped, a pcap record whose
+  // headers do not hold together: counted malformed), "" while none.
+  const std::string& first_damage() const noexcept;
   const CaptureStats& stats() const noexcept { return stats_; }
+  // How far through the file reading is, in the file's own bytes (compressed ones for a
+  // pcap.zst, read ahead by a buffer), and the file's size: a replay's progress.
+  std::uint64_t bytes_read() const noexcept;
+  std::uint64_t size_bytes() const noexcept { return size_bytes_; }
   int link_type() const noexcept { return link_type_; }  // 0 for MCAP
   CaptureFormat format() const noexcept { return format_; }
   // Whether records carry their source and destination (not MCAP's).
@@ -107,6 +119,7 @@ class CaptureReader {
 
  private:
   CaptureStatus finish(int pcap_status);  // records the final status of a failed pcap_next_ex
+  void malformed(const char* what);       // counts the record just read, naming the first
   void open_mcap(int fd);
 
   std::string path_;
@@ -115,12 +128,15 @@ class CaptureReader {
   int link_type_ = 0;
   bool nanosecond_ = false;
   std::string error_;
+  std::string first_damage_;
   CaptureStats stats_;
   std::optional<CaptureStatus> final_status_;  // set once next() has returned a final status
   CaptureFormat format_ = CaptureFormat::kPcap;
   const ZstdReadStream* zstd_ = nullptr;  // kPcapZstd: the stream behind libpcap's FILE
   std::unique_ptr<McapPacketReader> mcap_;
   std::optional<CaptureRecord> first_;  // MCAP: the packet read at open, not yet yielded
+  int fd_ = -1;                         // pcap, pcap.zst: the file libpcap reads (owned there)
+  std::uint64_t size_bytes_ = 0;
 };
 
 }  // namespace pandarcap

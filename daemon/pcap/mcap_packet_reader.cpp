@@ -26,6 +26,111 @@ McapPacketReader::McapPacketReader(int fd, std::string path)
     : fd_(fd), path_(std::move(path)), offset_(mcap::kMagic.size()) {
   struct stat info {};
   if (::fstat(fd_, &info) == 0) size_ = static_cast<std::uint64_t>(info.st_size);
+  read_chunk_index();
+}
+
+// Footer (opcode, length 20, summary start, summary offset start, summary CRC) and the magic.
+void McapPacketReader::read_chunk_index() {
+  constexpr std::size_t kFooterRecordBytes = mcap::kRecordPrefixBytes + 20;
+  constexpr std::size_t kFileTailBytes = kFooterRecordBytes + mcap::kMagic.size();
+  if (size_ < mcap::kMagic.size() + kFileTailBytes) return;
+  std::uint8_t tail[kFileTailBytes];
+  const std::uint64_t footer_at = size_ - kFileTailBytes;
+  if (!read_at(footer_at, tail, sizeof tail)) {
+    error_.clear();
+    return;
+  }
+  mcap::ByteReader r(std::span<const std::uint8_t>(tail, sizeof tail));
+  const auto op = static_cast<mcap::Op>(r.u8());
+  const std::uint64_t length = r.u64();
+  const std::uint64_t summary_start = r.u64();
+  r.u64();  // summary offset start
+  const std::uint32_t summary_crc = r.u32();
+  if (op != mcap::Op::kFooter || length != 20 ||
+      !std::equal(mcap::kMagic.begin(), mcap::kMagic.end(), tail + kFooterRecordBytes)) {
+    return;
+  }
+  has_footer_ = true;
+  if (summary_start < mcap::kMagic.size() || summary_start >= footer_at ||
+      footer_at - summary_start > kMaxMcapRecordBytes) {
+    return;
+  }
+  // The CRC covers the summary and summary offset sections and the footer up to the CRC.
+  std::vector<std::uint8_t> summary(footer_at + kFooterRecordBytes - 4 - summary_start);
+  if (!read_at(summary_start, summary.data(), summary.size())) {
+    error_.clear();
+    return;
+  }
+  if (summary_crc != 0 && mcap::crc32(summary) != summary_crc) return;  // not to be trusted
+  data_end_ = summary_start;
+  std::span<const std::uint8_t> rest(summary.data(), footer_at - summary_start);
+  while (const auto record = mcap::record_at(rest)) {
+    rest = rest.subspan(mcap::kRecordPrefixBytes + record->content.size());
+    if (record->op != mcap::Op::kChunkIndex) continue;
+    mcap::ByteReader c(record->content);
+    c.u64();  // message start time
+    c.u64();  // message end time
+    IndexedChunk chunk;
+    chunk.start = c.u64();
+    chunk.length = c.u64();
+    c.bytes(c.u32());  // message index offsets
+    chunk.message_index_length = c.u64();
+    if (c.failed() || chunk.start < mcap::kMagic.size() || chunk.start >= summary_start ||
+        chunk.length > summary_start - chunk.start) {
+      chunks_.clear();  // an index that points outside the data is not used at all
+      return;
+    }
+    chunks_.push_back(chunk);
+  }
+  std::sort(chunks_.begin(), chunks_.end(),
+            [](const IndexedChunk& a, const IndexedChunk& b) { return a.start < b.start; });
+}
+
+std::uint64_t McapPacketReader::indexed_packets(std::size_t i) {
+  const IndexedChunk& chunk = chunks_[i];
+  const std::uint64_t at = chunk.start + chunk.length;
+  if (chunk.message_index_length > kMaxMcapRecordBytes || at > size_ ||
+      chunk.message_index_length > size_ - at) {
+    return 0;
+  }
+  std::vector<std::uint8_t> indexes(chunk.message_index_length);
+  if (!read_at(at, indexes.data(), indexes.size())) {
+    error_.clear();
+    return 0;
+  }
+  std::uint64_t packets = 0;
+  std::span<const std::uint8_t> rest(indexes);
+  while (const auto record = mcap::record_at(rest)) {
+    rest = rest.subspan(mcap::kRecordPrefixBytes + record->content.size());
+    if (record->op != mcap::Op::kMessageIndex) continue;
+    mcap::ByteReader m(record->content);
+    const std::uint16_t channel = m.u16();
+    const std::uint32_t entries_bytes = m.u32();  // (log time, offset) pairs of 16 bytes
+    if (!m.failed() && packet_channels_[channel] && (!channel_ || *channel_ == channel))
+      packets += entries_bytes / 16;
+  }
+  return packets;
+}
+
+bool McapPacketReader::skip_past(std::uint64_t offset, bool chunk, const std::string& what,
+                                 CaptureStats& stats) {
+  std::size_t next = 0;
+  while (next < chunks_.size() && chunks_[next].start <= offset)
+    ++next;
+  if (next == chunks_.size()) return false;
+  if (chunk) {
+    ++stats.chunks_skipped;
+    // The damaged chunk is the indexed one it starts at, if any.
+    if (next > 0 && chunks_[next - 1].start == offset)
+      stats.packets_skipped += indexed_packets(next - 1);
+  } else {
+    ++stats.records_damaged;
+  }
+  if (first_damage_.empty()) first_damage_ = path_ + ": " + what;
+  in_chunk_ = false;
+  offset_ = chunks_[next].start;
+  next_chunk_ = next;
+  return true;
 }
 
 McapPacketReader::~McapPacketReader() {
@@ -173,26 +278,44 @@ CaptureStatus McapPacketReader::next(CaptureRecord& out, CaptureStats& stats) {
       }
       const std::span<const std::uint8_t> rest(chunk_.get() + chunk_pos_, chunk_size_ - chunk_pos_);
       const auto record = mcap::record_at(rest);
+      std::string damage;
       if (!record) {
-        return fail(CaptureStatus::kError, "a record inside the chunk" + at_offset(chunk_offset_) +
-                                               " runs past its end (a damaged file)");
+        damage = "a record inside the chunk" + at_offset(chunk_offset_) +
+                 " runs past its end (a damaged file)";
+      } else if (record->op == mcap::Op::kChunk) {
+        damage = "a chunk inside the chunk" + at_offset(chunk_offset_) + " (a damaged file)";
+      } else {
+        chunk_pos_ += mcap::kRecordPrefixBytes + record->content.size();
+        switch (handle(static_cast<std::uint8_t>(record->op), record->content, chunk_offset_, out,
+                       stats)) {
+          case Handled::kRecord:
+            return CaptureStatus::kRecord;
+          case Handled::kFailed:
+            damage = error_.substr(path_.size() + 2);
+            break;
+          case Handled::kNone:
+            continue;
+        }
       }
-      chunk_pos_ += mcap::kRecordPrefixBytes + record->content.size();
-      if (record->op == mcap::Op::kChunk) {
-        return fail(CaptureStatus::kError,
-                    "a chunk inside the chunk" + at_offset(chunk_offset_) + " (a damaged file)");
+      // The rest of this chunk is lost (its packets before the damage were yielded).
+      if (skip_past(chunk_offset_, true, damage, stats)) {
+        error_.clear();
+        continue;
       }
-      switch (handle(static_cast<std::uint8_t>(record->op), record->content, chunk_offset_, out,
-                     stats)) {
-        case Handled::kRecord:
-          return CaptureStatus::kRecord;
-        case Handled::kFailed:
-          return CaptureStatus::kError;
-        case Handled::kNone:
-          continue;
-      }
+      return fail(CaptureStatus::kError, damage);
     }
 
+    // A record before this one claimed a length that ran over an indexed chunk's start: its
+    // length is damaged. Reading resumes at that chunk, which loses nothing of it.
+    if (next_chunk_ < chunks_.size() && chunks_[next_chunk_].start < offset_) {
+      ++stats.records_damaged;
+      if (first_damage_.empty()) {
+        first_damage_ = path_ + ": a record before offset " + std::to_string(offset_) +
+                        " has a damaged length (it runs over the chunk" +
+                        at_offset(chunks_[next_chunk_].start) + ")";
+      }
+      offset_ = chunks_[next_chunk_].start;
+    }
     if (offset_ == size_) {
       return fail(CaptureStatus::kTruncated,
                   "the file ends before its data end record (cut off while recording)");
@@ -205,22 +328,61 @@ CaptureStatus McapPacketReader::next(CaptureRecord& out, CaptureStats& stats) {
     if (!read_at(offset_, prefix, sizeof prefix)) return CaptureStatus::kError;
     mcap::ByteReader r(std::span<const std::uint8_t>(prefix, sizeof prefix));
     const std::uint8_t op = r.u8();
-    const std::uint64_t length = r.u64();
+    std::uint64_t length = r.u64();
     const std::uint64_t offset = offset_;
-    if (length > size_ - offset_ - sizeof prefix) {
+    const auto kind = static_cast<mcap::Op>(op);
+    const bool indexed_chunk_here =
+        next_chunk_ < chunks_.size() && chunks_[next_chunk_].start == offset;
+    if (indexed_chunk_here) {
+      // The index knows the chunk's length: a different one in the record is damage, read over
+      // with the index's (the chunk's own CRC then says whether its content is whole).
+      const std::uint64_t indexed = chunks_[next_chunk_].length - sizeof prefix;
+      if (kind == mcap::Op::kChunk && length != indexed) {
+        ++stats.records_damaged;
+        if (first_damage_.empty()) {
+          first_damage_ = path_ + ": the chunk" + at_offset(offset) + " claims " +
+                          std::to_string(length) + " bytes, its index " + std::to_string(indexed) +
+                          ": a damaged length (read with the index's)";
+        }
+        length = indexed;
+      }
+      ++next_chunk_;
+    }
+    // Damage at the top level: an opcode MCAP does not have (0, 0x10-0x7F), a chunk where the
+    // index has none or none where it has one, or a length past the end of a finished file.
+    std::string damage;
+    if (op == 0 || (op > static_cast<std::uint8_t>(mcap::Op::kDataEnd) && op < 0x80)) {
+      damage = "the record" + at_offset(offset) + " has opcode " + std::to_string(op) +
+               ", which MCAP does not have (a damaged file)";
+    } else if (!chunks_.empty() && (kind == mcap::Op::kChunk) != indexed_chunk_here) {
+      damage =
+          indexed_chunk_here
+              ? "the chunk" + at_offset(offset) + " the index lists is not there (a damaged file)"
+              : "a chunk" + at_offset(offset) + " that the index does not list (a damaged file)";
+    } else if (data_end_ > 0 && offset < data_end_ && length > data_end_ - offset - sizeof prefix) {
+      damage = "the record" + at_offset(offset) + " claims " + std::to_string(length) +
+               " bytes, past the data section's end (at " + std::to_string(data_end_) +
+               ", the summary's start): a damaged length, not a file cut off";
+    } else if (length > size_ - offset_ - sizeof prefix && has_footer_) {
+      damage = "the record" + at_offset(offset) + " claims " + std::to_string(length) +
+               " bytes, past the end of the file, which has its footer: a damaged length, not "
+               "a file cut off";
+    } else if (length > size_ - offset_ - sizeof prefix) {
       return fail(CaptureStatus::kTruncated, "the file ends inside the record" + at_offset(offset) +
                                                  " (cut off while recording)");
+    } else if (length > kMaxMcapRecordBytes) {
+      damage = "the record" + at_offset(offset) + " claims " + std::to_string(length) +
+               " bytes (a damaged file)";
+    }
+    if (!damage.empty()) {
+      if (skip_past(offset, indexed_chunk_here, damage, stats)) continue;
+      return fail(CaptureStatus::kError, damage);
     }
     offset_ += sizeof prefix + length;
-    const auto kind = static_cast<mcap::Op>(op);
     if (kind == mcap::Op::kDataEnd || kind == mcap::Op::kFooter) return CaptureStatus::kEnd;
     if (kind != mcap::Op::kChunk && kind != mcap::Op::kMessage && kind != mcap::Op::kSchema &&
         kind != mcap::Op::kChannel) {
       continue;  // not read: skipped by its length
-    }
-    if (length > kMaxMcapRecordBytes) {
-      return fail(CaptureStatus::kError, "the record" + at_offset(offset) + " claims " +
-                                             std::to_string(length) + " bytes (a damaged file)");
     }
     record_.resize(length);
     if (!read_at(offset + sizeof prefix, record_.data(), record_.size())) {
@@ -229,7 +391,13 @@ CaptureStatus McapPacketReader::next(CaptureRecord& out, CaptureStats& stats) {
     const Handled handled = kind == mcap::Op::kChunk ? load_chunk(record_, offset)
                                                      : handle(op, record_, offset, out, stats);
     if (handled == Handled::kRecord) return CaptureStatus::kRecord;
-    if (handled == Handled::kFailed) return CaptureStatus::kError;
+    if (handled == Handled::kFailed) {
+      if (skip_past(offset, kind == mcap::Op::kChunk, error_.substr(path_.size() + 2), stats)) {
+        error_.clear();
+        continue;
+      }
+      return CaptureStatus::kError;
+    }
   }
 }
 

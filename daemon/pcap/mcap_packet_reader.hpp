@@ -19,9 +19,20 @@
 // (0.0.0.0:0), so a port or sensor-address filter cannot apply; pandarcapd recorded only the
 // sensor's datagrams to its data port in the first place.
 //
+// Damage, and the chunk index: a finished file ends with a summary whose ChunkIndex records say
+// where every chunk starts (read at open: the footer, then the summary, its CRC checked). With it,
+// a chunk that does not parse, decompress or pass its CRC, or a record inside it that does not
+// parse, is skipped, counted (stats.chunks_skipped, and the packets its message index lists in
+// stats.packets_skipped) and named (first_damage()), and reading goes on at the next chunk the
+// index lists. A chunk whose length differs from its index's is read with the index's (counted
+// in stats.records_damaged); another record's length that runs over an indexed chunk's start is
+// caught there, and reading resumes at that chunk; one that runs past the data section (the
+// summary's start) or the end of a file that has its footer is damage too, never "cut off" (a
+// file cut while recording has no footer).
+//
 // End of input: kEnd at the DataEnd record (or the footer); kTruncated when the file ends before
-// it (a file copied while being written, or one a killed run left and no start finished); kError
-// for a record that does not parse, a chunk that does not decompress or fails its CRC.
+// it and has no footer (a file copied while being written, or one a killed run left and no start
+// finished); kError for damage with no later chunk to go on at (or no chunk index).
 #pragma once
 
 #include <bitset>
@@ -55,6 +66,9 @@ class McapPacketReader {
   // until the next call); anything else is final, with error() saying why.
   CaptureStatus next(CaptureRecord& out, CaptureStats& stats);
   const std::string& error() const noexcept { return error_; }
+  std::uint64_t offset() const noexcept { return offset_; }  // of the next top-level record
+  // The first damage skipped over ("" while none), with the file's name.
+  const std::string& first_damage() const noexcept { return first_damage_; }
 
  private:
   enum class Handled { kNone, kRecord, kFailed };
@@ -64,6 +78,17 @@ class McapPacketReader {
   Handled handle(std::uint8_t op, std::span<const std::uint8_t> content, std::uint64_t offset,
                  CaptureRecord& out, CaptureStats& stats);
   Handled load_chunk(std::span<const std::uint8_t> content, std::uint64_t offset);
+  // The footer's summary, for the chunk index (nothing when the file has none or it is damaged).
+  void read_chunk_index();
+  // Damage at `offset`: goes on at the first indexed chunk after it (true), counting the chunk
+  // skipped when `chunk` and naming the first damage; false when there is none to go on at.
+  bool skip_past(std::uint64_t offset, bool chunk, const std::string& what, CaptureStats& stats);
+  // The packets the message index after the indexed chunk `i` lists (0 when it is unreadable).
+  std::uint64_t indexed_packets(std::size_t i);
+
+  struct IndexedChunk {
+    std::uint64_t start = 0, length = 0, message_index_length = 0;
+  };
 
   int fd_;
   std::string path_;
@@ -77,6 +102,11 @@ class McapPacketReader {
   std::bitset<65536> packet_schemas_, packet_channels_;
   std::optional<std::uint16_t> channel_;  // the packet channel being read
   std::string error_;
+  std::string first_damage_;
+  bool has_footer_ = false;           // the file ends with a footer and the closing magic
+  std::vector<IndexedChunk> chunks_;  // by start offset; empty: no usable chunk index
+  std::size_t next_chunk_ = 0;        // the first indexed chunk not yet reached
+  std::uint64_t data_end_ = 0;        // where the summary starts (a trusted footer's); 0: unknown
 };
 
 }  // namespace pandarcap

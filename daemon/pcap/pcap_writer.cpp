@@ -229,6 +229,7 @@ void PcapWriter::flush() {
   flushed_records_ = records_;
   flushed_bytes_ = bytes();
   flushed_stream_bytes_ = bytes_;
+  if (compressor_ != nullptr) flushed_hash_ = compressor_->content_hash();
 }
 
 void PcapWriter::close() {
@@ -254,8 +255,12 @@ PcapWriter::Dropped PcapWriter::abandon() noexcept {
     // cut fails too, the reader stops at the cut record (kTruncated).
     file_.truncate(flushed_bytes_);
     try {
-      // A flush ended a block: an empty last block ends the frame there.
-      if (compressor_ != nullptr && flushed_bytes_ > 0) file_.write(kZstdEmptyLastBlock);
+      // A flush ended a block: an empty last block ends the frame there, and the checksum of
+      // the stream up to it closes the frame as zstd would have.
+      if (compressor_ != nullptr && flushed_bytes_ > 0) {
+        file_.write(kZstdEmptyLastBlock);
+        file_.write(zstd_content_checksum(flushed_hash_));
+      }
     } catch (const std::exception&) {
       // The frame stays unfinished: readers get every flushed record, then report the cut.
     }

@@ -90,10 +90,10 @@ class PcapWriter {
     std::uint64_t bytes = 0;
   };
   // Discards whatever is buffered, truncates the file to the last successful flush and closes
-  // it, without throwing; a compressed file is then ended with an empty last block (if that
-  // write fails too, the frame stays unfinished: readers see every flushed record, then a cut). The
-  // file then holds flushed_records() whole records (0: possibly not even the global header; the
-  // caller removes it).
+  // it, without throwing; a compressed file is then ended with an empty last block and the
+  // content checksum of what it holds (if that write fails too, the frame stays unfinished: readers
+  // see every flushed record, then a cut). The file then holds flushed_records() whole records (0:
+  // possibly not even the global header; the caller removes it).
   Dropped abandon() noexcept;
 
   std::uint64_t records() const noexcept { return records_; }
@@ -124,6 +124,7 @@ class PcapWriter {
   std::uint64_t flushed_records_ = 0;       // as of the last flush() that succeeded
   std::uint64_t flushed_bytes_ = 0;         // the file's size then
   std::uint64_t flushed_stream_bytes_ = 0;  // the pcap stream's (uncompressed) bytes then
+  Xxh64 flushed_hash_;                      // compressed: the stream's hash then (its checksum)
 };
 
 }  // namespace pandarcap

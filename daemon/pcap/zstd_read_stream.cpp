@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 #include <zstd.h>
+#include <zstd_errors.h>
 
 #include <cerrno>
 #include <cstring>
@@ -75,6 +76,7 @@ ssize_t ZstdReadStream::read(char* out, std::size_t size) {
         errno = EIO;
         return -1;
       }
+      file_offset_ += input_size_;  // the buffer's bytes before these
       input_size_ = static_cast<std::size_t>(got);
       input_pos_ = 0;
       eof_ = got == 0;
@@ -82,7 +84,15 @@ ssize_t ZstdReadStream::read(char* out, std::size_t size) {
     ZSTD_inBuffer input{input_, input_size_, input_pos_};
     const std::size_t hint = ZSTD_decompressStream(dstream(stream_), &output, &input);
     if (ZSTD_isError(hint)) {
-      error_ = std::string("corrupt zstd data (") + ZSTD_getErrorName(hint) + ")";
+      // Where, in the file's (compressed) bytes: the input zstd had reached. A checksum that does
+      // not match is found at the frame's end, after the frame's bytes were handed on.
+      const std::uint64_t at = file_offset_ + input.pos;
+      error_ = ZSTD_getErrorCode(hint) == ZSTD_error_checksum_wrong
+                   ? "the zstd frame's content checksum does not match what it "
+                     "decompresses to (the frame ending at byte " +
+                         std::to_string(at) + ")"
+                   : "corrupt zstd data (" + std::string(ZSTD_getErrorName(hint)) + ") near byte " +
+                         std::to_string(at);
       errno = EIO;
       return -1;
     }

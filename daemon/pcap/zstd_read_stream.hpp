@@ -11,11 +11,13 @@
 //   - the file ends inside a frame (a recording killed before its last ZSTD_e_end: NAME.pcap.zst
 //     .part): everything flushed before the cut is delivered, then end of stream, and
 //     unfinished_frame() says so;
-//   - the bytes do not decompress: the read fails (EIO) and error() names zstd's reason.
+//   - the bytes do not decompress, or a frame's content checksum (pandarcapd writes one) does not
+//     match: the read fails (EIO) and error() names zstd's reason and the byte it was found at.
 #pragma once
 
 #include <sys/types.h>
 
+#include <cstdint>
 #include <cstdio>
 #include <string>
 
@@ -48,6 +50,7 @@ class ZstdReadStream {
   char* input_ = nullptr;
   std::size_t input_capacity_ = 0;
   std::size_t input_size_ = 0, input_pos_ = 0;
+  std::uint64_t file_offset_ = 0;  // of input_[0] in the file
   bool eof_ = false;
   bool in_frame_ = false;  // inside a frame: begun and not yet finished
   std::string error_;

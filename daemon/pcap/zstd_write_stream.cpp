@@ -38,7 +38,8 @@ ZstdStreamCompressor::~ZstdStreamCompressor() = default;
 void ZstdStreamCompressor::begin() noexcept {
   ZSTD_CCtx_reset(cctx(context_), ZSTD_reset_session_and_parameters);
   ZSTD_CCtx_setParameter(cctx(context_), ZSTD_c_compressionLevel, level_);
-  ZSTD_CCtx_setParameter(cctx(context_), ZSTD_c_checksumFlag, 0);  // see the header
+  ZSTD_CCtx_setParameter(cctx(context_), ZSTD_c_checksumFlag, 1);  // see the header
+  hash_.reset();
 }
 
 std::span<const std::uint8_t> ZstdStreamCompressor::compress(std::span<const std::uint8_t> in,
@@ -47,6 +48,7 @@ std::span<const std::uint8_t> ZstdStreamCompressor::compress(std::span<const std
     throw std::length_error("zstd: " + std::to_string(in.size()) +
                             " bytes are more than the compressor was sized for");
   }
+  hash_.update(in);
   const ZSTD_EndDirective directive = step == Step::kEnd     ? ZSTD_e_end
                                       : step == Step::kFlush ? ZSTD_e_flush
                                                              : ZSTD_e_continue;

@@ -4,8 +4,11 @@
 //
 // One frame per file, not a frame per flush: Debian 12's tshark (Wireshark 4.0) reads a
 // one-frame .pcap.zst but stops at the end of the first frame of a file made of several. The
-// frame is written without a content checksum, so that a recording cut back to a flush (a full
-// disk) can still be ended with an empty last block (kEmptyLastBlock) and stay a complete frame.
+// frame carries zstd's content checksum (ZSTD_c_checksumFlag: XXH64 of the pcap stream, checked by
+// every reader at the frame's end), so a damaged recording says so instead of replaying wrong
+// packets. A recording cut back to a flush (a full disk) is ended with an empty last block
+// (kZstdEmptyLastBlock) and the checksum of what it holds then: content_hash() runs beside zstd's
+// own (xxh64.hpp), and PcapWriter keeps a copy of it at each flush.
 //
 // The compressor's state lives in one workspace allocated when it is made (ZSTD_initStaticCCtx),
 // and its output in a buffer sized for the largest input; compressing never allocates, and one
@@ -17,6 +20,8 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+
+#include "daemon/pcap/xxh64.hpp"
 
 namespace pandarcap {
 
@@ -48,6 +53,8 @@ class ZstdStreamCompressor {
   std::span<const std::uint8_t> compress(std::span<const std::uint8_t> in, Step step);
 
   int level() const noexcept { return level_; }
+  // XXH64 of every byte given since begin(): the frame's content checksum is made of it.
+  const Xxh64& content_hash() const noexcept { return hash_; }
 
  private:
   std::unique_ptr<std::uint8_t[]> workspace_;
@@ -55,6 +62,7 @@ class ZstdStreamCompressor {
   std::unique_ptr<std::uint8_t[]> output_;
   std::size_t max_input_, output_bytes_;
   int level_;
+  Xxh64 hash_;
 };
 
 }  // namespace pandarcap

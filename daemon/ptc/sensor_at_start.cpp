@@ -16,11 +16,15 @@ std::string SensorAtStart::describe() const {
                        inventory ? inventory->sensor_firmware : "unknown", endpoint);
   }
   if (calibration_source == "file") return "from file " + calibration.source;
+  if (calibration_source == "recording") return "from the recording: " + calibration.source;
   return "nominal Pandar40P table";
 }
 
-std::string SensorAtStart::to_json() const {
+std::string SensorAtStart::to_json(const std::string& device_name,
+                                   const std::string& config_hash) const {
   nlohmann::ordered_json j;
+  j["device_name"] = device_name;
+  j["config_hash"] = config_hash;
   j["calibration_source"] = calibration_source;
   j["calibration"] = calibration.source;
   j["ptc_endpoint"] =

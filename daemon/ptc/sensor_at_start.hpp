@@ -32,8 +32,9 @@ class SensorUnavailable : public std::runtime_error {
 
 struct SensorAtStart {
   Calibration calibration;
-  std::string calibration_source;  // "sensor", "file" or "nominal"
-  std::string endpoint;            // "ADDRESS:PORT" when the sensor was asked
+  // "sensor", "file", "nominal", or "recording" (a replay: the table the recording carries)
+  std::string calibration_source;
+  std::string endpoint;  // "ADDRESS:PORT" when the sensor was asked
   std::optional<ptc::SensorInventory> inventory;
   std::optional<ptc::SensorSettings> settings;
   std::uint64_t ptc_requests = 0, ptc_errors = 0;
@@ -42,7 +43,9 @@ struct SensorAtStart {
   // 127.0.0.1:41234", "from file /etc/pandarcap/front.csv", "nominal Pandar40P table".
   std::string describe() const;
   // The neighbour file of recordings (raw/sensor.json): source, identity, configuration.
-  std::string to_json() const;
+  // `device_name` and `config_hash` (daemon_options.hpp) say which machine and configuration
+  // made the recordings beside it.
+  std::string to_json(const std::string& device_name, const std::string& config_hash) const;
 };
 
 // Throws CalibrationError for a calibration file that is missing or invalid, SensorUnavailable

@@ -44,6 +44,8 @@ class PacketSource {
   // After run(): how the replay ended (replays only).
   bool replayed() const noexcept { return replay_ != nullptr; }
   const ReplayResult& replay_result() const noexcept { return replay_result_; }
+  // The replay's file, for its progress while run() reads it; null for a live source.
+  const ReplaySource* replay_source() const noexcept { return replay_.get(); }
 
  private:
   PacketSource() = default;

@@ -35,10 +35,36 @@ void sleep_until_monotonic(std::int64_t deadline_ns, const std::atomic<bool>& st
 // Bounding it keeps start + offset far inside int64 whatever the file's timestamps say.
 constexpr double kMaxReplayOffsetNs = 1e15;
 
+void copy_text(char (&to)[ReceiveCounters::kDamageTextBytes], std::string_view text) noexcept {
+  const std::size_t n = std::min(text.size(), sizeof to - 1);
+  std::memcpy(to, text.data(), n);
+  to[n] = '\0';
+}
+
 }  // namespace
 
+// The reader's damage counts into the health's counters, and the first damage named once.
+void ReplaySource::publish_damage(ReceiveCounters& counters) noexcept {
+  const CaptureStats& stats = reader_.stats();
+  const auto publish = [](std::atomic<std::uint64_t>& counter, std::uint64_t value) {
+    if (counter.load(std::memory_order_relaxed) != value)
+      counter.store(value, std::memory_order_relaxed);
+  };
+  publish(counters.capture_records_malformed, stats.malformed);
+  publish(counters.capture_chunks_skipped, stats.chunks_skipped);
+  publish(counters.capture_packets_skipped, stats.packets_skipped);
+  publish(counters.capture_records_damaged, stats.records_damaged);
+  if (damage_named_) return;
+  if (reader_.first_damage().empty()) return;
+  copy_text(counters.capture_first_damage, reader_.first_damage());
+  damage_named_ = true;
+  counters.capture_damage_named.store(true, std::memory_order_release);
+}
+
 ReplaySource::ReplaySource(const ReplayOptions& options)
-    : options_(options), reader_(options.path, CaptureReader::Options{options.destination_port}) {
+    : options_(options),
+      reader_(options.path, CaptureReader::Options{options.destination_port}),
+      size_bytes_(reader_.size_bytes()) {
   if (!reader_.has_endpoints()) {
     // MCAP packets carry no addresses: neither filter can apply. What pandarcapd recorded there
     // is already the sensor's datagrams to its data port (the live receiver's own filters).
@@ -86,9 +112,12 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
       break;
     }
     const CaptureStatus status = reader_.next(record);
+    publish_damage(counters);
+    if ((reader_.stats().records & 1023) == 0)
+      bytes_read_.store(reader_.bytes_read(), std::memory_order_relaxed);
     if (status != CaptureStatus::kRecord) {
       result.status = status;
-      if (status == CaptureStatus::kError) result.error = reader_.error();
+      if (status != CaptureStatus::kEnd) result.error = reader_.error();
       break;
     }
     if (options_.rate) {
@@ -141,7 +170,23 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
     if (pending == slots.size()) publish();
   }
   publish();
+  bytes_read_.store(size_bytes_, std::memory_order_relaxed);
   result.capture = reader_.stats();
+  result.first_damage = reader_.first_damage();
+  // How the file ended, for the last health record (read by the writer after `capture_end`).
+  using End = ReceiveCounters::CaptureEnd;
+  End end = End::kWhole;
+  if (result.status == CaptureStatus::kTruncated) {
+    end = End::kTruncated;
+    copy_text(counters.capture_end_text, result.error);
+  } else if (result.status == CaptureStatus::kError) {
+    end = End::kDamaged;
+    copy_text(counters.capture_end_text, result.error);
+  } else if (damage_named_) {
+    end = End::kDamaged;  // read to its end over damage: the first damage names it
+  }
+  if (!result.stopped || end != End::kWhole)
+    counters.capture_end.store(end, std::memory_order_release);
   return result;
 }
 

@@ -27,9 +27,14 @@ struct ReplayOptions {
   std::string sensor_ip;  // "" = every source
 };
 
+// Damage: a replay reads over what it can (an MCAP file's damaged chunks, skipped by its chunk
+// index; pcap records whose headers are damaged), counts it in ReceiveCounters (capture_*) and
+// names the first, and says how the file ended there (capture_end) before the source is done:
+// the health of a replay that met damage is degraded from then on, to its last record.
 struct ReplayResult {
   CaptureStatus status = CaptureStatus::kEnd;  // kEnd, kTruncated or kError
-  std::string error;                           // for kError
+  std::string error;                           // for kTruncated and kError
+  std::string first_damage;                    // read over without stopping; "" when none
   CaptureStats capture;
   bool stopped = false;  // stopped early by a signal
 };
@@ -42,10 +47,20 @@ class ReplaySource {
   ReplayResult run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
                    std::atomic<std::uint64_t>& heartbeat);
 
+  // How far run() is through the file, in its bytes (updated every 1024 records), and its size:
+  // read by the main thread for the progress line.
+  std::uint64_t bytes_read() const noexcept { return bytes_read_.load(std::memory_order_relaxed); }
+  std::uint64_t size_bytes() const noexcept { return size_bytes_; }
+
  private:
   ReplayOptions options_;
   CaptureReader reader_;
   std::optional<std::uint32_t> sensor_ip_;  // host order, as Endpoint
+  bool damage_named_ = false;
+  std::atomic<std::uint64_t> bytes_read_{0};
+  std::uint64_t size_bytes_ = 0;
+
+  void publish_damage(ReceiveCounters& counters) noexcept;
 };
 
 }  // namespace pandarcap
