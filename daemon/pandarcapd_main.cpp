@@ -94,6 +94,13 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
         "time, or left out), no frame cut for them\n",
         c.duplicate_packets, c.outlier_packets);
   }
+  if (c.points_missing > 0 || c.standing_packets > 0 || c.other_sensor_packets > 0 ||
+      c.sequence_resets > 0) {
+    fmt::print(
+        "{} points missing (lost packets; frames that lost them are partial), {} standing packets "
+        "(motor not turning), {} packets from another sensor (dropped), {} sequence resets\n",
+        c.points_missing, c.standing_packets, c.other_sensor_packets, c.sequence_resets);
+  }
   if (wo.mcap) {
     fmt::print("mcap: {} messages written, {} not written, {} not recorded, {} bytes{}\n",
                c.mcap_messages_written - c.mcap_messages_lost, c.mcap_messages_not_written,
