@@ -46,8 +46,8 @@ void FrameAssembler::start_stream(std::uint16_t azimuth_cdeg) {
   next_open_index_ = floor_div(position_ + config_.relative_azimuth_min_cdeg, kFullCircle);
 }
 
-void FrameAssembler::count_gap(const PacketMeta& meta, std::int64_t gap_ns) {
-  ++stats_.discontinuities;
+void FrameAssembler::count_lost(const PacketMeta& meta, std::int64_t gap_ns,
+                                std::uint16_t previous_first_azimuth) {
   // Longer than a second is an outage or a clock that leapt, not packets to count.
   if (gap_ns <= 0 || gap_ns > 1'000'000'000) return;
   const double period = static_cast<double>(packet_period_ns(meta.return_mode));
@@ -56,7 +56,7 @@ void FrameAssembler::count_gap(const PacketMeta& meta, std::int64_t gap_ns) {
   if (missing <= 0) return;
   // A loss: the azimuth went on as the time did. A clock that stepped: it did not.
   const double expected = static_cast<double>(gap_ns) * meta.motor_rpm / 60e9 * kFullCircle;
-  const int actual = signed_step(meta.block_azimuth_cdeg[0], previous_first_azimuth_);
+  const int actual = signed_step(meta.block_azimuth_cdeg[0], previous_first_azimuth);
   const double off = std::remainder(actual - expected, static_cast<double>(kFullCircle));
   if (std::abs(off) <= 200.0 + 0.02 * expected) stats_.packets_missing += missing;
 }
@@ -64,14 +64,19 @@ void FrameAssembler::count_gap(const PacketMeta& meta, std::int64_t gap_ns) {
 void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> points,
                                 const DecodedPacket& layout) {
   ++packet_counter_;
-  if (started_ && meta.time_valid && previous_time_valid_ && meta.motor_rpm > 0) {
+  // The time since the packet before, when both are known: what a discontinuity lost.
+  // (Known across a discontinuity the stream decoder called: its loss is counted here.)
+  const bool timed =
+      packet_counter_ > 1 && meta.time_valid && previous_time_valid_ && meta.motor_rpm > 0;
+  const std::int64_t gap_ns = meta.t0_ns - previous_t0_ns_;
+  const std::uint16_t previous_first = previous_first_azimuth_;
+  if (timed) {
     // More than half a revolution without packets: whole revolutions may be missing, which the
     // azimuth alone cannot tell.
     const std::int64_t half_revolution_ns = 30'000'000'000LL / meta.motor_rpm;
-    const std::int64_t gap = meta.t0_ns - previous_t0_ns_;
-    if (gap > half_revolution_ns || gap < -half_revolution_ns) {
-      count_gap(meta, gap);
-      flush();
+    if (gap_ns > half_revolution_ns || gap_ns < -half_revolution_ns) {
+      count_lost(meta, gap_ns, previous_first);
+      if (started_) discontinuity();
     }
   }
   if (started_) {
@@ -117,6 +122,8 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
       const int step = signed_step(azimuth, previous_azimuth_);
       if (std::abs(step) > kMaxStepCdeg) {
         ++stats_.discontinuities;
+        // Between two packets, a step that the time says is a loss is counted as one.
+        if (b == 0 && timed) count_lost(meta, gap_ns, previous_first);
         flush();
         start_stream(azimuth);
         restarted = true;
@@ -310,6 +317,11 @@ void FrameAssembler::close_through(std::int64_t frame_index, bool partial) {
     if (slot->in_use && slot->index <= frame_index) close_slot(*slot, partial);
   }
   next_open_index_ = std::max(next_open_index_, frame_index + 1);
+}
+
+void FrameAssembler::discontinuity() {
+  ++stats_.discontinuities;
+  flush();
 }
 
 void FrameAssembler::flush() {

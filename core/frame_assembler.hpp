@@ -14,9 +14,10 @@
 //  - packet loss: U advances by the real azimuth step, so losing packets around the cut still
 //    puts every point in the right frame;
 //  - discontinuities (an azimuth step of more than 90°, a packet-time gap of more than half a
-//    revolution, or a frame that would hold more than 1.25 revolutions of packets at the tail's
-//    speed: a motor that slowed or turns back and forth): the open frames are closed as partial
-//    and cutting restarts. A frame never holds more than one revolution of azimuth, nor of the
+//    revolution, a frame that would hold more than 1.25 revolutions of packets at the tail's
+//    speed: a motor that slowed or turns back and forth; or the stream decoder's word, at a
+//    change that stepped the rotation back): the open frames are closed as partial and cutting
+//    restarts. A frame never holds more than one revolution of azimuth, nor of the
 //    sensor's time (counted in packets, its firing clock, which a glitching tail time does not
 //    stretch);
 //  - completeness: a frame is complete only if its packets covered every azimuth its points can
@@ -24,8 +25,9 @@
 //    packet's step wide, and makes the frame partial, however few it lacks. Packets the stream
 //    decoder left out on purpose (PacketMeta::skipped_before) cover their place. What was lost
 //    is counted in packets (packets_missing): the uncovered azimuth inside frames over the
-//    packet's step, and across a time gap of more than half a revolution, the packets the time
-//    says were sent (when the azimuth agrees: a loss, not a clock that stepped);
+//    packet's step, and across a discontinuity between two packets (a time gap of more than half
+//    a revolution, an azimuth step over 90°), the packets the time says were sent, up to a
+//    second's (when the azimuth agrees: a loss, not a clock that stepped);
 //  - the first frame after start or a discontinuity is partial unless the stream started before
 //    it began for every channel; frames open at flush() are partial;
 //  - a small backward step (a reordered packet) moves U back. A frame is closed kCloseMarginCdeg
@@ -92,6 +94,8 @@ class FrameAssembler {
   // Closes the open frames as partial and forgets the rotation: the next packet starts a new
   // stream (end of input, shutdown, a long silence).
   void flush();
+  // The same, counted as a discontinuity: the caller saw the stream change.
+  void discontinuity();
 
   const AssemblerStats& stats() const noexcept { return stats_; }
 
@@ -112,9 +116,11 @@ class FrameAssembler {
   };
 
   void start_stream(std::uint16_t azimuth_cdeg);
-  // A time gap of more than half a revolution (`gap_ns`, valid times) before `meta`: a
-  // discontinuity; the packets the time says were lost are counted when the azimuth agrees.
-  void count_gap(const PacketMeta& meta, std::int64_t gap_ns);
+  // A discontinuity `gap_ns` (valid times) after the packet that began at
+  // `previous_first_azimuth`: the packets the time says were lost are counted when the azimuth
+  // agrees.
+  void count_lost(const PacketMeta& meta, std::int64_t gap_ns,
+                  std::uint16_t previous_first_azimuth);
   // Whether `slot`'s frame lacks azimuth (a lost packet); counts what it lacks.
   bool holed(const Slot& slot, bool whole_candidate);
   Slot* slot_for(std::int64_t frame_index);

@@ -248,6 +248,12 @@ void StreamDecoder::take_change() {
     if (dt < 0) ++stats_.backward_timestamps;
     if (dt > kTimestampJumpNs) ++stats_.timestamp_jumps;
   }
+  // A rotation that resumes behind where it was is no continuation of it, however small the
+  // step: the frames in progress end there (a step forward is the assembler's to judge).
+  if (decode_points_ && last_placed_ &&
+      signed_step_cdeg(first.rotation.azimuth_cdeg, last_placed_->azimuth_cdeg) < 0) {
+    assembler_.discontinuity();
+  }
   // Whatever was left out belonged to the old stream.
   skipped_ = 0;
   for (std::size_t i = start; i < held_.size(); ++i)
