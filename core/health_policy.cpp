@@ -32,11 +32,14 @@ void motor_problems(const HealthCounters& c, const HealthCounters& p,
   const bool tail_zero = arriving && g.seconds_since_last_packet >= 0 && g.rpm_tail == 0;
   // A motor stops for longer than 2 ms: fewer standing packets are copies or glitches.
   const bool stood = standing >= kStandingPacketsForStop;
-  if (tail_zero || stood || frameless > 0) {
+  // An azimuth that barely turns (its jitter keeps it from standing still) is a stopped motor.
+  const bool crawling = arriving && g.rpm_measured > 0 && g.rpm_measured < 0.1 * expected.rpm;
+  if (tail_zero || stood || crawling || frameless > 0) {
     problem("motor stopped:");
     const auto out = std::back_inserter(problems);
     if (tail_zero) problems += " the packets' tail says 0 RPM,";
     if (stood) fmt::format_to(out, " azimuth standing in {} packets,", standing);
+    if (crawling) fmt::format_to(out, " azimuth turning at {:.1f} RPM,", g.rpm_measured);
     if (frameless > 0) fmt::format_to(out, " no frame closed in {} packets,", frameless);
     problems.pop_back();  // the last comma
   } else if (standing > 0) {
@@ -45,7 +48,7 @@ void motor_problems(const HealthCounters& c, const HealthCounters& p,
   if (g.seconds_since_last_packet >= 0 && g.rpm_tail > 0 &&
       std::abs(g.rpm_tail - expected.rpm) > 0.1 * expected.rpm) {
     problem("motor at {:.0f} RPM (expected {})", g.rpm_tail, expected.rpm);
-  } else if (arriving && g.rpm_measured > 0 &&
+  } else if (arriving && !crawling && g.rpm_measured > 0 &&
              std::abs(g.rpm_measured - expected.rpm) > 0.1 * expected.rpm) {
     // The tail may say what the motor was set to; the azimuth says how it turns.
     problem("motor measured at {:.0f} RPM (expected {})", g.rpm_measured, expected.rpm);

@@ -15,7 +15,8 @@
 //               rejects, duplicates, outliers, timestamp troubles, the high-temperature flag, a
 //               return mode other than expected, a motor that stopped ("motor stopped: the
 //               packets' tail says 0 RPM, azimuth standing in 3600 packets, no frame closed in
-//               2521 packets"), a motor speed more than 10 % off (the tail's, else the one
+//               2521 packets"; or "azimuth turning at 12.5 RPM", under a tenth of the expected
+//               speed), a motor speed more than 10 % off (the tail's, else the one
 //               measured from the azimuth), a packet rate more than 10 % off the sensor's
 //               ("packet rate 7200/s (expected 3600 in dual return)"), a sensor clock
 //               off from the host's by more than the bound ("sensor clock off by 168035162 s

@@ -319,6 +319,11 @@ TEST_CASE("Health: the speed measured from the azimuth is checked when the tail'
   g.rpm_tail = 300;  // both off: the tail's is said, once
   classify_health(now, before, kLast, false, "", g);
   CHECK(g.reason == "motor at 300 RPM (expected 600)");
+  // An azimuth that barely turns: a stopped motor, whatever the tail says.
+  g.rpm_tail = 600;
+  g.rpm_measured = 12.5;
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.reason == "motor stopped: azimuth turning at 12.5 RPM");
 }
 
 TEST_CASE("Health: a packet rate more than 10 % off the sensor's is a problem of its own",
