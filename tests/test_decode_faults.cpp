@@ -261,7 +261,8 @@ TEST_CASE(
     CHECK(reasons.find("motor stopped") != std::string::npos);
     CHECK(reasons.find("points missing") != std::string::npos);
     CHECK(reasons.find("sequence resets") != std::string::npos);
-    CHECK(r.out.find("standing packets (motor not turning)") != std::string::npos);
+    CHECK(r.out.find(std::to_string(health_counter(h, "standing_packets")) +
+                     " standing packets (motor not turning; left out)") != std::string::npos);
   }
 }
 
