@@ -207,7 +207,10 @@ void StreamDecoder::settle_outliers(const RotationPoint& after) {
   const RotationPoint before = *last_placed_;
   const int to_after = signed_step_cdeg(after.azimuth_cdeg, before.azimuth_cdeg);
   const std::int64_t dt = after.t0_ns - before.t0_ns;
-  const bool timed = to_after > 0 && dt > 0 && before.time_valid && after.time_valid;
+  // (Within a second: a stream without a speed follows by azimuth alone, whatever its times
+  // say, and the interpolation below must not overflow.)
+  const bool timed =
+      to_after > 0 && dt > 0 && dt <= kTimestampJumpNs && before.time_valid && after.time_valid;
   int placed_to = 0;  // azimuth of the last one placed, from `before`: they stay in order
   for (std::size_t i = 0; i < held_.size(); ++i) {
     ++stats_.outliers;
