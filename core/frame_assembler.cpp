@@ -90,9 +90,8 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
       const double rpm =
           std::clamp<double>(std::min(slot.slowest_rpm, meta.motor_rpm), kSlowestRpm, kFastestRpm);
       if (slot.packets + 1 > 1.25 * packets_per_revolution(meta.return_mode, rpm)) {
-        ++stats_.discontinuities;
         ++stats_.frames_overlong;
-        flush();
+        discontinuity();
         break;
       }
     }
@@ -178,8 +177,7 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
     // Frames that no channel can reach any more are done, a few packets later: a packet that
     // arrives a little late (reordered) still finds its frame open.
     const std::int64_t done =
-        floor_div(position_ + config_.relative_azimuth_min_cdeg - FrameAssembler::kCloseMarginCdeg,
-                  kFullCircle);
+        floor_div(position_ + config_.relative_azimuth_min_cdeg - kCloseMarginCdeg, kFullCircle);
     if (done > next_open_index_) close_through(done - 1, false);
   }
 }

@@ -562,18 +562,10 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   out += ",\"return_mode\":";
   append_json_string(out, h.gauges.return_mode);
   // The sensor's source, and another sensor's (core/source_lock.hpp): "a.b.c.d:port" or null.
-  for (const auto& [name, source] :
-       {std::pair{"sensor_source", h.gauges.sensor_source},
-        std::pair{"other_sensor_source", h.gauges.other_sensor_source}}) {
-    append(",\"{}\":", name);
-    if (source == 0) {
-      out += "null";
-    } else {
-      out += '"';
-      append_ipv4_source(out, source);
-      out += '"';
-    }
-  }
+  out += ",\"sensor_source\":";
+  append_ipv4_source_json(out, h.gauges.sensor_source);
+  out += ",\"other_sensor_source\":";
+  append_ipv4_source_json(out, h.gauges.other_sensor_source);
   append(",\"high_temperature\":{}", h.gauges.high_temperature);
   if (h.gauges.sensor_clock_offset_known) {
     out += ",\"sensor_clock_offset_seconds\":";

@@ -46,4 +46,14 @@ void append_ipv4_source(std::string& out, std::uint64_t source) {
                  (ip >> 8) & 0xFF, ip & 0xFF, packed_port(source));
 }
 
+void append_ipv4_source_json(std::string& out, std::uint64_t source) {
+  if (source == 0) {
+    out += "null";
+    return;
+  }
+  out += '"';
+  append_ipv4_source(out, source);
+  out += '"';
+}
+
 }  // namespace pandarcap

@@ -43,5 +43,7 @@ constexpr std::uint16_t packed_port(std::uint64_t source) noexcept {
 // Appends "192.168.1.201:2368" (a packed source; "none" for 0). Allocates nothing once `out`
 // has room for 21 more characters.
 void append_ipv4_source(std::string& out, std::uint64_t source);
+// The same as a JSON value: the source in quotes, or null for none.
+void append_ipv4_source_json(std::string& out, std::uint64_t source);
 
 }  // namespace pandarcap

@@ -3,8 +3,9 @@
 // daemon's decode worker, pandarcap-inspect and the tests all run packets through this.
 //
 // Duplicates: a payload with the same bytes as one of the last kDuplicateWindow (a switch loop, a
-// mirror port), or whose UDP sequence number has already arrived, is counted and not decoded
-// again.
+// mirror port), or whose UDP sequence number has already arrived at the time it says (a number
+// seen before at a new time is the sensor's counter restarting: core/sequence_tracker.hpp), is
+// counted and not decoded again.
 //
 // The outlier rule: a glitch costs its packets, not the revolution around it. A packet that
 // does not follow the last one placed (follows(), core/outlier_rule.hpp) is held back, with the
@@ -17,8 +18,8 @@
 //    revolution stays whole;
 //  - the stream changed: kChangeRunPackets (17) packets follow each other and not the last one
 //    placed (a sensor restart, a long gap, a new speed, a clock that stepped for good). They are
-//    placed, and the frame assembler cuts as before; held packets that were not part of that run
-//    are outliers.
+//    placed, and the frame assembler cuts as before (told to, when the rotation resumes behind
+//    where it was); held packets that were not part of that run are outliers.
 // With no packet placed yet (the start, after flush()), the first 17 that follow each other
 // start the stream, so a glitch right after the start is an outlier too. flush() places the run
 // in progress.
