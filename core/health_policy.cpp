@@ -15,13 +15,10 @@ namespace pandarcap {
 
 namespace {
 constexpr auto kPtpLocked = static_cast<std::uint8_t>(ptc::PtpState::kLocked);
-}  // namespace
-
-namespace {
 
 // A motor that stands (or turns too slowly), said whatever the tail claims: its speed from the
-// tail and from the azimuth against the time, packets whose azimuth stood, frames that stopped
-// closing; and a packet rate that is not the sensor's.
+// azimuth against the time, packets whose azimuth stood, frames that stopped closing; and a
+// packet rate that is not the sensor's.
 template <typename Problem>
 void motor_problems(const HealthCounters& c, const HealthCounters& p,
                     const HealthExpectations& expected, const HealthGauges& g,
@@ -45,11 +42,11 @@ void motor_problems(const HealthCounters& c, const HealthCounters& p,
   } else if (standing > 0) {
     problem("{} packets with the azimuth standing", standing);
   }
-  if (g.seconds_since_last_packet >= 0 && g.rpm_tail > 0 &&
-      std::abs(g.rpm_tail - expected.rpm) > 0.1 * expected.rpm) {
-    problem("motor at {:.0f} RPM (expected {})", g.rpm_tail, expected.rpm);
-  } else if (arriving && !crawling && g.rpm_measured > 0 &&
-             std::abs(g.rpm_measured - expected.rpm) > 0.1 * expected.rpm) {
+  // The tail's speed is checked by the caller; when it is fine (or 0), the azimuth's.
+  const bool tail_off = g.seconds_since_last_packet >= 0 && g.rpm_tail > 0 &&
+                        std::abs(g.rpm_tail - expected.rpm) > 0.1 * expected.rpm;
+  if (!tail_off && arriving && !crawling && g.rpm_measured > 0 &&
+      std::abs(g.rpm_measured - expected.rpm) > 0.1 * expected.rpm) {
     // The tail may say what the motor was set to; the azimuth says how it turns.
     problem("motor measured at {:.0f} RPM (expected {})", g.rpm_measured, expected.rpm);
   }
@@ -124,6 +121,10 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   if (expected.return_mode != "any" && !g.return_mode.empty() &&
       g.return_mode != expected.return_mode) {
     problem("return mode {} (expected {})", g.return_mode, expected.return_mode);
+  }
+  if (g.seconds_since_last_packet >= 0 && g.rpm_tail > 0 &&
+      std::abs(g.rpm_tail - expected.rpm) > 0.1 * expected.rpm) {
+    problem("motor at {:.0f} RPM (expected {})", g.rpm_tail, expected.rpm);
   }
   motor_problems(c, p, expected, g, problems, problem);
   if (expected.max_clock_offset_seconds > 0 && g.sensor_clock_offset_known &&
