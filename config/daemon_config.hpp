@@ -11,7 +11,7 @@
 namespace pandarcap {
 
 struct SensorSection {
-  std::string sensor_ip;               // accept datagrams only from this IPv4; "" = any source
+  std::string sensor_ip;  // accept datagrams only from this IPv4; "" = the first to send a packet
   std::string host_ip = "0.0.0.0";     // local address the UDP socket binds to
   std::string multicast_ip;            // group to join; "" = unicast/broadcast
   std::string multicast_interface_ip;  // local interface address for the join; "" = any

@@ -36,6 +36,8 @@ std::string_view to_string(FilterReason reason) noexcept {
       return "dual_too_close";
     case FilterReason::kOutlier:
       return "outlier";
+    case FilterReason::kStanding:
+      return "standing";
   }
   return "unknown";
 }

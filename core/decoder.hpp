@@ -47,8 +47,9 @@ enum class FilterReason : std::uint8_t {
   kDualDuplicate,  // dual: identical to the strongest echo
   kDualTooClose,   // dual: within dual_return_distance_threshold of the strongest echo
   kOutlier,        // the packet was an isolated outlier in the rotation (core/stream_decoder.hpp)
+  kStanding,       // the motor did not turn: the packet's azimuth stood (core/stream_decoder.hpp)
 };
-inline constexpr std::size_t kFilterReasonCount = 6;
+inline constexpr std::size_t kFilterReasonCount = 7;
 std::string_view to_string(FilterReason reason) noexcept;  // "no_return", ...
 
 // The range filter and dual-return threshold in raw 4 mm units (inclusive limits).

@@ -37,9 +37,11 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
 // "counters" keys (= field) are all generated from this list, in this order, so a counter is
 // added in exactly one place. The help text is the field's documentation. Counters that feed the
 // health state: receive_errors makes it "error"; kernel_drops, ring_overruns,
-// frames_dropped_no_arena, pcap_packets_not_recorded, sequence_lost, azimuth_gaps,
-// packets_rejected, duplicate_packets, outlier_packets, the timestamp counters, write_errors and
-// files_removed_before_upload make it "degraded" while they grow
+// frames_dropped_no_arena, pcap_packets_not_recorded, sequence_lost, points_missing,
+// sequence_reordered, sequence_resets, azimuth_gaps, packets_rejected, duplicate_packets,
+// outlier_packets, standing_packets, frameless_packets, other_sensor_packets,
+// sensor_source_changes, the timestamp counters, write_errors and files_removed_before_upload
+// make it "degraded" while they grow
 // (core/health_policy.hpp).
 // clang-format off
 #define PANDARCAP_HEALTH_COUNTERS(X)                                                               \
@@ -47,7 +49,14 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
     "UDP datagrams delivered by the socket or the replay, from any source")                        \
   X(bytes_received, "received_bytes", "UDP payload bytes received, before truncation")             \
   X(foreign_datagrams, "foreign_datagrams",                                                        \
-    "Datagrams from a source other than sensor_ip, dropped")                                       \
+    "Datagrams from a source other than the sensor's (sensor_ip, or the first to send a packet), " \
+    "dropped")                                                                                     \
+  X(other_sensor_packets, "other_sensor_packets",                                                  \
+    "Valid Pandar packets from a source other than the sensor's: a second sensor on the port. "    \
+    "Dropped (also in foreign_datagrams)")                                                         \
+  X(sensor_source_changes, "sensor_source_changes",                                                \
+    "Times another source was taken as the sensor's, the sensor's having been silent for a "       \
+    "second (no sensor_ip)")                                                                       \
   X(truncated_datagrams, "truncated_datagrams",                                                    \
     "Datagrams larger than a ring slot (also rejected as bad_length)")                             \
   X(kernel_drops, "kernel_drops",                                                                  \
@@ -60,9 +69,17 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(outlier_packets, "outlier_packets",                                                            \
     "Isolated packets out of the rotation's order: placed by azimuth with their time fixed, or "   \
     "left out of the frames when their azimuth is out of order (points filtered: outlier)")       \
+  X(standing_packets, "standing_packets",                                                          \
+    "Packets whose azimuth did not move from the packet before: the motor not turning. Left out "  \
+    "of the frames (points filtered: standing)")                                                   \
+  X(frameless_packets, "frameless_packets",                                                        \
+    "Packets that arrived while no frame had closed for three revolutions' worth of packets")      \
   X(sequence_gaps, "sequence_gaps", "Jumps forward in the UDP sequence number")                    \
   X(sequence_lost, "sequence_lost_packets",                                                        \
     "Packets missing from the UDP sequence (late arrivals forgiven)")                              \
+  X(points_missing, "points_missing",                                                              \
+    "Channel slots of lost packets (400 a packet): the azimuth frames lacked, and the packets "    \
+    "the time says a gap of more than half a revolution held")                                     \
   X(sequence_duplicates, "sequence_duplicate_packets",                                             \
     "Packets whose UDP sequence number had already arrived")                                       \
   X(sequence_reordered, "sequence_reordered_packets",                                              \
@@ -72,9 +89,11 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(azimuth_gaps, "azimuth_gaps",                                                                  \
     "Azimuth jumps larger than one packet's worth (packets without a UDP sequence)")               \
   X(static_timestamp_packets, "static_timestamp_packets", "Packets whose time did not advance")    \
-  X(backward_timestamp_packets, "backward_timestamp_packets", "Packets whose time went back")      \
+  X(backward_timestamp_packets, "backward_timestamp_packets",                                      \
+    "Packets whose time went back from the stream's (a glitch, or a clock stepped back)")          \
   X(timestamp_jump_packets, "timestamp_jump_packets",                                              \
-    "Packets whose time leapt more than a second forward")                                         \
+    "Packets whose time leapt forward: ahead of the packets after them (a glitch), or the "        \
+    "stream's clock more than a second on")                                                        \
   X(invalid_time_packets, "invalid_time_packets",                                                  \
     "Packets with an impossible tail date or microsecond field")                                   \
   X(high_temperature_packets, "high_temperature_packets",                                          \
@@ -257,9 +276,17 @@ struct HealthFallbackGauges {
 };
 
 struct HealthGauges {
-  double rpm_tail = 0;            // mean motor speed reported in the tails over the last second
-  double rpm_measured = 0;        // from azimuth progression over packet time, last second
-  double frame_rate_hz = 0;       // complete frames cut in the last second
+  double rpm_tail = 0;       // mean motor speed reported in the tails over the last second
+  double rpm_measured = 0;   // from azimuth progression over packet time, last second
+  double frame_rate_hz = 0;  // complete frames cut in the last second
+  // Packets per second by the sensor's own clock over the last second (StreamStats'
+  // rate_packets / rate_time_ns); 0 while unknown. The sensor sends a fixed rate
+  // (core/sensor_model.hpp): more is two streams on one port, less is loss.
+  double packet_rate_hz = 0;
+  // The sensor's source and, when one sent valid packets, another's (core/source_lock.hpp), as
+  // pack_ipv4_source (core/ipv4.hpp); 0: none.
+  std::uint64_t sensor_source = 0;
+  std::uint64_t other_sensor_source = 0;
   std::string return_mode;        // "last", "strongest", "dual", or "" before the first packet
   bool high_temperature = false;  // the last packet's flag
   // The sensor's clock minus the host's: the last accepted packet's time (its tail) minus the
@@ -308,8 +335,9 @@ struct HealthSnapshot {
   HealthGauges gauges;
   // Whether points were decoded and frames cut: false when nothing consumes them (output.frames
   // and output.mcap off; the decoder then does only what the health needs). Then the counters
-  // points, points_dropped_frame_full, frames_complete, frames_partial, frames_decimated and
-  // frames_fragment, the filtered points by reason and the frame_rate_hz gauge are left out of
+  // points, points_dropped_frame_full, frames_complete, frames_partial, frames_decimated,
+  // frames_fragment, points_missing and frameless_packets, the filtered points by reason and the
+  // frame_rate_hz gauge are left out of
   // both renderings (not counted is not 0); every other counter, frames_dropped_no_arena and
   // frames_written included (no frame is cut, so none is lost or written), keeps its meaning.
   bool points_counted = true;

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "core/health_format_parts.hpp"
+#include "core/ipv4.hpp"
 #include "core/ptc/ptc_messages.hpp"
 #include "core/ptc/status_plausibility.hpp"
 #include "core/text_encoding.hpp"
@@ -70,6 +71,8 @@ constexpr GaugeField kGauges[] = {
      "Motor speed measured from azimuth progression over packet time, last second"},
     {"frame_rate_hz", "frame_rate_hertz", &HealthGauges::frame_rate_hz,
      "Complete frames (full revolutions) cut per second, last second"},
+    {"packet_rate_hz", "packet_rate_hertz", &HealthGauges::packet_rate_hz,
+     "Packets per second by the sensor's own clock, last second; 0 while unknown"},
     {"seconds_since_last_packet", "seconds_since_last_packet",
      &HealthGauges::seconds_since_last_packet,
      "Seconds since the last accepted packet; -1 before the first"},
@@ -89,7 +92,9 @@ constexpr bool counts_points(std::uint64_t HealthCounters::*member) {
   return member == &HealthCounters::points ||
          member == &HealthCounters::points_dropped_frame_full ||
          member == &HealthCounters::frames_complete || member == &HealthCounters::frames_partial ||
-         member == &HealthCounters::frames_decimated || member == &HealthCounters::frames_fragment;
+         member == &HealthCounters::frames_decimated ||
+         member == &HealthCounters::frames_fragment || member == &HealthCounters::points_missing ||
+         member == &HealthCounters::frameless_packets;
 }
 
 // Whether a counter or gauge is in this record (see counts_points).
@@ -440,6 +445,11 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   }
   out += ",\"return_mode\":";
   append_json_string(out, h.gauges.return_mode);
+  // The sensor's source, and another sensor's (core/source_lock.hpp): "a.b.c.d:port" or null.
+  out += ",\"sensor_source\":";
+  append_ipv4_source_json(out, h.gauges.sensor_source);
+  out += ",\"other_sensor_source\":";
+  append_ipv4_source_json(out, h.gauges.other_sensor_source);
   append(",\"high_temperature\":{}", h.gauges.high_temperature);
   if (h.gauges.sensor_clock_offset_known) {
     out += ",\"sensor_clock_offset_seconds\":";

@@ -8,11 +8,19 @@
 //               "no packet received yet" / "no packet for 2.5 s".
 //   - degraded: data flows but something grew or looks wrong; every problem is named, joined by
 //               "; " in a fixed order: write errors first (with the last error's text), then
-//               kernel drops, ring overruns, frames dropped, packets not recorded, packets lost,
-//               files removed before they were uploaded ("1 file removed before it was uploaded
-//               (9.0 MB; the last by the free-space floor: pandarcap_..._0003.pcap.zst)"),
-//               azimuth gaps, rejects, timestamp troubles, the high-temperature flag, a return
-//               mode other than expected, a motor speed more than 10 % off, a sensor clock
+//               kernel drops, ring overruns, a second sensor on the port ("3600 packets from a
+//               second sensor at 127.0.0.2:2368 (the sensor is 127.0.0.1:2368): one sensor per
+//               daemon") or the sensor's source changed, frames dropped, packets not recorded,
+//               packets lost, files removed before they were uploaded ("1 file removed before it
+//               was uploaded (9.0 MB; the last by the free-space floor:
+//               pandarcap_..._0003.pcap.zst)"), sequence resets and reorders, azimuth gaps, points missing,
+//               rejects, duplicates, outliers, timestamp troubles, the high-temperature flag, a
+//               return mode other than expected, a motor that stopped ("motor stopped: the
+//               packets' tail says 0 RPM, azimuth standing in 3600 packets, no frame closed in
+//               2521 packets"; or "azimuth turning at 12.5 RPM", under a tenth of the expected
+//               speed), a motor speed more than 10 % off (the tail's, else the one
+//               measured from the azimuth), a packet rate more than 10 % off the sensor's
+//               ("packet rate 7200/s (expected 3600 in dual return)"), a sensor clock
 //               off from the host's by more than the bound ("sensor clock off by 168035162 s
 //               (behind the host): not synchronised?"), then the
 //               sensor's own status (gauges.sensor_status): stale ("sensor status stale: no
@@ -35,6 +43,10 @@
 #include "health.hpp"
 
 namespace pandarcap {
+
+// Standing packets (core/stream_decoder.hpp) in one record that say the motor stopped: a stop
+// lasts longer than 2 ms. Fewer are copies or glitches, named as such.
+inline constexpr std::uint64_t kStandingPacketsForStop = 8;
 
 struct HealthExpectations {
   std::string_view return_mode = "any";  // "any", or the mode the sensor must send

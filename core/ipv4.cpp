@@ -1,7 +1,9 @@
 #include "core/ipv4.hpp"
 
 #include <arpa/inet.h>
+#include <fmt/format.h>
 
+#include <iterator>
 #include <stdexcept>
 
 namespace pandarcap {
@@ -32,6 +34,26 @@ sockaddr_in ipv4_endpoint(const std::string& text, std::uint16_t port, const cha
   endpoint.sin_port = htons(port);
   endpoint.sin_addr = require_ipv4(text, what);
   return endpoint;
+}
+
+void append_ipv4_source(std::string& out, std::uint64_t source) {
+  if (source == 0) {
+    out += "none";
+    return;
+  }
+  const std::uint32_t ip = packed_ipv4(source);
+  fmt::format_to(std::back_inserter(out), "{}.{}.{}.{}:{}", ip >> 24, (ip >> 16) & 0xFF,
+                 (ip >> 8) & 0xFF, ip & 0xFF, packed_port(source));
+}
+
+void append_ipv4_source_json(std::string& out, std::uint64_t source) {
+  if (source == 0) {
+    out += "null";
+    return;
+  }
+  out += '"';
+  append_ipv4_source(out, source);
+  out += '"';
 }
 
 }  // namespace pandarcap

@@ -7,10 +7,20 @@
 // bitmap), so a late packet is told apart from a repeat: only a number that was really missing
 // is "reordered" and forgiven from `lost`; a number that already arrived is a duplicate, however
 // far back it is inside the window.
+//
+// The packet's time, where the caller has one, settles what the numbers alone cannot. A sensor
+// that restarts within kReorderWindow packets of the start (or of its last restart) sends
+// numbers that have already arrived, or that look like a reordered loss: a copy carries the time
+// of the packet it copies, as old as its number says; a restarted counter's packet is new. So a
+// number behind the highest whose time is not that of its place (newer than the highest's, or
+// far from what its place gives) is a reset. Likewise a jump ahead much larger than the packets
+// the time says were sent (a counter that restarted near 2^32, or at a random number) is a reset,
+// not a loss.
 #pragma once
 
 #include <array>
 #include <cstdint>
+#include <optional>
 
 namespace pandarcap {
 
@@ -23,6 +33,12 @@ struct SequenceStats {
   std::uint64_t resets = 0;      // jumps too large to be loss or reordering
 };
 
+// A packet's time and the sensor's packet period: how many packets the time says were sent.
+struct SequenceClock {
+  std::int64_t t0_ns = 0;
+  std::int64_t period_ns = 0;
+};
+
 class SequenceTracker {
  public:
   // Skips ahead by more than this, or back by more than kReorderWindow, mean a reset.
@@ -30,7 +46,8 @@ class SequenceTracker {
   static constexpr std::uint32_t kReorderWindow = 1024;
 
   enum class Verdict { kFirst, kInOrder, kGap, kDuplicate, kReordered, kReset };
-  Verdict observe(std::uint32_t sequence) noexcept;
+  // `clock`: the packet's time, when valid (see above); without it, the numbers alone.
+  Verdict observe(std::uint32_t sequence, std::optional<SequenceClock> clock = {}) noexcept;
 
   const SequenceStats& stats() const noexcept { return stats_; }
 
@@ -43,9 +60,13 @@ class SequenceTracker {
   bool arrived(std::uint32_t sequence) const noexcept;
   void mark(std::uint32_t sequence, bool arrived) noexcept;
   void advance_to(std::uint32_t sequence) noexcept;  // numbers skipped become missing
+  Verdict reset(std::uint32_t sequence) noexcept;
+  // Packets sent since the highest number's packet, by the clocks; nothing without both times.
+  std::optional<std::int64_t> elapsed_packets(const std::optional<SequenceClock>& clock) const;
 
   bool started_ = false;
   std::uint32_t last_ = 0;  // highest sequence seen (the next expected is last_ + 1)
+  std::optional<SequenceClock> last_clock_;  // that packet's time
   std::array<std::uint64_t, kBits / 64> arrived_{};
   SequenceStats stats_;
 };

@@ -4,7 +4,9 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <utility>
 
+#include "sensor_model.hpp"
 #include "timing.hpp"
 
 namespace pandarcap {
@@ -45,45 +47,33 @@ std::uint64_t fingerprint(std::span<const std::uint8_t> payload) noexcept {
   return h == 0 ? 1 : h;
 }
 
-// a - b on the circle, in [-18000, 18000).
-int signed_step(int a, int b) noexcept {
-  int d = (a - b) % 36000;
-  if (d < -18000) d += 36000;
-  if (d >= 18000) d -= 36000;
-  return d;
-}
-
 }  // namespace
 
-bool follows(const RotationPoint& last, const RotationPoint& next) noexcept {
-  const int step = signed_step(next.azimuth_cdeg, last.azimuth_cdeg);
-  const std::int64_t dt = next.t0_ns - last.t0_ns;
-  if (!last.time_valid || !next.time_valid || dt == 0 || last.rpm == 0) {
-    return std::abs(step) <= 9000;
-  }
-  // Half a revolution without packets is a gap whole revolutions may hide in (the assembler's
-  // rule): never "follows".
-  const double revolution_ns = 60e9 / last.rpm;
-  if (std::abs(static_cast<double>(dt)) > revolution_ns / 2) return false;
-  const double expected_cdeg = static_cast<double>(dt) / revolution_ns * 36000.0;
-  return std::abs(step - expected_cdeg) <= 200.0 + 0.02 * std::abs(expected_cdeg);
-}
-
-void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, std::uint16_t rpm,
-                                  ReturnMode mode, bool sequence_present) {
+void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, bool time_valid,
+                                  std::uint16_t rpm, ReturnMode mode, bool sequence_present) {
   const std::optional<std::uint16_t> previous = previous_azimuth_cdeg_;
   previous_azimuth_cdeg_ = azimuth_cdeg;
   if (!previous || !previous_t0_ns_) return;
   const int step = (azimuth_cdeg - *previous + 36000) % 36000;  // forward, 0..35999
   const std::int64_t dt = t0_ns - *previous_t0_ns_;
+  // Both from one clock: an invalid date still has a running microseconds field (a sensor
+  // without a date), but a good time and a bad one are not comparable.
+  const bool times_valid = time_valid == previous_time_valid_;
   // The step one packet should make at the reported speed (600 RPM dual: 100 cdeg).
-  const double expected = rpm / 60.0 * 36000.0 * static_cast<double>(packet_period_ns(mode)) * 1e-9;
+  const double expected = azimuth_step_per_packet_cdeg(mode, rpm);
   const bool gap = step > 1.5 * expected + 5;
   if (gap && !sequence_present && step < 18000) ++stats_.azimuth_gaps;
-  // A time gap over 100 ms or a big step is an outage or restart, not spin: leave it out.
-  if (!gap && step > 0 && dt > 0 && dt < 100'000'000) {
+  // Spin is measured over consecutive packets only: a loss, a glitch or a restart is not spin.
+  // A standing motor's step is 0, and counts: it measures 0 RPM.
+  const auto period = packet_period_ns(mode);
+  if (times_valid && !gap && dt > 0 && dt <= period + period / 2) {
     stats_.measured_azimuth_cdeg += static_cast<std::uint64_t>(step);
     stats_.measured_time_ns += static_cast<std::uint64_t>(dt);
+  }
+  // The packet rate by the sensor's clock (two merged streams: twice the packets).
+  if (times_valid && dt >= 0 && dt <= 100'000'000) {
+    ++stats_.rate_packets;
+    stats_.rate_time_ns += static_cast<std::uint64_t>(dt);
   }
 }
 
@@ -114,8 +104,14 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
     ++stats_.duplicates;
     return RejectReason::kNone;
   }
+  const ReturnMode mode = packet.return_mode();
+  const PacketTime time = clock_.convert(packet.utc(), packet.timestamp_us());
   if (const auto sequence = packet.sequence()) {
-    if (sequence_.observe(*sequence) == SequenceTracker::Verdict::kDuplicate) {
+    // The packet's time tells a late copy (as old as its number says) from a sensor that
+    // restarted its counter (a number already seen, at a new time).
+    std::optional<SequenceClock> clock;
+    if (time.valid()) clock = SequenceClock{time.t0_ns, packet_period_ns(mode)};
+    if (sequence_.observe(*sequence, clock) == SequenceTracker::Verdict::kDuplicate) {
       ++stats_.duplicates;
       return RejectReason::kNone;
     }
@@ -124,7 +120,6 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   ++stats_.accepted;
 
   const std::uint16_t rpm = packet.motor_rpm();
-  const ReturnMode mode = packet.return_mode();
   stats_.rpm_min = stats_.accepted == 1 ? rpm : std::min(stats_.rpm_min, rpm);
   stats_.rpm_max = stats_.accepted == 1 ? rpm : std::max(stats_.rpm_max, rpm);
   if (stats_.return_mode && *stats_.return_mode != mode) ++stats_.return_mode_changes;
@@ -133,91 +128,174 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   if (high_temperature) ++stats_.high_temperature;
   const bool sequence_present = packet.sequence().has_value();
 
-  const PacketTime time = clock_.convert(packet.utc(), packet.timestamp_us());
   if (time.status == PacketTimeStatus::kBadDate) ++stats_.bad_date;
   if (time.status == PacketTimeStatus::kBadMicroseconds) ++stats_.bad_microseconds;
-  if (previous_t0_ns_) {
-    // Counted as they arrive, outliers included: the health reports each. Frames are cut by
-    // azimuth; a time that freezes changes no frame, and one that leaps or steps back is either
-    // an outlier (left out) or a real gap (the assembler ends the frame in progress).
-    if (time.t0_ns == *previous_t0_ns_) ++stats_.static_timestamps;
-    if (time.t0_ns < *previous_t0_ns_) ++stats_.backward_timestamps;
-    if (time.t0_ns - *previous_t0_ns_ > kTimestampJumpNs) ++stats_.timestamp_jumps;
-  }
-  track_azimuth(packet.azimuth_cdeg(0), time.t0_ns, rpm, mode, sequence_present);
+  // A clock that froze is counted as the packets arrive. One that went back or leapt is judged
+  // against the stream by the outlier rule, so the packet that returns to the stream after a
+  // glitch is not taken for a step of its own.
+  if (previous_t0_ns_ && time.t0_ns == *previous_t0_ns_) ++stats_.static_timestamps;
+  const std::uint16_t azimuth = packet.azimuth_cdeg(0);
+  const bool standing =
+      previous_azimuth_cdeg_ &&
+      std::abs(signed_step_cdeg(azimuth, *previous_azimuth_cdeg_)) <= kStandingStepCdeg;
+  track_azimuth(azimuth, time.t0_ns, time.valid(), rpm, mode, sequence_present);
   previous_t0_ns_ = time.t0_ns;
+  previous_time_valid_ = time.valid();
   stats_.last_t0_ns = time.t0_ns;
   stats_.last_time_valid = time.status == PacketTimeStatus::kValid;
   stats_.last_rpm = rpm;
   stats_.last_high_temperature = high_temperature;
 
-  place_or_hold(payload, Admitted{{packet.azimuth_cdeg(0), time.t0_ns, time.valid(), rpm}, time});
+  if (standing) {
+    // The motor did not turn: counted, never placed (see the top of the header).
+    ++stats_.standing;
+    filter_packet(FilterReason::kStanding);
+    ++skipped_;
+  } else {
+    place_or_hold(payload, AdmittedPacket{{azimuth, time.t0_ns, time.valid(), rpm}, time});
+  }
+  watch_frames(rpm, mode);
   return RejectReason::kNone;
 }
 
-void StreamDecoder::place_or_hold(std::span<const std::uint8_t> payload, const Admitted& admitted) {
-  if (held_size_ != 0) {
-    const std::span<const std::uint8_t> held(held_bytes_.data(), held_size_);
-    if (last_placed_ && follows(*last_placed_, admitted.rotation)) {
-      // The stream went on as if the held packet had not been there: an isolated outlier.
-      settle_outlier(*last_placed_, admitted.rotation);
-    } else if (follows(held_.rotation, admitted.rotation)) {
-      place(held, held_);  // the stream changed at the held packet: a real change
-      held_size_ = 0;
+void StreamDecoder::place_or_hold(std::span<const std::uint8_t> payload,
+                                  const AdmittedPacket& admitted) {
+  const bool follows_stream = last_placed_ && follows(*last_placed_, admitted.rotation);
+  if (held_.empty()) {
+    if (follows_stream) {
       place(payload, admitted);
-      return;
     } else {
-      drop_held_as_outlier();  // followed by nothing: judge this one in its place
+      held_.push(payload, admitted, false);
+    }
+    return;
+  }
+  if (follows_stream) {
+    // The stream went on as if the held run had not been there: a glitch.
+    settle_outliers(admitted.rotation);
+    place(payload, admitted);
+    return;
+  }
+  // The held run's newest is always the chain's newest.
+  const bool extends_chain = follows(held_.newest().rotation, admitted.rotation);
+  if (extends_chain && held_.chain_length() + 1 >= kChangeRunPackets) {
+    take_change();  // 17 packets that follow each other and not the stream: it changed
+    place(payload, admitted);
+    return;
+  }
+  // Full: the oldest is a stray (a full chain would have made 17 with this one).
+  if (held_.full()) drop_oldest_as_outlier();
+  held_.push(payload, admitted, extends_chain);
+}
+
+namespace {
+
+// An outlier's time against the stream it interrupted: behind the packet before it went back,
+// ahead of the packet after it leapt forward.
+void count_outlier_time(const PacketTime& time, const RotationPoint& before,
+                        const RotationPoint& after, StreamStats& stats) noexcept {
+  if (!time.valid() || !before.time_valid) return;
+  if (time.t0_ns < before.t0_ns) {
+    ++stats.backward_timestamps;
+  } else if (after.time_valid && time.t0_ns > after.t0_ns) {
+    ++stats.timestamp_jumps;
+  }
+}
+
+}  // namespace
+
+void StreamDecoder::settle_outliers(const RotationPoint& after) {
+  const RotationPoint before = *last_placed_;
+  const int to_after = signed_step_cdeg(after.azimuth_cdeg, before.azimuth_cdeg);
+  const std::int64_t dt = after.t0_ns - before.t0_ns;
+  // (Within a second: a stream without a speed follows by azimuth alone, whatever its times
+  // say, and the interpolation below must not overflow.)
+  const bool timed =
+      to_after > 0 && dt > 0 && dt <= kTimestampJumpNs && before.time_valid && after.time_valid;
+  int placed_to = 0;  // azimuth of the last one placed, from `before`: they stay in order
+  for (std::size_t i = 0; i < held_.size(); ++i) {
+    ++stats_.outliers;
+    const AdmittedPacket& held = held_.admitted(i);
+    count_outlier_time(held.time, before, after, stats_);
+    const int to_held = signed_step_cdeg(held.rotation.azimuth_cdeg, before.azimuth_cdeg);
+    if (timed && to_held >= placed_to && to_held <= to_after) {
+      // Its azimuth sits between its neighbours': only its time was wrong (back, forward, a
+      // second off, zeroed). Placed where it belongs, at the time the rotation gives that
+      // azimuth, its points kept.
+      AdmittedPacket fixed = held;
+      fixed.time.t0_ns = before.t0_ns + dt * to_held / to_after;
+      fixed.time.status = PacketTimeStatus::kValid;
+      fixed.rotation.t0_ns = fixed.time.t0_ns;
+      fixed.rotation.time_valid = true;
+      place(held_.bytes(i), fixed);
+      placed_to = to_held;
+    } else {
+      // Out of the rotation's order in azimuth: left out, its slots counted; the frame is told
+      // a packet was left out there.
+      filter_packet(FilterReason::kOutlier);
+      ++skipped_;
     }
   }
-  if (!last_placed_ || follows(*last_placed_, admitted.rotation)) {
-    place(payload, admitted);
-  } else {
-    hold(payload, admitted);
+  held_.clear();
+}
+
+void StreamDecoder::take_change() {
+  const std::size_t start = held_.chain_start();
+  for (std::size_t i = 0; i < start; ++i) {
+    ++stats_.outliers;
+    filter_packet(FilterReason::kOutlier);
   }
+  const AdmittedPacket& first = held_.admitted(start);
+  if (last_placed_ && last_placed_->time_valid && first.time.valid()) {
+    // The clock of the new stream against the old one's.
+    const std::int64_t dt = first.time.t0_ns - last_placed_->t0_ns;
+    if (dt < 0) ++stats_.backward_timestamps;
+    if (dt > kTimestampJumpNs) ++stats_.timestamp_jumps;
+  }
+  // A rotation that resumes behind where it was is no continuation of it, however small the
+  // step: the frames in progress end there (a step forward is the assembler's to judge).
+  if (decode_points_ && last_placed_ &&
+      signed_step_cdeg(first.rotation.azimuth_cdeg, last_placed_->azimuth_cdeg) < 0) {
+    assembler_.discontinuity();
+  }
+  // Whatever was left out belonged to the old stream.
+  skipped_ = 0;
+  for (std::size_t i = start; i < held_.size(); ++i)
+    place(held_.bytes(i), held_.admitted(i));
+  held_.clear();
 }
 
-void StreamDecoder::hold(std::span<const std::uint8_t> payload, const Admitted& admitted) {
-  std::memcpy(held_bytes_.data(), payload.data(), payload.size());
-  held_size_ = payload.size();
-  held_ = admitted;
-}
-
-void StreamDecoder::settle_outlier(const RotationPoint& before, const RotationPoint& after) {
+void StreamDecoder::drop_oldest_as_outlier() noexcept {
   ++stats_.outliers;
-  const int to_held = signed_step(held_.rotation.azimuth_cdeg, before.azimuth_cdeg);
-  const int to_after = signed_step(after.azimuth_cdeg, before.azimuth_cdeg);
-  const std::int64_t dt = after.t0_ns - before.t0_ns;
-  if (to_held >= 0 && to_held <= to_after && to_after > 0 && dt > 0 && before.time_valid &&
-      after.time_valid) {
-    // Its azimuth sits between its neighbours': only its time is wrong. Placed where it belongs,
-    // at the time the rotation gives that azimuth, its points kept.
-    Admitted fixed = held_;
-    fixed.time.t0_ns = before.t0_ns + dt * to_held / to_after;
-    fixed.time.status = PacketTimeStatus::kValid;
-    fixed.rotation.t0_ns = fixed.time.t0_ns;
-    fixed.rotation.time_valid = true;
-    const std::span<const std::uint8_t> held(held_bytes_.data(), held_size_);
-    held_size_ = 0;
-    place(held, fixed);
+  filter_packet(FilterReason::kOutlier);
+  ++skipped_;
+  held_.pop_oldest();
+}
+
+void StreamDecoder::filter_packet(FilterReason reason) noexcept {
+  stats_.filtered.add(reason, std::uint64_t{kBlocks} * kChannels);
+}
+
+void StreamDecoder::watch_frames(std::uint16_t rpm, ReturnMode mode) noexcept {
+  if (!decode_points_) return;
+  const AssemblerStats& f = assembler_.stats();
+  const std::uint64_t closed = f.frames_complete + f.frames_partial + f.frames_dropped;
+  if (closed != frames_closed_) {
+    frames_closed_ = closed;
+    packets_since_frame_ = 0;
     return;
   }
-  // Out of the rotation's order in azimuth: left out, its slots counted.
-  stats_.filtered.add(FilterReason::kOutlier, std::uint64_t{kBlocks} * kChannels);
-  held_size_ = 0;
-}
-
-void StreamDecoder::drop_held_as_outlier() noexcept {
-  ++stats_.outliers;
-  stats_.filtered.add(FilterReason::kOutlier, std::uint64_t{kBlocks} * kChannels);
-  held_size_ = 0;
-}
-
-void StreamDecoder::place(std::span<const std::uint8_t> payload, const Admitted& admitted) {
-  if (!decode_points_) {  // the health needs only where the rotation is
-    last_placed_ = admitted.rotation;
-    return;
+  // Three revolutions at the tail's speed (kept to the speeds a sensor runs at: a tail of 0 or
+  // of garbage says nothing of how long a revolution is).
+  const double speed = std::clamp<double>(rpm, kSlowestRpm, kFastestRpm);
+  if (static_cast<double>(++packets_since_frame_) > 3 * packets_per_revolution(mode, speed)) {
+    ++stats_.frameless_packets;
   }
+}
+
+void StreamDecoder::place(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted) {
+  last_placed_ = admitted.rotation;
+  const std::uint32_t skipped = std::exchange(skipped_, 0);
+  if (!decode_points_) return;  // the health needs only where the rotation is
   const PacketView packet = PacketView::assume_valid(payload);
   const DecodedPacket decoded =
       decoder_.decode(packet, admitted.time.t0_ns, points_, stats_.filtered);
@@ -230,18 +308,17 @@ void StreamDecoder::place(std::span<const std::uint8_t> payload, const Admitted&
   meta.time_valid = admitted.time.valid();
   meta.motor_rpm = admitted.rotation.rpm;
   meta.return_mode = packet.return_mode();
+  meta.skipped_before = skipped;
   assembler_.add_packet(meta, std::span<const Point>(points_).first(decoded.point_count), decoded);
-  last_placed_ = admitted.rotation;
 }
 
 void StreamDecoder::flush() {
-  if (held_size_ != 0) {
-    // Nothing came after it to say it was an outlier: it is placed.
-    place(std::span<const std::uint8_t>(held_bytes_.data(), held_size_), held_);
-    held_size_ = 0;
-  }
+  // Nothing came after the held run to say it was a glitch: its chain is placed (a change at the
+  // very end), the strays before it are outliers.
+  if (!held_.empty()) take_change();
   assembler_.flush();
   last_placed_.reset();
+  skipped_ = 0;
 }
 
 }  // namespace pandarcap

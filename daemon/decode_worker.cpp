@@ -7,6 +7,7 @@
 #include <cstring>
 #include <thread>
 
+#include "core/sensor_model.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 
@@ -14,9 +15,6 @@ namespace pandarcap {
 namespace {
 
 constexpr std::size_t kDecodeBatch = 64;
-constexpr double kFullCircleCdeg = 36000.0;
-// 1800 firing rounds per revolution at 600 RPM, 10 rounds per single-return packet.
-constexpr double kSingleReturnPacketsAt600Rpm = 180.0;
 
 }  // namespace
 
@@ -67,8 +65,8 @@ void DecodeWorker::frame_done(Frame& frame) {
   if (arena == nullptr) return;
   if (frame.info.partial &&
       (frame.info.azimuth_span_cdeg < options_.min_frame_fraction * kFullCircleCdeg ||
-       frame.info.packets < options_.min_frame_fraction * kSingleReturnPacketsAt600Rpm * 600.0 /
-                                options_.expected_rpm)) {
+       frame.info.packets < options_.min_frame_fraction *
+                                packets_per_revolution(ReturnMode::kLast, options_.expected_rpm))) {
     ++frames_fragment_;
     keep_spare(arena);
     return;

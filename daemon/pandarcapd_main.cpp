@@ -99,6 +99,19 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
         "time, or left out), no frame cut for them\n",
         c.duplicate_packets, c.outlier_packets);
   }
+  {
+    // The stream's faults, those that occurred (issue 38's rules: docs/decoding.md).
+    std::string faults;
+    const auto add = [&](std::uint64_t n, const char* what) {
+      if (n == 0) return;
+      fmt::format_to(std::back_inserter(faults), "{}{} {}", faults.empty() ? "" : ", ", n, what);
+    };
+    add(c.points_missing, "points missing (lost packets; the frames that lost them are partial)");
+    add(c.standing_packets, "standing packets (motor not turning; left out)");
+    add(c.other_sensor_packets, "packets from a second sensor (dropped)");
+    add(c.sequence_resets, "sequence resets");
+    if (!faults.empty()) fmt::print("{}\n", faults);
+  }
   if (wo.mcap) {
     fmt::print("mcap: {} messages written, {} not written, {} not recorded, {} bytes{}\n",
                c.mcap_messages_written - c.mcap_messages_lost, c.mcap_messages_not_written,

@@ -137,6 +137,12 @@ struct ReceiveCounters {
   std::atomic<std::uint64_t> datagrams{0};
   std::atomic<std::uint64_t> bytes{0};
   std::atomic<std::uint64_t> foreign{0};
+  // The source lock's (core/source_lock.hpp): valid Pandar packets from another source (also in
+  // `foreign`), the times the lock moved, and the sources as pack_ipv4_source (0: none yet).
+  std::atomic<std::uint64_t> other_sensor{0};
+  std::atomic<std::uint64_t> source_changes{0};
+  std::atomic<std::uint64_t> sensor_source{0};
+  std::atomic<std::uint64_t> other_source{0};
   std::atomic<std::uint64_t> truncated{0};
   std::atomic<std::uint64_t> kernel_drops{0};
   std::atomic<std::uint64_t> ring_overruns{0};
@@ -163,6 +169,12 @@ struct ReceiveCounters {
   // Single writer: a relaxed load + store is enough (no read-modify-write needed).
   static void add(std::atomic<std::uint64_t>& counter, std::uint64_t n) noexcept {
     counter.store(counter.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);
+  }
+  // The source lock's state, as the health reads it (after each batch).
+  void publish_sources(std::uint64_t sensor, std::uint64_t other, std::uint64_t changes) noexcept {
+    sensor_source.store(sensor, std::memory_order_relaxed);
+    other_source.store(other, std::memory_order_relaxed);
+    source_changes.store(changes, std::memory_order_relaxed);
   }
 };
 

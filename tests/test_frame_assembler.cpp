@@ -285,12 +285,14 @@ class Harness {
       e.index = key.second;
       e.ids = ids;
       std::sort(e.ids.begin(), e.ids.end());
-      // Header: whole only if the stream started before the frame began for every channel, and
-      // closed (not flushed) once U + the most negative offset passed the frame's end.
+      // Header: whole only if the stream started before the frame began for every channel,
+      // and closed (not flushed) once U + the most negative offset passed the frame's end by the
+      // close margin.
       const bool started_before =
           e.index * kCircle >= first_u[e.segment] + config_.relative_azimuth_max_cdeg;
-      const bool closed =
-          (e.index + 1) * kCircle <= max_u[e.segment] + config_.relative_azimuth_min_cdeg;
+      const bool closed = (e.index + 1) * kCircle <= max_u[e.segment] +
+                                                         config_.relative_azimuth_min_cdeg -
+                                                         FrameAssembler::kCloseMarginCdeg;
       e.complete = started_before && closed;
       frames.push_back(std::move(e));
     }
@@ -731,13 +733,19 @@ TEST_CASE("two swapped packets: a backward step, late points counted, nothing el
     }
     {
       INFO("across the cut: the earlier packet's points of the closed revolution are late");
-      // Choose B (the packet that arrives first) so that after it U + (most negative offset)
-      // has passed the cut of revolution 2 (so revolution 1 is closed), while A, arriving
-      // after, still has points of revolution 1.
+      // A, the last packet with points of revolution 1, arrives after B, the first packet after
+      // which U + (most negative offset) has passed the cut of revolution 2 by the close margin
+      // (so revolution 1 is closed): A's points of revolution 1 are late, counted. (Whether the
+      // frame that lost them is partial depends on how much of it they were: the coverage sees a
+      // hole of half a packet's azimuth, not a sliver at its edge; docs/decoding.md.)
       std::size_t b = 1;
-      while (stream.packets[b].last_block_u + lo < 2 * kCircle + 60)
+      while (stream.packets[b].last_block_u + lo <
+             2 * kCircle + 60 + FrameAssembler::kCloseMarginCdeg)
         ++b;
-      const std::size_t a = b - 1;
+      std::size_t a = 0;
+      for (std::size_t k = 0; k < b; ++k) {
+        if (stream.packets[k].first_block_u + lo < 2 * kCircle) a = k;
+      }
       std::size_t late = 0;
       RecordingSink sink(2, capacity_for(spec));
       Harness h(stream, config_for(0), sink);
@@ -751,13 +759,15 @@ TEST_CASE("two swapped packets: a backward step, late points counted, nothing el
       REQUIRE(late > 0);
       h.feed_range(0, a);
       h.feed(b);
-      h.feed(a);
+      h.feed_range(a, b);
       h.feed_range(b + 1, stream.packets.size());
       h.flush();
       CHECK(h.stats().azimuth_backward_steps == 1);
       CHECK(h.stats().points_late == late);
       CHECK(h.stats().discontinuities == 0);
-      check_frames(sink.recorded, h.expected(), stream, h);
+      CheckOptions options;
+      options.partial_unchecked.insert({0, 1});
+      check_frames(sink.recorded, h.expected(), stream, h, options);
       CHECK(stored_points(sink.recorded) + h.stats().points_late == h.points_fed());
     }
   }

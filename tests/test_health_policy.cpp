@@ -4,6 +4,7 @@
 #include <string>
 
 #include "core/health_policy.hpp"
+#include "core/ipv4.hpp"
 
 using namespace pandarcap;
 
@@ -49,7 +50,11 @@ TEST_CASE("Health: each counter that grew is a named problem", "[health][policy]
       {&HealthCounters::packets_rejected, "3 packets rejected"},
       {&HealthCounters::static_timestamp_packets, "3 static timestamps"},
       {&HealthCounters::backward_timestamp_packets, "3 timestamps going back"},
-      {&HealthCounters::timestamp_jump_packets, "3 timestamp jumps"},
+      {&HealthCounters::timestamp_jump_packets, "3 timestamps leaping forward"},
+      {&HealthCounters::sequence_resets, "3 sequence resets (the sensor restarted?)"},
+      {&HealthCounters::sequence_reordered, "3 packets reordered"},
+      {&HealthCounters::points_missing, "3 points missing (lost packets)"},
+      {&HealthCounters::standing_packets, "3 packets with the azimuth standing"},
   };
   for (const Case& c : cases) {
     INFO(c.reason);
@@ -160,7 +165,8 @@ TEST_CASE("Health: several problems are joined by semicolons, in a fixed order",
   classify_health(now, before, kLast, false, "", g);
   CHECK(g.state == HealthState::kDegraded);
   CHECK(g.reason ==
-        "2 kernel drops; 3 packets rejected; 1 timestamp jumps; sensor high-temperature flag set; "
+        "2 kernel drops; 3 packets rejected; 1 timestamps leaping forward; sensor high-temperature "
+        "flag set; "
         "return mode strongest (expected last); motor at 300 RPM (expected 600)");
 }
 
@@ -259,4 +265,117 @@ TEST_CASE("Health: a sensor clock off from the host's past the bound is degraded
   g.sensor_clock_offset_known = false;  // no packet with a receive time yet: nothing to judge
   classify_health(now, before, bounded, false, "", g);
   CHECK(g.state == HealthState::kOk);
+}
+
+TEST_CASE("Health: a motor that stops is a fault, whatever its tail says", "[health][policy]") {
+  struct Case {
+    const char* name;
+    double rpm_tail;
+    std::uint64_t standing, frameless;
+    bool arriving;
+    const char* reason;
+  };
+  const Case cases[] = {
+      {"the tail says 0", 0, 0, 0, true, "motor stopped: the packets' tail says 0 RPM"},
+      {"the tail says 0, no packet this second", 0, 0, 0, false, ""},
+      {"standing azimuth, tail normal", 600, 3600, 0, true,
+       "motor stopped: azimuth standing in 3600 packets"},
+      {"a stop of 8 packets (2.2 ms)", 600, 8, 0, true,
+       "motor stopped: azimuth standing in 8 packets"},
+      {"fewer standing: copies or glitches", 600, 7, 0, true,
+       "7 packets with the azimuth standing"},
+      {"frames not closing", 600, 0, 2521, true, "motor stopped: no frame closed in 2521 packets"},
+      {"all three", 0, 3600, 2521, true,
+       "motor stopped: the packets' tail says 0 RPM, azimuth standing in 3600 packets, no frame "
+       "closed in 2521 packets"},
+  };
+  for (const Case& k : cases) {
+    INFO(k.name);
+    HealthCounters before, now;
+    before.packets_accepted = 1000;
+    now.packets_accepted = before.packets_accepted + (k.arriving ? 3600 : 0);
+    now.standing_packets = k.standing;
+    now.frameless_packets = k.frameless;
+    HealthGauges g = streaming();
+    g.return_mode = "dual";
+    g.rpm_tail = k.rpm_tail;
+    classify_health(now, before, HealthExpectations{"dual", 600}, false, "", g);
+    CHECK(g.reason == k.reason);
+    CHECK(g.state == (*k.reason == '\0' ? HealthState::kOk : HealthState::kDegraded));
+  }
+}
+
+TEST_CASE("Health: the speed measured from the azimuth is checked when the tail's is fine",
+          "[health][policy]") {
+  HealthCounters before, now;
+  now.packets_accepted = 3600;
+  HealthGauges g = streaming();
+  g.rpm_measured = 598;  // within 10 %
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+  g.rpm_measured = 300;  // the tail says 600, the azimuth half that
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.reason == "motor measured at 300 RPM (expected 600)");
+  g.rpm_tail = 300;  // both off: the tail's is said, once
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.reason == "motor at 300 RPM (expected 600)");
+  // An azimuth that barely turns: a stopped motor, whatever the tail says.
+  g.rpm_tail = 600;
+  g.rpm_measured = 12.5;
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.reason == "motor stopped: azimuth turning at 12.5 RPM");
+}
+
+TEST_CASE("Health: a packet rate more than 10 % off the sensor's is a problem of its own",
+          "[health][policy]") {
+  struct Case {
+    const char* mode;
+    double rate;
+    const char* reason;
+  };
+  const Case cases[] = {
+      {"dual", 3600, ""},
+      {"dual", 3300, ""},  // 8 % low: some loss, said elsewhere
+      {"dual", 7200, "packet rate 7200/s (expected 3600 in dual return)"},
+      {"dual", 3000, "packet rate 3000/s (expected 3600 in dual return)"},
+      {"last", 1800, ""},
+      {"strongest", 3600, "packet rate 3600/s (expected 1800 in strongest return)"},
+      {"dual", 0, ""},  // not known
+  };
+  for (const Case& k : cases) {
+    INFO(k.mode << " at " << k.rate);
+    HealthCounters before, now;
+    now.packets_accepted = 3600;
+    HealthGauges g = streaming();
+    g.return_mode = k.mode;
+    g.rpm_measured = 600;
+    g.packet_rate_hz = k.rate;
+    classify_health(now, before, HealthExpectations{"any", 600}, false, "", g);
+    CHECK(g.reason == k.reason);
+  }
+}
+
+TEST_CASE("Health: a second sensor on the port is named with the first", "[health][policy]") {
+  HealthCounters before, now;
+  now.packets_accepted = 3600;
+  now.other_sensor_packets = 3600;
+  now.foreign_datagrams = 3600;
+  HealthGauges g = streaming();
+  g.sensor_source = pack_ipv4_source(0x7F000001, 10000);
+  g.other_sensor_source = pack_ipv4_source(0x7F000002, 10001);
+  classify_health(now, before, kLast, false, "", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason ==
+        "3600 packets from a second sensor at 127.0.0.2:10001 (the sensor is 127.0.0.1:10000): "
+        "one sensor per daemon");
+  // Foreign datagrams that are not packets are not a second sensor.
+  HealthCounters noise = before;
+  noise.foreign_datagrams = 50;
+  classify_health(noise, before, kLast, false, "", g);
+  CHECK(g.state == HealthState::kOk);
+  // The lock moved to another source after the sensor's fell silent.
+  HealthCounters moved = before;
+  moved.sensor_source_changes = 1;
+  classify_health(moved, before, kLast, false, "", g);
+  CHECK(g.reason == "the sensor's source changed to 127.0.0.1:10000 (127.0.0.2:10001 silent)");
 }

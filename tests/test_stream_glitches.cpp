@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <functional>
 #include <random>
+#include <tuple>
 #include <vector>
 
 #include "core/calibration.hpp"
@@ -92,14 +93,17 @@ TEST_CASE("follows: a packet follows when its azimuth advanced as its time did, 
 }
 
 TEST_CASE("follows: without usable times, a step of at most 90° either way", "[stream][glitch]") {
-  for (const auto& [last, name] : {std::pair{at(5000, 0, false), "invalid time"},
-                                   std::pair{at(5000, 0, true, 0), "no speed"}}) {
+  for (const auto& [last, valid, name] : {std::tuple{at(5000, 0, false), false, "invalid times"},
+                                          std::tuple{at(5000, 0, true, 0), true, "no speed"}}) {
     INFO(name);
-    CHECK(follows(last, at(5000 + 9000, 0, false)));
-    CHECK_FALSE(follows(last, at(5000 + 9001, 0, false)));
-    CHECK(follows(last, at(5000 - 9000, 0, false)));
-    CHECK_FALSE(follows(last, at(5000 - 9001, 0, false)));
+    CHECK(follows(last, at(5000 + 9000, kMs, valid)));
+    CHECK_FALSE(follows(last, at(5000 + 9001, kMs, valid)));
+    CHECK(follows(last, at(5000 - 9000, kMs, valid)));
+    CHECK_FALSE(follows(last, at(5000 - 9001, kMs, valid)));
   }
+  // A valid time after an invalid one, or the reverse: two clocks, never "follows".
+  CHECK_FALSE(follows(at(5000, 0, true), at(5100, 277'800, false)));
+  CHECK_FALSE(follows(at(5000, 0, false), at(5100, 277'800, true)));
   // A frozen clock (the same time): the azimuth alone, too.
   CHECK(follows(at(5000, 7 * kMs), at(5000 + 4000, 7 * kMs)));
   CHECK_FALSE(follows(at(5000, 7 * kMs), at(5000 + 9500, 7 * kMs)));

@@ -160,6 +160,12 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.decode_wakeups = sources.decode_wakeups;
   c.writer_wakeups = sources.writer_wakeups;
   h.frame_latency = sources.frames.latency();
+  // The decode faults (issue 38): the sources on the port, the motor, what was lost in points.
+  c.other_sensor_packets = receive.other_sensor.load(std::memory_order_relaxed);
+  c.sensor_source_changes = receive.source_changes.load(std::memory_order_relaxed);
+  c.standing_packets = s.standing;
+  c.frameless_packets = s.frameless_packets;
+  c.points_missing = decode.frames.packets_missing * kBlocks * kChannels;
 
   HealthGauges& g = h.gauges;
   g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;
@@ -169,13 +175,26 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   const double span_s = static_cast<double>(decode.monotonic_ns - decode_prev_.monotonic_ns) / 1e9;
   const auto d_az = s.measured_azimuth_cdeg - decode_prev_.stream.measured_azimuth_cdeg;
   const auto d_t = s.measured_time_ns - decode_prev_.stream.measured_time_ns;
-  g.rpm_measured =
-      d_t > 0 ? (static_cast<double>(d_az) / 36000.0) / (static_cast<double>(d_t) / 60e9) : 0.0;
+  // Packets that did not turn (a motor standing) measure 0; no packet in the window measures
+  // nothing, and the last measurement stands (a final record just after the stream ended).
+  if (d_t > 0) {
+    g.rpm_measured = (static_cast<double>(d_az) / 36000.0) / (static_cast<double>(d_t) / 60e9);
+  } else if (s.accepted > decode_prev_.stream.accepted) {
+    g.rpm_measured = 0.0;
+  }
   // Complete frames only: partial ones are cut by start, gaps and shutdown, not by rotation. The
   // final tick at shutdown can be a fraction of a second long (and sees the flushed partials),
   // so a window under half a second keeps the previous second's rate.
   const auto complete = decode.frames.frames_complete - decode_prev_.frames.frames_complete;
   if (span_s >= 0.5) g.frame_rate_hz = static_cast<double>(complete) / span_s;
+  // By the sensor's clock, over a fifth of a second of it at least (else not known).
+  const auto rate_t = s.rate_time_ns - decode_prev_.stream.rate_time_ns;
+  g.packet_rate_hz = rate_t >= 200'000'000
+                         ? static_cast<double>(s.rate_packets - decode_prev_.stream.rate_packets) *
+                               1e9 / static_cast<double>(rate_t)
+                         : 0.0;
+  g.sensor_source = receive.sensor_source.load(std::memory_order_relaxed);
+  g.other_sensor_source = receive.other_source.load(std::memory_order_relaxed);
   g.seconds_since_last_packet = sources.seconds_since_last_packet;
   g.sensor_clock_offset_known = decode.sensor_clock_offset_ns.has_value();
   g.sensor_clock_offset_seconds =

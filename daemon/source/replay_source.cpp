@@ -79,13 +79,25 @@ ReplaySource::ReplaySource(const ReplayOptions& options)
     }
     return;
   }
+  judge_sources_ = true;
   if (!options.sensor_ip.empty()) {
     // A bad address is refused, never ignored: ignoring it would replay every source.
-    sensor_ip_ = parse_ipv4_host_order(options.sensor_ip);
-    if (!sensor_ip_) {
+    const auto sensor_ip = parse_ipv4_host_order(options.sensor_ip);
+    if (!sensor_ip) {
       throw std::invalid_argument("sensor_ip '" + options.sensor_ip + "' is not an IPv4 address");
     }
+    sources_ = SourceLock(*sensor_ip);
+    sensor_ip_set_ = true;
   }
+}
+
+bool ReplaySource::judge(const CaptureRecord& record, ReceiveCounters& counters) noexcept {
+  const SourceLock::Verdict verdict =
+      sources_.judge(record.source.ip, record.source.port, record.payload, record.timestamp_ns);
+  if (verdict == SourceLock::Verdict::kOtherSensor) ReceiveCounters::add(counters.other_sensor, 1);
+  counters.publish_sources(sources_.sensor_source(), sources_.other_source(),
+                           sources_.source_changes());
+  return verdict == SourceLock::Verdict::kSensor;
 }
 
 ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
@@ -139,8 +151,9 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
     }
     ReceiveCounters::add(counters.datagrams, 1);
     ReceiveCounters::add(counters.bytes, record.udp_payload_length);
-    // The sensor's address is IPv4: an IPv6 sender is not it.
-    if (sensor_ip_ && (record.source.ipv6 || record.source.ip != *sensor_ip_)) {
+    // The sensor's address is IPv4: with sensor_ip set an IPv6 sender is not it; without, the
+    // lock judges IPv4 sources only.
+    if (judge_sources_ && (record.source.ipv6 ? sensor_ip_set_ : !judge(record, counters))) {
       ReceiveCounters::add(counters.foreign, 1);
       continue;
     }

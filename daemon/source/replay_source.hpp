@@ -1,7 +1,9 @@
 // The replay source: feeds a capture (pcap/pcapng, either compressed with zstd, or the packets of
 // an MCAP file: CaptureReader) through the same PacketRing the live socket fills, so a recording
-// is processed exactly as live data would be. An MCAP file's packets have no addresses: the port
-// and sensor-address filters do not apply to them (a warning says so when they are set).
+// is processed exactly as live data would be, the sensor's source judged as live
+// (core/source_lock.hpp: sensor_ip, or the first source to send a packet). An MCAP file's packets
+// have no addresses: the port and source filters do not apply to them (a warning says so when
+// they are set).
 //
 // Pace: as fast as the decoder takes it (top speed, the default for files), or the recorded
 // pace scaled by `rate` (1 = real time, 2 = twice as fast). Unlike the live receiver, replay
@@ -14,6 +16,7 @@
 #include <optional>
 #include <string>
 
+#include "core/source_lock.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pipeline_types.hpp"
@@ -24,7 +27,7 @@ struct ReplayOptions {
   std::string path;
   std::optional<double> rate;  // empty = top speed
   std::optional<std::uint16_t> destination_port;
-  std::string sensor_ip;  // "" = every source
+  std::string sensor_ip;  // "" = the first source that sends a packet
 };
 
 // Damage: a replay reads over what it can (an MCAP file's damaged chunks, skipped by its chunk
@@ -53,12 +56,17 @@ class ReplaySource {
   std::uint64_t size_bytes() const noexcept { return size_bytes_; }
 
  private:
+  // The record's source judged by the lock (IPv4): true when it is the sensor's.
+  bool judge(const CaptureRecord& record, ReceiveCounters& counters) noexcept;
+
   ReplayOptions options_;
   CaptureReader reader_;
-  std::optional<std::uint32_t> sensor_ip_;  // host order, as Endpoint
   bool damage_named_ = false;
   std::atomic<std::uint64_t> bytes_read_{0};
   std::uint64_t size_bytes_ = 0;
+  bool sensor_ip_set_ = false;
+  bool judge_sources_ = false;  // the file's records have addresses
+  SourceLock sources_{std::nullopt};
 
   void publish_damage(ReceiveCounters& counters) noexcept;
 };

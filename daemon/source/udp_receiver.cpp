@@ -158,7 +158,9 @@ void UdpReceiver::configure(const UdpReceiverOptions& options) {
     }
     spdlog::info("joined multicast group {}", options.multicast_ip);
   }
-  if (!options.sensor_ip.empty()) sensor_ip_ = require_ipv4(options.sensor_ip, "sensor_ip").s_addr;
+  if (!options.sensor_ip.empty()) {
+    sources_ = SourceLock(ntohl(require_ipv4(options.sensor_ip, "sensor_ip").s_addr));
+  }
   // Kernel drops are read with SO_MEMINFO (Linux 3.19+). Where it is refused (QEMU's user mode)
   // they cannot be counted at all: said at start, since every other stage's drops are counted.
   {
@@ -231,6 +233,7 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
   std::uint64_t bytes = 0;
   std::uint64_t truncated = 0;
   std::uint64_t foreign = 0;
+  std::uint64_t other_sensor = 0;
   std::size_t kept = 0;
   const std::int64_t fallback_time = realtime_ns();
   for (int i = 0; i < received; ++i) {
@@ -259,8 +262,12 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
         slot.destination.v4.sin_addr = info.ipi_addr;
       }
     }
-    if (sensor_ip_ && slot.source.v4.sin_addr.s_addr != *sensor_ip_) {
+    const SourceLock::Verdict verdict = sources_.judge(
+        ntohl(slot.source.v4.sin_addr.s_addr), ntohs(slot.source.v4.sin_port),
+        std::span<const std::uint8_t>(slot.payload, slot.length), slot.receive_time_ns);
+    if (verdict != SourceLock::Verdict::kSensor) {
       ++foreign;
+      other_sensor += verdict == SourceLock::Verdict::kOtherSensor;
       continue;
     }
     // Keep accepted datagrams contiguous; a copy happens only after a foreign one.
@@ -274,6 +281,9 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
   } else {
     ReceiveCounters::add(counters.truncated, truncated);
     ReceiveCounters::add(counters.foreign, foreign);
+    ReceiveCounters::add(counters.other_sensor, other_sensor);
+    counters.publish_sources(sources_.sensor_source(), sources_.other_source(),
+                             sources_.source_changes());
     if (kept > 0) ring.publish(kept);
   }
   return {static_cast<std::size_t>(received), n, overrun, overrun ? 0 : kept};

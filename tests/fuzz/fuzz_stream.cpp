@@ -4,8 +4,9 @@
 // the return mode and the UDP sequence. That keeps most packets valid, so the fuzzer explores
 // cuts, wraps, gaps, reordering, discontinuities, frame overflow and the accounting rather than
 // the validator. Invariants: packets = accepted + rejected + duplicates (a record that repeats
-// the one before it makes a duplicate); no frame exceeds its capacity; the frames handed out are
-// in sequence order.
+// the one before it makes a duplicate); every channel slot of an accepted packet is a point or a
+// filtered count (placed, an outlier, or standing); no frame exceeds its capacity; the frames
+// handed out are in sequence order.
 #include <array>
 #include <cstdint>
 #include <cstdlib>
@@ -75,5 +76,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   decoder.flush();
   const StreamStats& stats = decoder.stats();
   if (broken || stats.packets != stats.accepted + stats.rejected() + stats.duplicates) std::abort();
+  if (stats.points + stats.filtered.total() != stats.accepted * kBlocks * kChannels) std::abort();
   return 0;
 }
