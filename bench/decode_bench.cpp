@@ -7,11 +7,12 @@
 #include <cstdio>
 #include <stdexcept>
 
-#include "core/calibration.hpp"
-#include "core/packet_decoder.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/packet_decoder.hpp"
+#include "core/decode/simd_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/simd_decoder.hpp"
 #include "daemon/clocks.hpp"
+#include "daemon/io/calibration_file.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap::bench {
@@ -114,7 +115,7 @@ double median(std::vector<double> values) {
 nlohmann::ordered_json run_decode_bench(const DecodeBenchOptions& options) {
   const Stream stream = load_stream(options);
   const Calibration calibration =
-      options.calibration.empty() ? Calibration::nominal() : Calibration::load(options.calibration);
+      options.calibration.empty() ? Calibration::nominal() : load_calibration(options.calibration);
   std::vector<DecoderTarget> targets = options.targets;
   if (targets.empty()) targets = supported_decoder_targets();
 

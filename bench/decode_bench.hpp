@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "core/decoder_target.hpp"
+#include "core/decode/decoder_target.hpp"
 
 namespace pandarcap::bench {
 

@@ -13,8 +13,8 @@
 
 #include "bench/mutex_queue.hpp"
 #include "bench/thread_pinning.hpp"
-#include "core/packet.hpp"
-#include "core/timing.hpp"
+#include "core/sensors/packet.hpp"
+#include "core/sensors/timing.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"

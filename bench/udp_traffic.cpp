@@ -18,10 +18,10 @@
 #include <random>
 #include <stdexcept>
 
+#include "core/decode/packet_time.hpp"
 #include "core/ipv4.hpp"
-#include "core/packet_time.hpp"
+#include "core/sensors/timing.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/timing.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
 #include "daemon/pcap/capture_reader.hpp"

@@ -14,7 +14,7 @@
 #include <thread>
 #include <vector>
 
-#include "core/packet.hpp"
+#include "core/sensors/packet.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 
 namespace pandarcap::bench {

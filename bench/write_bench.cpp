@@ -8,11 +8,11 @@
 #include <filesystem>
 #include <vector>
 
-#include "core/frame_collector.hpp"
-#include "core/pcd.hpp"
-#include "core/pcd_compressed.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
+#include "core/frames/pcd.hpp"
+#include "core/frames/pcd_compressed.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/stream_decoder.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/pcap/pcap_writer.hpp"

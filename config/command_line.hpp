@@ -12,7 +12,7 @@
 #include <string_view>
 
 #include "config/daemon_config.hpp"
-#include "core/stream_decoder.hpp"
+#include "core/decode/stream_decoder.hpp"
 
 namespace pandarcap {
 

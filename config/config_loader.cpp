@@ -25,7 +25,7 @@
 #include "config/suggest.hpp"
 #include "config/value_checks.hpp"
 #include "core/log_text.hpp"
-#include "core/text_file.hpp"
+#include "daemon/io/text_file.hpp"
 
 namespace pandarcap {
 

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <initializer_list>
 
-#include "core/decoder_target.hpp"
+#include "core/decode/decoder_target.hpp"
 #include "core/ipv4.hpp"
 
 namespace pandarcap::config_detail {

@@ -19,4 +19,9 @@ UnixTime split_unix_ns(std::int64_t unix_ns) noexcept;
 // "2026-11-22T12:00:00.123Z" for 3. No allocation once `out` has room.
 void append_rfc3339(std::string& out, std::int64_t unix_ns, int fraction_digits);
 
+// The stamp in the outputs' file names: "20261122T120000.123Z" (with_millis) or
+// "20261122T120000Z". No allocation once `out` has room (the frames' names, every frame).
+void append_utc_file_stamp(std::string& out, std::int64_t unix_ns, bool with_millis);
+std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis);
+
 }  // namespace pandarcap

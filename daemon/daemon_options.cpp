@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <string_view>
@@ -90,7 +91,7 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.upload_frames = config.output.upload_frames;
   wo.min_hours_left = config.health.min_hours_left;
   wo.sync_interval_seconds = config.output.sync_interval_seconds;
-  wo.health_fallback_dir = health_fallback_directory(config.health);
+  wo.health_fallback_dirs = health_fallback_directories(config.health);
   const OutputSection& o = config.output;
   wo.mcap = o.mcap;
   wo.pcd_format = pcd_format(config);
@@ -123,20 +124,25 @@ WriterOptions writer_options(const DaemonConfig& config) {
   return wo;
 }
 
-std::filesystem::path health_fallback_directory(const HealthSection& health) {
-  if (!health.fallback_directory.empty()) return health.fallback_directory;
+std::vector<std::filesystem::path> health_fallback_directories(const HealthSection& health) {
+  std::vector<std::filesystem::path> dirs;
+  const auto add = [&](std::filesystem::path dir) {
+    if (std::find(dirs.begin(), dirs.end(), dir) == dirs.end()) dirs.push_back(std::move(dir));
+  };
+  if (!health.fallback_directory.empty()) add(health.fallback_directory);
   // systemd's RuntimeDirectory= (the packaged unit: /run/pandarcap/NAME): a tmpfs of the
   // instance's own, which a failing disk cannot take with it.
   if (const char* runtime = std::getenv("RUNTIME_DIRECTORY"); runtime != nullptr && *runtime) {
     // Several directories are separated by ':'; the first is the instance's.
     const std::string_view all(runtime);
-    return std::filesystem::path(all.substr(0, all.find(':')));
+    add(std::filesystem::path(all.substr(0, all.find(':'))));
   }
   // Outside systemd, one directory per sensor label (unique per sensor, as its metrics are).
   if (const char* user = std::getenv("XDG_RUNTIME_DIR"); user != nullptr && *user) {
-    return std::filesystem::path(user) / "pandarcap" / health.sensor_name;
+    add(std::filesystem::path(user) / "pandarcap" / health.sensor_name);
   }
-  return std::filesystem::path(fmt::format("/tmp/pandarcap-{}", ::getuid())) / health.sensor_name;
+  add(std::filesystem::path(fmt::format("/tmp/pandarcap-{}", ::getuid())) / health.sensor_name);
+  return dirs;
 }
 
 DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTarget target,

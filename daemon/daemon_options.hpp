@@ -8,11 +8,12 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "config/daemon_config.hpp"
-#include "core/decoder_target.hpp"
-#include "core/packet.hpp"
+#include "core/decode/decoder_target.hpp"
 #include "core/progress_line.hpp"
+#include "core/sensors/packet.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/live/foxglove_server.hpp"
@@ -34,8 +35,9 @@ bool points_decoded(const DaemonConfig& config);
 // are known only at start (the caller fills them in); the test hook only in builds with
 // PANDARCAP_TEST_HOOKS (the test builds; never the package).
 WriterOptions writer_options(const DaemonConfig& config);
-// health.fallback_directory, or where it defaults to (config/daemon_config.hpp).
-std::filesystem::path health_fallback_directory(const HealthSection& health);
+// Where the health files go while their own directory cannot be written, in the order tried:
+// health.fallback_directory when set, then the defaults (config/daemon_config.hpp), each once.
+std::vector<std::filesystem::path> health_fallback_directories(const HealthSection& health);
 // A replay shows its progress (core/progress_line.hpp) on stderr when that is a terminal and not
 // systemd's journal (JOURNAL_STREAM): never in a pipe, a file or a service's log.
 bool replay_progress_wanted();

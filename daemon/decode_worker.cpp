@@ -7,7 +7,7 @@
 #include <cstring>
 #include <thread>
 
-#include "core/sensor_model.hpp"
+#include "core/sensors/sensor_model.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 

@@ -14,8 +14,8 @@
 #include <optional>
 #include <vector>
 
-#include "core/calibration.hpp"
-#include "core/stream_decoder.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/stream_decoder.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "ringbuf/spsc_queue.hpp"

@@ -1,7 +1,7 @@
 #include "daemon/pandarcapd_command_line.hpp"
 
 #include "config/command_line.hpp"
-#include "core/packet.hpp"
+#include "core/sensors/packet.hpp"
 #include "daemon/cli_args.hpp"
 #include "daemon/pandarcapd_usage.hpp"
 

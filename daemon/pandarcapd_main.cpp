@@ -39,7 +39,7 @@
 
 #include "config/config_loader.hpp"
 #include "config/daemon_config.hpp"
-#include "core/health_state_log.hpp"
+#include "core/health/health_state_log.hpp"
 #include "core/log_text.hpp"
 #include "core/progress_line.hpp"
 #include "daemon/daemon_options.hpp"

@@ -69,8 +69,8 @@ Overrides (same names as the configuration keys):
   --pcap-compression C   output.pcap_compression: none (default: raw/NAME.pcap) or zstd
                          (raw/NAME.pcap.zst, which tshark and --replay read as it is)
   --min-free-bytes N     output.min_free_bytes: delete the oldest of pandarcap's files to keep
-                         N bytes free on each output file system (default 0: only the health
-                         files' 32 MiB plus 2 s of writing, the least the floor ever keeps)
+                         N bytes free on each output file system, never less than the health
+                         files' 32 MiB plus 2 s of writing (default 0: no floor, nothing deleted)
   --upload               output.upload = true: raw/ and mcap/ leave by upload (pandarcap-upload@
                          NAME.timer); the health says how far it is behind, and counts files
                          removed before they were uploaded

@@ -22,11 +22,11 @@
 #include <optional>
 #include <span>
 
-#include "core/frame.hpp"
-#include "core/latency_histogram.hpp"
-#include "core/packet.hpp"
-#include "core/point.hpp"
-#include "core/stream_decoder.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame.hpp"
+#include "core/frames/point.hpp"
+#include "core/health/latency_histogram.hpp"
+#include "core/sensors/packet.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
@@ -137,8 +137,8 @@ struct ReceiveCounters {
   std::atomic<std::uint64_t> datagrams{0};
   std::atomic<std::uint64_t> bytes{0};
   std::atomic<std::uint64_t> foreign{0};
-  // The source lock's (core/source_lock.hpp): valid Pandar packets from another source (also in
-  // `foreign`), the times the lock moved, and the sources as pack_ipv4_source (0: none yet).
+  // The source lock's (core/decode/source_lock.hpp): valid Pandar packets from another source (also
+  // in `foreign`), the times the lock moved, and the sources as pack_ipv4_source (0: none yet).
   std::atomic<std::uint64_t> other_sensor{0};
   std::atomic<std::uint64_t> source_changes{0};
   std::atomic<std::uint64_t> sensor_source{0};

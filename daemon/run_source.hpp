@@ -6,7 +6,7 @@
 #include <optional>
 #include <string>
 
-#include "core/packet.hpp"
+#include "core/sensors/packet.hpp"
 
 namespace pandarcap {
 

@@ -16,11 +16,12 @@
 #include <vector>
 
 #include "config/config_loader.hpp"
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 #include "core/log_text.hpp"
 #include "core/sim/simulated_unit.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/daemon_options.hpp"
+#include "daemon/io/calibration_file.hpp"
 #include "daemon/live/live_handover.hpp"
 #include "daemon/live/live_port_probe.hpp"
 #include "daemon/pcap/capture_reader.hpp"
@@ -146,7 +147,7 @@ int check_config(const DaemonConfig& config, const std::string& source_name) {
     // The file the start would read; the sensor is not asked (no network here).
     const SensorSection& s = config.sensor;
     if (s.calibration_source != "nominal" && !s.calibration_file.empty())
-      Calibration::load(s.calibration_file);
+      load_calibration(s.calibration_file);
   } catch (const std::exception& error) {
     std::fprintf(stderr, "pandarcapd: %s\n", escaped_control(error.what()).c_str());
     return kExitConfig;
@@ -166,6 +167,8 @@ int check_config(const DaemonConfig& config, const std::string& source_name) {
     fmt::print("free space: {}\n", escaped_control(line));
   for (const std::string& line : floor_report(outputs))
     fmt::print("free-space floor: {}\n", escaped_control(line));
+  for (const std::string& line : health_fallback_report(outputs))
+    fmt::print("health fallback: {}\n", escaped_control(line));
   if (outputs.upload) {
     fmt::print(
         "upload: raw/ and mcap/{} leave by upload (output.upload): the health says how far it is "

@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "config/daemon_config.hpp"
-#include "core/decoder_target.hpp"
+#include "core/decode/decoder_target.hpp"
 #include "daemon/output/output_directories.hpp"
 #include "daemon/pandarcapd_command_line.hpp"
 #include "daemon/ptc/ptc_client.hpp"

@@ -14,8 +14,8 @@
 #include <string>
 
 #include "bench/child_process.hpp"
-#include "core/decoder_target.hpp"
-#include "core/packet.hpp"
+#include "core/decode/decoder_target.hpp"
+#include "core/sensors/packet.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

@@ -7,7 +7,8 @@
 #include <fstream>
 #include <string>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
+#include "daemon/io/calibration_file.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;
@@ -109,21 +110,21 @@ TEST_CASE("an endless, huge or non-regular calibration file is refused at once",
   const auto huge = dir / "huge.csv";
   std::ofstream(huge).close();
   std::filesystem::resize_file(huge, 4u << 20);
-  CHECK_THROWS_WITH(Calibration::load(huge.string()),
+  CHECK_THROWS_WITH(load_calibration(huge.string()),
                     huge.string() + ":1:1: larger than 1048576 bytes: not a calibration table");
   // A device (endless) and a FIFO with no writer (an open would wait for one, a read forever):
   // refused before anything is read.
   const std::string not_regular =
       ": not a regular file (a FIFO, socket, device or directory): not a calibration table";
-  CHECK_THROWS_WITH(Calibration::load("/dev/zero"), "/dev/zero" + not_regular);
+  CHECK_THROWS_WITH(load_calibration("/dev/zero"), "/dev/zero" + not_regular);
   const auto fifo = dir / "fifo.csv";
   REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
-  CHECK_THROWS_WITH(Calibration::load(fifo.string()), fifo.string() + not_regular);
+  CHECK_THROWS_WITH(load_calibration(fifo.string()), fifo.string() + not_regular);
 }
 
 TEST_CASE("loading a missing file is a clear error naming it", "[calibration]") {
   try {
-    (void)Calibration::load("/nonexistent/cal.csv");
+    (void)load_calibration("/nonexistent/cal.csv");
     FAIL("no error");
   } catch (const CalibrationError& e) {
     CHECK(std::string(e.what()).find("/nonexistent/cal.csv") != std::string::npos);
@@ -161,7 +162,7 @@ TEST_CASE("to_csv round-trips through parse", "[calibration]") {
 TEST_CASE("the real nebula calibration file loads with the spec's values", "[calibration][real]") {
   const auto path = test::real_capture("nebula_Pandar40P_calibration.csv");
   if (!path) return;
-  const Calibration c = Calibration::load(path->string());
+  const Calibration c = load_calibration(path->string());
   // Spec §3.2, nebula sample column.
   CHECK(c.elevation_deg[0] == Approx(14.794));
   CHECK(c.elevation_deg[33] == Approx(-10.133));

@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/decoder_target.hpp"
+#include "core/decode/decoder_target.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_writer.hpp"

@@ -22,11 +22,11 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/calibration.hpp"
-#include "core/decoder_target.hpp"
-#include "core/frame_collector.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/decoder_target.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
 #include "core/ipv4.hpp"
-#include "core/stream_decoder.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
 #include "support/retimed_capture.hpp"

@@ -3,9 +3,9 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
-#include "core/decoder.hpp"
+#include "core/decode/decoder.hpp"
+#include "core/sensors/timing.hpp"
 #include "core/sim/packet_builder.hpp"
-#include "core/timing.hpp"
 
 using namespace pandarcap;
 

@@ -20,8 +20,8 @@
 #include "daemon/io/syscalls.hpp"
 #include "daemon/output/file_finisher.hpp"
 #include "daemon/output/frame_output.hpp"
+#include "daemon/output/health_room.hpp"
 #include "daemon/output/output_accounting.hpp"
-#include "daemon/output/space_guard.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "support/test_support.hpp"
 
@@ -221,7 +221,7 @@ TEST_CASE("frames go past the page cache, and through it once a file system refu
   fs::create_directories(options.output_dir / "frames");
   fs::create_directories(options.output_dir / "health");
   OutputAccounting accounting;
-  SpaceGuard space(options.output_dir / "health");
+  HealthRoom space(options.output_dir / "health");
   ToFrames receiver;
   FileFinisher finisher(receiver);
   FrameOutput output(options, accounting, space, finisher);

@@ -16,12 +16,12 @@
 #include <utility>
 #include <vector>
 
-#include "core/calibration.hpp"
-#include "core/decoder.hpp"
-#include "core/frame.hpp"
-#include "core/frame_assembler.hpp"
-#include "core/pcd.hpp"
-#include "core/timing.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/decoder.hpp"
+#include "core/decode/frame_assembler.hpp"
+#include "core/frames/frame.hpp"
+#include "core/frames/pcd.hpp"
+#include "core/sensors/timing.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

@@ -5,9 +5,9 @@
 #include <catch2/catch.hpp>
 #include <vector>
 
-#include "core/frame_collector.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/stream_decoder.hpp"
 
 using namespace pandarcap;
 

@@ -41,6 +41,9 @@ struct Case {
   const char* mount_options;
   Failure failure;
   bool comes_back;  // the disk takes writes again (btrfs: the subvolume set read-write)
+  // health.fallback_directory names a path that cannot be a directory (under a regular file):
+  // the next of the defaults takes the files ($XDG_RUNTIME_DIR/pandarcap/SENSOR here).
+  bool configured_unusable = false;
 };
 
 void fallback_case(const Case& c) {
@@ -54,14 +57,20 @@ void fallback_case(const Case& c) {
     REQUIRE(test::shell("btrfs subvolume create '" + base.string() + "'"));
   }
   const fs::path out = base / "o";
-  const fs::path fallback = dir / "fallback";  // not there yet: made at the first need
+  const fs::path configured = c.configured_unusable ? dir / "a-file" / "fallback" : dir / "fallback";
+  if (c.configured_unusable) std::ofstream(dir / "a-file") << "not a directory\n";
+  // Not there yet: made at the first need.
+  const fs::path fallback =
+      c.configured_unusable ? dir / "xdg" / "pandarcap" / "pandar40p" : configured;
   const fs::path config = dir / "health.toml";
-  std::ofstream(config) << "[health]\nfallback_directory = \"" << fallback.string() << "\"\n";
+  std::ofstream(config) << "[health]\nfallback_directory = \"" << configured.string() << "\"\n";
   test::NotifyListener notify(dir / "notify.sock");
   harness::ChildProcess daemon(
       test::binary("pandarcapd"),
       {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
-      dir / "log.txt", {"NOTIFY_SOCKET=" + (dir / "notify.sock").string()});
+      dir / "log.txt",
+      {"NOTIFY_SOCKET=" + (dir / "notify.sock").string(),
+       "XDG_RUNTIME_DIR=" + (dir / "xdg").string()});
   INFO(daemon.log());
   const fs::path home_prom = out / "health" / "pandarcap.prom";
   REQUIRE(notify.wait_for(
@@ -143,9 +152,10 @@ TEST_CASE("health on a disk that fails: ext4 forced read-only by an error (EROFS
   fallback_case({"ext4-errors-read-only", "ext4", "errors=remount-ro", Failure::kReadOnly, false});
 }
 
-TEST_CASE("health on a disk that fails: ext4 shut down (EIO from every call)",
+TEST_CASE("health on a disk that fails: ext4 shut down (EIO), the configured fallback unusable",
           "[fallback][reliability][threads]") {
-  fallback_case({"ext4-shut-down", "ext4", "", Failure::kShutDown, false});
+  // Its configured fallback unusable too: the next default takes the files.
+  fallback_case({"ext4-shut-down", "ext4", "", Failure::kShutDown, false, true});
 }
 
 TEST_CASE("health on a disk that fails: a btrfs subvolume read-only, then read-write: home again",

@@ -7,7 +7,7 @@
 #include <regex>
 #include <sstream>
 
-#include "core/health_format.hpp"
+#include "core/health/health_format.hpp"
 #include "core/text_encoding.hpp"
 #include "core/utc_time.hpp"
 #include "support/test_support.hpp"

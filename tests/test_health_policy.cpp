@@ -1,9 +1,9 @@
-// The health state and reason (core/health_policy.hpp), decided from two counter snapshots
+// The health state and reason (core/health/health_policy.hpp), decided from two counter snapshots
 // without a daemon: each problem's text, their order, and error > no_data > degraded > ok.
 #include <catch2/catch.hpp>
 #include <string>
 
-#include "core/health_policy.hpp"
+#include "core/health/health_policy.hpp"
 #include "core/ipv4.hpp"
 
 using namespace pandarcap;

@@ -1,8 +1,8 @@
-// The journal's account of the health state (core/health_state_log.hpp): one warning when the
-// state leaves ok, one info line when it returns, rate-limited, and never silent about the end.
+// The journal's account of the health state (core/health/health_state_log.hpp): one warning when
+// the state leaves ok, one info line when it returns, rate-limited, and never silent about the end.
 #include <catch2/catch.hpp>
 
-#include "core/health_state_log.hpp"
+#include "core/health/health_state_log.hpp"
 
 using namespace pandarcap;
 

@@ -1,5 +1,5 @@
-// pandarcap-inspect --png: the top-down picture (core/topdown_render.hpp) drawn where the points
-// are and nowhere else, and the PNG as libpng reads it back.
+// pandarcap-inspect --png: the top-down picture (core/frames/topdown_render.hpp) drawn where the
+// points are and nowhere else, and the PNG as libpng reads it back.
 #include <png.h>
 
 #include <catch2/catch.hpp>
@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
-#include "core/frame_collector.hpp"
-#include "core/topdown_render.hpp"
+#include "core/frames/frame_collector.hpp"
+#include "core/frames/topdown_render.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

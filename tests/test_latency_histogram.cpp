@@ -7,7 +7,7 @@
 #include <random>
 #include <vector>
 
-#include "core/latency_histogram.hpp"
+#include "core/health/latency_histogram.hpp"
 
 using namespace pandarcap;
 

@@ -82,8 +82,8 @@ std::vector<std::string> sources_under(std::initializer_list<const char*> folder
 }
 
 // The files of ours a source includes, as paths relative to the source directory: "x.hpp" next
-// to the file, or from the project root ("core/packet.hpp"). System and library headers are not
-// ours and are left out.
+// to the file, or from the project root ("core/sensors/packet.hpp"). System and library headers are
+// not ours and are left out.
 std::vector<std::string> our_includes(const std::string& file) {
   std::vector<std::string> found;
   std::istringstream lines(pandarcap::harness::read_file(kSourceDir / file));

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
+#include "core/frames/pcd.hpp"
 #include "core/mcap/mcap_parse.hpp"
-#include "core/pcd.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
 #include "support/mcap_reader.hpp"

@@ -8,11 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "core/frames/pcd.hpp"
 #include "core/mcap/chunk_codec.hpp"
 #include "core/mcap/mcap_parse.hpp"
 #include "core/mcap/mcap_records.hpp"
 #include "core/mcap/ros2_messages.hpp"
-#include "core/pcd.hpp"
 
 using namespace pandarcap;
 using namespace pandarcap::mcap;

@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/pcd.hpp"
+#include "core/frames/pcd.hpp"
 #include "support/mcap_reader.hpp"
 #include "support/test_support.hpp"
 

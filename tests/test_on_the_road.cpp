@@ -95,7 +95,7 @@ double uptime(const json& record) {
   return record.is_null() ? -1.0 : record.at("gauges").at("uptime_seconds").get<double>();
 }
 
-// Every datagram is accounted for (core/health.hpp). While packets flow the decoder's counts
+// Every datagram is accounted for (core/health/health.hpp). While packets flow the decoder's counts
 // are its last snapshot (once a second) and may lag the receive thread's: at most as many; at
 // rest (the final record) exactly.
 void check_identity(const json& h, bool at_rest = true) {

@@ -264,7 +264,7 @@ TEST_CASE("a stream of discontinuities cannot turn packets into files",
           "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-fragments");
   // Valid-looking packets in runs of 18 at random azimuths: each run follows on in itself (17
-  // that do, and it is no glitch but a change, see core/stream_decoder.hpp), and each is a
+  // that do, and it is no glitch but a change, see core/decode/stream_decoder.hpp), and each is a
   // discontinuity from the last.
   const fs::path capture = dir / "hostile.pcap";
   {
@@ -634,4 +634,46 @@ TEST_CASE("a run with another calibration keeps the earlier recordings' table be
           std::string::npos);
     if (i + 1 == recordings.size()) CHECK(facts == harness::read_file(out / "raw" / "sensor.json"));
   }
+}
+
+TEST_CASE("with output.upload, the recordings the upload moved are not counted lost",
+          "[daemon][outputs][upload][threads]") {
+  test::ScratchDir dir("outputs-upload-moved");
+  const fs::path out = dir / "out";
+  const fs::path remote = dir / "remote";  // where the upload put them (rclone move)
+  fs::create_directories(remote);
+  std::ofstream(dir / "up.toml") << "[output]\npcap_rotate_seconds = 1\nmcap = true\n"
+                                    "mcap_rotate_seconds = 1\nupload = true\n";
+  harness::ChildProcess daemon(test::binary("pandarcapd"),
+                               {"--allow-root", "-c", (dir / "up.toml").string(), "--simulate",
+                                "--output-dir", out.string()},
+                               dir / "log.txt");
+  // Moved as the upload moves them: finished files only, never a .part.
+  std::size_t moved = 0;
+  REQUIRE(harness::wait_until(
+      [&] {
+        for (const char* sub : {"raw", "mcap"}) {
+          for (const char* suffix : {".pcap", ".mcap"}) {
+            for (const fs::path& f : files_ending(out / sub, suffix)) {
+              std::error_code ec;
+              fs::rename(f, remote / f.filename(), ec);
+              if (!ec) ++moved;
+            }
+          }
+        }
+        return moved >= 4;
+      },
+      20s));
+  daemon.signal(SIGTERM);
+  INFO(daemon.log());
+  REQUIRE(daemon.wait_exit(30s) == 0);
+  const json last = test::last_health_record(out);
+  INFO(last.dump());
+  // They left for the upload: not lost, nothing said as lost, the log says where they went.
+  CHECK(health_counter(last, "pcap_packets_lost") == 0);
+  CHECK(health_counter(last, "mcap_messages_lost") == 0);
+  CHECK(health_counter(last, "packets_not_recorded") == 0);
+  CHECK(last.at("reason").get<std::string>().find("lost") == std::string::npos);
+  CHECK(daemon.log().find("have left") != std::string::npos);
+  CHECK(daemon.log().find("not counted as recorded") == std::string::npos);
 }

@@ -2,7 +2,7 @@
 #include <catch2/catch.hpp>
 #include <vector>
 
-#include "core/packet.hpp"
+#include "core/sensors/packet.hpp"
 #include "core/sim/packet_builder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/pcap/capture_reader.hpp"

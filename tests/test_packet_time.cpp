@@ -8,7 +8,7 @@
 #include <optional>
 #include <string>
 
-#include "core/packet_time.hpp"
+#include "core/decode/packet_time.hpp"
 
 using namespace pandarcap;
 

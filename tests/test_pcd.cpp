@@ -6,7 +6,7 @@
 #include <sstream>
 #include <vector>
 
-#include "core/pcd.hpp"
+#include "core/frames/pcd.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

@@ -17,12 +17,12 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/calibration.hpp"
-#include "core/frame_collector.hpp"
-#include "core/pcd.hpp"
-#include "core/pcd_compressed.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
+#include "core/frames/pcd.hpp"
+#include "core/frames/pcd_compressed.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/stream_decoder.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

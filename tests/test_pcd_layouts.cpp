@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/pcd.hpp"
+#include "core/frames/pcd.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

@@ -7,10 +7,11 @@
 #include <map>
 #include <vector>
 
-#include "core/decoder.hpp"
-#include "core/frame_collector.hpp"
-#include "core/packet_time.hpp"
-#include "core/stream_decoder.hpp"
+#include "core/decode/decoder.hpp"
+#include "core/decode/packet_time.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
+#include "daemon/io/calibration_file.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "support/test_support.hpp"
 
@@ -70,7 +71,7 @@ TEST_CASE("real dual capture: packets, RPM, return mode and frames", "[real][e2e
   const auto capture = test::real_capture(kDualCapture);
   const auto calibration_path = test::real_capture(kCalibration);
   if (!capture || !calibration_path) return;
-  const Calibration calibration = Calibration::load(calibration_path->string());
+  const Calibration calibration = load_calibration(calibration_path->string());
 
   std::vector<FrameInfo> frames;
   std::map<std::uint64_t, std::map<int, std::vector<std::uint16_t>>> azimuths;  // frame->ch->az
@@ -151,7 +152,7 @@ TEST_CASE("real dual capture: the calibration's offsets align adjacent channels"
   const auto calibration_path = test::real_capture(kCalibration);
   if (!capture || !calibration_path) return;
   const auto payloads = read_payloads(capture->string());
-  const Calibration right = Calibration::load(calibration_path->string());
+  const Calibration right = load_calibration(calibration_path->string());
   Calibration negated = right;  // offsets subtracted instead of added
   for (double& offset : negated.azimuth_offset_deg)
     offset = -offset;
@@ -170,7 +171,7 @@ TEST_CASE("real dual capture: timing and dual-return labelling", "[real][timing]
   const auto calibration_path = test::real_capture(kCalibration);
   if (!capture || !calibration_path) return;
   const auto payloads = read_payloads(capture->string());
-  ScalarDecoder decoder(Calibration::load(calibration_path->string()), {});
+  ScalarDecoder decoder(load_calibration(calibration_path->string()), {});
   PacketClock clock;
   std::array<Point, kMaxPointsPerPacket> points{};
   FilterCounts filtered;

@@ -11,13 +11,13 @@
 #include <string>
 
 #include "bench/udp_traffic.hpp"
-#include "core/health_format.hpp"
-#include "core/health_policy.hpp"
+#include "core/decode/packet_time.hpp"
+#include "core/health/health_format.hpp"
+#include "core/health/health_policy.hpp"
 #include "core/log_text.hpp"
-#include "core/packet.hpp"
-#include "core/packet_time.hpp"
 #include "core/ptc/status_plausibility.hpp"
-#include "core/timing.hpp"
+#include "core/sensors/packet.hpp"
+#include "core/sensors/timing.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

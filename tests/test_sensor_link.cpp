@@ -9,7 +9,7 @@
 #include <fstream>
 #include <optional>
 
-#include "core/decoder.hpp"
+#include "core/decode/decoder.hpp"
 #include "core/sim/simulated_unit.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/ptc/simulated_ptc_server.hpp"

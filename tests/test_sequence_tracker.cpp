@@ -5,7 +5,7 @@
 #include <initializer_list>
 #include <vector>
 
-#include "core/sequence_tracker.hpp"
+#include "core/decode/sequence_tracker.hpp"
 
 using namespace pandarcap;
 using Verdict = SequenceTracker::Verdict;

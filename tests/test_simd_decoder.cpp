@@ -16,11 +16,12 @@
 #include <string>
 #include <vector>
 
-#include "core/decoder.hpp"
-#include "core/decoder_target.hpp"
-#include "core/packet_decoder.hpp"
+#include "core/decode/decoder.hpp"
+#include "core/decode/decoder_target.hpp"
+#include "core/decode/packet_decoder.hpp"
+#include "core/decode/simd_decoder.hpp"
 #include "core/sim/packet_builder.hpp"
-#include "core/simd_decoder.hpp"
+#include "daemon/io/calibration_file.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "support/test_support.hpp"
 
@@ -228,7 +229,7 @@ TEST_CASE("every SIMD target this CPU has is offered: no silent fallback to scal
 TEST_CASE("SIMD decoders match the scalar reference on the real captures", "[simd][real]") {
   const auto calibration_path = test::real_capture("nebula_Pandar40P_calibration.csv");
   if (!calibration_path) return;
-  const Calibration calibration = Calibration::load(calibration_path->string());
+  const Calibration calibration = load_calibration(calibration_path->string());
   for (const char* name : {"pandar40p_nebula_dual_600rpm_1262B.pcap",
                            "velocityreport_pandar40p_single_packet_1266B.pcapng"}) {
     const auto capture = test::real_capture(name);

@@ -1,12 +1,12 @@
-// One sensor per daemon (core/source_lock.hpp): which source's datagrams are the sensor's, with
-// sensor_ip and without, and what another sensor on the port looks like.
+// One sensor per daemon (core/decode/source_lock.hpp): which source's datagrams are the sensor's,
+// with sensor_ip and without, and what another sensor on the port looks like.
 #include <array>
 #include <catch2/catch.hpp>
 #include <cstdint>
 
+#include "core/decode/source_lock.hpp"
 #include "core/ipv4.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/source_lock.hpp"
 
 using namespace pandarcap;
 

@@ -1,8 +1,8 @@
-// The free-space floor (daemon/output/space_floor.hpp) and the hours left (core/storage_rate.hpp):
-// which files are ours, the oldest removed first across outputs on a fake disk, other programs'
-// files and the open recordings left alone, the counts; the write-rate window and hours_left
-// arithmetic; the storage gauges in the JSON line and the .prom; the policy's min_hours_left.
-// Then a real daemon on a small tmpfs with earlier runs' files and a foreign file.
+// The free-space floor (daemon/output/space_floor.hpp) and the hours left
+// (core/health/storage_rate.hpp): which files are ours, the oldest removed first across outputs on
+// a fake disk, other programs' files and the open recordings left alone, the counts; the write-rate
+// window and hours_left arithmetic; the storage gauges in the JSON line and the .prom; the policy's
+// min_hours_left. Then a real daemon on a small tmpfs with earlier runs' files and a foreign file.
 #include <fmt/format.h>
 #include <signal.h>
 #include <sys/stat.h>
@@ -21,9 +21,9 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
-#include "core/health_format.hpp"
-#include "core/health_policy.hpp"
-#include "core/storage_rate.hpp"
+#include "core/health/health_format.hpp"
+#include "core/health/health_policy.hpp"
+#include "core/health/storage_rate.hpp"
 #include "daemon/output/retention.hpp"
 #include "daemon/output/space_floor.hpp"
 #include "support/test_support.hpp"

@@ -11,13 +11,13 @@
 #include <utility>
 #include <vector>
 
-#include "core/calibration.hpp"
-#include "core/decoder.hpp"
-#include "core/frame.hpp"
-#include "core/frame_collector.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/decoder.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame.hpp"
+#include "core/frames/frame_collector.hpp"
+#include "core/sensors/timing.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/stream_decoder.hpp"
-#include "core/timing.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;

@@ -1,10 +1,10 @@
-// The decode path's fault rules as matrices (core/stream_decoder.hpp, core/frame_assembler.hpp),
-// on the real capture re-timed with a sensor's clock (support/retimed_capture.hpp) in every
-// return mode: glitch bursts of every kind and length, and their neighbours (17 and more, at the
-// cut, right after the start, with a loss); losses of 1 to 500 packets, in a revolution and at
-// the cut; a motor that stands or crawls, its tail saying 0 or not; a counter that restarts at
-// any moment; two streams merged on one port. Pure core, a StreamDecoder per case: the daemon's
-// own runs of the same faults are in test_decode_faults.cpp.
+// The decode path's fault rules as matrices (core/decode/stream_decoder.hpp,
+// core/decode/frame_assembler.hpp), on the real capture re-timed with a sensor's clock
+// (support/retimed_capture.hpp) in every return mode: glitch bursts of every kind and length, and
+// their neighbours (17 and more, at the cut, right after the start, with a loss); losses of 1 to
+// 500 packets, in a revolution and at the cut; a motor that stands or crawls, its tail saying 0 or
+// not; a counter that restarts at any moment; two streams merged on one port. Pure core, a
+// StreamDecoder per case: the daemon's own runs of the same faults are in test_decode_faults.cpp.
 #include <algorithm>
 #include <array>
 #include <catch2/catch.hpp>
@@ -14,10 +14,10 @@
 #include <optional>
 #include <vector>
 
-#include "core/calibration.hpp"
-#include "core/decoder_target.hpp"
-#include "core/sensor_model.hpp"
-#include "core/stream_decoder.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/decoder_target.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/sensors/sensor_model.hpp"
 #include "support/retimed_capture.hpp"
 #include "support/test_support.hpp"
 

@@ -1,5 +1,5 @@
-// A glitch costs a packet, not a revolution (core/stream_decoder.hpp): the rule that tells an
-// isolated outlier from a real change, at its boundaries; duplicates decoded once; and streams
+// A glitch costs a packet, not a revolution (core/decode/stream_decoder.hpp): the rule that tells
+// an isolated outlier from a real change, at its boundaries; duplicates decoded once; and streams
 // with a glitch every few hundred packets cut into as many whole revolutions as clean ones.
 #include <array>
 #include <catch2/catch.hpp>
@@ -9,12 +9,12 @@
 #include <tuple>
 #include <vector>
 
-#include "core/calibration.hpp"
-#include "core/frame_collector.hpp"
-#include "core/packet_time.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/packet_time.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
 #include "core/sim/packet_builder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/stream_decoder.hpp"
 
 using namespace pandarcap;
 

@@ -6,10 +6,10 @@
 #include <cmath>
 #include <vector>
 
-#include "core/calibration.hpp"
-#include "core/frame_collector.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/stream_decoder.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "support/test_support.hpp"
 

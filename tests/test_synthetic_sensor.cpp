@@ -6,10 +6,10 @@
 #include <cmath>
 #include <set>
 
-#include "core/decoder.hpp"
-#include "core/packet_time.hpp"
+#include "core/decode/decoder.hpp"
+#include "core/decode/packet_time.hpp"
+#include "core/sensors/timing.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/timing.hpp"
 
 using namespace pandarcap;
 

@@ -1,7 +1,7 @@
 // Block and channel firing offsets against the spec's tables (§2.2, §2.3).
 #include <catch2/catch.hpp>
 
-#include "core/timing.hpp"
+#include "core/sensors/timing.hpp"
 
 using namespace pandarcap;
 

@@ -13,8 +13,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "core/health_format.hpp"
-#include "core/health_policy.hpp"
+#include "core/health/health_format.hpp"
+#include "core/health/health_policy.hpp"
 #include "daemon/output/upload_backlog.hpp"
 #include "daemon/pcap/recording_sidecars.hpp"
 #include "support/test_support.hpp"

@@ -2,7 +2,7 @@
 
 #include <array>
 
-#include "core/pcd.hpp"
+#include "core/frames/pcd.hpp"
 
 namespace pandarcap::mcap {
 

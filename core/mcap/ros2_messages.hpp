@@ -3,9 +3,9 @@
 // little-endian), then each field aligned to its own size counted from after that header.
 //
 //   sensor_msgs/msg/PointCloud2   one per frame. Its points are the PCD files' bytes exactly, in
-//                                 the same layout (core/pcd.hpp: output.pcd_fields; the fields
-//                                 name each of the layout's), so both outputs agree point for
-//                                 point; header.stamp is the frame's first firing time, the
+//                                 the same layout (core/frames/pcd.hpp: output.pcd_fields; the
+//                                 fields name each of the layout's), so both outputs agree point
+//                                 for point; header.stamp is the frame's first firing time, the
 //                                 reference of the relative-time layouts.
 //   pandar_msgs/msg/PandarPacket  one per datagram (optional): receive time, payload, size, as
 //                                 Hesai's ROS 2 driver defines it.
@@ -19,8 +19,8 @@
 #include <span>
 #include <string_view>
 
+#include "core/frames/pcd.hpp"
 #include "core/mcap/mcap_records.hpp"
-#include "core/pcd.hpp"
 
 namespace pandarcap::mcap {
 

@@ -2,7 +2,7 @@
 // device on the network says; a garbage answer (a firmware bug, another device on the port, a
 // corrupted reply that still has the right length) must not be published as fact. Each field has
 // the range a Pandar40P can report; what falls outside is left out of the health, counted, and
-// makes the state degraded naming the field (core/health_policy.cpp).
+// makes the state degraded naming the field (core/health/health_policy.cpp).
 //
 // The ranges, and why:
 //   uptime          0 .. 10 years: a sensor up longer than that has not been seen; 117 years

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <span>
 
-#include "core/packet.hpp"
+#include "core/sensors/packet.hpp"
 
 namespace pandarcap {
 

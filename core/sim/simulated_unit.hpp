@@ -9,7 +9,7 @@
 
 #include <cstdint>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 #include "core/ptc/ptc_messages.hpp"
 
 namespace pandarcap {

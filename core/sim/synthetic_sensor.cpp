@@ -5,8 +5,8 @@
 #include <limits>
 #include <numbers>
 
-#include "core/packet_time.hpp"
-#include "core/timing.hpp"
+#include "core/decode/packet_time.hpp"
+#include "core/sensors/timing.hpp"
 
 namespace pandarcap {
 

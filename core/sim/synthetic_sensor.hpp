@@ -22,8 +22,8 @@
 #include <cstdint>
 #include <span>
 
-#include "core/calibration.hpp"
-#include "core/packet.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/sensors/packet.hpp"
 #include "core/sim/packet_builder.hpp"
 
 namespace pandarcap {

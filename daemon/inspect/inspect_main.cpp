@@ -19,13 +19,14 @@
 
 #include "config/command_line.hpp"
 #include "config/config_loader.hpp"
-#include "core/calibration.hpp"
-#include "core/frame_collector.hpp"
-#include "core/packet.hpp"
-#include "core/stream_decoder.hpp"
-#include "core/topdown_render.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
+#include "core/frames/topdown_render.hpp"
+#include "core/sensors/packet.hpp"
 #include "daemon/cli_args.hpp"
 #include "daemon/inspect/png_file.hpp"
+#include "daemon/io/calibration_file.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/recording_calibration.hpp"
 
@@ -239,7 +240,7 @@ int run(const Options& options) {
   Calibration calibration = Calibration::nominal();
   std::string calibration_source = "nominal";
   if (options.calibration) {
-    calibration = Calibration::load(*options.calibration);
+    calibration = load_calibration(*options.calibration);
     calibration_source = "file";
   } else {
     std::string looked_for;

@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "core/topdown_render.hpp"
+#include "core/frames/topdown_render.hpp"
 
 namespace pandarcap {
 

@@ -224,9 +224,16 @@ void assign_directory_of(std::string& out, std::string_view path) {
 }
 
 void sync_file(const std::string& path) {
-  const io::UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW));
-  if (!fd) throw_errno("cannot open", path);
+  const io::UniqueFd fd = open_for_sync(path);
   sync_data(fd.get(), path);
+}
+
+io::UniqueFd open_for_sync(const std::string& path) {
+  io::UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW));
+  if (!fd) throw_errno("cannot open", path);
+  // Best effort: a file system without it (EINVAL, ESPIPE) is synced whole by fdatasync anyway.
+  ::sync_file_range(fd.get(), 0, 0, SYNC_FILE_RANGE_WRITE);
+  return fd;
 }
 
 bool place_durably(const std::string& from, std::string& to) {
@@ -236,22 +243,6 @@ bool place_durably(const std::string& from, std::string& to) {
   assign_directory_of(directory, to);
   sync_directory(directory);
   return renamed;
-}
-
-std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis) {
-  std::string stamp;
-  append_utc_file_stamp(stamp, unix_ns, with_millis);
-  return stamp;
-}
-
-void append_utc_file_stamp(std::string& out, std::int64_t unix_ns, bool with_millis) {
-  const std::time_t seconds = static_cast<std::time_t>(unix_ns / 1'000'000'000);
-  std::tm tm{};
-  gmtime_r(&seconds, &tm);
-  fmt::format_to(std::back_inserter(out), "{:04}{:02}{:02}T{:02}{:02}{:02}", tm.tm_year + 1900,
-                 tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec);
-  if (with_millis) fmt::format_to(std::back_inserter(out), ".{:03}", (unix_ns / 1'000'000) % 1000);
-  out += 'Z';
 }
 
 }  // namespace pandarcap

@@ -102,6 +102,11 @@ void sync_data(int fd, std::string_view path);
 // The same for the file named `path` (opened read-only, never through a link: fdatasync flushes
 // the file, whichever descriptor asks). Throws std::system_error.
 void sync_file(const std::string& path);
+// The file named `path` opened to be synced (read-only, never through a link, close-on-exec),
+// its dirty pages already sent on their way to the disk (sync_file_range: start, do not wait), so
+// that syncing several files one after the other waits for the slowest, not for their sum.
+// Throws std::system_error.
+io::UniqueFd open_for_sync(const std::string& path);
 // fsync(2) of the directory `directory`, so the names made, renamed or removed in it survive a
 // power cut. A file system that cannot sync a directory (EINVAL: some FUSE, NFS) has nothing to
 // sync: not an error. Throws std::system_error.
@@ -131,9 +136,5 @@ void assign_temporary_name(std::string& out, std::string_view path);
 // file is refused. Returns the descriptor and the file's size. Throws std::system_error naming
 // the path.
 std::pair<io::UniqueFd, std::uint64_t> open_leftover(const std::string& path, int access);
-
-// "20261122T120000.123Z" (with_millis) or "20261122T120000Z", for file names.
-std::string utc_file_stamp(std::int64_t unix_ns, bool with_millis);
-void append_utc_file_stamp(std::string& out, std::int64_t unix_ns, bool with_millis);
 
 }  // namespace pandarcap

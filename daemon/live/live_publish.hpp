@@ -7,8 +7,8 @@
 #include <cstdint>
 #include <string_view>
 
-#include "core/frame.hpp"
-#include "core/pcd.hpp"
+#include "core/frames/frame.hpp"
+#include "core/frames/pcd.hpp"
 #include "daemon/live/live_handover.hpp"
 
 namespace pandarcap::live {

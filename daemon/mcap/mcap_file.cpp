@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "core/frames/pcd.hpp"
 #include "core/mcap/ros2_messages.hpp"
-#include "core/pcd.hpp"
 
 namespace pandarcap {
 namespace {

@@ -33,7 +33,7 @@
 #include <utility>
 #include <vector>
 
-#include "core/frame.hpp"
+#include "core/frames/frame.hpp"
 #include "core/mcap/mcap_records.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/mcap/chunk_pipeline.hpp"

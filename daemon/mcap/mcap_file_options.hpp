@@ -7,8 +7,8 @@
 #include <utility>
 #include <vector>
 
+#include "core/frames/pcd.hpp"
 #include "core/mcap/chunk_codec.hpp"
-#include "core/pcd.hpp"
 
 namespace pandarcap {
 

@@ -59,7 +59,8 @@ FileFinisher::FileFinisher(FinishReceiver& receiver, std::size_t jobs)
       done_(std::bit_ceil(jobs + 1)) {
   jobs_.reserve(jobs);
   free_.reserve(jobs);
-  batch_.reserve(jobs + 1);
+  batch_.reserve(kMaxBatch);
+  batch_fds_.resize(kMaxBatch);
   batch_directories_.resize(jobs + 1);
   for (std::string& directory : batch_directories_)
     directory.reserve(kReservedPath);
@@ -169,25 +170,40 @@ void FileFinisher::run() noexcept {
       to_finish_.wait_for_data(kIdleWait);
       continue;
     }
-    // The jobs queued now make one batch: one directory sync each for all of them.
+    // The jobs queued now make one batch (up to kMaxBatch): their writeback started together,
+    // each synced, renamed in order, and one directory sync each for all of them.
     while (true) {
       if (job == nullptr) {
         stopping = true;  // the destructor's marker: after everything queued before it
         break;
       }
-      process(*job);
+      start(*job);
       batch_.push_back(job);
-      if (!to_finish_.try_pop(job)) break;
+      if (batch_.size() == kMaxBatch || !to_finish_.try_pop(job)) break;
     }
+    for (std::size_t i = 0; i < batch_.size(); ++i)
+      process(*batch_[i], batch_fds_[i]);
     end_batch();
   }
 }
 
-void FileFinisher::process(FinishJob& job) noexcept {
+void FileFinisher::start(FinishJob& job) noexcept {
+  io::UniqueFd& fd = batch_fds_[batch_.size()];
   try {
-    sync_file(job.from);
+    fd = open_for_sync(job.from);
   } catch (const std::exception& error) {
     note_error(job, error);
+  }
+}
+
+void FileFinisher::process(FinishJob& job, io::UniqueFd& fd) noexcept {
+  try {
+    if (!job.failed) sync_data(fd.get(), job.from);
+  } catch (const std::exception& error) {
+    note_error(job, error);
+  }
+  fd.reset();
+  if (job.failed) {
     if (job.kind != FinishJob::Kind::kSync && job.remove_on_failure) ::unlink(job.from.c_str());
     return;
   }

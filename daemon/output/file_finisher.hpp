@@ -48,6 +48,7 @@
 #include <thread>
 #include <vector>
 
+#include "daemon/io/unique_fd.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {
@@ -97,8 +98,9 @@ class FileFinisher {
  public:
   // Room for a path this long in every job's names, reserved up front.
   static constexpr std::size_t kReservedPath = 4096;
-  // The writer's: a second of frames three times over, and the recordings and health beside.
-  static constexpr std::size_t kDefaultJobs = 32;
+  // The writer's: over a second of frames at ten sensors' rate (100 frames a second), so a disk
+  // that takes a few hundred milliseconds for one journal commit does not stop the writer.
+  static constexpr std::size_t kDefaultJobs = 128;
 
   // `jobs` in flight at most; finished jobs go to `receiver` (from collect(), take(), drain()).
   explicit FileFinisher(FinishReceiver& receiver, std::size_t jobs = kDefaultJobs);
@@ -130,8 +132,10 @@ class FileFinisher {
 
  private:
   void run() noexcept;
-  // One job's data sync and rename; its directory is noted for the batch's sync.
-  void process(FinishJob& job) noexcept;
+  // A job of the batch opened, its writeback started (a failure noted in the job).
+  void start(FinishJob& job) noexcept;
+  // Its data synced, then renamed; its directory is noted for the batch's sync.
+  void process(FinishJob& job, io::UniqueFd& fd) noexcept;
   // The batch's directories synced, then its jobs handed back.
   void end_batch() noexcept;
 
@@ -141,7 +145,9 @@ class FileFinisher {
   std::vector<FinishJob*> free_;  // the writer's
   std::size_t in_flight_ = 0;     // the writer's
   // The finisher thread's: the jobs of the batch in progress and the directories they renamed in.
+  static constexpr std::size_t kMaxBatch = 64;
   std::vector<FinishJob*> batch_;
+  std::vector<io::UniqueFd> batch_fds_;  // each job's, while its batch is synced
   std::vector<std::string> batch_directories_;
   std::size_t batch_directory_count_ = 0;
   std::string directory_;  // scratch

@@ -9,14 +9,15 @@
 #include <span>
 #include <system_error>
 
-#include "core/pcd.hpp"
+#include "core/frames/pcd.hpp"
+#include "core/utc_time.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 
 namespace pandarcap {
 FrameOutput::FrameOutput(const WriterOptions& options, OutputAccounting& accounting,
-                         SpaceGuard& space, FileFinisher& finisher)
+                         HealthRoom& space, FileFinisher& finisher)
     : accounting_(accounting),
       space_(space),
       finisher_(finisher),

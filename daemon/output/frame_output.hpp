@@ -6,15 +6,15 @@
 // thread's (daemon/output/file_finisher.hpp), after it synced the frame's data, and the
 // directory is synced after it: a frame has its final name only once it is on the disk whole,
 // and is counted written (frames_written, retention, its latency) then. A frame is not written
-// while its file system is down to the space kept for the health files (SpaceGuard: counted as a
+// while its file system is down to the space kept for the health files (HealthRoom: counted as a
 // failed write, said in the health), and a frames/ removed while running is made again. N continues
 // across runs: it starts after the highest number found at start-up (adopt_earlier_files), and is
 // that base plus the frame's sequence number. Retention (frames_max_files / frames_max_bytes)
 // counts earlier runs' frames too.
 //
 // With output.pcd_compression = "lzf" a frame is compressed whole (DATA binary_compressed,
-// core/pcd_compressed.hpp) before it is written, in buffers sized at start-up for the largest
-// frame (arenas.points_per_frame).
+// core/frames/pcd_compressed.hpp) before it is written, in buffers sized at start-up for the
+// largest frame (arenas.points_per_frame).
 //
 // The points come encoded in the output layout (the decode worker wrote them into the arena so):
 // a frame is its header and the arena's bytes. Uncompressed, they go past the page cache
@@ -33,13 +33,13 @@
 #include <string_view>
 #include <vector>
 
-#include "core/latency_histogram.hpp"
-#include "core/pcd_compressed.hpp"
+#include "core/frames/pcd_compressed.hpp"
+#include "core/health/latency_histogram.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/output/file_finisher.hpp"
+#include "daemon/output/health_room.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/retention.hpp"
-#include "daemon/output/space_guard.hpp"
 #include "daemon/output/writer_options.hpp"
 #include "daemon/pipeline_types.hpp"
 
@@ -47,7 +47,7 @@ namespace pandarcap {
 
 class FrameOutput {
  public:
-  FrameOutput(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space,
+  FrameOutput(const WriterOptions& options, OutputAccounting& accounting, HealthRoom& space,
               FileFinisher& finisher);
 
   const std::filesystem::path& directory() const noexcept { return dir_; }
@@ -72,7 +72,7 @@ class FrameOutput {
 
  private:
   OutputAccounting& accounting_;
-  SpaceGuard& space_;
+  HealthRoom& space_;
   FileFinisher& finisher_;
   std::filesystem::path dir_;
   int volume_;  // dir_'s file system, for space_

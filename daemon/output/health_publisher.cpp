@@ -1,5 +1,6 @@
 #include "daemon/output/health_publisher.hpp"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
@@ -11,8 +12,8 @@
 #include <string_view>
 #include <system_error>
 
-#include "core/health_format.hpp"
-#include "core/health_policy.hpp"
+#include "core/health/health_format.hpp"
+#include "core/health/health_policy.hpp"
 #include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
@@ -22,7 +23,7 @@
 
 namespace pandarcap {
 HealthPublisher::HealthPublisher(const WriterOptions& options, OutputAccounting& accounting,
-                                 SpaceGuard& space, FileFinisher& finisher)
+                                 HealthRoom& space, FileFinisher& finisher)
     : options_(options), accounting_(accounting), space_(space), finisher_(finisher) {}
 
 void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
@@ -38,12 +39,10 @@ void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
   // The probe of a health directory that failed: the name the start-up's writability probe uses.
   probe_path_ = (options_.health_dir / kProbeFileName).native();
   prom_probe_path_ = (options_.prometheus_file.parent_path() / kProbeFileName).native();
-  const std::filesystem::path& fallback = options_.health_fallback_dir;
-  fallback_prom_path_ = (fallback / options_.prometheus_file.filename()).native();
-  assign_temporary_name(fallback_prom_temporary_path_, fallback_prom_path_);
-  fallback_jsonl_path_ = (fallback / "health.jsonl").native();
-  fallback_jsonl_rotated_path_ = fallback_jsonl_path_ + ".1";
-  health_.gauges.health_fallback.directory.reserve(fallback.native().size() + 1);
+  use_fallback(0);
+  for (const std::filesystem::path& dir : options_.health_fallback_dirs) {
+    health_.gauges.health_fallback.directory.reserve(dir.native().size() + 1);
+  }
   health_.gauges.health_fallback.error.reserve(1024);
   home_error_.reserve(1024);
   health_.sensor_identity = options_.sensor_identity;  // found at start-up, constant after
@@ -376,7 +375,7 @@ bool HealthPublisher::probe_home() {
 void HealthPublisher::enter_fallback(std::int64_t now) {
   HealthFallbackGauges& fallback = health_.gauges.health_fallback;
   fallback.active = true;
-  fallback.directory.assign(options_.health_fallback_dir.native());
+  use_fallback(0);
   fallback.error.assign(home_error_);
   home_error_.clear();
   jsonl_file_.close();  // reopened, and checked, when home again
@@ -385,10 +384,25 @@ void HealthPublisher::enter_fallback(std::int64_t now) {
   write_fallback(now);
 }
 
-void HealthPublisher::write_fallback(std::int64_t now) {
-  const HealthFallbackGauges& fallback = health_.gauges.health_fallback;
-  const std::filesystem::path& dir = options_.health_fallback_dir;
-  std::string_view problem;
+void HealthPublisher::use_fallback(std::size_t index) {
+  fallback_index_ = index;
+  if (index >= options_.health_fallback_dirs.size()) {
+    health_.gauges.health_fallback.directory.clear();  // none takes them
+    return;
+  }
+  const std::filesystem::path& dir = options_.health_fallback_dirs[index];
+  fallback_prom_path_ = (dir / options_.prometheus_file.filename()).native();
+  assign_temporary_name(fallback_prom_temporary_path_, fallback_prom_path_);
+  fallback_jsonl_path_ = (dir / "health.jsonl").native();
+  fallback_jsonl_rotated_path_ = fallback_jsonl_path_ + ".1";
+  fallback_prom_file_.close();
+  fallback_jsonl_file_.close();
+  if (health_.gauges.health_fallback.active)
+    health_.gauges.health_fallback.directory = dir.native();
+}
+
+bool HealthPublisher::write_fallback_files() noexcept {
+  const std::filesystem::path& dir = options_.health_fallback_dirs[fallback_index_];
   for (int attempt = 0; attempt < 2; ++attempt) {
     try {
       if (options_.prometheus) {
@@ -399,27 +413,45 @@ void HealthPublisher::write_fallback(std::int64_t now) {
       if (options_.jsonl) {
         append_jsonl(fallback_jsonl_file_, fallback_jsonl_path_, fallback_jsonl_rotated_path_);
       }
-      problem = {};
-      break;
+      return true;
     } catch (const std::exception& error) {
       // Its directory is made at the first need (a tmpfs under /run starts empty).
       std::error_code ignored;
       if (attempt == 0 && std::filesystem::create_directories(dir, ignored)) continue;
-      problem = error.what();
-      // The message is logged now: `error` goes with this scope.
-      if (fallback_logged_ns_ < 0 || now - fallback_logged_ns_ >= 10 * kNsPerSecond) {
-        spdlog::error("health: {} ({}); and the fallback {} cannot be written either: {}",
-                      fallback.error, options_.health_dir.string(), dir.string(), problem);
-        fallback_logged_ns_ = now;
+      fallback_error_ = fmt::format("{}: {}", dir.string(), error.what());
+    }
+  }
+  return false;
+}
+
+void HealthPublisher::write_fallback(std::int64_t now) {
+  HealthFallbackGauges& fallback = health_.gauges.health_fallback;
+  const bool log = fallback_logged_ns_ < 0 || now - fallback_logged_ns_ >= 10 * kNsPerSecond;
+  if (log) fallback_logged_ns_ = now;
+  // The directory in use, else the next of them that takes the files: the record is decided
+  // again for each, so that it names where it is.
+  for (std::size_t tried = 0; fallback_index_ < options_.health_fallback_dirs.size(); ++tried) {
+    if (write_fallback_files()) {
+      if (log) {
+        spdlog::error("health: {}; writing the health files to {} until {} takes them again",
+                      fallback.error, fallback.directory, options_.health_dir.string());
       }
       return;
     }
+    spdlog::error("health: {} cannot take the health files either ({})",
+                  options_.health_fallback_dirs[fallback_index_].string(), fallback_error_);
+    use_fallback(fallback_index_ + 1);
+    if (fallback_index_ < options_.health_fallback_dirs.size()) reclassify();
   }
-  if (fallback_logged_ns_ < 0 || now - fallback_logged_ns_ >= 10 * kNsPerSecond) {
-    spdlog::error("health: {}; writing the health files to {} until {} takes them again",
-                  fallback.error, dir.string(), options_.health_dir.string());
-    fallback_logged_ns_ = now;
+  // None takes them: said where it still can be (the journal, STATUS=, the exit summary).
+  if (!fallback.directory.empty() || fallback.error.find(fallback_error_) == std::string::npos) {
+    fallback.directory.clear();
+    fallback.error += "; and no fallback directory either (";
+    fallback.error += fallback_error_;
+    fallback.error += ')';
+    reclassify();
   }
+  if (log) spdlog::error("health: cannot be written anywhere: {}", fallback.error);
 }
 
 void HealthPublisher::leave_fallback() {
@@ -429,6 +461,7 @@ void HealthPublisher::leave_fallback() {
   fallback.error.clear();
   fallback_jsonl_file_.close();
   ::unlink(fallback_prom_path_.c_str());  // no monitor keeps reading a frozen copy
+  use_fallback(0);
   reclassify();
   spdlog::info("health: {} takes writes again; the health files are back there ({} removed)",
                options_.health_dir.string(), fallback_prom_path_);

@@ -3,11 +3,11 @@
 //
 //   - build(): the HealthSnapshot from the receive thread's atomics, the decoder's latest
 //     snapshot and the writer's own parts (frames, recordings, failed writes), with the per-second
-//     rates and the state and reason decided by core/health_policy.hpp against the previous
+//     rates and the state and reason decided by core/health/health_policy.hpp against the previous
 //     record. Filled in place: once warm its strings keep their capacity.
 //     The `storage` gauges: each output's bytes written per second over the last minute
-//     (a preallocated window of per-second samples, core/storage_rate.hpp) and the hours of disk
-//     left at that pace, which health.min_hours_left checks.
+//     (a preallocated window of per-second samples, core/health/storage_rate.hpp) and the hours of
+//     disk left at that pace, which health.min_hours_left checks.
 //   - write(): DIR/pandarcap.prom replaced whole (temporary file + rename: node_exporter never
 //     reads half a file; the rename is the finisher thread's, after the data is synced:
 //     daemon/output/file_finisher.hpp), one line appended to health.jsonl (kept open; rotated to
@@ -15,7 +15,7 @@
 //     it cannot glue itself to the next; synced every output.sync_interval_seconds, sync_jsonl()).
 //     A failure is counted (OutputAccounting), not thrown. Neither may freeze
 //     (docs/reliability.md): a write that fails for want of space takes a piece of the health
-//     reserve (SpaceGuard) and is tried again; a health directory removed while running is made
+//     reserve (HealthRoom) and is tried again; a health directory removed while running is made
 //     again; health.jsonl is reopened when it is no longer at its path.
 //   - The fallback: any other failure of the health files (a disk gone read-only: EROFS; failing:
 //     EIO, at the write or at the finisher's sync) sends them to health.fallback_directory
@@ -33,16 +33,16 @@
 #include <cstdint>
 #include <string>
 
-#include "core/health.hpp"
-#include "core/storage_rate.hpp"
+#include "core/health/health.hpp"
+#include "core/health/storage_rate.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/live/live_handover.hpp"
 #include "daemon/output/file_finisher.hpp"
 #include "daemon/output/frame_output.hpp"
+#include "daemon/output/health_room.hpp"
 #include "daemon/output/mcap_recorder.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/pcap_recorder.hpp"
-#include "daemon/output/space_guard.hpp"
 #include "daemon/output/writer_options.hpp"
 #include "daemon/pipeline_types.hpp"
 #include "daemon/ptc/sensor_status_channel.hpp"
@@ -65,8 +65,8 @@ struct HealthSources {
   std::uint64_t ptc_requests;
   std::uint64_t ptc_errors;
   std::uint64_t sensor_status_implausible;
-  // The free space of each output's file system (core/storage_rate.hpp), asked by the free-space
-  // floor this second, and what the floor removed (daemon/output/space_floor.hpp).
+  // The free space of each output's file system (core/health/storage_rate.hpp), asked by the
+  // free-space floor this second, and what the floor removed (daemon/output/space_floor.hpp).
   const StorageInputs& storage;
   std::uint64_t files_removed_for_space;
   std::uint64_t bytes_removed_for_space;
@@ -77,7 +77,7 @@ struct HealthSources {
 class HealthPublisher {
  public:
   // `options` must outlive the publisher.
-  HealthPublisher(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space,
+  HealthPublisher(const WriterOptions& options, OutputAccounting& accounting, HealthRoom& space,
                   FileFinisher& finisher);
 
   // At start-up: the file names, the clock the uptime and rates count from, and the buffers.
@@ -130,11 +130,15 @@ class HealthPublisher {
   void reclassify();
   void enter_fallback(std::int64_t now);
   void write_fallback(std::int64_t now);
+  // The files' names in health_fallback_dirs[index] (past the end: none left).
+  void use_fallback(std::size_t index);
+  // Both files written to the fallback in use; false (fallback_error_ says why) when it refuses.
+  bool write_fallback_files() noexcept;
   void leave_fallback();
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
-  SpaceGuard& space_;
+  HealthRoom& space_;
   FileFinisher& finisher_;
   HealthSnapshot health_;
   bool silent_ = true;  // the last build()'s, for reclassify()
@@ -162,6 +166,8 @@ class HealthPublisher {
       fallback_jsonl_rotated_path_;
   OutputFile probe_file_, fallback_prom_file_, fallback_jsonl_file_;
   std::int64_t fallback_logged_ns_ = -1;
+  std::size_t fallback_index_ = 0;  // in options_.health_fallback_dirs
+  std::string fallback_error_;      // why the last fallback refused
 };
 
 }  // namespace pandarcap

@@ -8,6 +8,7 @@
 #include <span>
 #include <system_error>
 
+#include "core/utc_time.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
@@ -25,7 +26,7 @@ constexpr std::uint64_t kMcapMessageOverheadBytes = 128;
 }  // namespace
 
 McapRecorder::McapRecorder(const WriterOptions& options, OutputAccounting& accounting,
-                           SpaceGuard& space, FileFinisher& finisher)
+                           HealthRoom& space, FileFinisher& finisher)
     : options_(options),
       accounting_(accounting),
       space_(space),
@@ -207,6 +208,12 @@ void McapRecorder::lose_open_file() {
 void McapRecorder::verify_on_disk() {
   const RecordedFiles::Gone gone = recorded_.take_gone();
   if (gone.files == 0) return;
+  if (options_.upload) {
+    // mcap/ is an upload directory: a finished file that left it was moved by the upload.
+    spdlog::info("{} of this run's MCAP files have left {} for the upload ({} messages)",
+                 gone.files, dir_.string(), gone.items);
+    return;
+  }
   messages_lost_ += gone.items;
   spdlog::warn(
       "{} of this run's MCAP files are gone from {} (removed while running): their {} "

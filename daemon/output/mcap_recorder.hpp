@@ -22,7 +22,7 @@
 // (as the pcap's does) and, with retention on, its entry in the retention list.
 //
 // As the pcap's: nothing is written while mcap/'s file system is down to the space kept for the
-// health files (SpaceGuard; counted as not written), mcap/ removed while running is made again,
+// health files (HealthRoom; counted as not written), mcap/ removed while running is made again,
 // and messages in a file that vanished are counted as lost (messages_lost), the open file's at
 // every flush, this run's finished files' at the end (verify_on_disk).
 #pragma once
@@ -37,9 +37,9 @@
 
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/output/file_finisher.hpp"
+#include "daemon/output/health_room.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/retention.hpp"
-#include "daemon/output/space_guard.hpp"
 #include "daemon/output/writer_options.hpp"
 #include "daemon/pipeline_types.hpp"
 
@@ -48,7 +48,7 @@ namespace pandarcap {
 class McapRecorder {
  public:
   // `options` must outlive the recorder.
-  McapRecorder(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space,
+  McapRecorder(const WriterOptions& options, OutputAccounting& accounting, HealthRoom& space,
                FileFinisher& finisher);
   ~McapRecorder();
 
@@ -113,7 +113,7 @@ class McapRecorder {
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
-  SpaceGuard& space_;
+  HealthRoom& space_;
   FileFinisher& finisher_;
   std::filesystem::path dir_;
   int volume_;  // dir_'s file system, for space_

@@ -13,8 +13,8 @@
 #include <system_error>
 
 #include "daemon/io/errors.hpp"
+#include "daemon/output/health_room.hpp"
 #include "daemon/output/space_floor.hpp"
-#include "daemon/output/space_guard.hpp"
 
 namespace pandarcap {
 namespace {
@@ -143,10 +143,29 @@ std::vector<std::string> space_problems(const WriterOptions& o, std::vector<std:
   return problems;
 }
 
+std::vector<std::string> health_fallback_report(const WriterOptions& o) {
+  std::vector<std::string> lines;
+  if (!o.jsonl && !o.prometheus) return lines;
+  for (const fs::path& dir : o.health_fallback_dirs) {
+    const std::string problem = directory_problem(dir);
+    lines.push_back(problem.empty()
+                        ? fmt::format("'{}' (made when first needed)", dir.string())
+                        : fmt::format("'{}' cannot be used: {}", dir.string(), problem));
+    if (problem.empty()) break;  // the ones after are not reached
+  }
+  return lines;
+}
+
 std::vector<std::string> floor_report(const WriterOptions& o) {
   std::vector<std::string> lines;
   const bool any_output = o.frames || o.pcap || o.mcap;
   if (!any_output) return lines;
+  if (o.min_free_bytes == 0 && o.min_free_percent <= 0) {
+    lines.push_back(
+        "none (output.min_free_bytes and min_free_percent 0): nothing of pandarcap's is removed "
+        "for space; a disk its own files fill refuses writes, counted");
+    return lines;
+  }
   WriterOptions outputs = o;  // the health directory holds none of the floor's files
   outputs.jsonl = outputs.prometheus = false;
   for_each_output_file_system(outputs, [&](const char* what, const fs::path& dir) {

@@ -22,7 +22,7 @@
 
 #include "daemon/io/file_output.hpp"
 #include "daemon/io/unique_fd.hpp"
-#include "daemon/output/writer.hpp"
+#include "daemon/output/writer_options.hpp"
 
 namespace pandarcap {
 
@@ -35,7 +35,7 @@ inline constexpr std::string_view kProbeFileName = ".pandarcapd-probe.tmp";
 std::vector<std::string> output_problems(const WriterOptions& options);
 
 // The free space on each output's file system against what the start needs to begin writing:
-// kOutputFloorBytes + kHealthReserveBytes (space_guard.hpp). One line per file system in
+// kOutputFloorBytes + kHealthReserveBytes (health_room.hpp). One line per file system in
 // `report` ("frames directory '/x/frames': 812 MiB free, 40 MiB needed"); returns the problems
 // (the same line, for each file system short of it). `--check-config` prints both; the start
 // refuses with the problems (exit 73).
@@ -46,6 +46,12 @@ std::vector<std::string> space_problems(const WriterOptions& options,
 // configured one, or that it is raised to the health files' room plus 2 s of writing
 // (space_floor.hpp).
 std::vector<std::string> floor_report(const WriterOptions& options);
+
+// Where the health files would go while their own directory cannot be written: each of
+// health_fallback_dirs tried in order, up to the first one this user can write ("'DIR' (made when
+// first needed)" / "'DIR' cannot be used: WHY"). For --check-config: a warning, not a refusal
+// (the capture does not need it).
+std::vector<std::string> health_fallback_report(const WriterOptions& options);
 
 // A directory of ours removed while the daemon runs (a USB disk pulled, a clean-up script): made
 // again and said in the log. True when it was missing and exists now; false when it was there

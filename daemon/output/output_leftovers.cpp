@@ -120,9 +120,19 @@ void finish_interrupted_recordings(const fs::path& dir, std::string_view suffix,
         spdlog::warn("{}: left by an interrupted run with no whole record; removed", part);
         continue;
       }
+      // Its final name chosen first (a taken one becomes "_dupN", as place_without_replacing
+      // makes it), so that the sidecars written for it are in place before it is.
       std::string finished = part.substr(0, part.size() - 5);  // without ".part"
+      const std::string wanted = finished;
+      if (fs::exists(finished, ec)) {
+        const std::size_t extension = finished.size() - suffix.size();
+        for (unsigned n = 1; fs::exists(finished, ec); ++n)
+          finished = fmt::format("{}_dup{}{}", wanted.substr(0, extension), n, suffix);
+      }
       if (sidecars) write_recovered_sidecars(dir, finished);
-      if (place_durably(part, finished)) accounting.name_collision(part, finished);
+      if (place_durably(part, finished) || finished != wanted) {
+        accounting.name_collision(part, finished);
+      }
       spdlog::warn(
           "{}: left by an interrupted run; finished as {} ({} whole records, {} bytes of "
           "a cut record removed)",

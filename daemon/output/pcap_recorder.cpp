@@ -11,9 +11,10 @@
 #include <system_error>
 #include <utility>
 
-#include "core/text_file.hpp"
+#include "core/utc_time.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
+#include "daemon/io/text_file.hpp"
 #include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 #include "daemon/output/rotation.hpp"
@@ -21,7 +22,7 @@
 
 namespace pandarcap {
 PcapRecorder::PcapRecorder(const WriterOptions& options, OutputAccounting& accounting,
-                           SpaceGuard& space, FileFinisher& finisher)
+                           HealthRoom& space, FileFinisher& finisher)
     : options_(options),
       accounting_(accounting),
       space_(space),
@@ -140,6 +141,13 @@ void PcapRecorder::lose_open_file() {
 void PcapRecorder::verify_on_disk() {
   const RecordedFiles::Gone gone = recorded_.take_gone();
   if (gone.files == 0) return;
+  if (options_.upload) {
+    // raw/ is an upload directory: a finished recording that left it was moved by the upload
+    // (which never takes one before it is finished), not lost.
+    spdlog::info("{} of this run's recordings have left {} for the upload ({} packets)", gone.files,
+                 dir_.string(), gone.items);
+    return;
+  }
   packets_lost_ += gone.items;
   spdlog::warn(
       "{} of this run's recordings are gone from {} (removed while running): their {} "

@@ -20,7 +20,7 @@
 // closes it (readers never choke on a cut record); the records taken back and the rest of the
 // batch are counted as not written, and the next batch tries a new file. Each batch is flushed
 // whole, so a crash loses at most the batch being written. A batch is not written while raw/'s
-// file system is down to the space kept for the health files (SpaceGuard): counted as not
+// file system is down to the space kept for the health files (HealthRoom): counted as not
 // written.
 //
 // Recordings that vanish (raw/ removed while running, a remount over it): raw/ is made again at
@@ -44,9 +44,9 @@
 #include <vector>
 
 #include "daemon/output/file_finisher.hpp"
+#include "daemon/output/health_room.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/retention.hpp"
-#include "daemon/output/space_guard.hpp"
 #include "daemon/output/writer_options.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
 #include "daemon/pipeline_types.hpp"
@@ -56,7 +56,7 @@ namespace pandarcap {
 class PcapRecorder {
  public:
   // `options` must outlive the recorder.
-  PcapRecorder(const WriterOptions& options, OutputAccounting& accounting, SpaceGuard& space,
+  PcapRecorder(const WriterOptions& options, OutputAccounting& accounting, HealthRoom& space,
                FileFinisher& finisher);
   ~PcapRecorder();
 
@@ -118,7 +118,7 @@ class PcapRecorder {
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
-  SpaceGuard& space_;
+  HealthRoom& space_;
   FileFinisher& finisher_;
   std::filesystem::path dir_;
   int volume_;  // dir_'s file system, for space_

@@ -6,7 +6,7 @@
 // writer thread) each file system is asked its free space: one statvfs each, nothing else while
 // above the floor. The floor is the larger of min_free_bytes and min_free_percent of the file
 // system's size, and never less than the room the outputs' writes stop short of
-// (kOutputFloorBytes, space_guard.hpp) plus 2 s of writing at the measured rate (write_rate()):
+// (kOutputFloorBytes, health_room.hpp) plus 2 s of writing at the measured rate (write_rate()):
 // a floor below that could not act before the writes were refused (a floor of 12 MB on a small
 // disk gave write errors with our old files still there). That minimum only rises: with the
 // rate, logged when it does. Below the floor, the output directories on that file system are
@@ -28,7 +28,7 @@
 // lists; the upload backlog counts it when it had not been uploaded); the removals are logged at
 // most every 10 s, summed. When no file of ours is left to remove and the file system is still
 // below the floor (someone else fills it), that is logged (at most every 10 s) and the full-disk
-// behaviour applies (space_guard.hpp): writes stop short of the health files' room, counted.
+// behaviour applies (health_room.hpp): writes stop short of the health files' room, counted.
 //
 // Nothing is allocated after prepare(): the scan reads directories with getdents64 into a buffer
 // of its own, keeps the oldest kCandidates files of a pass in a preallocated heap, and removes
@@ -45,8 +45,8 @@
 #include <string_view>
 #include <vector>
 
+#include "daemon/output/health_room.hpp"
 #include "daemon/output/output_names.hpp"
-#include "daemon/output/space_guard.hpp"
 
 namespace pandarcap {
 

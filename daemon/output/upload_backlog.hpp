@@ -29,7 +29,7 @@
 #include <string_view>
 #include <vector>
 
-#include "core/health.hpp"
+#include "core/health/health.hpp"
 #include "daemon/output/directory_reader.hpp"
 #include "daemon/output/output_names.hpp"
 

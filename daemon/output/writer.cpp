@@ -60,12 +60,6 @@ void Writer::prepare() {
   decode_.monotonic_ns = start;
   health_.prepare(start);
   std::filesystem::create_directories(options_.health_dir);
-  // Room to write, and the health files' room, first: a disk short of them fails the start (73),
-  // as --check-config says it would.
-  std::vector<std::string> space;
-  const std::vector<std::string> short_of_space = space_problems(options_, space);
-  if (!short_of_space.empty()) throw std::runtime_error(short_of_space.front());
-  space_.prepare();
   if (options_.prometheus && options_.prometheus_file.has_parent_path()) {
     std::filesystem::create_directories(options_.prometheus_file.parent_path());
   }
@@ -116,6 +110,14 @@ void Writer::prepare() {
   });
   upload_.prepare();
   tend_floor(start);
+  // Room to write, and the health files' room: a disk short of them fails the start (73), as
+  // --check-config says it would. Asked only now: what an interrupted run left is finished (a
+  // power cut's .part must not wait for space), and a floor asked for has removed the oldest
+  // files of ours first, so a disk our own recordings filled starts again.
+  std::vector<std::string> space;
+  const std::vector<std::string> short_of_space = space_problems(options_, space);
+  if (!short_of_space.empty()) throw std::runtime_error(short_of_space.front());
+  space_.prepare();
   // Proves the health directories are writable before the daemon reports ready.
   take_sensor_status();
   health_.build(sources(start), start);
@@ -324,7 +326,10 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       const HealthFallbackGauges& fallback = h.gauges.health_fallback;
       fmt::format_to_n(status.text, sizeof status.text - 1,
                        "{}{}{}: {} packets, {} frames written, {:.0f} RPM, {} dropped{}{}",
-                       to_string(h.gauges.state), fallback.active ? ", health written to " : "",
+                       to_string(h.gauges.state),
+                       !fallback.active             ? ""
+                       : fallback.directory.empty() ? ", health written nowhere"
+                                                    : ", health written to ",
                        fallback.active ? fallback.directory : std::string_view(),
                        c.datagrams_received, c.frames_written, h.gauges.rpm_tail,
                        c.kernel_drops + c.ring_overruns + c.frames_dropped_no_arena,

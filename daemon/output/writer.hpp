@@ -38,16 +38,16 @@
 #include <atomic>
 #include <cstdint>
 
-#include "core/health.hpp"
+#include "core/health/health.hpp"
 #include "daemon/live/live_handover.hpp"
 #include "daemon/output/file_finisher.hpp"
 #include "daemon/output/frame_output.hpp"
 #include "daemon/output/health_publisher.hpp"
+#include "daemon/output/health_room.hpp"
 #include "daemon/output/mcap_recorder.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/output/pcap_recorder.hpp"
 #include "daemon/output/space_floor.hpp"
-#include "daemon/output/space_guard.hpp"
 #include "daemon/output/upload_backlog.hpp"
 #include "daemon/output/writer_options.hpp"
 #include "daemon/pipeline_types.hpp"
@@ -58,7 +58,7 @@ namespace pandarcap {
 // One line for sd_notify STATUS=, handed to the main thread once a second.
 struct StatusLine {
   char text[200] = {};  // sd_notify's STATUS=
-  // For the journal's state changes (core/health_state_log.hpp), logged by the main thread.
+  // For the journal's state changes (core/health/health_state_log.hpp), logged by the main thread.
   HealthState state = HealthState::kNoData;
   char reason[400] = {};  // cut to fit
 };
@@ -113,7 +113,7 @@ class Writer final : private FinishReceiver {
   const DecodeLive& live_;
   // The parts, which count their failures in accounting_ and read options_ (declared first).
   OutputAccounting accounting_;
-  SpaceGuard space_;       // the health files' room, whatever fills their disk
+  HealthRoom space_;       // the health files' room, whatever fills their disk
   FileFinisher finisher_;  // the syncs and renames, on their own thread
   FrameOutput frames_;
   PcapRecorder pcap_;

@@ -5,9 +5,10 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
 
-#include "core/health.hpp"
-#include "core/pcd.hpp"
+#include "core/frames/pcd.hpp"
+#include "core/health/health.hpp"
 #include "daemon/mcap/mcap_file_options.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
@@ -53,8 +54,9 @@ struct WriterOptions {
   bool upload_frames = false;
   bool prometheus = true;
   bool jsonl = true;
-  // Where the health files go while health_dir (or the .prom's directory) cannot be written.
-  std::filesystem::path health_fallback_dir;
+  // Where the health files go while health_dir (or the .prom's directory) cannot be written: the
+  // first of these that takes them (health.fallback_directory, then the defaults).
+  std::vector<std::filesystem::path> health_fallback_dirs;
   std::uint64_t jsonl_rotate_bytes = 0;
   std::string sensor_name;
   std::string version;

@@ -11,6 +11,7 @@
 
 #include "core/mcap/mcap_parse.hpp"
 #include "core/mcap/mcap_records.hpp"
+#include "daemon/io/calibration_file.hpp"
 #include "daemon/io/unique_fd.hpp"
 #include "daemon/pcap/recording_sidecars.hpp"
 
@@ -93,8 +94,18 @@ std::optional<Calibration> recording_calibration(const std::string& recording_pa
   }
   looked_for = sidecars->calibration_csv;
   std::error_code ec;
-  if (!std::filesystem::exists(sidecars->calibration_csv, ec)) return std::nullopt;
-  return Calibration::load(sidecars->calibration_csv);
+  if (std::filesystem::exists(sidecars->calibration_csv, ec)) {
+    return load_calibration(sidecars->calibration_csv);
+  }
+  // A recording still open (a killed run's NAME.pcap.part) has no sidecars yet: its run's table
+  // is the directory's calibration.csv, which the next start gives it as its sidecar.
+  if (recording_path.ends_with(".part")) {
+    const std::filesystem::path beside =
+        std::filesystem::path(recording_path).parent_path() / "calibration.csv";
+    looked_for += " or " + beside.string();
+    if (std::filesystem::exists(beside, ec)) return load_calibration(beside.string());
+  }
+  return std::nullopt;
 }
 
 }  // namespace pandarcap

@@ -1,6 +1,7 @@
 // The calibration a recording carries, for a replay or pandarcap-inspect given no --calibration:
 //   - a pcap or pcap.zst: the sidecar beside it, STEM.calibration.csv (recording_sidecars.hpp),
-//     which pandarcapd writes when it finishes the recording;
+//     which pandarcapd writes when it finishes the recording; a NAME.pcap[.zst].part a killed
+//     run left (no sidecar yet): the calibration.csv of its directory, its run's;
 //   - an MCAP file: its calibration.csv attachment (every file pandarcapd writes has one).
 // The kind is told by the file's first bytes (the MCAP magic), as CaptureReader tells it.
 //
@@ -15,7 +16,7 @@
 #include <optional>
 #include <string>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 
 namespace pandarcap {
 

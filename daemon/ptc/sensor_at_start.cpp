@@ -5,6 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/io/calibration_file.hpp"
 #include "daemon/ptc/sensor_json.hpp"
 #include "daemon/ptc/sensor_queries.hpp"
 
@@ -43,7 +44,7 @@ SensorAtStart resolve_sensor_at_start(const std::string& source, const std::stri
     return out;
   }
   if (source == "file") {
-    out.calibration = Calibration::load(file);
+    out.calibration = load_calibration(file);
     out.calibration_source = "file";
     return out;
   }
@@ -55,7 +56,7 @@ SensorAtStart resolve_sensor_at_start(const std::string& source, const std::stri
   // A calibration_file named beside "auto" is checked now, whatever the sensor answers: a broken
   // fallback is a configuration error to hear about today, not on the day the sensor is silent.
   std::optional<Calibration> file_table;
-  if (!file.empty()) file_table = Calibration::load(file);
+  if (!file.empty()) file_table = load_calibration(file);
   const auto fall_back = [&] {
     out.calibration_source = file_table ? "file" : "nominal";
     out.calibration = file_table ? std::move(*file_table) : Calibration::nominal();

@@ -18,7 +18,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 #include "core/ptc/ptc_messages.hpp"
 #include "daemon/ptc/ptc_client.hpp"
 

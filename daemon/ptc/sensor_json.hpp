@@ -3,7 +3,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 #include "core/ptc/ptc_messages.hpp"
 
 namespace pandarcap {

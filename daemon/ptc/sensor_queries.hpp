@@ -13,7 +13,7 @@
 
 #include <optional>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 #include "core/ptc/ptc_messages.hpp"
 #include "daemon/ptc/ptc_client.hpp"
 

@@ -1,9 +1,9 @@
 // The replay source: feeds a capture (pcap/pcapng, either compressed with zstd, or the packets of
 // an MCAP file: CaptureReader) through the same PacketRing the live socket fills, so a recording
 // is processed exactly as live data would be, the sensor's source judged as live
-// (core/source_lock.hpp: sensor_ip, or the first source to send a packet). An MCAP file's packets
-// have no addresses: the port and source filters do not apply to them (a warning says so when
-// they are set).
+// (core/decode/source_lock.hpp: sensor_ip, or the first source to send a packet). An MCAP file's
+// packets have no addresses: the port and source filters do not apply to them (a warning says so
+// when they are set).
 //
 // Pace: as fast as the decoder takes it (top speed, the default for files), or the recorded
 // pace scaled by `rate` (1 = real time, 2 = twice as fast). Unlike the live receiver, replay
@@ -16,7 +16,7 @@
 #include <optional>
 #include <string>
 
-#include "core/source_lock.hpp"
+#include "core/decode/source_lock.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pipeline_types.hpp"

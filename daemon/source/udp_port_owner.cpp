@@ -7,7 +7,7 @@
 #include <charconv>
 #include <sstream>
 
-#include "core/text_file.hpp"
+#include "daemon/io/text_file.hpp"
 
 namespace pandarcap {
 

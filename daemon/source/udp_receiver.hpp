@@ -8,8 +8,8 @@
 //
 // A batch: reserve up to `batch` free slots, recvmmsg(MSG_TRUNC) into them, then per datagram:
 // record a cut one as truncated with its real length, take the kernel time, and drop (count) a
-// datagram that is not the sensor's (core/source_lock.hpp: sensor_ip, or the first source when
-// none is set; a valid packet from elsewhere is another sensor, counted and named in the
+// datagram that is not the sensor's (core/decode/source_lock.hpp: sensor_ip, or the first source
+// when none is set; a valid packet from elsewhere is another sensor, counted and named in the
 // health). Publish the rest with one store. Ring full: receive
 // the waiting datagrams into a scratch buffer and count them as overruns (drop newest) — never
 // block on the decoder. No allocation, no locks in the loop.
@@ -35,7 +35,7 @@
 #include <optional>
 #include <string>
 
-#include "core/source_lock.hpp"
+#include "core/decode/source_lock.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pipeline_types.hpp"
 
@@ -47,7 +47,7 @@ struct UdpReceiverOptions {
   std::string multicast_ip;
   std::string multicast_interface_ip;
   std::uint64_t receive_buffer_bytes = 8u << 20;
-  std::string sensor_ip;  // "" = the first source that sends a packet (core/source_lock.hpp)
+  std::string sensor_ip;  // "" = the first source that sends a packet (core/decode/source_lock.hpp)
   std::size_t batch = 64;
   std::int64_t latency_budget_ns = 0;  // 0: wake per datagram; see above
 };

@@ -5,7 +5,7 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 
 using namespace pandarcap;
 

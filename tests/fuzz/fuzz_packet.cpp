@@ -12,11 +12,11 @@
 #include <string>
 #include <vector>
 
-#include "core/calibration.hpp"
-#include "core/decoder_target.hpp"
-#include "core/packet.hpp"
-#include "core/packet_decoder.hpp"
-#include "core/simd_decoder.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/decoder_target.hpp"
+#include "core/decode/packet_decoder.hpp"
+#include "core/decode/simd_decoder.hpp"
+#include "core/sensors/packet.hpp"
 
 using namespace pandarcap;
 

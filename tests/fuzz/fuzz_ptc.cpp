@@ -16,7 +16,7 @@
 #include <span>
 #include <string_view>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 #include "core/ptc/ptc_messages.hpp"
 #include "core/ptc/ptc_protocol.hpp"
 

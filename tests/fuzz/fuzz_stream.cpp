@@ -11,11 +11,11 @@
 #include <cstdint>
 #include <cstdlib>
 
-#include "core/calibration.hpp"
-#include "core/frame_collector.hpp"
-#include "core/packet.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/stream_decoder.hpp"
+#include "core/frames/frame_collector.hpp"
+#include "core/sensors/packet.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/stream_decoder.hpp"
 
 using namespace pandarcap;
 

@@ -9,7 +9,7 @@
 #include <cerrno>
 #include <stdexcept>
 
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
 #include "core/ptc/ptc_messages.hpp"
 #include "core/ptc/ptc_protocol.hpp"
 #include "core/sim/simulated_unit.hpp"

@@ -3,7 +3,7 @@
 #include <catch2/catch.hpp>
 #include <cstring>
 
-#include "core/packet_time.hpp"
+#include "core/decode/packet_time.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "support/test_support.hpp"
 

@@ -15,7 +15,7 @@
 #include <span>
 #include <vector>
 
-#include "core/packet.hpp"
+#include "core/sensors/packet.hpp"
 
 namespace pandarcap::test {
 

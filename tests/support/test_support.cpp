@@ -14,9 +14,10 @@
 #include <sstream>
 
 #include "bench/child_process.hpp"
-#include "core/calibration.hpp"
+#include "core/decode/calibration.hpp"
+#include "core/decode/stream_decoder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
-#include "core/stream_decoder.hpp"
+#include "daemon/io/calibration_file.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
 
 namespace pandarcap::test {
@@ -147,7 +148,7 @@ std::vector<PcdPoint> pandarcap_pcd_points(const std::filesystem::path& file) {
 
 void decode_capture(const std::filesystem::path& capture,
                     const std::filesystem::path& calibration_csv, FrameSink& frames) {
-  StreamDecoder decoder(Calibration::load(calibration_csv.string()), {}, frames);
+  StreamDecoder decoder(load_calibration(calibration_csv.string()), {}, frames);
   CaptureReader reader(capture.string());
   CaptureRecord record;
   while (reader.next(record) == CaptureStatus::kRecord)

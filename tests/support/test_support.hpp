@@ -12,8 +12,8 @@
 #include <utility>
 #include <vector>
 
-#include "core/frame.hpp"
-#include "core/pcd.hpp"
+#include "core/frames/frame.hpp"
+#include "core/frames/pcd.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap::test {

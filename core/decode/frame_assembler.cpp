@@ -1,0 +1,330 @@
+#include "core/decode/frame_assembler.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/sensors/sensor_model.hpp"
+#include "core/sensors/timing.hpp"
+
+namespace pandarcap {
+
+namespace {
+
+constexpr std::int64_t kFullCircle = 36000;
+// An azimuth step larger than this between consecutive blocks is not rotation but a
+// discontinuity (long loss, a restarted sensor, a foreign stream).
+constexpr int kMaxStepCdeg = 9000;
+
+std::int64_t floor_div(std::int64_t a, std::int64_t b) {
+  const std::int64_t q = a / b;
+  return (a % b != 0 && (a < 0) != (b < 0)) ? q - 1 : q;
+}
+
+// a - b on the circle, in [-18000, 18000).
+int signed_step(int a, int b) {
+  int d = (a - b) % 36000;
+  if (d < -18000) d += 36000;
+  if (d >= 18000) d -= 36000;
+  return d;
+}
+
+}  // namespace
+
+FrameAssembler::FrameAssembler(const FrameAssemblerConfig& config, FrameSink& sink)
+    : config_(config), sink_(sink) {
+  double cut = std::fmod(config.cut_angle_deg, 360.0);
+  if (cut < 0) cut += 360.0;
+  cut_cdeg_ = static_cast<int>(std::lround(cut * 100)) % 36000;
+}
+
+void FrameAssembler::start_stream(std::uint16_t azimuth_cdeg) {
+  started_ = true;
+  position_ = (azimuth_cdeg - cut_cdeg_ + kFullCircle) % kFullCircle;
+  start_position_ = position_;
+  reach_position_ = position_;
+  coverage_.reset(position_);
+  next_open_index_ = floor_div(position_ + config_.relative_azimuth_min_cdeg, kFullCircle);
+}
+
+void FrameAssembler::count_lost(const PacketMeta& meta, std::int64_t gap_ns,
+                                std::uint16_t previous_first_azimuth) {
+  // Longer than a second is an outage or a clock that leapt, not packets to count.
+  if (gap_ns <= 0 || gap_ns > 1'000'000'000) return;
+  const double period = static_cast<double>(packet_period_ns(meta.return_mode));
+  const auto sent = static_cast<std::int64_t>(std::llround(static_cast<double>(gap_ns) / period));
+  const std::int64_t missing = sent - 1 - static_cast<std::int64_t>(meta.skipped_before);
+  if (missing <= 0) return;
+  // A loss: the azimuth went on as the time did. A clock that stepped: it did not.
+  const double expected = static_cast<double>(gap_ns) * meta.motor_rpm / 60e9 * kFullCircle;
+  const int actual = signed_step(meta.block_azimuth_cdeg[0], previous_first_azimuth);
+  const double off = std::remainder(actual - expected, static_cast<double>(kFullCircle));
+  if (std::abs(off) <= 200.0 + 0.02 * expected) stats_.packets_missing += missing;
+}
+
+void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> points,
+                                const DecodedPacket& layout) {
+  ++packet_counter_;
+  // The time since the packet before, when both are known: what a discontinuity lost.
+  // (Known across a discontinuity the stream decoder called: its loss is counted here.)
+  const bool timed =
+      packet_counter_ > 1 && meta.time_valid && previous_time_valid_ && meta.motor_rpm > 0;
+  const std::int64_t gap_ns = meta.t0_ns - previous_t0_ns_;
+  const std::uint16_t previous_first = previous_first_azimuth_;
+  if (timed) {
+    // More than half a revolution without packets: whole revolutions may be missing, which the
+    // azimuth alone cannot tell.
+    const std::int64_t half_revolution_ns = 30'000'000'000LL / meta.motor_rpm;
+    if (gap_ns > half_revolution_ns || gap_ns < -half_revolution_ns) {
+      count_lost(meta, gap_ns, previous_first);
+      if (started_) discontinuity();
+    }
+  }
+  if (started_) {
+    // A frame never spans more than a revolution's time (with a quarter to spare), counted in
+    // packets, the sensor's own firing clock (a clock that glitches does not stretch it): a
+    // motor that slowed, or turns back and forth, must not pile packets into one frame. The
+    // revolution is the slowest the frame's packets said (a speed change inside it), at the
+    // speeds a sensor runs at (a tail of 0 or garbage says nothing).
+    for (const Slot& slot : slots_) {
+      if (!slot.in_use) continue;
+      const double rpm =
+          std::clamp<double>(std::min(slot.slowest_rpm, meta.motor_rpm), kSlowestRpm, kFastestRpm);
+      if (slot.packets + 1 > 1.25 * packets_per_revolution(meta.return_mode, rpm)) {
+        ++stats_.frames_overlong;
+        discontinuity();
+        break;
+      }
+    }
+  }
+  previous_t0_ns_ = meta.t0_ns;
+  previous_time_valid_ = meta.time_valid;
+  previous_first_azimuth_ = meta.block_azimuth_cdeg[0];
+  // One block's firing turns the azimuth by this much: the packet's own span over its rounds.
+  const int rounds = rounds_per_packet(meta.return_mode);
+  const int span = signed_step(meta.block_azimuth_cdeg[kBlocks - 1], meta.block_azimuth_cdeg[0]);
+  if (span > 0 && span < kMaxStepCdeg) {
+    block_step_cdeg_ = static_cast<double>(span) / (rounds - 1);
+    packet_step_cdeg_ = block_step_cdeg_ * rounds;
+  }
+  const auto block_step = static_cast<std::int64_t>(std::lround(block_step_cdeg_));
+  const std::int64_t margin = block_step / 2;  // the encoder's jitter, and rounding
+  const std::int64_t previous_position = position_;
+  const bool continued = started_;
+
+  for (int b = 0; b < kBlocks; ++b) {
+    const std::uint16_t azimuth = meta.block_azimuth_cdeg[b];
+    bool restarted = false;
+    if (!started_) {
+      start_stream(azimuth);
+      restarted = true;
+    } else {
+      const int step = signed_step(azimuth, previous_azimuth_);
+      if (std::abs(step) > kMaxStepCdeg) {
+        ++stats_.discontinuities;
+        // Between two packets, a step that the time says is a loss is counted as one.
+        if (b == 0 && timed) count_lost(meta, gap_ns, previous_first);
+        flush();
+        start_stream(azimuth);
+        restarted = true;
+      } else {
+        if (step < 0) ++stats_.azimuth_backward_steps;
+        position_ += step;
+      }
+    }
+    previous_azimuth_ = azimuth;
+    // The block's firing covers its step of azimuth. Packets left out just before this one
+    // cover the azimuth between, up to as many packets' worth as there were.
+    coverage_.advance(position_);
+    coverage_.cover(position_ - margin, position_ + block_step + margin);
+    if (b == 0 && continued && !restarted && meta.skipped_before > 0) {
+      const std::int64_t from = previous_position + block_step;
+      const double allowance = (meta.skipped_before + 0.5) * packet_step_cdeg_;
+      if (position_ > from && static_cast<double>(position_ - from) <= allowance) {
+        coverage_.cover(from, position_);
+      }
+    }
+    reach_position_ = std::max(reach_position_, position_ + block_step);
+
+    const std::size_t begin = layout.block_begin[b], end = layout.block_begin[b + 1];
+    // Every point of the block lies within the channels' azimuth bounds of U: away from the cut
+    // (all but a few blocks a revolution) they all fall in one frame, and go in together.
+    const std::int64_t lowest =
+        floor_div(position_ + config_.relative_azimuth_min_cdeg, kFullCircle);
+    const std::int64_t highest =
+        floor_div(position_ + config_.relative_azimuth_max_cdeg, kFullCircle);
+    if (lowest == highest) {
+      if (begin < end) {
+        Slot* slot = slot_for(lowest);
+        if (slot == nullptr) {
+          stats_.points_late += end - begin;
+        } else {
+          add_points(*slot, points.subspan(begin, end - begin), meta);
+        }
+      }
+    } else {
+      for (std::size_t i = begin; i < end; ++i) {
+        const Point& point = points[i];
+        const std::int64_t u = position_ + signed_step(point.azimuth_cdeg, azimuth);
+        Slot* slot = slot_for(floor_div(u, kFullCircle));
+        if (slot == nullptr) {
+          ++stats_.points_late;
+        } else {
+          add_points(*slot, std::span(&point, 1), meta);
+        }
+      }
+    }
+
+    // Frames that no channel can reach any more are done, a few packets later: a packet that
+    // arrives a little late (reordered) still finds its frame open.
+    const std::int64_t done =
+        floor_div(position_ + config_.relative_azimuth_min_cdeg - kCloseMarginCdeg, kFullCircle);
+    if (done > next_open_index_) close_through(done - 1, false);
+  }
+}
+
+FrameAssembler::Slot* FrameAssembler::slot_for(std::int64_t frame_index) {
+  if (frame_index < next_open_index_) return nullptr;
+  for (Slot& slot : slots_) {
+    if (slot.in_use && slot.index == frame_index) return &slot;
+  }
+  // Only two frames can be open; a point beyond them means the older one is finished.
+  if (frame_index >= next_open_index_ + 2) close_through(frame_index - 2, false);
+  Slot* slot = slots_[0].in_use ? &slots_[1] : &slots_[0];
+  *slot = Slot{};
+  slot->in_use = true;
+  slot->index = frame_index;
+  slot->frame = sink_.acquire_frame();
+  if (slot->frame == nullptr) {
+    slot->dropped = true;
+    ++stats_.frames_dropped;
+  } else {
+    slot->frame->reset();
+  }
+  return slot;
+}
+
+void FrameAssembler::add_points(Slot& slot, std::span<const Point> points, const PacketMeta& meta) {
+  if (slot.counted_packet != packet_counter_) {
+    slot.counted_packet = packet_counter_;
+    ++slot.packets;
+    slot.slowest_rpm = std::min(slot.slowest_rpm, meta.motor_rpm);
+  }
+  if (slot.dropped) {
+    stats_.points_dropped_no_frame += points.size();
+    return;
+  }
+  Frame& frame = *slot.frame;
+  FrameInfo& info = frame.info;
+  // Capacity first: a packet whose points were all dropped must not count towards the frame's
+  // packets, RPM or time validity.
+  const std::size_t room = frame.capacity() - frame.size;
+  if (points.size() > room) {
+    const std::size_t dropped = points.size() - room;
+    stats_.points_dropped_full += dropped;
+    info.points_dropped += static_cast<std::uint32_t>(dropped);
+    points = points.first(room);
+  }
+  if (points.empty()) return;
+  if (slot.last_packet != packet_counter_) {
+    slot.last_packet = packet_counter_;
+    slot.rpm_sum += meta.motor_rpm;
+    ++info.packets;
+    info.return_mode = meta.return_mode;
+    info.time_valid = info.time_valid && meta.time_valid;
+  }
+  if (info.points == 0 || position_ < slot.first_position) slot.first_position = position_;
+  if (info.points == 0 || position_ > slot.last_position) slot.last_position = position_;
+  if (info.points == 0) {
+    info.start_ns = info.end_ns = points.front().timestamp_ns;
+    frame.reference_ns = points.front().timestamp_ns;
+  }
+  for (const Point& point : points) {
+    info.start_ns = std::min(info.start_ns, point.timestamp_ns);
+    info.end_ns = std::max(info.end_ns, point.timestamp_ns);
+  }
+  if (frame.is_encoded()) {
+    const std::size_t step = pcd_point_bytes(frame.format.layout);
+    encode_pcd_points(points, frame.encoded.subspan(frame.size * step, points.size() * step),
+                      frame.format, PcdFrameContext{frame.reference_ns, meta.return_mode});
+  } else {
+    std::copy(points.begin(), points.end(), frame.points.begin() + frame.size);
+  }
+  frame.size += points.size();
+  info.points += static_cast<std::uint32_t>(points.size());
+}
+
+bool FrameAssembler::holed(const Slot& slot, bool whole_candidate) {
+  // Half a packet's step: a lost packet leaves nearly a whole step uncovered, the encoder's
+  // jitter and a small glitch placed where it was a fraction of one.
+  const auto min_run = static_cast<std::int64_t>(packet_step_cdeg_ / 2);
+  // What was lost inside this frame's own revolution, as far as the stream reached: counted
+  // once, by the frame whose revolution holds it.
+  const std::int64_t from = std::max(slot.index * kFullCircle, start_position_);
+  const std::int64_t to = std::min((slot.index + 1) * kFullCircle, reach_position_);
+  if (to > from) {
+    const auto lost = coverage_.holes(from, to, min_run).total_cdeg;
+    stats_.packets_missing +=
+        static_cast<std::uint64_t>(std::llround(static_cast<double>(lost) / packet_step_cdeg_));
+  }
+  if (!whole_candidate) return false;
+  // Every azimuth a point of this frame can come from (the channels' offsets reach past its
+  // revolution's ends).
+  const std::int64_t needed_from = slot.index * kFullCircle - config_.relative_azimuth_max_cdeg;
+  const std::int64_t needed_to = (slot.index + 1) * kFullCircle - config_.relative_azimuth_min_cdeg;
+  return coverage_.holes(needed_from, needed_to, min_run).longest_cdeg >= min_run;
+}
+
+void FrameAssembler::close_slot(Slot& slot, bool partial) {
+  // A frame is whole only if the stream had started before the frame began for every channel,
+  // and lost no packet on the way.
+  const bool started_late =
+      slot.index * kFullCircle < start_position_ + config_.relative_azimuth_max_cdeg;
+  const bool lost_packets = holed(slot, !partial && !started_late);
+  if (lost_packets) ++stats_.frames_holed;
+  // Numbered when finished, i.e. in revolution order; a dropped frame uses up its number too.
+  const std::uint64_t sequence = frame_sequence_++;
+  if (!slot.dropped) {
+    FrameInfo& info = slot.frame->info;
+    info.sequence = sequence;
+    info.partial = partial || started_late || lost_packets;
+    info.rpm = info.packets > 0 ? slot.rpm_sum / info.packets : 0;
+    info.azimuth_span_cdeg = static_cast<std::uint32_t>(
+        std::clamp<std::int64_t>(slot.last_position - slot.first_position, 0, kFullCircle));
+    Frame& frame = *slot.frame;
+    if (frame.is_encoded()) {
+      // Encoded against the first point's time; an earlier one came later (reordered).
+      if (info.points > 0 && info.start_ns < frame.reference_ns) {
+        const auto bytes = frame.encoded.first(frame.size * pcd_point_bytes(frame.format.layout));
+        rebase_pcd_times(bytes, frame.format.layout, frame.reference_ns - info.start_ns);
+      }
+      frame.reference_ns = info.start_ns;
+    }
+    ++(info.partial ? stats_.frames_partial : stats_.frames_complete);
+    sink_.frame_done(*slot.frame);
+  }
+  slot = Slot{};
+}
+
+void FrameAssembler::close_through(std::int64_t frame_index, bool partial) {
+  // Oldest first, so frames leave in the order they were started.
+  Slot* order[2] = {&slots_[0], &slots_[1]};
+  if (slots_[1].in_use && (!slots_[0].in_use || slots_[1].index < slots_[0].index)) {
+    std::swap(order[0], order[1]);
+  }
+  for (Slot* slot : order) {
+    if (slot->in_use && slot->index <= frame_index) close_slot(*slot, partial);
+  }
+  next_open_index_ = std::max(next_open_index_, frame_index + 1);
+}
+
+void FrameAssembler::discontinuity() {
+  ++stats_.discontinuities;
+  flush();
+}
+
+void FrameAssembler::flush() {
+  if (started_) close_through(next_open_index_ + 2, true);
+  started_ = false;
+}
+
+}  // namespace pandarcap

@@ -1,0 +1,155 @@
+// Cuts the point stream into frames (revolutions) at cut_angle, per channel, by each point's
+// corrected azimuth — so every channel's cloud ends exactly at the cut and no frame has the
+// ~8° ragged seam that cutting per packet or per block leaves (channel azimuth offsets span
+// -5.2°..+3.1°).
+//
+// How: the block azimuth is unwrapped relative to the cut into a running position U (0.01°,
+// growing by the signed azimuth step between blocks). A point lies at U + (its corrected azimuth
+// - its block azimuth), and belongs to frame floor(that / 36000). Two frames can be open at
+// once, because near the cut some channels have crossed and others have not. Frame f is closed
+// when U + (the most negative channel offset) has passed (f+1) x 360°: no later point can fall
+// in it.
+//
+// Robustness:
+//  - packet loss: U advances by the real azimuth step, so losing packets around the cut still
+//    puts every point in the right frame;
+//  - discontinuities (an azimuth step of more than 90°, a packet-time gap of more than half a
+//    revolution, a frame that would hold more than 1.25 revolutions of packets at the tail's
+//    speed: a motor that slowed or turns back and forth; or the stream decoder's word, at a
+//    change that stepped the rotation back): the open frames are closed as partial and cutting
+//    restarts. A frame never holds more than one revolution of azimuth, nor of the
+//    sensor's time (counted in packets, its firing clock, which a glitching tail time does not
+//    stretch);
+//  - completeness: a frame is complete only if its packets covered every azimuth its points can
+//    come from (AzimuthCoverage): a lost packet leaves a run of azimuth uncovered at least half a
+//    packet's step wide, and makes the frame partial, however few it lacks. Packets the stream
+//    decoder left out on purpose (PacketMeta::skipped_before) cover their place. What was lost
+//    is counted in packets (packets_missing): the uncovered azimuth inside frames over the
+//    packet's step, and across a discontinuity between two packets (a time gap of more than half
+//    a revolution, an azimuth step over 90°), the packets the time says were sent, up to a
+//    second's (when the azimuth agrees: a loss, not a clock that stepped);
+//  - the first frame after start or a discontinuity is partial unless the stream started before
+//    it began for every channel; frames open at flush() are partial;
+//  - a small backward step (a reordered packet) moves U back. A frame is closed kCloseMarginCdeg
+//    after the last point that can belong to it, so a packet a few late still finds it open;
+//    points that fall into an already closed frame are counted as late and dropped.
+// Pure state machine: no allocation (frames come from the FrameSink), no clocks, no I/O.
+#pragma once
+
+#include <cstdint>
+#include <span>
+
+#include "core/decode/azimuth_coverage.hpp"
+#include "core/decode/decoder.hpp"
+#include "core/frames/frame.hpp"
+#include "core/sensors/packet.hpp"
+
+namespace pandarcap {
+
+struct FrameAssemblerConfig {
+  double cut_angle_deg = 0.0;
+  // (corrected azimuth - block azimuth) bounds over channels, from
+  // ScalarDecoder::relative_azimuth_bounds_cdeg().
+  int relative_azimuth_min_cdeg = -600;
+  int relative_azimuth_max_cdeg = 400;
+};
+
+// What the assembler needs of a packet besides its points.
+struct PacketMeta {
+  std::array<std::uint16_t, kBlocks> block_azimuth_cdeg{};
+  std::int64_t t0_ns = 0;
+  bool time_valid = true;
+  std::uint16_t motor_rpm = 0;
+  ReturnMode return_mode = ReturnMode::kDual;
+  // Packets received but left out just before this one (outliers out of the azimuths' order, a
+  // standing motor's): the azimuth they leave uncovered is theirs, not a loss.
+  std::uint32_t skipped_before = 0;
+};
+
+struct AssemblerStats {
+  std::uint64_t frames_complete = 0;
+  std::uint64_t frames_partial = 0;
+  std::uint64_t frames_dropped = 0;  // no free frame in the sink
+  std::uint64_t points_dropped_no_frame = 0;
+  std::uint64_t points_dropped_full = 0;  // frame capacity exceeded
+  std::uint64_t points_late = 0;          // fell into an already closed frame
+  std::uint64_t discontinuities = 0;
+  std::uint64_t azimuth_backward_steps = 0;
+  std::uint64_t frames_holed = 0;     // partial because a packet's azimuth was missing
+  std::uint64_t frames_overlong = 0;  // cut at 1.25 revolutions of packets (also discontinuities)
+  std::uint64_t packets_missing = 0;  // estimated (see above)
+};
+
+class FrameAssembler {
+ public:
+  // How far past a frame's last possible point the rotation goes before the frame is closed:
+  // 6°, 6 packets of a dual-return stream at 600 RPM, 1.5 of a single-return one at 1200.
+  static constexpr std::int64_t kCloseMarginCdeg = 600;
+
+  FrameAssembler(const FrameAssemblerConfig& config, FrameSink& sink);
+
+  // Adds one decoded packet: its points (grouped by block as `layout` says) and metadata.
+  void add_packet(const PacketMeta& meta, std::span<const Point> points,
+                  const DecodedPacket& layout);
+  // Closes the open frames as partial and forgets the rotation: the next packet starts a new
+  // stream (end of input, shutdown, a long silence).
+  void flush();
+  // The same, counted as a discontinuity: the caller saw the stream change.
+  void discontinuity();
+
+  const AssemblerStats& stats() const noexcept { return stats_; }
+
+ private:
+  struct Slot {
+    std::int64_t index = 0;  // frame number relative to the stream start
+    Frame* frame = nullptr;
+    bool dropped = false;  // no frame could be had: its points are counted, not stored
+    bool in_use = false;
+    std::uint64_t last_packet = ~0ULL;
+    double rpm_sum = 0;
+    std::int64_t first_position = 0;  // U of the first and last block that added a point
+    std::int64_t last_position = 0;
+    // Packets that gave it points (a dropped frame's too), and the slowest tail speed of them.
+    std::uint64_t counted_packet = ~0ULL;
+    std::uint32_t packets = 0;
+    std::uint16_t slowest_rpm = 0xFFFF;
+  };
+
+  void start_stream(std::uint16_t azimuth_cdeg);
+  // A discontinuity `gap_ns` (valid times) after the packet that began at
+  // `previous_first_azimuth`: the packets the time says were lost are counted when the azimuth
+  // agrees.
+  void count_lost(const PacketMeta& meta, std::int64_t gap_ns,
+                  std::uint16_t previous_first_azimuth);
+  // Whether `slot`'s frame lacks azimuth (a lost packet); counts what it lacks.
+  bool holed(const Slot& slot, bool whole_candidate);
+  Slot* slot_for(std::int64_t frame_index);
+  void close_slot(Slot& slot, bool partial);
+  void close_through(std::int64_t frame_index, bool partial);
+  // Points of one block that all belong to `slot`'s frame (as many as it has room for).
+  void add_points(Slot& slot, std::span<const Point> points, const PacketMeta& meta);
+
+  FrameAssemblerConfig config_;
+  FrameSink& sink_;
+  int cut_cdeg_ = 0;
+  bool started_ = false;
+  std::int64_t position_ = 0;        // U: unwrapped block azimuth relative to the cut, 0.01°
+  std::int64_t start_position_ = 0;  // U when the stream (re)started
+  std::uint16_t previous_azimuth_ = 0;
+  std::uint16_t previous_first_azimuth_ = 0;  // the previous packet's first block
+  std::int64_t previous_t0_ns_ = 0;
+  bool previous_time_valid_ = false;
+  // Coverage: the azimuth one block's firing spans (the last packet's, 0.01°), a packet's, and
+  // how far the stream reached since it (re)started.
+  AzimuthCoverage coverage_;
+  double block_step_cdeg_ = 20;
+  double packet_step_cdeg_ = 100;
+  std::int64_t reach_position_ = 0;
+  std::int64_t next_open_index_ = 0;  // frames below this index are closed
+  std::uint64_t packet_counter_ = 0;
+  std::uint64_t frame_sequence_ = 0;
+  Slot slots_[2];
+  AssemblerStats stats_;
+};
+
+}  // namespace pandarcap

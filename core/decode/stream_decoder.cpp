@@ -1,0 +1,324 @@
+#include "core/decode/stream_decoder.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <utility>
+
+#include "core/sensors/sensor_model.hpp"
+#include "core/sensors/timing.hpp"
+
+namespace pandarcap {
+
+std::uint64_t StreamStats::rejected() const noexcept {
+  std::uint64_t sum = 0;
+  for (std::size_t i = 1; i < kRejectReasonCount; ++i)
+    sum += rejects[i];
+  return sum;
+}
+
+namespace {
+
+FrameAssemblerConfig assembler_config(const ScalarDecoder& decoder, double cut_angle_deg) {
+  const auto [lo, hi] = decoder.relative_azimuth_bounds_cdeg();
+  return {cut_angle_deg, lo, hi};
+}
+
+// A 64-bit fingerprint of a payload, 8 bytes at a time in four independent lanes (about 60 ns
+// for 1262 bytes). Never 0, which marks an empty place in the window.
+std::uint64_t fingerprint(std::span<const std::uint8_t> payload) noexcept {
+  constexpr std::uint64_t kMultiplier = 0x9E3779B97F4A7C15ULL;
+  std::uint64_t lane[4] = {payload.size(), 0x243F6A8885A308D3ULL, 0x13198A2E03707344ULL,
+                           0xA4093822299F31D0ULL};
+  std::size_t i = 0;
+  for (; i + 32 <= payload.size(); i += 32) {
+    for (int k = 0; k < 4; ++k) {
+      std::uint64_t word;
+      std::memcpy(&word, payload.data() + i + 8 * k, 8);
+      lane[k] = (lane[k] ^ word) * kMultiplier;
+      lane[k] ^= lane[k] >> 29;
+    }
+  }
+  for (; i < payload.size(); ++i)
+    lane[i % 4] = (lane[i % 4] ^ payload[i]) * kMultiplier;
+  std::uint64_t h = lane[0] ^ (lane[1] * 3) ^ (lane[2] * 5) ^ (lane[3] * 7);
+  h ^= h >> 31;
+  return h == 0 ? 1 : h;
+}
+
+}  // namespace
+
+void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, bool time_valid,
+                                  std::uint16_t rpm, ReturnMode mode, bool sequence_present) {
+  const std::optional<std::uint16_t> previous = previous_azimuth_cdeg_;
+  previous_azimuth_cdeg_ = azimuth_cdeg;
+  if (!previous || !previous_t0_ns_) return;
+  const int step = (azimuth_cdeg - *previous + 36000) % 36000;  // forward, 0..35999
+  const std::int64_t dt = t0_ns - *previous_t0_ns_;
+  // Both from one clock: an invalid date still has a running microseconds field (a sensor
+  // without a date), but a good time and a bad one are not comparable.
+  const bool times_valid = time_valid == previous_time_valid_;
+  // The step one packet should make at the reported speed (600 RPM dual: 100 cdeg).
+  const double expected = azimuth_step_per_packet_cdeg(mode, rpm);
+  const bool gap = step > 1.5 * expected + 5;
+  if (gap && !sequence_present && step < 18000) ++stats_.azimuth_gaps;
+  // Spin is measured over consecutive packets only: a loss, a glitch or a restart is not spin.
+  // A standing motor's step is 0, and counts: it measures 0 RPM.
+  const auto period = packet_period_ns(mode);
+  if (times_valid && !gap && dt > 0 && dt <= period + period / 2) {
+    stats_.measured_azimuth_cdeg += static_cast<std::uint64_t>(step);
+    stats_.measured_time_ns += static_cast<std::uint64_t>(dt);
+  }
+  // The packet rate by the sensor's clock (two merged streams: twice the packets).
+  if (times_valid && dt >= 0 && dt <= 100'000'000) {
+    ++stats_.rate_packets;
+    stats_.rate_time_ns += static_cast<std::uint64_t>(dt);
+  }
+}
+
+StreamDecoder::StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
+                             FrameSink& sink)
+    : decoder_(calibration, config.decoder, config.decoder_target),
+      assembler_(assembler_config(decoder_.scalar(), config.cut_angle_deg), sink),
+      decode_points_(config.decode_points) {}
+
+bool StreamDecoder::duplicate(std::span<const std::uint8_t> payload) noexcept {
+  const std::uint64_t print = fingerprint(payload);
+  for (const std::uint64_t recent : recent_) {
+    if (recent == print) return true;
+  }
+  recent_[recent_next_] = print;
+  recent_next_ = (recent_next_ + 1) % kDuplicateWindow;
+  return false;
+}
+
+RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
+  ++stats_.packets;
+  const RejectReason reason = validate(payload);
+  ++stats_.rejects[static_cast<std::size_t>(reason)];
+  if (reason != RejectReason::kNone) return reason;
+  const PacketView packet = PacketView::assume_valid(payload);
+  // A copy is counted once, and nothing of it is decoded again or counted as the stream's.
+  if (duplicate(payload)) {
+    ++stats_.duplicates;
+    return RejectReason::kNone;
+  }
+  const ReturnMode mode = packet.return_mode();
+  const PacketTime time = clock_.convert(packet.utc(), packet.timestamp_us());
+  if (const auto sequence = packet.sequence()) {
+    // The packet's time tells a late copy (as old as its number says) from a sensor that
+    // restarted its counter (a number already seen, at a new time).
+    std::optional<SequenceClock> clock;
+    if (time.valid()) clock = SequenceClock{time.t0_ns, packet_period_ns(mode)};
+    if (sequence_.observe(*sequence, clock) == SequenceTracker::Verdict::kDuplicate) {
+      ++stats_.duplicates;
+      return RejectReason::kNone;
+    }
+    ++stats_.sequence_packets;
+  }
+  ++stats_.accepted;
+
+  const std::uint16_t rpm = packet.motor_rpm();
+  stats_.rpm_min = stats_.accepted == 1 ? rpm : std::min(stats_.rpm_min, rpm);
+  stats_.rpm_max = stats_.accepted == 1 ? rpm : std::max(stats_.rpm_max, rpm);
+  if (stats_.return_mode && *stats_.return_mode != mode) ++stats_.return_mode_changes;
+  stats_.return_mode = mode;
+  const bool high_temperature = packet.tail_bytes()[5] != 0;
+  if (high_temperature) ++stats_.high_temperature;
+  const bool sequence_present = packet.sequence().has_value();
+
+  if (time.status == PacketTimeStatus::kBadDate) ++stats_.bad_date;
+  if (time.status == PacketTimeStatus::kBadMicroseconds) ++stats_.bad_microseconds;
+  // A clock that froze is counted as the packets arrive. One that went back or leapt is judged
+  // against the stream by the outlier rule, so the packet that returns to the stream after a
+  // glitch is not taken for a step of its own.
+  if (previous_t0_ns_ && time.t0_ns == *previous_t0_ns_) ++stats_.static_timestamps;
+  const std::uint16_t azimuth = packet.azimuth_cdeg(0);
+  const bool standing =
+      previous_azimuth_cdeg_ &&
+      std::abs(signed_step_cdeg(azimuth, *previous_azimuth_cdeg_)) <= kStandingStepCdeg;
+  track_azimuth(azimuth, time.t0_ns, time.valid(), rpm, mode, sequence_present);
+  previous_t0_ns_ = time.t0_ns;
+  previous_time_valid_ = time.valid();
+  stats_.last_t0_ns = time.t0_ns;
+  stats_.last_time_valid = time.status == PacketTimeStatus::kValid;
+  stats_.last_rpm = rpm;
+  stats_.last_high_temperature = high_temperature;
+
+  if (standing) {
+    // The motor did not turn: counted, never placed (see the top of the header).
+    ++stats_.standing;
+    filter_packet(FilterReason::kStanding);
+    ++skipped_;
+  } else {
+    place_or_hold(payload, AdmittedPacket{{azimuth, time.t0_ns, time.valid(), rpm}, time});
+  }
+  watch_frames(rpm, mode);
+  return RejectReason::kNone;
+}
+
+void StreamDecoder::place_or_hold(std::span<const std::uint8_t> payload,
+                                  const AdmittedPacket& admitted) {
+  const bool follows_stream = last_placed_ && follows(*last_placed_, admitted.rotation);
+  if (held_.empty()) {
+    if (follows_stream) {
+      place(payload, admitted);
+    } else {
+      held_.push(payload, admitted, false);
+    }
+    return;
+  }
+  if (follows_stream) {
+    // The stream went on as if the held run had not been there: a glitch.
+    settle_outliers(admitted.rotation);
+    place(payload, admitted);
+    return;
+  }
+  // The held run's newest is always the chain's newest.
+  const bool extends_chain = follows(held_.newest().rotation, admitted.rotation);
+  if (extends_chain && held_.chain_length() + 1 >= kChangeRunPackets) {
+    take_change();  // 17 packets that follow each other and not the stream: it changed
+    place(payload, admitted);
+    return;
+  }
+  // Full: the oldest is a stray (a full chain would have made 17 with this one).
+  if (held_.full()) drop_oldest_as_outlier();
+  held_.push(payload, admitted, extends_chain);
+}
+
+namespace {
+
+// An outlier's time against the stream it interrupted: behind the packet before it went back,
+// ahead of the packet after it leapt forward.
+void count_outlier_time(const PacketTime& time, const RotationPoint& before,
+                        const RotationPoint& after, StreamStats& stats) noexcept {
+  if (!time.valid() || !before.time_valid) return;
+  if (time.t0_ns < before.t0_ns) {
+    ++stats.backward_timestamps;
+  } else if (after.time_valid && time.t0_ns > after.t0_ns) {
+    ++stats.timestamp_jumps;
+  }
+}
+
+}  // namespace
+
+void StreamDecoder::settle_outliers(const RotationPoint& after) {
+  const RotationPoint before = *last_placed_;
+  const int to_after = signed_step_cdeg(after.azimuth_cdeg, before.azimuth_cdeg);
+  const std::int64_t dt = after.t0_ns - before.t0_ns;
+  // (Within a second: a stream without a speed follows by azimuth alone, whatever its times
+  // say, and the interpolation below must not overflow.)
+  const bool timed =
+      to_after > 0 && dt > 0 && dt <= kTimestampJumpNs && before.time_valid && after.time_valid;
+  int placed_to = 0;  // azimuth of the last one placed, from `before`: they stay in order
+  for (std::size_t i = 0; i < held_.size(); ++i) {
+    ++stats_.outliers;
+    const AdmittedPacket& held = held_.admitted(i);
+    count_outlier_time(held.time, before, after, stats_);
+    const int to_held = signed_step_cdeg(held.rotation.azimuth_cdeg, before.azimuth_cdeg);
+    if (timed && to_held >= placed_to && to_held <= to_after) {
+      // Its azimuth sits between its neighbours': only its time was wrong (back, forward, a
+      // second off, zeroed). Placed where it belongs, at the time the rotation gives that
+      // azimuth, its points kept.
+      AdmittedPacket fixed = held;
+      fixed.time.t0_ns = before.t0_ns + dt * to_held / to_after;
+      fixed.time.status = PacketTimeStatus::kValid;
+      fixed.rotation.t0_ns = fixed.time.t0_ns;
+      fixed.rotation.time_valid = true;
+      place(held_.bytes(i), fixed);
+      placed_to = to_held;
+    } else {
+      // Out of the rotation's order in azimuth: left out, its slots counted; the frame is told
+      // a packet was left out there.
+      filter_packet(FilterReason::kOutlier);
+      ++skipped_;
+    }
+  }
+  held_.clear();
+}
+
+void StreamDecoder::take_change() {
+  const std::size_t start = held_.chain_start();
+  for (std::size_t i = 0; i < start; ++i) {
+    ++stats_.outliers;
+    filter_packet(FilterReason::kOutlier);
+  }
+  const AdmittedPacket& first = held_.admitted(start);
+  if (last_placed_ && last_placed_->time_valid && first.time.valid()) {
+    // The clock of the new stream against the old one's.
+    const std::int64_t dt = first.time.t0_ns - last_placed_->t0_ns;
+    if (dt < 0) ++stats_.backward_timestamps;
+    if (dt > kTimestampJumpNs) ++stats_.timestamp_jumps;
+  }
+  // A rotation that resumes behind where it was is no continuation of it, however small the
+  // step: the frames in progress end there (a step forward is the assembler's to judge).
+  if (decode_points_ && last_placed_ &&
+      signed_step_cdeg(first.rotation.azimuth_cdeg, last_placed_->azimuth_cdeg) < 0) {
+    assembler_.discontinuity();
+  }
+  // Whatever was left out belonged to the old stream.
+  skipped_ = 0;
+  for (std::size_t i = start; i < held_.size(); ++i)
+    place(held_.bytes(i), held_.admitted(i));
+  held_.clear();
+}
+
+void StreamDecoder::drop_oldest_as_outlier() noexcept {
+  ++stats_.outliers;
+  filter_packet(FilterReason::kOutlier);
+  ++skipped_;
+  held_.pop_oldest();
+}
+
+void StreamDecoder::filter_packet(FilterReason reason) noexcept {
+  stats_.filtered.add(reason, std::uint64_t{kBlocks} * kChannels);
+}
+
+void StreamDecoder::watch_frames(std::uint16_t rpm, ReturnMode mode) noexcept {
+  if (!decode_points_) return;
+  const AssemblerStats& f = assembler_.stats();
+  const std::uint64_t closed = f.frames_complete + f.frames_partial + f.frames_dropped;
+  if (closed != frames_closed_) {
+    frames_closed_ = closed;
+    packets_since_frame_ = 0;
+    return;
+  }
+  // Three revolutions at the tail's speed (kept to the speeds a sensor runs at: a tail of 0 or
+  // of garbage says nothing of how long a revolution is).
+  const double speed = std::clamp<double>(rpm, kSlowestRpm, kFastestRpm);
+  if (static_cast<double>(++packets_since_frame_) > 3 * packets_per_revolution(mode, speed)) {
+    ++stats_.frameless_packets;
+  }
+}
+
+void StreamDecoder::place(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted) {
+  last_placed_ = admitted.rotation;
+  const std::uint32_t skipped = std::exchange(skipped_, 0);
+  if (!decode_points_) return;  // the health needs only where the rotation is
+  const PacketView packet = PacketView::assume_valid(payload);
+  const DecodedPacket decoded =
+      decoder_.decode(packet, admitted.time.t0_ns, points_, stats_.filtered);
+  stats_.points += decoded.point_count;
+
+  PacketMeta meta;
+  for (int b = 0; b < kBlocks; ++b)
+    meta.block_azimuth_cdeg[b] = packet.azimuth_cdeg(b);
+  meta.t0_ns = admitted.time.t0_ns;
+  meta.time_valid = admitted.time.valid();
+  meta.motor_rpm = admitted.rotation.rpm;
+  meta.return_mode = packet.return_mode();
+  meta.skipped_before = skipped;
+  assembler_.add_packet(meta, std::span<const Point>(points_).first(decoded.point_count), decoded);
+}
+
+void StreamDecoder::flush() {
+  // Nothing came after the held run to say it was a glitch: its chain is placed (a change at the
+  // very end), the strays before it are outliers.
+  if (!held_.empty()) take_change();
+  assembler_.flush();
+  last_placed_.reset();
+  skipped_ = 0;
+}
+
+}  // namespace pandarcap

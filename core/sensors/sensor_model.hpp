@@ -1,0 +1,47 @@
+// The Pandar40P's rotation in numbers, in one place: how many packets a second it sends, how many
+// a revolution has, how far the azimuth steps from one packet to the next. The stream rules judge
+// a stream against them: the outlier rule and the standing motor (core/decode/stream_decoder.hpp),
+// the frame's completeness (core/decode/frame_assembler.hpp), the measured speed and the packet
+// rate in the health (core/health/health_policy.hpp). Issue 39 makes these one model's facts among
+// several.
+//
+// The 40P fires on a time base: a firing round every 55.56 µs whatever the motor's speed
+// (core/sensors/timing.hpp), 10 rounds to a single-return packet, 5 to a dual one (its blocks
+// paired). So its packet rate is fixed, and the speed sets how far each packet turns:
+//
+//   return   packets/s   per revolution at 600 RPM   step per packet at 600 RPM
+//   single   1800        180                         2° (0.2° per block)
+//   dual     3600        360                         1° (blocks paired, 0.2° per pair)
+#pragma once
+
+#include "core/sensors/packet.hpp"
+#include "core/sensors/timing.hpp"
+
+namespace pandarcap {
+
+inline constexpr double kFullCircleCdeg = 36000.0;
+
+// The motor speeds the sensor is set to (its web page and PTC offer 300, 600 and 1200 RPM).
+inline constexpr int kSlowestRpm = 300;
+inline constexpr int kFastestRpm = 1200;
+
+constexpr double packets_per_second(ReturnMode mode) noexcept {
+  return 1e9 / static_cast<double>(packet_period_ns(mode));
+}
+
+// 0 for a motor that does not turn.
+constexpr double packets_per_revolution(ReturnMode mode, double rpm) noexcept {
+  return rpm > 0 ? packets_per_second(mode) * 60.0 / rpm : 0.0;
+}
+
+// The first block's azimuth advance from one packet to the next (0.01°): 100 at 600 RPM dual.
+constexpr double azimuth_step_per_packet_cdeg(ReturnMode mode, double rpm) noexcept {
+  return rpm / 60.0 * kFullCircleCdeg * static_cast<double>(packet_period_ns(mode)) * 1e-9;
+}
+
+// A packet whose first block's azimuth moved less than this from the previous packet's did not
+// turn: 0.05°, a motor below 15 RPM in single return, 30 in dual (at 300 RPM, the slowest, a
+// dual packet still turns 0.5°). The encoder's jitter on a turning motor is 0.01-0.02°.
+inline constexpr int kStandingStepCdeg = 5;
+
+}  // namespace pandarcap
