@@ -214,6 +214,66 @@ TEST_CASE("a compressed recording the disk filled is a complete frame of its flu
   if (have_tshark()) CHECK(tshark_packets(finished) == 40);
 }
 
+TEST_CASE("finish_interrupted_pcap_zst on a disk with no room for a copy: ended in place",
+          "[pcap][zstd][recovery]") {
+  // The copy is refused (ENOSPC through the seam, as a disk our own recordings filled): the
+  // frame is cut after its last block that ends on a whole record, which every flush makes, and
+  // ended there, checksum and all, without a byte more on the disk.
+  test::ScratchDir dir("pcap-zstd-recovery-in-place");
+  std::vector<char> buffer(kPcapBufferBytes);
+  ZstdStreamCompressor compressor(kPcapBufferBytes, 1);
+  const fs::path whole = dir / "whole.pcap.zst";
+  std::vector<std::uint64_t> flushed_at;  // the file's size after each flush
+  {
+    PcapWriter writer(whole.string(), buffer, &compressor);
+    SyntheticSensor sensor(SyntheticSensorConfig{});
+    std::array<std::uint8_t, kMaxPacketBytes> packet{};
+    for (int i = 0; i < 2000; ++i) {
+      const std::size_t size = sensor.next(packet);
+      writer.write({packet.data(), size}, kTime + i * 1000, kSource, kDestination);
+      if ((i + 1) % 250 == 0) {
+        writer.flush();
+        flushed_at.push_back(writer.bytes());
+      }
+    }
+    writer.close();
+  }
+  const std::string bytes = contents(whole);
+  const std::string stream = decompress(bytes).bytes;
+  const std::size_t record = kPcapRecordOverheadBytes + 1262;
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = [](int, const void*, std::size_t) -> ssize_t {
+    errno = ENOSPC;
+    return -1;
+  };
+  int checked = 0;
+  for (std::size_t cut = 0; cut < bytes.size(); cut += 1 + bytes.size() / 53) {
+    INFO("cut at " << cut << " of " << bytes.size());
+    const fs::path part = dir / "cut.pcap.zst.part";
+    std::ofstream(part, std::ios::binary) << bytes.substr(0, cut);
+    std::size_t flushes = 0;  // the flushes the cut file holds whole
+    while (flushes < flushed_at.size() && flushed_at[flushes] <= cut)
+      ++flushes;
+    PcapRecovery r;
+    {
+      const io::ScopedFileSyscalls seam(calls);
+      r = finish_interrupted_pcap_zst(part.string());
+    }
+    CHECK(r.ours);
+    CHECK(r.records >= 250 * flushes);
+    CHECK(fs::file_size(part) <= cut + 7);  // an empty last block and the checksum at most
+    if (r.records > 0) {
+      const Decompressed finished = decompress(contents(part));
+      CHECK(finished.complete);  // ended, and its content checksum right
+      CHECK(finished.bytes == stream.substr(0, kPcapGlobalHeaderBytes + r.records * record));
+      CHECK(r.kept_bytes == fs::file_size(part));
+    }
+    CHECK(test::files_ending(dir.path(), ".tmp").empty());
+    ++checked;
+  }
+  CHECK(checked >= 30);
+}
+
 TEST_CASE("finish_interrupted_pcap_zst keeps every whole record of a frame cut anywhere",
           "[pcap][zstd][recovery]") {
   test::ScratchDir dir("pcap-zstd-recovery");
