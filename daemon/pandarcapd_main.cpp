@@ -47,6 +47,7 @@
 #include "daemon/live/foxglove_server.hpp"
 #include "daemon/live/live_handover.hpp"
 #include "daemon/live/live_port_probe.hpp"
+#include "daemon/output/stall_report.hpp"
 #include "daemon/output/writer.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pandarcapd_command_line.hpp"
@@ -149,7 +150,7 @@ void show_progress(ProgressLine& progress, const ReplaySource& replay, const Pip
 
 // `replay`: the replay whose progress to show, or null.
 void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> duration_s,
-               const ReplaySource* replay) {
+               const ReplaySource* replay, StalledWriterReport& stall) {
   const auto start = std::chrono::steady_clock::now();
   ProgressLine progress = replay_progress_line();
   // The progress line ends with the run, whichever way supervise() returns.
@@ -164,6 +165,11 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
   auto next_watchdog = start;
   std::uint64_t seen[3] = {~0ull, ~0ull, ~0ull};
   HealthStateLog state_log;
+  // The writer's heartbeat, and since when it stands: stuck on its disk for kWriterStall, its
+  // health is reported from here (daemon/output/stall_report.hpp), once a second.
+  constexpr auto kWriterStall = std::chrono::seconds(2);
+  std::uint64_t writer_beat = pipe.heartbeats.writer.load();
+  auto writer_beat_at = start, next_stall_report = start;
   for (;;) {
     const timespec timeout{0, std::chrono::nanoseconds(tick).count()};
     const int signal = sigtimedwait(&signals, nullptr, &timeout);
@@ -190,6 +196,19 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
           spdlog::info("{}", line->text);
         }
       }
+    }
+    if (const std::uint64_t beat = pipe.heartbeats.writer.load(); beat != writer_beat) {
+      writer_beat = beat;
+      writer_beat_at = now;
+      if (stall.active()) stall.clear();
+    } else if (now - writer_beat_at >= kWriterStall && now >= next_stall_report) {
+      const double stalled = std::chrono::duration<double>(now - writer_beat_at).count();
+      stall.write(stalled, std::chrono::duration_cast<std::chrono::nanoseconds>(
+                               std::chrono::system_clock::now().time_since_epoch())
+                               .count());
+      systemd::status(
+          fmt::format("degraded: writer stalled for {:.0f} s (its disk does not answer)", stalled));
+      next_stall_report = now + std::chrono::seconds(1);
     }
     if (watchdog && now >= next_watchdog) {
       // Only while all three loops are making progress (each bumps its counter even when idle).
@@ -390,8 +409,9 @@ int run(const CommandLine& options) {
   systemd::ready();
   spdlog::info("ready: writing to {}", config.output.directory);
 
+  StalledWriterReport stall(wo);
   supervise(pipe, signals, options.duration_s,
-            replay_progress_wanted() ? source->replay_source() : nullptr);
+            replay_progress_wanted() ? source->replay_source() : nullptr, stall);
 
   systemd::stopping();
   threads.stop_all();  // the decoder drains the ring, the writer finishes every file

@@ -33,7 +33,7 @@ std::optional<double> age_seconds(const fs::path& file) {
   return std::chrono::duration<double>(fs::file_time_type::clock::now() - written).count();
 }
 
-enum class Failure { kReadOnly, kShutDown, kSubvolumeReadOnly };
+enum class Failure { kReadOnly, kShutDown, kSubvolumeReadOnly, kFrozen };
 
 struct Case {
   const char* name;
@@ -57,7 +57,8 @@ void fallback_case(const Case& c) {
     REQUIRE(test::shell("btrfs subvolume create '" + base.string() + "'"));
   }
   const fs::path out = base / "o";
-  const fs::path configured = c.configured_unusable ? dir / "a-file" / "fallback" : dir / "fallback";
+  const fs::path configured =
+      c.configured_unusable ? dir / "a-file" / "fallback" : dir / "fallback";
   if (c.configured_unusable) std::ofstream(dir / "a-file") << "not a directory\n";
   // Not there yet: made at the first need.
   const fs::path fallback =
@@ -91,13 +92,19 @@ void fallback_case(const Case& c) {
     case Failure::kSubvolumeReadOnly:
       REQUIRE(test::shell("btrfs property set -ts '" + base.string() + "' ro true"));
       break;
+    case Failure::kFrozen:
+      REQUIRE(test::shell("fsfreeze -f '" + disk.mount_point().string() + "'"));
+      break;
   }
   const auto failed_at = std::chrono::steady_clock::now();
   INFO(daemon.log());
   const fs::path prom = fallback / "pandarcap.prom";
-  // Within 2 s the fallback holds the health, and says why.
-  REQUIRE(notify.wait_for([&] { return fs::exists(prom); }, 2500ms));
-  CHECK(std::chrono::steady_clock::now() - failed_at < 2500ms);
+  // Within 2 s the fallback holds the health, and says why. A disk that hangs (frozen) fails no
+  // call: the writer stands still in one, and the main thread says so once it stood 2 s.
+  const bool frozen = c.failure == Failure::kFrozen;
+  const auto within = frozen ? 3500ms : 2500ms;
+  REQUIRE(notify.wait_for([&] { return fs::exists(prom); }, within));
+  CHECK(std::chrono::steady_clock::now() - failed_at < within);
   // And stays fresh and true for the next seconds: never more than 2 s old, degraded, naming it.
   while (std::chrono::steady_clock::now() - failed_at < 6s) {
     notify.receive();
@@ -113,16 +120,24 @@ void fallback_case(const Case& c) {
   REQUIRE_FALSE(lines.empty());
   const std::string reason = lines.back().at("reason");
   INFO(lines.back().dump());
-  CHECK(reason.find("health written to " + fallback.string()) != std::string::npos);
+  CHECK(reason.find(frozen ? "writer stalled for" : "health written to " + fallback.string()) !=
+        std::string::npos);
   CHECK(lines.back().at("health_fallback").at("active") == true);
   // The supervisor is told too: systemctl status shows it.
   CHECK(notify.count("STATUS=degraded") >= 1);
-  CHECK(notify.count("health written to") >= 1);
+  CHECK(notify.count(frozen ? "writer stalled" : "health written to") >= 1);
   // The journal says so at once, and every 10 s after.
-  CHECK(daemon.log().find("writing the health files to " + fallback.string()) != std::string::npos);
+  CHECK(daemon.log().find(frozen ? "a report of it in " + fallback.string()
+                                 : "writing the health files to " + fallback.string()) !=
+        std::string::npos);
+  if (frozen) {
+    const auto samples = test::prom_samples(harness::read_file(prom));
+    CHECK(samples.count("pandarcap_writer_stalled_seconds{sensor=\"pandar40p\"}") == 1);
+  }
 
   if (c.comes_back) {
-    REQUIRE(test::shell("btrfs property set -ts '" + base.string() + "' ro false"));
+    REQUIRE(test::shell(frozen ? "fsfreeze -u '" + disk.mount_point().string() + "'"
+                               : "btrfs property set -ts '" + base.string() + "' ro false"));
     // Home again: the home file fresh, the fallback's .prom gone, the state ok once the
     // outputs' own write errors are a second old.
     REQUIRE(notify.wait_for(
@@ -138,7 +153,8 @@ void fallback_case(const Case& c) {
                  record.at("health_fallback").at("active") == false;
         },
         5s));
-    CHECK(daemon.log().find("the health files are back there") != std::string::npos);
+    CHECK(daemon.log().find(frozen ? "the writer is back" : "the health files are back there") !=
+          std::string::npos);
   }
   daemon.signal(SIGTERM);
   // Ends whatever its disk does (a shut-down one fails every write and sync).
@@ -161,4 +177,9 @@ TEST_CASE("health on a disk that fails: ext4 shut down (EIO), the configured fal
 TEST_CASE("health on a disk that fails: a btrfs subvolume read-only, then read-write: home again",
           "[fallback][reliability][threads]") {
   fallback_case({"btrfs-subvolume-read-only", "btrfs", "", Failure::kSubvolumeReadOnly, true});
+}
+
+TEST_CASE("health on a disk that hangs: frozen (fsfreeze), the writer stuck, then thawed",
+          "[fallback][reliability][threads]") {
+  fallback_case({"ext4-frozen", "ext4", "", Failure::kFrozen, true});
 }
