@@ -25,12 +25,9 @@ using namespace pandarcap;
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
 using nlohmann::json;
+using test::quoted;
 
 namespace {
-
-std::string quoted(const fs::path& path) {
-  return "'" + path.string() + "'";
-}
 
 // Runs pandarcapd with `args` and a configuration of `toml`; returns its exit status and output.
 // The PCD files are written in the layout the MCAP messages carry (pandarcap's), so the two can

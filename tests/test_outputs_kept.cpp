@@ -41,15 +41,12 @@ using nlohmann::json;
 namespace fs = std::filesystem;
 using test::files_ending;
 using test::health_counter;
+using test::quoted;
 
 namespace {
 
 std::string pandarcapd() {
   return test::pandarcapd_command();
-}
-
-std::string quoted(const fs::path& path) {
-  return "'" + path.string() + "'";
 }
 
 json last_health(const fs::path& out) {

@@ -18,12 +18,9 @@ using namespace pandarcap;
 using nlohmann::json;
 using namespace std::chrono_literals;
 namespace fs = std::filesystem;
+using test::quoted;
 
 namespace {
-
-std::string quoted(const fs::path& path) {
-  return "'" + path.string() + "'";
-}
 
 // The counters the decoder no longer counts with nothing consuming points.
 constexpr const char* kPointCounters[] = {"points",           "points_dropped_frame_full",

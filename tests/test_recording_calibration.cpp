@@ -26,12 +26,9 @@
 using namespace pandarcap;
 using nlohmann::json;
 namespace fs = std::filesystem;
+using test::quoted;
 
 namespace {
-
-std::string quoted(const fs::path& path) {
-  return "'" + path.string() + "'";
-}
 
 // The complete frames of an output directory: file name -> bytes.
 std::map<std::string, std::string> complete_frames(const fs::path& out) {

@@ -23,6 +23,8 @@
 
 using namespace pandarcap;
 namespace fs = std::filesystem;
+using test::quoted;
+using test::write_bytes;
 
 namespace {
 
@@ -30,15 +32,6 @@ constexpr std::int64_t kRecordedNs = 1'677'657'600'000'000'000;  // 2023-03-01T0
 constexpr int kPackets = 1800;  // half a second of a dual-return sensor
 constexpr Endpoint kLidar{0xC0A801C9, 2368};
 constexpr Endpoint kHost{0xC0A8010A, 2368};
-
-std::string quoted(const fs::path& path) {
-  return "'" + path.string() + "'";
-}
-
-void write_bytes(const fs::path& path, std::string_view bytes) {
-  std::ofstream(path, std::ios::binary | std::ios::trunc)
-      .write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
 
 struct Outcome {
   bool opened = false;

@@ -26,6 +26,8 @@
 using namespace pandarcap;
 using nlohmann::json;
 namespace fs = std::filesystem;
+using test::quoted;
+using test::write_bytes;
 
 namespace {
 
@@ -33,15 +35,6 @@ constexpr std::int64_t kRecordedNs = 1'677'657'600'000'000'000;  // 2023-03-01T0
 constexpr int kPackets = 3600;  // one second of a dual-return sensor at 600 RPM
 constexpr Endpoint kLidar{0xC0A801C9, 2368};
 constexpr Endpoint kHost{0xC0A8010A, 2368};
-
-std::string quoted(const fs::path& path) {
-  return "'" + path.string() + "'";
-}
-
-void write_bytes(const fs::path& path, std::string_view bytes) {
-  std::ofstream(path, std::ios::binary | std::ios::trunc)
-      .write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
 
 fs::path simulated_capture(const fs::path& path) {
   return test::write_simulated_recording(path, kPackets, kRecordedNs, kLidar, kHost);
@@ -369,7 +362,8 @@ TEST_CASE("an MCAP file without packets, cut or damaged says so", "[daemon][mcap
     CaptureRecord record;
     std::size_t records = 0;
     CaptureStatus status;
-    while ((status = reader.next(record)) == CaptureStatus::kRecord) ++records;
+    while ((status = reader.next(record)) == CaptureStatus::kRecord)
+      ++records;
     CHECK(status == CaptureStatus::kEnd);
     CHECK(reader.stats().chunks_skipped == 1);
     CHECK(records + reader.stats().packets_skipped == kPackets);

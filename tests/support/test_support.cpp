@@ -49,6 +49,15 @@ std::filesystem::path binary(const std::string& name) {
   return std::filesystem::path(PANDARCAP_BIN_DIR) / name;
 }
 
+std::string quoted(const std::filesystem::path& path) {
+  return "'" + path.string() + "'";
+}
+
+void write_bytes(const std::filesystem::path& path, std::string_view bytes) {
+  std::ofstream(path, std::ios::binary | std::ios::trunc)
+      .write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
 CommandResult run_command(const std::string& command) {
   CommandResult result;
   std::FILE* pipe = ::popen(command.c_str(), "r");

@@ -68,6 +68,11 @@ class ScratchDir {
 // Path of a built binary (pandarcap-inspect, pandarcapd).
 std::filesystem::path binary(const std::string& name);
 
+// `path` in single quotes, for the shell commands the tests run (run_command).
+std::string quoted(const std::filesystem::path& path);
+// `bytes` written to `path`, replacing it.
+void write_bytes(const std::filesystem::path& path, std::string_view bytes);
+
 // Runs a command through /bin/sh, returning its exit status and standard output.
 struct CommandResult {
   int exit_code = -1;
