@@ -224,16 +224,17 @@ void assign_directory_of(std::string& out, std::string_view path) {
 }
 
 void sync_file(const std::string& path) {
-  const io::UniqueFd fd = open_for_sync(path);
+  const io::UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW));
+  if (!fd) throw_errno("cannot open", path);
   sync_data(fd.get(), path);
 }
 
-io::UniqueFd open_for_sync(const std::string& path) {
-  io::UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW));
-  if (!fd) throw_errno("cannot open", path);
-  // Best effort: a file system without it (EINVAL, ESPIPE) is synced whole by fdatasync anyway.
-  ::sync_file_range(fd.get(), 0, 0, SYNC_FILE_RANGE_WRITE);
-  return fd;
+void start_writeback(const std::string& path) noexcept {
+  // Closed again at once: the writeback goes on without the descriptor, and a batch of files
+  // holds none open while it waits.
+  const io::UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW));
+  // A file system without it (EINVAL, ESPIPE) is synced whole by fdatasync anyway.
+  if (fd) ::sync_file_range(fd.get(), 0, 0, SYNC_FILE_RANGE_WRITE);
 }
 
 bool place_durably(const std::string& from, std::string& to) {

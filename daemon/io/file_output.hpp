@@ -102,11 +102,10 @@ void sync_data(int fd, std::string_view path);
 // The same for the file named `path` (opened read-only, never through a link: fdatasync flushes
 // the file, whichever descriptor asks). Throws std::system_error.
 void sync_file(const std::string& path);
-// The file named `path` opened to be synced (read-only, never through a link, close-on-exec),
-// its dirty pages already sent on their way to the disk (sync_file_range: start, do not wait), so
-// that syncing several files one after the other waits for the slowest, not for their sum.
-// Throws std::system_error.
-io::UniqueFd open_for_sync(const std::string& path);
+// The file named `path`'s dirty pages sent on their way to the disk (sync_file_range: start, do
+// not wait), so that syncing several files one after the other waits for the slowest, not for
+// their sum. Best effort: no throw (the sync that follows reports what fails).
+void start_writeback(const std::string& path) noexcept;
 // fsync(2) of the directory `directory`, so the names made, renamed or removed in it survive a
 // power cut. A file system that cannot sync a directory (EINVAL: some FUSE, NFS) has nothing to
 // sync: not an error. Throws std::system_error.

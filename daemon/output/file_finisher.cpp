@@ -60,7 +60,6 @@ FileFinisher::FileFinisher(FinishReceiver& receiver, std::size_t jobs)
   jobs_.reserve(jobs);
   free_.reserve(jobs);
   batch_.reserve(kMaxBatch);
-  batch_fds_.resize(kMaxBatch);
   batch_directories_.resize(jobs + 1);
   for (std::string& directory : batch_directories_)
     directory.reserve(kReservedPath);
@@ -181,28 +180,22 @@ void FileFinisher::run() noexcept {
       batch_.push_back(job);
       if (batch_.size() == kMaxBatch || !to_finish_.try_pop(job)) break;
     }
-    for (std::size_t i = 0; i < batch_.size(); ++i)
-      process(*batch_[i], batch_fds_[i]);
+    for (FinishJob* queued : batch_)
+      process(*queued);
     end_batch();
   }
 }
 
 void FileFinisher::start(FinishJob& job) noexcept {
-  io::UniqueFd& fd = batch_fds_[batch_.size()];
-  try {
-    fd = open_for_sync(job.from);
-  } catch (const std::exception& error) {
-    note_error(job, error);
-  }
+  start_writeback(job.from);
 }
 
-void FileFinisher::process(FinishJob& job, io::UniqueFd& fd) noexcept {
+void FileFinisher::process(FinishJob& job) noexcept {
   try {
-    if (!job.failed) sync_data(fd.get(), job.from);
+    sync_file(job.from);
   } catch (const std::exception& error) {
     note_error(job, error);
   }
-  fd.reset();
   if (job.failed) {
     if (job.kind != FinishJob::Kind::kSync && job.remove_on_failure) ::unlink(job.from.c_str());
     return;

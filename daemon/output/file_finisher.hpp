@@ -48,7 +48,6 @@
 #include <thread>
 #include <vector>
 
-#include "daemon/io/unique_fd.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {
@@ -132,10 +131,10 @@ class FileFinisher {
 
  private:
   void run() noexcept;
-  // A job of the batch opened, its writeback started (a failure noted in the job).
+  // A job of the batch: its writeback started.
   void start(FinishJob& job) noexcept;
   // Its data synced, then renamed; its directory is noted for the batch's sync.
-  void process(FinishJob& job, io::UniqueFd& fd) noexcept;
+  void process(FinishJob& job) noexcept;
   // The batch's directories synced, then its jobs handed back.
   void end_batch() noexcept;
 
@@ -147,7 +146,6 @@ class FileFinisher {
   // The finisher thread's: the jobs of the batch in progress and the directories they renamed in.
   static constexpr std::size_t kMaxBatch = 64;
   std::vector<FinishJob*> batch_;
-  std::vector<io::UniqueFd> batch_fds_;  // each job's, while its batch is synced
   std::vector<std::string> batch_directories_;
   std::size_t batch_directory_count_ = 0;
   std::string directory_;  // scratch
