@@ -13,6 +13,7 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "core/sensors/sensor_models.hpp"
 #include "daemon/pcap/endpoint.hpp"
 #include "ringbuf/slot_ring.hpp"
 
@@ -40,8 +41,9 @@ inline Endpoint to_endpoint(const SlotAddress& address) noexcept {
   return address.v4.sin_family == AF_INET6 ? to_endpoint(address.v6) : to_endpoint(address.v4);
 }
 
-// Largest datagram the decoder accepts (spec §1: 1262 bytes, or 1266 with the UDP sequence).
-inline constexpr std::size_t kMaxAcceptedDatagram = 1266;
+// Largest datagram the decoder accepts: the largest of any supported model, the Pandar40P's
+// (spec §1: 1262 bytes, or 1266 with the UDP sequence; core/sensors/sensor_models.hpp).
+inline constexpr std::size_t kMaxAcceptedDatagram = kLargestDatagramBytes;
 
 struct alignas(ringbuf::kCacheLine) PacketSlot {
   // Room for the largest accepted datagram, rounded up so the slot is whole cache lines.

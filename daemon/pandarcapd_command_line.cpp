@@ -65,7 +65,8 @@ CommandLine parse_command_line(int argc, char** argv) {
       if (arg == "--return-mode") {
         // Also the simulated sensor's mode, which must be one a sensor sends ("any" is not).
         const auto mode = return_mode_from_string(text);
-        if (!mode) args.usage_error("--return-mode takes dual, strongest or last");
+        if (!mode || !mode_listed(kPandar40PReturnModes, *mode))
+          args.usage_error("--return-mode takes dual, strongest or last");
         o.source.simulated_mode = *mode;
       }
       o.overrides.emplace_back(key->key, text);

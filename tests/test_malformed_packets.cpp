@@ -156,7 +156,13 @@ TEST_CASE(
     CHECK(got.stats.accepted == expected.stats.accepted);
     for (std::size_t r = 1; r < kRejectReasonCount; ++r) {  // 0 is kNone, not a reject
       CHECK(got.stats.rejects[r] == injected[r]);
-      CHECK(injected[r] > 0);
+      // Every reason the Pandar40P's validate() gives is injected. bad_crc (the QT128's CRCs)
+      // and wrong_model (a fixed model meeting another model's packets) cannot come from a 40P
+      // stream until the stream decoder is generic over the model (issue 39, part 2).
+      const auto reason = static_cast<RejectReason>(r);
+      if (reason != RejectReason::kBadCrc && reason != RejectReason::kWrongModel) {
+        CHECK(injected[r] > 0);
+      }
     }
     CHECK(got.stats.rejected() == stream.size());
     CHECK(got.stats.packets == expected.stats.packets + stream.size());

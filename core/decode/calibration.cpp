@@ -2,32 +2,26 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <bitset>
 #include <charconv>
 #include <cmath>
+#include <type_traits>
 #include <vector>
+
+#include "core/sensors/sensor_models.hpp"
 
 namespace pandarcap {
 
-Calibration Calibration::nominal() {
-  // Design elevations (MAN40 Appendix I, Hesai General SDK default). The General SDK has -1.66
-  // for channel 17; every neighbouring step is 1/3 degree, so the design value -1.67 is used.
-  static constexpr std::array<double, kChannels> kElevation = {
-      15.0, 11.0,  8.0,   5.0,   3.0,   2.0,   1.67,  1.33,  1.0,   0.67,
-      0.33, 0.0,   -0.33, -0.67, -1.0,  -1.33, -1.67, -2.0,  -2.33, -2.67,
-      -3.0, -3.33, -3.67, -4.0,  -4.33, -4.67, -5.0,  -5.33, -5.67, -6.0,
-      -7.0, -8.0,  -9.0,  -10.0, -11.0, -12.0, -13.0, -14.0, -19.0, -25.0};
+Calibration Calibration::nominal(SensorModelId model) {
   Calibration calibration;
-  calibration.elevation_deg = kElevation;
-  for (int c = 0; c < kChannels; ++c) {
-    // Channels 1-6 and 31-40 sit at -1.042°; channels 7-30 cycle +3.125, -5.208, -1.042.
-    double offset = -1.042;
-    if (c >= 6 && c < 30) {
-      static constexpr double kCycle[3] = {3.125, -5.208, -1.042};
-      offset = kCycle[(c - 6) % 3];
-    }
-    calibration.azimuth_offset_deg[c] = offset;
-  }
+  with_model(model, [&]<class M>(std::type_identity<M>) {
+    calibration.channel_count = M::kChannels;
+    std::copy(M::kNominalElevationDeg.begin(), M::kNominalElevationDeg.end(),
+              calibration.elevation_deg.begin());
+    std::copy(M::kNominalAzimuthOffsetDeg.begin(), M::kNominalAzimuthOffsetDeg.end(),
+              calibration.azimuth_offset_deg.begin());
+  });
   calibration.source = "nominal";
   return calibration;
 }
@@ -82,17 +76,12 @@ bool parse_number(std::string_view text, double& value) {
   throw CalibrationError(fmt::format("{}:{}:{}: {}", source, line, column, message));
 }
 
-}  // namespace
-
-Calibration Calibration::parse(std::string_view text, const std::string& source_name) {
-  Calibration calibration;
-  calibration.source = source_name;
-  std::bitset<kChannels> seen;
-  std::array<std::size_t, kChannels> seen_on_line{};
-  bool header_done = false;
+// Calls f(line_number, line) for every line of `text` that is not blank; returns the number of
+// the last such line (0 for none).
+template <class F>
+std::size_t for_each_line(std::string_view text, F&& f) {
   std::size_t line_number = 0;
   std::size_t last_line = 0;
-
   std::size_t pos = 0;
   while (pos <= text.size()) {
     const std::size_t newline = text.find('\n', pos);
@@ -102,14 +91,49 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
     ++line_number;
     if (trim(raw).empty()) continue;
     last_line = line_number;
+    f(line_number, raw);
+  }
+  return last_line;
+}
 
-    const std::vector<Field> fields = split_fields(raw);
-    double id_value = 0;
+// The first non-blank line is a header unless it already holds a numeric channel id.
+bool is_header(std::string_view line) {
+  double id = 0;
+  return !parse_number(split_fields(line)[0].text, id);
+}
+
+// The rows a file holds (its non-blank lines less a header): said when an id is out of range,
+// so a table of another model reads as that ("expected 40 channels ..., found 64").
+std::size_t data_rows(std::string_view text) {
+  std::size_t rows = 0;
+  bool first = true;
+  for_each_line(text, [&](std::size_t, std::string_view line) {
+    if (!first || !is_header(line)) ++rows;
+    first = false;
+  });
+  return rows;
+}
+
+}  // namespace
+
+Calibration Calibration::parse(std::string_view text, const std::string& source_name,
+                               SensorModelId model) {
+  const int expected = pandarcap::channel_count(model);
+  const std::string_view model_name = display_name(model);
+  Calibration calibration;
+  calibration.channel_count = expected;
+  calibration.source = source_name;
+  std::bitset<kMaxChannels> seen;
+  std::array<std::size_t, kMaxChannels> seen_on_line{};
+  bool header_done = false;
+
+  const std::size_t last_line = for_each_line(text, [&](std::size_t line_number,
+                                                        std::string_view raw) {
     if (!header_done) {
       header_done = true;
-      // The first non-blank line is a header unless it already holds a numeric channel id.
-      if (!parse_number(fields[0].text, id_value)) continue;
+      if (is_header(raw)) return;
     }
+    const std::vector<Field> fields = split_fields(raw);
     if (fields.size() != 3) {
       fail(source_name, line_number, 1,
            fmt::format("expected 3 fields (id,elevation,azimuth), found {}", fields.size()));
@@ -122,9 +146,11 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
              fmt::format("{} is not a number: '{}'", kNames[i], fields[i].text));
       }
     }
-    if (values[0] != std::floor(values[0]) || values[0] < 1 || values[0] > kChannels) {
+    if (values[0] != std::floor(values[0]) || values[0] < 1 || values[0] > expected) {
       fail(source_name, line_number, fields[0].column,
-           fmt::format("channel id must be an integer 1..{}, got '{}'", kChannels, fields[0].text));
+           fmt::format("channel id must be an integer 1..{}, got '{}': expected {} channels ({}), "
+                       "found {} rows",
+                       expected, fields[0].text, expected, model_name, data_rows(text)));
     }
     const int channel = static_cast<int>(values[0]) - 1;
     if (seen[channel]) {
@@ -144,23 +170,24 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
     seen_on_line[channel] = line_number;
     calibration.elevation_deg[channel] = values[1];
     calibration.azimuth_offset_deg[channel] = values[2];
-  }
+  });
 
-  if (!seen.all()) {
+  const auto found = static_cast<int>(seen.count());
+  if (found != expected) {
     std::string missing;
-    for (int c = 0; c < kChannels; ++c) {
+    for (int c = 0; c < expected; ++c) {
       if (!seen[c]) missing += fmt::format("{}{}", missing.empty() ? "" : ",", c + 1);
     }
-    fail(
-        source_name, last_line + 1, 1,
-        fmt::format("{} of {} channels missing: {}", kChannels - seen.count(), kChannels, missing));
+    fail(source_name, last_line + 1, 1,
+         fmt::format("expected {} channels ({}), found {}: {} of {} channels missing: {}", expected,
+                     model_name, found, expected - found, expected, missing));
   }
   return calibration;
 }
 
 std::string Calibration::to_csv() const {
   std::string out = "Laser id,Elevation,Azimuth\n";
-  for (int c = 0; c < kChannels; ++c) {
+  for (int c = 0; c < channel_count; ++c) {
     out += fmt::format("{},{},{}\n", c + 1, elevation_deg[c], azimuth_offset_deg[c]);
   }
   return out;

@@ -4,29 +4,39 @@ namespace pandarcap {
 
 std::string_view to_string(ReturnMode mode) noexcept {
   switch (mode) {
+    case ReturnMode::kFirst:
+      return "first";
+    case ReturnMode::kSecond:
+      return "second";
     case ReturnMode::kStrongest:
       return "strongest";
     case ReturnMode::kLast:
       return "last";
     case ReturnMode::kDual:
       return "dual";
+    case ReturnMode::kFirstSecond:
+      return "first_second";
+    case ReturnMode::kFirstLast:
+      return "first_last";
+    case ReturnMode::kFirstStrongest:
+      return "first_strongest";
+    case ReturnMode::kFirstLastStrongest:
+      return "first_last_strongest";
+    case ReturnMode::kStrongestSecond:
+      return "strongest_second";
   }
   return "unknown";
 }
 
 std::optional<ReturnMode> return_mode_from_byte(std::uint8_t value) noexcept {
-  switch (value) {
-    case 0x37:
-    case 0x38:
-    case 0x39:
-      return static_cast<ReturnMode>(value);
-    default:
-      return std::nullopt;
+  for (ReturnMode mode : kAllReturnModes) {
+    if (static_cast<std::uint8_t>(mode) == value) return mode;
   }
+  return std::nullopt;
 }
 
 std::optional<ReturnMode> return_mode_from_string(std::string_view name) noexcept {
-  for (ReturnMode mode : {ReturnMode::kStrongest, ReturnMode::kLast, ReturnMode::kDual}) {
+  for (ReturnMode mode : kAllReturnModes) {
     if (name == to_string(mode)) return mode;
   }
   return std::nullopt;
@@ -44,6 +54,10 @@ std::string_view to_string(RejectReason reason) noexcept {
       return "bad_azimuth";
     case RejectReason::kBadReturnMode:
       return "bad_return_mode";
+    case RejectReason::kBadCrc:
+      return "bad_crc";
+    case RejectReason::kWrongModel:
+      return "wrong_model";
   }
   return "unknown";
 }
@@ -61,7 +75,8 @@ RejectReason validate(std::span<const std::uint8_t> payload) noexcept {
   for (int b = 0; b < kBlocks; ++b) {
     if (load_u16_le(p + kBlockBytes * b + 2) >= kAzimuthLimitCdeg) return RejectReason::kBadAzimuth;
   }
-  if (!return_mode_from_byte(p[kBodyBytes + 14])) return RejectReason::kBadReturnMode;
+  const auto mode = return_mode_from_byte(p[kBodyBytes + 14]);
+  if (!mode || !mode_listed(kPandar40PReturnModes, *mode)) return RejectReason::kBadReturnMode;
   return RejectReason::kNone;
 }
 

@@ -39,32 +39,79 @@ inline constexpr std::uint8_t kMarker1 = 0xEE;             // second marker byte
 inline constexpr std::uint16_t kAzimuthLimitCdeg = 36000;  // azimuths are 0..35999
 inline constexpr double kDistanceUnitM = 0.004;
 
-// Return mode byte at payload offset 1254.
+// The return mode byte of every Hesai model (at payload offset 1254 in a Pandar40P packet): which
+// echoes each firing reports, and so how many blocks one firing fills (returns_per_firing).
+// "dual" stays the name of 0x39 (last + strongest), the Pandar40P's name for it since the first
+// release: its outputs say "dual". 0x35 and 0x36 are no mode. Each model accepts only its own
+// modes (Pandar40P: kPandar40PReturnModes; the others: their kReturnModes, core/sensors/).
 enum class ReturnMode : std::uint8_t {
+  kFirst = 0x33,
+  kSecond = 0x34,
   kStrongest = 0x37,
   kLast = 0x38,
-  kDual = 0x39,  // blocks (2k, 2k+1) share one firing: even = last, odd = strongest
+  kDual =
+      0x39,  // last + strongest: blocks (2k, 2k+1) share one firing: even = last, odd = strongest
+  kFirstSecond = 0x3A,
+  kFirstLast = 0x3B,
+  kFirstStrongest = 0x3C,
+  kFirstLastStrongest = 0x3D,  // three blocks (3k, 3k+1, 3k+2) per firing
+  kStrongestSecond = 0x3E,     // strongest + second strongest
 };
+inline constexpr std::array<ReturnMode, 10> kAllReturnModes = {
+    ReturnMode::kFirst,          ReturnMode::kSecond,         ReturnMode::kStrongest,
+    ReturnMode::kLast,           ReturnMode::kDual,           ReturnMode::kFirstSecond,
+    ReturnMode::kFirstLast,      ReturnMode::kFirstStrongest, ReturnMode::kFirstLastStrongest,
+    ReturnMode::kStrongestSecond};
+// The modes a Pandar40P sends (MAN40P: last, strongest, last + strongest); validate() rejects
+// the others as bad_return_mode.
+inline constexpr std::array<ReturnMode, 3> kPandar40PReturnModes = {
+    ReturnMode::kStrongest, ReturnMode::kLast, ReturnMode::kDual};
 
-// "strongest", "last", "dual" (the names the JSON outputs use); "unknown" for other values.
+// "first", "second", "strongest", "last", "dual", "first_second", "first_last",
+// "first_strongest", "first_last_strongest", "strongest_second" (the names the JSON outputs
+// use); "unknown" for other values.
 std::string_view to_string(ReturnMode mode) noexcept;
-// Returns the mode for a known byte value, nullopt otherwise.
+// Returns the mode for one of the ten mode bytes, nullopt otherwise.
 std::optional<ReturnMode> return_mode_from_byte(std::uint8_t value) noexcept;
-// Parses "strongest" | "last" | "dual".
+// Parses one of the ten names above.
 std::optional<ReturnMode> return_mode_from_string(std::string_view name) noexcept;
+// Echoes per firing: 1 (single modes), 2 (the dual modes), 3 (first + last + strongest).
 inline constexpr int returns_per_firing(ReturnMode mode) noexcept {
-  return mode == ReturnMode::kDual ? 2 : 1;
+  switch (mode) {
+    case ReturnMode::kDual:
+    case ReturnMode::kFirstSecond:
+    case ReturnMode::kFirstLast:
+    case ReturnMode::kFirstStrongest:
+    case ReturnMode::kStrongestSecond:
+      return 2;
+    case ReturnMode::kFirstLastStrongest:
+      return 3;
+    default:
+      return 1;
+  }
+}
+// Whether `mode` is one of `modes` (a model's list of the modes it sends).
+template <std::size_t N>
+constexpr bool mode_listed(const std::array<ReturnMode, N>& modes, ReturnMode mode) noexcept {
+  for (ReturnMode m : modes) {
+    if (m == mode) return true;
+  }
+  return false;
 }
 
 // Why a payload was not accepted. Each value is its own counter in the daemon's health output.
 enum class RejectReason : std::uint8_t {
   kNone = 0,
-  kBadLength,      // not 1262 or 1266 bytes (1256 = legacy Pandar40, 512 = GPS packet, ...)
-  kBadMarker,      // some block does not start with FF EE
+  kBadLength,      // not 1262 or 1266 bytes (1256 = legacy Pandar40, 512 = GPS packet, ...); for
+                   // the other models: not a length their header's flags allow
+  kBadMarker,      // some block does not start with FF EE (other models: no EE FF start)
   kBadAzimuth,     // some block azimuth >= 36000
-  kBadReturnMode,  // return mode byte not 0x37/0x38/0x39
+  kBadReturnMode,  // return mode byte not one the model sends (Pandar40P: 0x37/0x38/0x39)
+  // New values go at the end: the names are JSON keys and the numbers index counters.
+  kBadCrc,      // a CRC the packet carries does not match its bytes (PandarQT128)
+  kWrongModel,  // the header names another model: protocol version, laser or block count
 };
-inline constexpr std::size_t kRejectReasonCount = 5;
+inline constexpr std::size_t kRejectReasonCount = 7;
 // Stable snake_case name, used as a JSON key and a Prometheus label value ("bad_length", ...).
 std::string_view to_string(RejectReason reason) noexcept;
 

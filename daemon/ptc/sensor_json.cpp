@@ -58,7 +58,7 @@ nlohmann::ordered_json to_json(const ptc::SensorStatus& s) {
 
 nlohmann::ordered_json to_json(const Calibration& c) {
   nlohmann::ordered_json channels = nlohmann::ordered_json::array();
-  for (int ch = 0; ch < kChannels; ++ch) {
+  for (int ch = 0; ch < c.channel_count; ++ch) {
     channels.push_back({{"channel", ch + 1},
                         {"elevation_deg", c.elevation_deg[ch]},
                         {"azimuth_offset_deg", c.azimuth_offset_deg[ch]}});

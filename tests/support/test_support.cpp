@@ -33,6 +33,17 @@ std::optional<std::filesystem::path> real_capture(const std::string& name) {
   return std::nullopt;
 }
 
+std::vector<std::vector<std::uint8_t>> capture_payloads(const std::filesystem::path& path) {
+  CaptureReader reader(path.string());
+  std::vector<std::vector<std::uint8_t>> payloads;
+  CaptureRecord record;
+  CaptureStatus status;
+  while ((status = reader.next(record)) == CaptureStatus::kRecord)
+    payloads.emplace_back(record.payload.begin(), record.payload.end());
+  REQUIRE(status == CaptureStatus::kEnd);
+  return payloads;
+}
+
 ScratchDir::ScratchDir(const std::string& tag) {
   std::random_device rd;
   path_ = std::filesystem::temp_directory_path() /

@@ -51,6 +51,9 @@ inline std::int64_t floor_mod(std::int64_t a, std::int64_t b) {
 // the caller can return early.
 std::optional<std::filesystem::path> real_capture(const std::string& name);
 
+// Every UDP payload of a capture file, in order (REQUIREs that the file reads to its end).
+std::vector<std::vector<std::uint8_t>> capture_payloads(const std::filesystem::path& path);
+
 // A fresh, empty directory under the system temp dir, removed by the destructor.
 class ScratchDir {
  public:
