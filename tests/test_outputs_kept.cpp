@@ -155,6 +155,26 @@ TEST_CASE("restarts within one second never replace a finished frame or recordin
   }
 }
 
+TEST_CASE("retention allocates nothing once warm: a frame in, the oldest out",
+          "[daemon][outputs][threads]") {
+  // Sanitizer builds keep their own allocator: there the daemon counts nothing.
+  if (test::kSanitizerBuild) return;
+  test::ScratchDir dir("outputs-retention-allocations");
+  const fs::path out = dir / "out";
+  const fs::path config = dir / "retention.toml";
+  // 5 frames kept of ~50 written: from the first second on, every frame in removes one.
+  std::ofstream(config) << "[output]\nframes_max_files = 5\n";
+  const auto r = test::run_command(pandarcapd() + " -c " + quoted(config) + " --output-dir " +
+                                   quoted(out) + " --simulate --duration 5 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  const json h = last_health(out);
+  INFO(h.dump());
+  CHECK(health_counter(h, "frames_written") >= 30);
+  CHECK(files_ending(out / "frames", ".pcd").size() == 5);
+  CHECK(h.at("counters").at("hot_path_allocations_by_thread").at("writer") == 0);
+}
+
 TEST_CASE("retention counts the frames and recordings of earlier runs",
           "[daemon][outputs][threads]") {
   test::ScratchDir dir("outputs-retention");

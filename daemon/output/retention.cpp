@@ -1,11 +1,12 @@
 #include "daemon/output/retention.hpp"
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <array>
+#include <cerrno>
 #include <cstring>
 #include <optional>
-#include <system_error>
 
 #include "daemon/pcap/recording_sidecars.hpp"
 
@@ -31,43 +32,34 @@ void remove_sidecars(std::string_view recording_path) noexcept {
 
 std::size_t Retention::enforce() {
   const std::size_t before = files_.size();
-  std::uint64_t total = 0;
-  for (const auto& file : files_)
-    total += file.second;
   while (!files_.empty() && ((max_files_ != 0 && files_.size() > max_files_) ||
-                             (max_bytes_ != 0 && total > max_bytes_))) {
-    std::error_code ignored;
-    const auto& [path, bytes] = files_.front();
-    if (std::filesystem::remove(path, ignored)) {
-      remove_sidecars(path.native());
-      if (on_removed_) on_removed_(path.native(), bytes);
+                             (max_bytes_ != 0 && bytes_ > max_bytes_))) {
+    const FileList::Entry& oldest = files_.front();
+    if (::unlink(oldest.path.c_str()) == 0) {
+      remove_sidecars(oldest.path);
+      if (on_removed_) on_removed_(oldest.path, oldest.value);
     }
-    total -= bytes;
+    bytes_ -= oldest.value;
     files_.pop_front();
   }
   return before - files_.size();
 }
 
 void Retention::forget(std::string_view path) noexcept {
-  for (auto it = files_.begin(); it != files_.end(); ++it) {
-    if (it->first.native() == path) {
-      files_.erase(it);
-      return;
-    }
+  for (std::size_t i = 0; i < files_.size(); ++i) {
+    if (files_[i].path != path) continue;
+    bytes_ -= files_[i].value;
+    files_.erase(path);
+    return;
   }
 }
 
 void RecordedFiles::forget(std::string_view path) noexcept {
-  for (auto it = files_.begin(); it != files_.end(); ++it) {
-    if (it->first == path) {
-      files_.erase(it);
-      return;
-    }
-  }
+  files_.erase(path);
 }
 
 void RecordedFiles::add(std::string_view path, std::uint64_t items, const Retention& retention) {
-  files_.emplace_back(path, items);
+  files_.push_back(path, items);
   if (retention.limited()) {
     while (files_.size() > retention.size())
       files_.pop_front();
@@ -76,10 +68,11 @@ void RecordedFiles::add(std::string_view path, std::uint64_t items, const Retent
 
 RecordedFiles::Gone RecordedFiles::take_gone() {
   Gone gone;
-  for (const auto& [path, items] : files_) {
-    std::error_code error;
-    if (std::filesystem::exists(path, error) || error) continue;
-    gone.items += items;
+  for (std::size_t i = 0; i < files_.size(); ++i) {
+    struct stat info;
+    // A file that cannot be asked about (any error but ENOENT) counts as there.
+    if (::stat(files_[i].path.c_str(), &info) == 0 || errno != ENOENT) continue;
+    gone.items += files_[i].value;
     ++gone.files;
   }
   files_.clear();

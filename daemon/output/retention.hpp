@@ -5,19 +5,20 @@
 // upload backlog counts a file that had not been uploaded).
 //
 // The list holds every file of ours, those of earlier runs included (adopted at start-up, oldest
-// first), so restarts and crash loops cannot fill the disk. Adding a file costs one allocation
-// (its name), which is why nothing is listed without a limit: the name is copied only then. Owned
-// by the writer thread.
+// first), so restarts and crash loops cannot fill the disk. The names are copied into slots that
+// keep their memory (file_list.hpp): at steady state, a file in and a file out, nothing is
+// allocated; nothing is listed without a limit (the list would only grow). Owned by the writer
+// thread.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
-#include <deque>
-#include <filesystem>
 #include <functional>
 #include <string>
 #include <string_view>
 #include <utility>
+
+#include "daemon/output/file_list.hpp"
 
 namespace pandarcap {
 
@@ -37,16 +38,19 @@ class Retention {
   // A file just finished (the newest): listed, then the oldest removed while over a limit.
   void add(std::string_view path, std::uint64_t bytes) {
     if (!limited()) return;
-    files_.emplace_back(path, bytes);
+    files_.push_back(path, bytes);
+    bytes_ += bytes;
     enforce();
   }
   // A file found at start-up, listed without enforcing yet: earlier runs' files are adopted
   // oldest first, then enforce() applies the limits once.
   void adopt(std::string_view path, std::uint64_t bytes) {
-    if (limited()) files_.emplace_back(path, bytes);
+    if (!limited()) return;
+    files_.push_back(path, bytes);
+    bytes_ += bytes;
   }
   // Removes the oldest files while over a limit (a removal that fails is not retried); returns
-  // how many left the list.
+  // how many left the list. Allocates nothing (the callback aside).
   std::size_t enforce();
   // A listed file removed by the free-space floor (space_floor.hpp): off the list, its bytes no
   // longer counted. Searched from the oldest (the floor removes the oldest). Allocates nothing.
@@ -58,14 +62,15 @@ class Retention {
 
  private:
   std::uint64_t max_files_, max_bytes_;
-  std::deque<std::pair<std::filesystem::path, std::uint64_t>> files_;  // oldest first
+  FileList files_;           // oldest first, each with its bytes
+  std::uint64_t bytes_ = 0;  // theirs, all together
   std::function<void(std::string_view, std::uint64_t)> on_removed_;
 };
 
 // A recorder's finished files of this run still kept, each with what it holds (packets,
 // messages), so that the end can count what vanished from disk with its file
 // (pcap_packets_lost, mcap_messages_lost). Retention removes the oldest first, so they leave the
-// front. Adding a file costs one allocation (its name). Owned by the writer thread.
+// front. At steady state nothing is allocated (file_list.hpp). Owned by the writer thread.
 class RecordedFiles {
  public:
   // A file just finished and put in place; then the list trimmed to what `retention` keeps.
@@ -83,7 +88,7 @@ class RecordedFiles {
   void forget(std::string_view path) noexcept;
 
  private:
-  std::deque<std::pair<std::string, std::uint64_t>> files_;  // oldest first
+  FileList files_;  // oldest first, each with what it holds
 };
 
 }  // namespace pandarcap
