@@ -25,10 +25,12 @@
 #include "core/sensors/model_facts.hpp"
 #include "core/sensors/packet.hpp"
 #include "core/sensors/sensor_model_id.hpp"
+#include "core/sensors/uniform_blocks.hpp"
 
 namespace pandarcap {
 
-struct Pandar64 : FiringRates<55'560, 6> {
+struct Pandar64 : FiringRates<55'560, 6>, UniformBlocks<Pandar64> {
+  using Blocks = UniformBlocks<Pandar64>;
   static constexpr SensorModelId kId = SensorModelId::kPandar64;
   static constexpr int kChannels = 64;
   static constexpr int kBlocks = 6;
@@ -112,41 +114,12 @@ struct Pandar64 : FiringRates<55'560, 6> {
     if (p.size() != kDatagramBytes[0] && p.size() != kDatagramBytes[1]) {
       return RejectReason::kBadLength;
     }
-    for (int b = 0; b < kBlocks; ++b) {
-      if (azimuth_cdeg(p, b) >= kAzimuthLimitCdeg) return RejectReason::kBadAzimuth;
-    }
+    if (!Blocks::azimuths_in_range(p)) return RejectReason::kBadAzimuth;
     const auto mode = return_mode_from_byte(p[kReturnModeOffset]);
     if (!mode || !mode_listed(kReturnModes, *mode)) return RejectReason::kBadReturnMode;
     return RejectReason::kNone;
   }
 
-  static const std::uint8_t* block(std::span<const std::uint8_t> p, int b) noexcept {
-    return p.data() + kHeaderBytes + kBlockBytes * static_cast<std::size_t>(b);
-  }
-  static std::uint16_t azimuth_cdeg(std::span<const std::uint8_t> p, int b) noexcept {
-    return load_u16_le(block(p, b) + kBlockAzimuthOffset);
-  }
-  static std::uint16_t distance_raw(std::span<const std::uint8_t> p, int b, int c) noexcept {
-    return load_u16_le(block(p, b) + kFirstUnitOffset + kUnitBytes * static_cast<std::size_t>(c));
-  }
-  static std::uint8_t reflectivity(std::span<const std::uint8_t> p, int b, int c) noexcept {
-    return block(p, b)[kFirstUnitOffset + kUnitBytes * static_cast<std::size_t>(c) + 2];
-  }
-  static double distance_unit_m(std::span<const std::uint8_t> p) noexcept {
-    return p[kDistanceUnitOffset] * 1e-3;
-  }
-  static std::uint16_t motor_rpm(std::span<const std::uint8_t> p) noexcept {
-    return load_u16_le(p.data() + kMotorSpeedOffset);
-  }
-  static std::uint32_t timestamp_us(std::span<const std::uint8_t> p) noexcept {
-    return load_u32_le(p.data() + kTimestampOffset);
-  }
-  static ReturnMode return_mode(std::span<const std::uint8_t> p) noexcept {
-    return static_cast<ReturnMode>(p[kReturnModeOffset]);
-  }
-  static std::uint8_t factory(std::span<const std::uint8_t> p) noexcept {
-    return p[kFactoryOffset];
-  }
   static bool high_temperature(std::span<const std::uint8_t> p) noexcept {
     return p[kHighTemperatureOffset] != 0;
   }
@@ -159,10 +132,6 @@ struct Pandar64 : FiringRates<55'560, 6> {
   // timestamps for the 64 are 100 years ahead of these.
   static constexpr std::uint16_t year_from_raw(std::uint8_t raw) noexcept {
     return static_cast<std::uint16_t>(raw < 70 ? 2000 + raw : 1900 + raw);
-  }
-  static PacketDateTime utc(std::span<const std::uint8_t> p) noexcept {
-    const std::uint8_t* t = p.data() + kDateTimeOffset;
-    return {year_from_raw(t[0]), t[1], t[2], t[3], t[4], t[5]};
   }
 
   // When channel `channel` of block `block` fired, relative to the packet's time (ns; negative:

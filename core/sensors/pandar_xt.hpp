@@ -26,6 +26,7 @@
 #include "core/sensors/model_facts.hpp"
 #include "core/sensors/packet.hpp"
 #include "core/sensors/sensor_model_id.hpp"
+#include "core/sensors/uniform_blocks.hpp"
 
 namespace pandarcap {
 
@@ -47,7 +48,8 @@ inline constexpr std::array<double, 16> kXt16ElevationDeg = {
 }  // namespace xt_design
 
 template <int N>
-struct PandarXT : FiringRates<50'000, 8> {
+struct PandarXT : FiringRates<50'000, 8>, UniformBlocks<PandarXT<N>> {
+  using Blocks = UniformBlocks<PandarXT>;
   static_assert(N == 32 || N == 16, "the XT protocol's models have 32 or 16 channels");
   static constexpr SensorModelId kId =
       N == 32 ? SensorModelId::kPandarXT32 : SensorModelId::kPandarXT16;
@@ -116,43 +118,14 @@ struct PandarXT : FiringRates<50'000, 8> {
       return RejectReason::kWrongModel;
     }
     if (p.size() != kMaxDatagramBytes) return RejectReason::kBadLength;
-    for (int b = 0; b < kBlocks; ++b) {
-      if (azimuth_cdeg(p, b) >= kAzimuthLimitCdeg) return RejectReason::kBadAzimuth;
-    }
+    if (!Blocks::azimuths_in_range(p)) return RejectReason::kBadAzimuth;
     const auto mode = return_mode_from_byte(p[kReturnModeOffset]);
     if (!mode || !mode_listed(kReturnModes, *mode)) return RejectReason::kBadReturnMode;
     return RejectReason::kNone;
   }
 
-  static const std::uint8_t* block(std::span<const std::uint8_t> p, int b) noexcept {
-    return p.data() + kHeaderBytes + kBlockBytes * static_cast<std::size_t>(b);
-  }
-  static std::uint16_t azimuth_cdeg(std::span<const std::uint8_t> p, int b) noexcept {
-    return load_u16_le(block(p, b) + kBlockAzimuthOffset);
-  }
-  static std::uint16_t distance_raw(std::span<const std::uint8_t> p, int b, int c) noexcept {
-    return load_u16_le(block(p, b) + kFirstUnitOffset + kUnitBytes * static_cast<std::size_t>(c));
-  }
-  static std::uint8_t reflectivity(std::span<const std::uint8_t> p, int b, int c) noexcept {
-    return block(p, b)[kFirstUnitOffset + kUnitBytes * static_cast<std::size_t>(c) + 2];
-  }
   static std::uint8_t confidence(std::span<const std::uint8_t> p, int b, int c) noexcept {
-    return block(p, b)[kFirstUnitOffset + kUnitBytes * static_cast<std::size_t>(c) + 3];
-  }
-  static double distance_unit_m(std::span<const std::uint8_t> p) noexcept {
-    return p[kDistanceUnitOffset] * 1e-3;
-  }
-  static std::uint16_t motor_rpm(std::span<const std::uint8_t> p) noexcept {
-    return load_u16_le(p.data() + kMotorSpeedOffset);
-  }
-  static std::uint32_t timestamp_us(std::span<const std::uint8_t> p) noexcept {
-    return load_u32_le(p.data() + kTimestampOffset);
-  }
-  static ReturnMode return_mode(std::span<const std::uint8_t> p) noexcept {
-    return static_cast<ReturnMode>(p[kReturnModeOffset]);
-  }
-  static std::uint8_t factory(std::span<const std::uint8_t> p) noexcept {
-    return p[kFactoryOffset];
+    return Blocks::unit(p, b, c)[3];
   }
   // Bit 0 of the shutdown flag (MAN-XT: 0x01 high temperature, shutting down in 60 s).
   static bool high_temperature(std::span<const std::uint8_t> p) noexcept {
@@ -165,10 +138,6 @@ struct PandarXT : FiringRates<50'000, 8> {
   // (the SDK's alternative: Unix seconds in the date's last four bytes) is not read as such.
   static constexpr std::uint16_t year_from_raw(std::uint8_t raw) noexcept {
     return static_cast<std::uint16_t>(1900 + raw);
-  }
-  static PacketDateTime utc(std::span<const std::uint8_t> p) noexcept {
-    const std::uint8_t* t = p.data() + kDateTimeOffset;
-    return {year_from_raw(t[0]), t[1], t[2], t[3], t[4], t[5]};
   }
 
   // When channel `channel` of block `block` fired, relative to the packet's time (ns). The
