@@ -164,7 +164,9 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.sensor_source_changes = receive.source_changes.load(std::memory_order_relaxed);
   c.standing_packets = s.standing;
   c.frameless_packets = s.frameless_packets;
-  c.points_missing = decode.frames.packets_missing * kBlocks * kChannels;
+  c.reversed_packets = s.reversed;
+  c.stream_changes = s.stream_changes;
+  c.points_missing = packets_missing(s, decode.sequence, decode.frames) * kBlocks * kChannels;
 
   HealthGauges& g = h.gauges;
   g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;
