@@ -515,6 +515,52 @@ TEST_CASE(
   }
 }
 
+TEST_CASE(
+    "a stream that turns backwards is a change, taken within 17 packets: its packets counted "
+    "and filtered as reversed, no frame cut from them; turning forwards again is a change back",
+    "[stream][faults]") {
+  for (const ReturnMode mode : {ReturnMode::kDual, ReturnMode::kLast}) {
+    const RetimedCapture* stream = stream_in(mode);
+    if (stream == nullptr) return;
+    const std::uint64_t rate = stream->packets_per_second();
+    for (const std::uint64_t from : {rate, rate + rate / 7}) {
+      for (const bool back_again : {false, true}) {
+        INFO(to_string(mode) << ": reversed from packet " << from
+                             << (back_again ? ", forwards again after 1 s" : ""));
+        const std::uint64_t until = back_again ? from + rate : 3 * rate;
+        int pivot = 0;
+        const Outcome o = run(*stream, 3 * rate, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+          if (k == from) pivot = test::first_azimuth(p);
+          if (k < from || k >= until) return true;
+          // Mirrored about the azimuth where it turned: the rotation runs down.
+          for (int b = 0; b < kBlocks; ++b) {
+            const auto at = static_cast<std::size_t>(kBlockBytes * b + 2);
+            const int azimuth = p[at] | (p[at + 1] << 8);
+            const int mirrored = ((2 * pivot - azimuth) % 36000 + 36000) % 36000;
+            p[at] = static_cast<std::uint8_t>(mirrored);
+            p[at + 1] = static_cast<std::uint8_t>(mirrored >> 8);
+          }
+          return true;
+        });
+        // Every slot a point or a filtered count, the reversed ones too.
+        check_accounting(o);
+        const std::uint64_t reversed = until - from;
+        // (Its first packet is where the stream was: it still follows.)
+        CHECK(o.stats.reversed + 1 >= reversed);
+        CHECK(o.stats.reversed <= reversed);
+        CHECK(o.stats.filtered[FilterReason::kReversed] == o.stats.reversed * kSlots);
+        CHECK(o.stats.outliers == 0);
+        CHECK(o.stats.stream_changes == (back_again ? 2 : 1));
+        // The frames before it whole; none cut while it ran backwards (at most a revolution's
+        // packets in any); after it turned forwards again, whole ones again.
+        CHECK(o.most_packets <= frame_packet_limit(mode, 602, 830));
+        CHECK(o.frames.frames_complete >= (back_again ? 2 * 10 - 4 : 10 - 2));
+        CHECK(o.frames.frames_complete <= (back_again ? 2 * 10 : 10));
+      }
+    }
+  }
+}
+
 TEST_CASE("a sensor that restarts its counter at any moment is a reset: every packet decoded",
           "[stream][faults]") {
   const RetimedCapture* stream = stream_in(ReturnMode::kDual);

@@ -41,9 +41,8 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
 // sequence_reordered, sequence_resets, azimuth_gaps, packets_rejected, duplicate_packets,
 // outlier_packets, standing_packets, reversed_packets, stream_changes, frameless_packets,
 // other_sensor_packets,
-// sensor_source_changes, the timestamp counters, write_errors and files_removed_before_upload
-// make it "degraded" while they grow
-// (core/health/health_policy.hpp).
+// sensor_source_changes, the timestamp counters (invalid_time_packets too), write_errors and
+// files_removed_before_upload make it "degraded" while they grow (core/health/health_policy.hpp).
 // clang-format off
 #define PANDARCAP_HEALTH_COUNTERS(X)                                                               \
   X(datagrams_received, "datagrams_received",                                                      \
