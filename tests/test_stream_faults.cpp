@@ -474,6 +474,9 @@ TEST_CASE(
         CHECK(o.stats.standing + 1 >= stand_to - stand_from);
         CHECK(o.stats.standing <= stand_to - stand_from);
         CHECK(o.stats.filtered[FilterReason::kStanding] == o.stats.standing * kSlots);
+        // Turning again is a change whose clock went on with the standing packets: no leap.
+        CHECK(o.stats.timestamp_jumps == 0);
+        CHECK(o.stats.backward_timestamps == 0);
         // No frame holds more than a revolution and a quarter, and none overflowed.
         CHECK(o.most_packets <= 1.25 * packets_per_revolution(mode, 598));
         CHECK(o.frames.points_dropped_full == 0);

@@ -57,6 +57,7 @@ struct AdmittedPacket {
   RotationPoint rotation;
   PacketTime time;
   std::int64_t period_ns = 0;  // the sensor's packet period in its return mode
+  std::uint64_t arrival = 0;   // which packet accepted it was (StreamStats::accepted then)
 };
 
 // The held-back packets, oldest first: copies of their bytes and what the rule knows of them.

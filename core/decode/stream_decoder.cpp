@@ -175,7 +175,7 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
     ++stats_.standing;
     filter_packet(FilterReason::kStanding);
   } else {
-    place_or_hold(payload, AdmittedPacket{rotation, time, packet_period_ns(mode)});
+    place_or_hold(payload, AdmittedPacket{rotation, time, packet_period_ns(mode), stats_.accepted});
   }
   // A stream turning backwards closes no frame by design (its packets are counted as reversed).
   if (turning_ == Turning::kForward) {
@@ -342,7 +342,8 @@ void StreamDecoder::take_change(bool counted) {
       // The clock of the new stream against the old one's: back, or on while the azimuth went
       // on as if only the packets in between had passed (a clock that leapt, not a gap).
       const std::int64_t dt = first.time.t0_ns - last_placed_->t0_ns;
-      const auto between = static_cast<double>(held_.forgotten() + start + 1);
+      // (Every packet that arrived in between: strays, outliers, a standing motor's.)
+      const auto between = static_cast<double>(first.arrival - placed_arrival_);
       const double step =
           last_placed_->rpm / 60.0 * kFullCircleCdeg * static_cast<double>(first.period_ns) * 1e-9;
       const int moved = signed_step_cdeg(first.rotation.azimuth_cdeg, last_placed_->azimuth_cdeg);
@@ -398,6 +399,7 @@ void StreamDecoder::watch_frames(std::uint16_t rpm, ReturnMode mode) noexcept {
 void StreamDecoder::place(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted) {
   const std::optional<RotationPoint> previous = last_placed_;
   last_placed_ = admitted.rotation;
+  placed_arrival_ = admitted.arrival;
   last_placed_->time_stood = previous && previous->time_valid && admitted.rotation.time_valid &&
                              previous->t0_ns == admitted.rotation.t0_ns;
   const std::uint32_t skipped = std::exchange(skipped_, 0);

@@ -222,6 +222,7 @@ class StreamDecoder {
   std::optional<RotationPoint> last_placed_;
   Turning turning_ = Turning::kForward;  // the stream's, as the last change took it
   bool stood_ = false;                   // the packet before was counted standing
+  std::uint64_t placed_arrival_ = 0;     // the last packet placed's AdmittedPacket::arrival
   HeldPackets held_;
   // Outliers left out since the last one placed: the frame assembler's word that the azimuth
   // they leave uncovered was not lost.
