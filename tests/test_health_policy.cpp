@@ -52,7 +52,7 @@ TEST_CASE("Health: each counter that grew is a named problem", "[health][policy]
       {&HealthCounters::backward_timestamp_packets, "3 timestamps going back"},
       {&HealthCounters::timestamp_jump_packets, "3 timestamps leaping forward"},
       {&HealthCounters::invalid_time_packets,
-       "3 packets with an impossible tail time (date or microseconds)"},
+       "3 packets with an impossible tail time (the last: date or microseconds)"},
       {&HealthCounters::sequence_resets, "3 sequence resets (the sensor restarted?)"},
       {&HealthCounters::sequence_reordered, "3 packets reordered"},
       {&HealthCounters::points_missing, "3 points missing (lost packets)"},

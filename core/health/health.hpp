@@ -293,7 +293,10 @@ struct HealthGauges {
   // as pack_ipv4_source (core/ipv4.hpp); 0: none.
   std::uint64_t sensor_source = 0;
   std::uint64_t other_sensor_source = 0;
-  std::string return_mode;        // "last", "strongest", "dual", or "" before the first packet
+  std::string return_mode;  // "last", "strongest", "dual", or "" before the first packet
+  // The last impossible tail time's first field out of range and its value ("month 31",
+  // "microseconds 1200000"; core/decode/packet_time.hpp), "" before one.
+  std::string last_invalid_time;
   bool high_temperature = false;  // the last packet's flag
   // The sensor's clock minus the host's: the last accepted packet's time (its tail) minus the
   // kernel's receive time of it (a replay: the recording's capture time). A synchronised sensor

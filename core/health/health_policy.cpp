@@ -130,8 +130,12 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   grew(c.static_timestamp_packets, p.static_timestamp_packets, "static timestamps");
   grew(c.backward_timestamp_packets, p.backward_timestamp_packets, "timestamps going back");
   grew(c.timestamp_jump_packets, p.timestamp_jump_packets, "timestamps leaping forward");
-  grew(c.invalid_time_packets, p.invalid_time_packets,
-       "packets with an impossible tail time (date or microseconds)");
+  if (c.invalid_time_packets > p.invalid_time_packets) {
+    problem("{} packets with an impossible tail time (the last: {})",
+            c.invalid_time_packets - p.invalid_time_packets,
+            g.last_invalid_time.empty() ? std::string_view("date or microseconds")
+                                        : std::string_view(g.last_invalid_time));
+  }
   if (g.high_temperature) problem("sensor high-temperature flag set");
   if (expected.return_mode != "any" && !g.return_mode.empty() &&
       g.return_mode != expected.return_mode) {
