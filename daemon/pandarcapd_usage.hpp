@@ -57,10 +57,9 @@ Overrides (same names as the configuration keys):
   --host-ip IP           sensor.host_ip (default 0.0.0.0)
   --port N               sensor.data_port (default 2368); with --replay: only datagrams to N
                          (not for MCAP: its packets carry no addresses)
-  --sensor-ip IP         sensor.sensor_ip: drop (and count) datagrams from other sources (a
-                         source is IP:port); without it, the first source to send a packet
-                         is the sensor's (not for a replayed MCAP: its packets carry no
-                         addresses)
+  --sensor-ip IP         sensor.sensor_ip: drop (and count) datagrams from other sources;
+                         without it, the first address to send a packet is the sensor's (not
+                         for a replayed MCAP: its packets carry no addresses)
   --cut-angle DEG        sensor.cut_angle (default 0)
   --frame AXES           sensor.frame: hesai (default; the sensor's axes, y at azimuth 0) or ros
                          (REP 103: x forward, y left, z up)

@@ -1,19 +1,18 @@
 // One sensor per daemon: which datagrams on the data port are the sensor's. The live receiver
 // and the replay judge every datagram's source with it before the ring (daemon/source/).
 //
-// A source is an address and a port (IPv4:port): two senders on one address are two sources.
-//   - sensor_ip set: the sensor is that address, from the first port it sends a valid Pandar
-//     packet from. A datagram from anywhere else is foreign: counted and dropped, as before.
-//   - no sensor_ip (the default): the first source that sends a valid Pandar packet is the
+//   - sensor_ip set: the sensor is that address (any port). A datagram from anywhere else is
+//     foreign: counted and dropped, as before.
+//   - no sensor_ip (the default): the first address that sends a valid Pandar packet is the
 //     sensor's; until then every datagram goes on to the decoder (which rejects and counts what
-//     is not a packet). After it, a datagram from another source is foreign, the same address
-//     on another port too (a second sensor behind one address, a second sender on one host).
-// The lock moves to another source only when the locked one has been silent for
-// kRelockSilenceNs and the other sends valid packets (a sensor that came back on a new port or,
-// without sensor_ip, a new address): counted as a source change.
+//     is not a packet). After it, a datagram from another address is foreign. The sensor's port
+//     may change (a sensor that restarted, a sender that opened a new socket): the address is
+//     what is locked, its latest port what is shown. The lock moves to another address only
+//     when the locked one has been silent for kRelockSilenceNs and the other sends valid
+//     packets (a sensor that came back with a new address): counted as a source change.
 //
 // A valid Pandar packet (validate(): its length, ten block markers and azimuths, its return
-// mode; a few compares) from a source that is not the sensor's is another sensor on the port:
+// mode; a few compares) from an address that is not the sensor's is another sensor on the port:
 // counted (other_sensor_packets) and its source kept, so the health can name both (two sensors
 // sending to one port would otherwise be merged, or dropped unseen). Sources are IPv4 (the live
 // socket is IPv4); a replayed IPv6 record is not judged by the lock.

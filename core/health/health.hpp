@@ -56,7 +56,7 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
     "Dropped (also in foreign_datagrams)")                                                         \
   X(sensor_source_changes, "sensor_source_changes",                                                \
     "Times another source was taken as the sensor's, the sensor's having been silent for a "       \
-    "second (with sensor_ip: another port of it)")                                                 \
+    "second (no sensor_ip)")                                                                       \
   X(truncated_datagrams, "truncated_datagrams",                                                    \
     "Datagrams larger than a ring slot (also rejected as bad_length)")                             \
   X(kernel_drops, "kernel_drops",                                                                  \
