@@ -88,7 +88,19 @@ TrafficSource TrafficSource::synthetic(const SyntheticSensorConfig& sensor_confi
     source.bodies.emplace_back(buffer.begin(), buffer.begin() + static_cast<long>(size));
     source.offsets_ns.push_back(static_cast<std::int64_t>(i) * period);
   }
-  source.loop_ns = static_cast<std::int64_t>(count) * period;
+  // The loop joins where the azimuth does: its packets turn a hair over a whole number of
+  // revolutions (600 RPM: 0.29° over one second), so the next loop's first packet is that much
+  // behind the one that would follow the last. Its time is put back by as much (80 µs), as a
+  // sensor's azimuth and time agree: the stream decoder takes 0.25° against its time for a
+  // glitch.
+  const std::size_t size = sensor.next(buffer);
+  const int next_azimuth = PacketView::assume_valid(std::span(buffer).first(size)).azimuth_cdeg(0);
+  const int first_azimuth =
+      PacketView::assume_valid(std::span(source.bodies.front())).azimuth_cdeg(0);
+  const int seam_cdeg = ((first_azimuth - next_azimuth) % 36000 + 54000) % 36000 - 18000;
+  const double revolution_ns = 60e9 / config.rpm;
+  source.loop_ns = static_cast<std::int64_t>(count) * period +
+                   static_cast<std::int64_t>(std::llround(seam_cdeg * revolution_ns / 36000.0));
   source.description = "simulated Pandar40P, " + std::string(to_string(config.return_mode)) +
                        " return, " + std::to_string(config.rpm) + " RPM";
   return source;

@@ -520,7 +520,7 @@ TEST_CASE(
 
 TEST_CASE(
     "a stream that turns backwards is a change, taken within 17 packets: its packets counted "
-    "and filtered as reversed, no frame cut from them; turning forwards again is a change back",
+    "and filtered as reversed, no frame cut from them, and turning forwards again is a change back",
     "[stream][faults]") {
   for (const ReturnMode mode : {ReturnMode::kDual, ReturnMode::kLast}) {
     const RetimedCapture* stream = stream_in(mode);

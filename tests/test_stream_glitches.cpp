@@ -147,7 +147,7 @@ TEST_CASE("an isolated time glitch is placed at its azimuth's time: no frame or 
 
 TEST_CASE(
     "an isolated azimuth glitch is repaired from its time: its points kept, the revolution "
-    "whole; one wrong in both is left out, its revolution partial",
+    "whole (one wrong in both is left out, its revolution partial)",
     "[stream][glitch]") {
   const Outcome clean = run(7200, kClean);
   for (const int shift : {18000, 9500, -12000, 3000, 100, -100, 25}) {
