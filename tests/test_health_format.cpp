@@ -212,7 +212,7 @@ TEST_CASE("promtool accepts the Prometheus file, every family in it, without a n
 }
 
 TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]") {
-  const HealthSnapshot h = distinct_snapshot();
+  HealthSnapshot h = distinct_snapshot();
   const std::string line = to_json_line(h);
   REQUIRE(line.back() == '\n');
   CHECK(line.find('\n') == line.size() - 1);  // one line
@@ -255,6 +255,10 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(g.at("return_mode") == "dual");
   CHECK(g.at("high_temperature") == true);
   CHECK(g.at("seconds_since_last_packet") == 0.25);
+  // The last impossible tail time: null before one, its field and value after.
+  CHECK(g.at("last_invalid_time").is_null());
+  h.gauges.last_invalid_time = "month 31";
+  CHECK(nlohmann::json::parse(to_json_line(h)).at("gauges").at("last_invalid_time") == "month 31");
 }
 
 TEST_CASE("JSON line survives a reason that is not UTF-8", "[health]") {

@@ -51,10 +51,15 @@ TEST_CASE("Health: each counter that grew is a named problem", "[health][policy]
       {&HealthCounters::static_timestamp_packets, "3 static timestamps"},
       {&HealthCounters::backward_timestamp_packets, "3 timestamps going back"},
       {&HealthCounters::timestamp_jump_packets, "3 timestamps leaping forward"},
+      {&HealthCounters::invalid_time_packets,
+       "3 packets with an impossible tail time (the last: date or microseconds)"},
       {&HealthCounters::sequence_resets, "3 sequence resets (the sensor restarted?)"},
       {&HealthCounters::sequence_reordered, "3 packets reordered"},
       {&HealthCounters::points_missing, "3 points missing (lost packets)"},
       {&HealthCounters::standing_packets, "3 packets with the azimuth standing"},
+      {&HealthCounters::reversed_packets, "3 packets turning backwards (left out)"},
+      {&HealthCounters::stream_changes,
+       "3 stream changes (a restart, a gap, a new speed, a clock step or a reversal)"},
   };
   for (const Case& c : cases) {
     INFO(c.reason);

@@ -223,10 +223,10 @@ TEST_CASE(
         CHECK(o.stats.timestamp_jumps == (glitch == Glitch::kTimeForward ? glitched : 0));
         const bool invalid = glitch == Glitch::kZeroTime || glitch == Glitch::kGarbageTime;
         CHECK(o.stats.bad_date + o.stats.bad_microseconds == (invalid ? glitched : 0));
-        // Only the azimuth glitches lose their points; the others are placed, times fixed.
-        const bool azimuth = glitch == Glitch::kAzimuthAhead || glitch == Glitch::kAzimuthBehind;
-        CHECK(o.stats.filtered[FilterReason::kOutlier] == (azimuth ? glitched * kSlots : 0));
-        if (!azimuth) CHECK(o.stats.points == clean.stats.points);
+        // Every one repaired and placed: its time re-derived from its azimuth, or its azimuth
+        // from its time. None left out, every point kept.
+        CHECK(o.stats.filtered[FilterReason::kOutlier] == 0);
+        CHECK(o.stats.points == clean.stats.points);
       }
     }
   }
@@ -324,18 +324,23 @@ TEST_CASE(
   SECTION("17 and more that do not follow each other are still a glitch") {
     for (const std::uint64_t length : {17, 30}) {
       INFO("scattered azimuths x " << length);
-      std::uint64_t glitched = 0;
+      std::uint64_t glitched = 0, events = 0;
       const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
         if (k % 1000 >= 400 && k % 1000 < 400 + length) {
           test::shift_azimuth(p, 9000 + static_cast<int>(k % 2) * 18000);
           ++glitched;
+          if (k % 1000 == 400) ++events;
         }
         return true;
       });
       check_accounting(o);
       CHECK(o.stats.outliers == glitched);
       CHECK(o.frames.discontinuities == 0);
-      CHECK(o.frames.frames_complete == clean.frames.frames_complete);
+      // The last 16 held are repaired from their times; the ones before them were let go as
+      // strays while the run went on: left out, and their revolutions partial (not lost).
+      CHECK(o.stats.filtered[FilterReason::kOutlier] == events * (length - 16) * kSlots);
+      CHECK(o.frames.frames_complete == clean.frames.frames_complete - events);
+      CHECK(o.frames.packets_missing == 0);
     }
   }
 }
@@ -351,45 +356,62 @@ TEST_CASE(
     const std::uint64_t revolution = stream->packets_per_second() / 10;
     const Outcome clean = run(*stream, packets, {});
     for (const std::uint64_t lost : {1, 5, 50}) {
-      INFO(to_string(mode) << ": " << lost << " lost every other revolution, mid-revolution");
-      std::uint64_t events = 0;
-      // From the second revolution to the third-last (the first frame and the last are partial
-      // whatever they lose).
-      const auto lossy = [&](std::uint64_t k) {
-        return k > revolution && k + 3 * revolution < packets;
-      };
-      const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t>) {
-        const std::uint64_t at = (k + revolution / 2) % (2 * revolution);
-        if (at == 0 && lossy(k)) ++events;
-        return !lossy(k) || at >= lost;
-      });
-      check_accounting(o);
-      CHECK(events >= 12);
-      CHECK(o.frames.packets_missing == lost * events);
-      if (static_cast<double>(lost) * azimuth_step_per_packet_cdeg(mode, 600) < 9000) {
-        // A hole in the revolution: that frame partial, no other.
-        CHECK(o.frames.frames_holed == events);
-        CHECK(o.frames.frames_complete == clean.frames.frames_complete - events);
-        CHECK(o.frames.frames_complete + o.frames.frames_partial ==
-              clean.frames.frames_complete + clean.frames.frames_partial);
-        CHECK(o.frames.discontinuities == 0);
-      } else {
-        // More than 90° of azimuth (50 single-return packets): a discontinuity, the frame it
-        // ends and the one it starts partial.
-        CHECK(o.frames.discontinuities == events);
-        CHECK(o.frames.frames_complete >= clean.frames.frames_complete - 2 * events);
-        CHECK(o.frames.frames_complete < clean.frames.frames_complete);
+      for (const bool sequence : {false, true}) {
+        INFO(to_string(mode) << ": " << lost << " lost every other revolution, mid-revolution"
+                             << (sequence ? ", with the UDP sequence" : ""));
+        std::uint64_t events = 0;
+        // From the second revolution to the third-last (the first frame and the last are
+        // partial whatever they lose).
+        const auto lossy = [&](std::uint64_t k) {
+          return k > revolution && k + 3 * revolution < packets;
+        };
+        const Outcome o = run(
+            *stream, packets,
+            [&](std::uint64_t k, std::span<std::uint8_t>) {
+              const std::uint64_t at = (k + revolution / 2) % (2 * revolution);
+              if (at == 0 && lossy(k)) ++events;
+              return !lossy(k) || at >= lost;
+            },
+            sequence);
+        check_accounting(o);
+        CHECK(events >= 12);
+        const bool hole =
+            static_cast<double>(lost) * azimuth_step_per_packet_cdeg(mode, 600) < 9000;
+        // Counted by the sequence when there is one; else by the azimuth the frames lacked, which
+        // a loss wider than 90° is not (a discontinuity: a restart looks the same).
+        CHECK(packets_missing(o.stats, o.sequence, o.frames) ==
+              (sequence || hole ? lost * events : 0));
+        if (hole) {
+          // A hole in the revolution: that frame partial, no other.
+          CHECK(o.frames.frames_holed == events);
+          CHECK(o.frames.packets_missing == lost * events);
+          CHECK(o.frames.frames_complete == clean.frames.frames_complete - events);
+          CHECK(o.frames.frames_complete + o.frames.frames_partial ==
+                clean.frames.frames_complete + clean.frames.frames_partial);
+          CHECK(o.frames.discontinuities == 0);
+        } else {
+          // More than 90° of azimuth (50 single-return packets): a discontinuity, the frame it
+          // ends and the one it starts partial.
+          CHECK(o.frames.discontinuities == events);
+          CHECK(o.frames.frames_complete >= clean.frames.frames_complete - 2 * events);
+          CHECK(o.frames.frames_complete < clean.frames.frames_complete);
+        }
       }
     }
     {
       INFO(to_string(mode) << ": 500 lost (more than a revolution) twice");
-      const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t>) {
+      const auto lose = [&](std::uint64_t k, std::span<std::uint8_t>) {
         return !(k >= revolution * 10 && k < revolution * 10 + 500) &&
                !(k >= revolution * 20 && k < revolution * 20 + 500);
-      });
+      };
+      const Outcome o = run(*stream, packets, lose);
       check_accounting(o);
       CHECK(o.frames.discontinuities == 2);
-      CHECK(o.frames.packets_missing == 1000);
+      // Without a sequence, nothing can tell so long a loss from a restart or a clock's step.
+      CHECK(packets_missing(o.stats, o.sequence, o.frames) == 0);
+      CHECK(packets_missing(run(*stream, packets, lose, true).stats,
+                            run(*stream, packets, lose, true).sequence,
+                            run(*stream, packets, lose, true).frames) == 1000);
       // The revolutions the loss spans, and those it cut on either side.
       const std::uint64_t spanned = 2 * (500 / revolution + 2);
       CHECK(o.frames.frames_complete + spanned >= clean.frames.frames_complete);
@@ -399,9 +421,10 @@ TEST_CASE(
       INFO(to_string(mode) << ": " << lost << " lost at each crossing of the cut");
       int previous = -1;
       std::uint64_t left = 0, events = 0;
-      const Outcome o = run(*stream, packets, [&](std::uint64_t, std::span<std::uint8_t> p) {
+      const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
         const int azimuth = test::first_azimuth(p);
-        if (previous >= 0 && azimuth < previous) {
+        // (Not where the stream ends within the loss: no packet after it says how wide it was.)
+        if (previous >= 0 && azimuth < previous && k + lost < packets) {
           left = lost;
           ++events;
         }
@@ -451,6 +474,9 @@ TEST_CASE(
         CHECK(o.stats.standing + 1 >= stand_to - stand_from);
         CHECK(o.stats.standing <= stand_to - stand_from);
         CHECK(o.stats.filtered[FilterReason::kStanding] == o.stats.standing * kSlots);
+        // Turning again is a change whose clock went on with the standing packets: no leap.
+        CHECK(o.stats.timestamp_jumps == 0);
+        CHECK(o.stats.backward_timestamps == 0);
         // No frame holds more than a revolution and a quarter, and none overflowed.
         CHECK(o.most_packets <= 1.25 * packets_per_revolution(mode, 598));
         CHECK(o.frames.points_dropped_full == 0);
@@ -480,12 +506,61 @@ TEST_CASE(
     check_accounting(o);
     // (The tail's slowest, 598 RPM, sets the bound: 451 packets.)
     CHECK(o.most_packets <= 1.25 * packets_per_revolution(ReturnMode::kDual, 598));
-    CHECK(o.frames.frames_overlong > 0);
+    // No packet follows the one before at the tail's speed: each is an outlier, none placed, and
+    // frames stop closing within three revolutions' worth (the health's "motor stopped").
+    CHECK(o.stats.outliers + kMaxHeldPackets >= 3600);
+    CHECK(o.stats.frameless_packets >= 3600 - 3 * 400);
     CHECK(o.frames.frames_complete == 0);
     CHECK(o.frames.points_dropped_full == 0);
     const double measured = (static_cast<double>(o.stats.measured_azimuth_cdeg) / 36000.0) /
                             (static_cast<double>(o.stats.measured_time_ns) / 60e9);
     CHECK(measured == Approx(60).margin(1));
+  }
+}
+
+TEST_CASE(
+    "a stream that turns backwards is a change, taken within 17 packets: its packets counted "
+    "and filtered as reversed, no frame cut from them, and turning forwards again is a change back",
+    "[stream][faults]") {
+  for (const ReturnMode mode : {ReturnMode::kDual, ReturnMode::kLast}) {
+    const RetimedCapture* stream = stream_in(mode);
+    if (stream == nullptr) return;
+    const std::uint64_t rate = stream->packets_per_second();
+    for (const std::uint64_t from : {rate, rate + rate / 7}) {
+      for (const bool back_again : {false, true}) {
+        INFO(to_string(mode) << ": reversed from packet " << from
+                             << (back_again ? ", forwards again after 1 s" : ""));
+        const std::uint64_t until = back_again ? from + rate : 3 * rate;
+        int pivot = 0;
+        const Outcome o = run(*stream, 3 * rate, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+          if (k == from) pivot = test::first_azimuth(p);
+          if (k < from || k >= until) return true;
+          // Mirrored about the azimuth where it turned: the rotation runs down.
+          for (int b = 0; b < kBlocks; ++b) {
+            const auto at = static_cast<std::size_t>(kBlockBytes * b + 2);
+            const int azimuth = p[at] | (p[at + 1] << 8);
+            const int mirrored = ((2 * pivot - azimuth) % 36000 + 36000) % 36000;
+            p[at] = static_cast<std::uint8_t>(mirrored);
+            p[at + 1] = static_cast<std::uint8_t>(mirrored >> 8);
+          }
+          return true;
+        });
+        // Every slot a point or a filtered count, the reversed ones too.
+        check_accounting(o);
+        const std::uint64_t reversed = until - from;
+        // (Its first packet is where the stream was: it still follows.)
+        CHECK(o.stats.reversed + 1 >= reversed);
+        CHECK(o.stats.reversed <= reversed);
+        CHECK(o.stats.filtered[FilterReason::kReversed] == o.stats.reversed * kSlots);
+        CHECK(o.stats.outliers == 0);
+        CHECK(o.stats.stream_changes == (back_again ? 2 : 1));
+        // The frames before it whole; none cut while it ran backwards (at most a revolution's
+        // packets in any); after it turned forwards again, whole ones again.
+        CHECK(o.most_packets <= frame_packet_limit(mode, 602, 830));
+        CHECK(o.frames.frames_complete >= (back_again ? 2 * 10 - 4 : 10 - 2));
+        CHECK(o.frames.frames_complete <= (back_again ? 2 * 10 : 10));
+      }
+    }
   }
 }
 

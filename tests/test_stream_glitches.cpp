@@ -13,6 +13,7 @@
 #include "core/decode/packet_time.hpp"
 #include "core/decode/stream_decoder.hpp"
 #include "core/frames/frame_collector.hpp"
+#include "core/sensors/timing.hpp"
 #include "core/sim/packet_builder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 
@@ -72,15 +73,22 @@ const auto kClean = [](int, PacketContents&) { return true; };
 
 }  // namespace
 
-TEST_CASE("follows: a packet follows when its azimuth advanced as its time did, within 2° + 2 %",
-          "[stream][glitch]") {
+TEST_CASE(
+    "follows: a packet follows when its azimuth advanced as its time did, within 0.2° + 1 %, "
+    "either way round",
+    "[stream][glitch]") {
   const RotationPoint last = at(10000, 0);
-  // 10 ms at 600 RPM is 36°: 3600 cdeg, tolerance 200 + 72 cdeg.
+  // 10 ms at 600 RPM is 36°: 3600 cdeg, tolerance 20 + 36 cdeg.
   CHECK(follows(last, at(10000 + 3600, 10 * kMs)));
-  CHECK(follows(last, at(10000 + 3600 + 272, 10 * kMs)));
-  CHECK_FALSE(follows(last, at(10000 + 3600 + 273, 10 * kMs)));
-  CHECK(follows(last, at(10000 + 3600 - 272, 10 * kMs)));
-  CHECK_FALSE(follows(last, at(10000 + 3600 - 273, 10 * kMs)));
+  CHECK(follows(last, at(10000 + 3600 + 56, 10 * kMs)));
+  CHECK_FALSE(follows(last, at(10000 + 3600 + 57, 10 * kMs)));
+  CHECK(follows(last, at(10000 + 3600 - 56, 10 * kMs)));
+  CHECK_FALSE(follows(last, at(10000 + 3600 - 57, 10 * kMs)));
+  // One dual packet (277.8 µs, 1°): 0.21° either side; a packet shifted by 0.25° does not.
+  CHECK(follows(last, at(10000 + 100 + 21, 277'800)));
+  CHECK_FALSE(follows(last, at(10000 + 100 + 25, 277'800)));
+  CHECK_FALSE(follows(last, at(10000 + 100 - 25, 277'800)));
+  CHECK_FALSE(follows(last, at(10000 + 100 + 100, 277'800)));  // 1° ahead
   // A swapped pair: time and azimuth both a packet back.
   CHECK(follows(last, at(10000 - 100, -277'800)));
   // Half a revolution of time, even with the azimuth that goes with it, is a gap.
@@ -90,6 +98,10 @@ TEST_CASE("follows: a packet follows when its azimuth advanced as its time did, 
   // The speed is the last packet's: at 1200 RPM 10 ms is 72°.
   CHECK(follows(at(0, 0, true, 1200), at(7200, 10 * kMs)));
   CHECK_FALSE(follows(at(0, 0, true, 600), at(7200, 10 * kMs)));
+  // Backwards: the azimuth goes back as the time goes on.
+  CHECK(follows(last, at(10000 - 100, 277'800), Turning::kBackward));
+  CHECK_FALSE(follows(last, at(10000 - 100, 277'800)));
+  CHECK_FALSE(follows(last, at(10000 + 100, 277'800), Turning::kBackward));
 }
 
 TEST_CASE("follows: without usable times, a step of at most 90° either way", "[stream][glitch]") {
@@ -104,9 +116,13 @@ TEST_CASE("follows: without usable times, a step of at most 90° either way", "[
   // A valid time after an invalid one, or the reverse: two clocks, never "follows".
   CHECK_FALSE(follows(at(5000, 0, true), at(5100, 277'800, false)));
   CHECK_FALSE(follows(at(5000, 0, false), at(5100, 277'800, true)));
-  // A frozen clock (the same time): the azimuth alone, too.
+  // A frozen clock (the same time, or a packet whose time stood): the azimuth alone, too.
   CHECK(follows(at(5000, 7 * kMs), at(5000 + 4000, 7 * kMs)));
   CHECK_FALSE(follows(at(5000, 7 * kMs), at(5000 + 9500, 7 * kMs)));
+  RotationPoint stood = at(5000, 7 * kMs);
+  stood.time_stood = true;
+  CHECK(follows(stood, at(5100, 10 * kMs)));
+  CHECK_FALSE(follows(at(5000, 7 * kMs), at(5100, 10 * kMs)));
 }
 
 TEST_CASE("an isolated time glitch is placed at its azimuth's time: no frame or point lost",
@@ -129,19 +145,41 @@ TEST_CASE("an isolated time glitch is placed at its azimuth's time: no frame or 
   }
 }
 
-TEST_CASE("an isolated azimuth glitch is left out: its slots counted, the revolution whole",
-          "[stream][glitch]") {
+TEST_CASE(
+    "an isolated azimuth glitch is repaired from its time: its points kept, the revolution "
+    "whole (one wrong in both is left out, its revolution partial)",
+    "[stream][glitch]") {
   const Outcome clean = run(7200, kClean);
-  for (const int shift : {18000, 9500, -12000, 3000}) {
+  for (const int shift : {18000, 9500, -12000, 3000, 100, -100, 25}) {
     INFO("packet 3000's azimuths moved by " << shift << " cdeg");
     const Outcome glitch = run(7200, [&](int k, PacketContents& c) {
       if (k == 3000) shift_azimuth(c, shift);
       return true;
     });
     CHECK(glitch.stats.outliers == 1);
-    CHECK(glitch.stats.filtered[FilterReason::kOutlier] == kBlocks * kChannels);
+    CHECK(glitch.stats.filtered[FilterReason::kOutlier] == 0);
+    CHECK(glitch.stats.points == clean.stats.points);
+    CHECK(glitch.points_in_frames == clean.points_in_frames);
     CHECK(glitch.frames.discontinuities == 0);
     CHECK(glitch.frames.frames_complete == clean.frames.frames_complete);
+    CHECK(glitch.frames.packets_missing == 0);
+  }
+  for (const int shift : {18000, 100}) {
+    INFO("packet 3000's azimuths moved by " << shift << " cdeg and its time 2 ms back");
+    const Outcome glitch = run(7200, [&](int k, PacketContents& c) {
+      if (k == 3000) {
+        shift_azimuth(c, shift);
+        shift_time(c, -2 * kMs);
+      }
+      return true;
+    });
+    CHECK(glitch.stats.outliers == 1);
+    CHECK(glitch.stats.filtered[FilterReason::kOutlier] == kBlocks * kChannels);
+    CHECK(glitch.frames.discontinuities == 0);
+    // Its revolution lacks its points: partial, though nothing was lost.
+    CHECK(glitch.frames.frames_complete + 1 == clean.frames.frames_complete);
+    CHECK(glitch.frames.frames_holed == 1);
+    CHECK(glitch.frames.packets_missing == 0);
     // Every slot of every accepted packet is a point or a filtered count.
     CHECK(glitch.stats.points + glitch.stats.filtered.total() ==
           glitch.stats.accepted * kBlocks * kChannels);
@@ -188,7 +226,9 @@ TEST_CASE("two glitches in a row are two outliers, and a real change still cuts"
     decoder.process(std::span(buffer).first(slow.next(buffer)));
   SyntheticSensorConfig fast_config;
   fast_config.rpm = 1200;
-  fast_config.start_unix_ns = slow.last_packet_time_ns() + slow.packet_period_ns();
+  // Its first packet a period after the slow one's last (t0 comes 4 rounds and 28.58 µs after a
+  // dual packet's first firing).
+  fast_config.start_unix_ns = slow.last_packet_time_ns() + kRoundPeriodNs - kLastRoundEndNs;
   // The next packet's first azimuth at 600 RPM: where the slow stream's next one would start.
   fast_config.start_azimuth_deg =
       (PacketView::assume_valid(std::span(buffer).first(kPacketBytes)).azimuth_cdeg(0) + 100) /
@@ -291,8 +331,7 @@ TEST_CASE("a glitch every few hundred packets leaves at least 95 % of revolution
                 shift_azimuth(c, static_cast<int>(9100 + rng() % 17800));  // out of order
                 break;
               default:
-                shift_azimuth(c, 1000 + static_cast<int>(rng() % 3000));  // ahead
-                shift_time(c, -static_cast<std::int64_t>(rng() % 3) * kMs);
+                shift_azimuth(c, 100 + static_cast<int>(rng() % 3000));  // ahead, 1° to 31°
                 break;
             }
             return true;

@@ -38,6 +38,8 @@ std::string_view to_string(FilterReason reason) noexcept {
       return "outlier";
     case FilterReason::kStanding:
       return "standing";
+    case FilterReason::kReversed:
+      return "reversed";
   }
   return "unknown";
 }

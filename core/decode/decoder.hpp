@@ -48,8 +48,9 @@ enum class FilterReason : std::uint8_t {
   kDualTooClose,   // dual: within dual_return_distance_threshold of the strongest echo
   kOutlier,   // the packet was an isolated outlier in the rotation (core/decode/stream_decoder.hpp)
   kStanding,  // the motor did not turn: the packet's azimuth stood (core/decode/stream_decoder.hpp)
+  kReversed,  // the stream's azimuth ran backwards (core/decode/stream_decoder.hpp)
 };
-inline constexpr std::size_t kFilterReasonCount = 7;
+inline constexpr std::size_t kFilterReasonCount = 8;
 std::string_view to_string(FilterReason reason) noexcept;  // "no_return", ...
 
 // The range filter and dual-return threshold in raw 4 mm units (inclusive limits).

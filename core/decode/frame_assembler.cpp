@@ -31,7 +31,9 @@ int signed_step(int a, int b) {
 }  // namespace
 
 FrameAssembler::FrameAssembler(const FrameAssemblerConfig& config, FrameSink& sink)
-    : config_(config), sink_(sink) {
+    : config_(config),
+      sink_(sink),
+      channel_span_cdeg_(config.relative_azimuth_max_cdeg - config.relative_azimuth_min_cdeg) {
   double cut = std::fmod(config.cut_angle_deg, 360.0);
   if (cut < 0) cut += 360.0;
   cut_cdeg_ = static_cast<int>(std::lround(cut * 100)) % 36000;
@@ -46,50 +48,31 @@ void FrameAssembler::start_stream(std::uint16_t azimuth_cdeg) {
   next_open_index_ = floor_div(position_ + config_.relative_azimuth_min_cdeg, kFullCircle);
 }
 
-void FrameAssembler::count_lost(const PacketMeta& meta, std::int64_t gap_ns,
-                                std::uint16_t previous_first_azimuth) {
-  // Longer than a second is an outage or a clock that leapt, not packets to count.
-  if (gap_ns <= 0 || gap_ns > 1'000'000'000) return;
-  const double period = static_cast<double>(packet_period_ns(meta.return_mode));
-  const auto sent = static_cast<std::int64_t>(std::llround(static_cast<double>(gap_ns) / period));
-  const std::int64_t missing = sent - 1 - static_cast<std::int64_t>(meta.skipped_before);
-  if (missing <= 0) return;
-  // A loss: the azimuth went on as the time did. A clock that stepped: it did not.
-  const double expected = static_cast<double>(gap_ns) * meta.motor_rpm / 60e9 * kFullCircle;
-  const int actual = signed_step(meta.block_azimuth_cdeg[0], previous_first_azimuth);
-  const double off = std::remainder(actual - expected, static_cast<double>(kFullCircle));
-  if (std::abs(off) <= 200.0 + 0.02 * expected) stats_.packets_missing += missing;
-}
-
 void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> points,
                                 const DecodedPacket& layout) {
   ++packet_counter_;
-  // The time since the packet before, when both are known: what a discontinuity lost.
-  // (Known across a discontinuity the stream decoder called: its loss is counted here.)
+  // More than half a revolution without packets: whole revolutions may be missing, which the
+  // azimuth alone cannot tell. (What was lost is not counted from the time: a clock that steps
+  // looks the same. The UDP sequence counts it, or the azimuth frames lacked.)
   const bool timed =
       packet_counter_ > 1 && meta.time_valid && previous_time_valid_ && meta.motor_rpm > 0;
   const std::int64_t gap_ns = meta.t0_ns - previous_t0_ns_;
-  const std::uint16_t previous_first = previous_first_azimuth_;
-  if (timed) {
-    // More than half a revolution without packets: whole revolutions may be missing, which the
-    // azimuth alone cannot tell.
+  if (timed && started_) {
     const std::int64_t half_revolution_ns = 30'000'000'000LL / meta.motor_rpm;
-    if (gap_ns > half_revolution_ns || gap_ns < -half_revolution_ns) {
-      count_lost(meta, gap_ns, previous_first);
-      if (started_) discontinuity();
-    }
+    if (gap_ns > half_revolution_ns || gap_ns < -half_revolution_ns) discontinuity();
   }
   if (started_) {
-    // A frame never spans more than a revolution's time (with a quarter to spare), counted in
-    // packets, the sensor's own firing clock (a clock that glitches does not stretch it): a
-    // motor that slowed, or turns back and forth, must not pile packets into one frame. The
-    // revolution is the slowest the frame's packets said (a speed change inside it), at the
-    // speeds a sensor runs at (a tail of 0 or garbage says nothing).
+    // A frame never spans more than a revolution of packets (frame_packet_limit: the channels'
+    // reach past its ends and two packets for reordering), counted in packets, the sensor's own
+    // firing clock (a clock that glitches does not stretch it): a motor that slowed, or turns
+    // back and forth, must not pile packets into one frame. The revolution is the slowest the
+    // frame's packets said (a speed change inside it), at the speeds a sensor runs at (a tail of
+    // 0 or garbage says nothing).
     for (const Slot& slot : slots_) {
       if (!slot.in_use) continue;
       const double rpm =
           std::clamp<double>(std::min(slot.slowest_rpm, meta.motor_rpm), kSlowestRpm, kFastestRpm);
-      if (slot.packets + 1 > 1.25 * packets_per_revolution(meta.return_mode, rpm)) {
+      if (slot.packets + 1 > frame_packet_limit(meta.return_mode, rpm, channel_span_cdeg_)) {
         ++stats_.frames_overlong;
         discontinuity();
         break;
@@ -98,7 +81,6 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
   }
   previous_t0_ns_ = meta.t0_ns;
   previous_time_valid_ = meta.time_valid;
-  previous_first_azimuth_ = meta.block_azimuth_cdeg[0];
   // One block's firing turns the azimuth by this much: the packet's own span over its rounds.
   const int rounds = rounds_per_packet(meta.return_mode);
   const int span = signed_step(meta.block_azimuth_cdeg[kBlocks - 1], meta.block_azimuth_cdeg[0]);
@@ -121,8 +103,6 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
       const int step = signed_step(azimuth, previous_azimuth_);
       if (std::abs(step) > kMaxStepCdeg) {
         ++stats_.discontinuities;
-        // Between two packets, a step that the time says is a loss is counted as one.
-        if (b == 0 && timed) count_lost(meta, gap_ns, previous_first);
         flush();
         start_stream(azimuth);
         restarted = true;
@@ -133,14 +113,15 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
     }
     previous_azimuth_ = azimuth;
     // The block's firing covers its step of azimuth. Packets left out just before this one
-    // cover the azimuth between, up to as many packets' worth as there were.
+    // leave the azimuth between uncovered but not lost, up to as many packets' worth as there
+    // were.
     coverage_.advance(position_);
     coverage_.cover(position_ - margin, position_ + block_step + margin);
     if (b == 0 && continued && !restarted && meta.skipped_before > 0) {
       const std::int64_t from = previous_position + block_step;
       const double allowance = (meta.skipped_before + 0.5) * packet_step_cdeg_;
       if (position_ > from && static_cast<double>(position_ - from) <= allowance) {
-        coverage_.cover(from, position_);
+        coverage_.leave_out(from, position_);
       }
     }
     reach_position_ = std::max(reach_position_, position_ + block_step);
@@ -257,21 +238,23 @@ bool FrameAssembler::holed(const Slot& slot, bool whole_candidate) {
   // Half a packet's step: a lost packet leaves nearly a whole step uncovered, the encoder's
   // jitter and a small glitch placed where it was a fraction of one.
   const auto min_run = static_cast<std::int64_t>(packet_step_cdeg_ / 2);
+  // Each packet covers its step and half a block's either side (add_packet): n lost packets
+  // leave n steps less a block's step uncovered.
+  const AzimuthCoverage::PacketSize size{packet_step_cdeg_, block_step_cdeg_};
   // What was lost inside this frame's own revolution, as far as the stream reached: counted
   // once, by the frame whose revolution holds it.
   const std::int64_t from = std::max(slot.index * kFullCircle, start_position_);
   const std::int64_t to = std::min((slot.index + 1) * kFullCircle, reach_position_);
   if (to > from) {
-    const auto lost = coverage_.holes(from, to, min_run).total_cdeg;
-    stats_.packets_missing +=
-        static_cast<std::uint64_t>(std::llround(static_cast<double>(lost) / packet_step_cdeg_));
+    stats_.packets_missing += coverage_.lost_packets(from, to, reach_position_, min_run, size);
   }
   if (!whole_candidate) return false;
   // Every azimuth a point of this frame can come from (the channels' offsets reach past its
-  // revolution's ends).
+  // revolution's ends), covered by a packet placed: one left out (an outlier that could not be
+  // repaired) leaves it without that packet's points.
   const std::int64_t needed_from = slot.index * kFullCircle - config_.relative_azimuth_max_cdeg;
   const std::int64_t needed_to = (slot.index + 1) * kFullCircle - config_.relative_azimuth_min_cdeg;
-  return coverage_.holes(needed_from, needed_to, min_run).longest_cdeg >= min_run;
+  return coverage_.longest_uncovered_cdeg(needed_from, needed_to) >= min_run;
 }
 
 void FrameAssembler::close_slot(Slot& slot, bool partial) {

@@ -14,20 +14,21 @@
 //  - packet loss: U advances by the real azimuth step, so losing packets around the cut still
 //    puts every point in the right frame;
 //  - discontinuities (an azimuth step of more than 90°, a packet-time gap of more than half a
-//    revolution, a frame that would hold more than 1.25 revolutions of packets at the tail's
-//    speed: a motor that slowed or turns back and forth; or the stream decoder's word, at a
-//    change that stepped the rotation back): the open frames are closed as partial and cutting
-//    restarts. A frame never holds more than one revolution of azimuth, nor of the
-//    sensor's time (counted in packets, its firing clock, which a glitching tail time does not
-//    stretch);
+//    revolution, a frame that would hold more than a revolution of packets at the tail's speed
+//    (frame_packet_limit, core/sensors/sensor_model.hpp: the channels' reach and two packets for
+//    reordering): a motor that slowed or turns back and forth; or the stream decoder's word, at
+//    a change): the open frames are closed as partial and cutting restarts. A frame never holds
+//    more than one revolution of azimuth, nor of the sensor's time (counted in packets, its
+//    firing clock, which a glitching tail time does not stretch);
 //  - completeness: a frame is complete only if its packets covered every azimuth its points can
 //    come from (AzimuthCoverage): a lost packet leaves a run of azimuth uncovered at least half a
-//    packet's step wide, and makes the frame partial, however few it lacks. Packets the stream
-//    decoder left out on purpose (PacketMeta::skipped_before) cover their place. What was lost
-//    is counted in packets (packets_missing): the uncovered azimuth inside frames over the
-//    packet's step, and across a discontinuity between two packets (a time gap of more than half
-//    a revolution, an azimuth step over 90°), the packets the time says were sent, up to a
-//    second's (when the azimuth agrees: a loss, not a clock that stepped);
+//    packet's step wide, and makes the frame partial, however few it lacks; so does a packet the
+//    stream decoder left out (an outlier it could not repair: PacketMeta::skipped_before), whose
+//    place is marked left out rather than lost. What was lost is counted in packets
+//    (packets_missing): each uncovered run inside frames, not left out, over the packet's step.
+//    Never from the time: a clock that steps, a glitch and a standing motor would look like lost
+//    packets by it. A loss wider than 90° is a discontinuity, whose packets only the UDP sequence
+//    counts (StreamDecoder::packets_missing());
 //  - the first frame after start or a discontinuity is partial unless the stream started before
 //    it began for every channel; frames open at flush() are partial;
 //  - a small backward step (a reordered packet) moves U back. A frame is closed kCloseMarginCdeg
@@ -61,8 +62,8 @@ struct PacketMeta {
   bool time_valid = true;
   std::uint16_t motor_rpm = 0;
   ReturnMode return_mode = ReturnMode::kDual;
-  // Packets received but left out just before this one (outliers out of the azimuths' order, a
-  // standing motor's): the azimuth they leave uncovered is theirs, not a loss.
+  // Packets received but left out just before this one (outliers that could not be repaired):
+  // the azimuth they leave uncovered is theirs, not a loss (the frame is still partial).
   std::uint32_t skipped_before = 0;
 };
 
@@ -76,8 +77,8 @@ struct AssemblerStats {
   std::uint64_t discontinuities = 0;
   std::uint64_t azimuth_backward_steps = 0;
   std::uint64_t frames_holed = 0;     // partial because a packet's azimuth was missing
-  std::uint64_t frames_overlong = 0;  // cut at 1.25 revolutions of packets (also discontinuities)
-  std::uint64_t packets_missing = 0;  // estimated (see above)
+  std::uint64_t frames_overlong = 0;  // cut at a revolution of packets (also discontinuities)
+  std::uint64_t packets_missing = 0;  // estimated from the azimuth (see above)
 };
 
 class FrameAssembler {
@@ -116,11 +117,6 @@ class FrameAssembler {
   };
 
   void start_stream(std::uint16_t azimuth_cdeg);
-  // A discontinuity `gap_ns` (valid times) after the packet that began at
-  // `previous_first_azimuth`: the packets the time says were lost are counted when the azimuth
-  // agrees.
-  void count_lost(const PacketMeta& meta, std::int64_t gap_ns,
-                  std::uint16_t previous_first_azimuth);
   // Whether `slot`'s frame lacks azimuth (a lost packet); counts what it lacks.
   bool holed(const Slot& slot, bool whole_candidate);
   Slot* slot_for(std::int64_t frame_index);
@@ -131,12 +127,12 @@ class FrameAssembler {
 
   FrameAssemblerConfig config_;
   FrameSink& sink_;
+  int channel_span_cdeg_ = 0;  // how far the channels' azimuths reach past a block's, in all
   int cut_cdeg_ = 0;
   bool started_ = false;
   std::int64_t position_ = 0;        // U: unwrapped block azimuth relative to the cut, 0.01°
   std::int64_t start_position_ = 0;  // U when the stream (re)started
   std::uint16_t previous_azimuth_ = 0;
-  std::uint16_t previous_first_azimuth_ = 0;  // the previous packet's first block
   std::int64_t previous_t0_ns_ = 0;
   bool previous_time_valid_ = false;
   // Coverage: the azimuth one block's firing spans (the last packet's, 0.01°), a packet's, and

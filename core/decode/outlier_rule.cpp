@@ -4,6 +4,9 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "core/sensors/sensor_model.hpp"
+#include "core/sensors/timing.hpp"
+
 namespace pandarcap {
 
 int signed_step_cdeg(int a, int b) noexcept {
@@ -13,35 +16,64 @@ int signed_step_cdeg(int a, int b) noexcept {
   return d;
 }
 
-bool follows(const RotationPoint& last, const RotationPoint& next) noexcept {
+bool follows(const RotationPoint& last, const RotationPoint& next, Turning turning) noexcept {
   const int step = signed_step_cdeg(next.azimuth_cdeg, last.azimuth_cdeg);
   // A tail whose date went bad (zeroed, garbage) in a stream of good ones, or the reverse: not
   // the same clock. The rule then holds the packet, and places it at the time its azimuth gives
   // when the stream goes on as before.
   if (last.time_valid != next.time_valid) return false;
   const std::int64_t dt = next.t0_ns - last.t0_ns;
-  if (!last.time_valid || dt == 0 || last.rpm == 0) return std::abs(step) <= 9000;
+  if (!last.time_valid || last.time_stood || dt == 0 || last.rpm == 0) {
+    return std::abs(step) <= 9000;
+  }
   // Half a revolution without packets is a gap whole revolutions may hide in (the assembler's
   // rule): never "follows".
   const double revolution_ns = 60e9 / last.rpm;
   if (std::abs(static_cast<double>(dt)) > revolution_ns / 2) return false;
-  const double expected_cdeg = static_cast<double>(dt) / revolution_ns * 36000.0;
-  return std::abs(step - expected_cdeg) <= 200.0 + 0.02 * std::abs(expected_cdeg);
+  const double expected_cdeg =
+      static_cast<int>(turning) * static_cast<double>(dt) / revolution_ns * kFullCircleCdeg;
+  return std::abs(step - expected_cdeg) <= follow_tolerance_cdeg(expected_cdeg);
 }
 
 void HeldPackets::push(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted,
-                       bool extends_chain) noexcept {
+                       std::optional<Turning> extends) noexcept {
   Entry& e = entries_[(head_ + count_) % kMaxHeldPackets];
   std::memcpy(e.bytes.data(), payload.data(), payload.size());
   e.size = payload.size();
   e.admitted = admitted;
-  if (!extends_chain) chain_start_ = count_;
+  if (!extends) chain_start_ = count_;
+  chain_turning_ = extends;
   ++count_;
+}
+
+void HeldPackets::move_azimuth(std::size_t i, int first_cdeg, double packet_step_cdeg) noexcept {
+  Entry& e = at(i);
+  const PacketView packet = PacketView::assume_valid({e.bytes.data(), e.size});
+  const int rounds = rounds_per_packet(packet.return_mode());
+  const int pairing = kBlocks / rounds;  // blocks a firing round gives (2 in dual return)
+  const double round_step = packet_step_cdeg / rounds;
+  const double span = round_step * (rounds - 1);
+  const int own_span = signed_step_cdeg(packet.azimuth_cdeg(kBlocks - 1), packet.azimuth_cdeg(0));
+  const bool whole = std::abs(own_span - span) <= follow_tolerance_cdeg(span);
+  const int shift = first_cdeg - packet.azimuth_cdeg(0);
+  std::array<int, kBlocks> azimuths{};
+  for (int b = 0; b < kBlocks; ++b) {
+    azimuths[b] = whole ? packet.azimuth_cdeg(b) + shift
+                        : first_cdeg + static_cast<int>(std::lround(round_step * (b / pairing)));
+  }
+  for (int b = 0; b < kBlocks; ++b) {
+    const auto azimuth = static_cast<std::uint16_t>((azimuths[b] % 36000 + 36000) % 36000);
+    std::uint8_t* field = e.bytes.data() + kBlockBytes * b + 2;
+    field[0] = static_cast<std::uint8_t>(azimuth);
+    field[1] = static_cast<std::uint8_t>(azimuth >> 8);
+  }
+  e.admitted.rotation.azimuth_cdeg = static_cast<std::uint16_t>(azimuths[0] % 36000);
 }
 
 void HeldPackets::pop_oldest() noexcept {
   head_ = (head_ + 1) % kMaxHeldPackets;
   --count_;
+  ++forgotten_;
   if (chain_start_ > 0) --chain_start_;
 }
 

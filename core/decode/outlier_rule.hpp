@@ -13,6 +13,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 
 #include "core/decode/packet_time.hpp"
@@ -29,15 +30,24 @@ struct RotationPoint {
   std::int64_t t0_ns = 0;
   bool time_valid = false;
   std::uint16_t rpm = 0;  // the tail's motor speed
+  // Its time was the packet's placed before it (a clock that froze): not one to judge by.
+  bool time_stood = false;
 };
 
-// Whether `next` follows `last` in one rotation. With valid times that moved, the azimuth must
-// have advanced by what the time took at `last`'s speed (within 2° + 2 %), and by less than half
-// a revolution: a packet loss, a reordered pair and a slow speed change all follow; a time that
-// leaps or goes back, an azimuth out of order do not. A valid time never follows an invalid one,
-// nor the other way round: one of the two clocks is broken. Without usable times (both invalid,
-// frozen, no speed), the azimuth alone: a step of at most 90° either way.
-bool follows(const RotationPoint& last, const RotationPoint& next) noexcept;
+// Which way a rotation turns: as the sensor's does (azimuth growing with time), or backwards (a
+// stream whose azimuth runs down; no 40P does it, a broken encoder or a hostile sender may).
+enum class Turning : std::int8_t { kForward = 1, kBackward = -1 };
+
+// Whether `next` follows `last` in one rotation turning `turning`. With valid times that moved,
+// the azimuth must have advanced (or, backwards, gone back) by what the time took at `last`'s
+// speed, within follow_tolerance_cdeg() (core/sensors/sensor_model.hpp: 0.06° for one dual
+// packet), and by less than half a revolution: a packet loss, a reordered pair and a slow speed
+// change follow; a time that leaps or goes back, an azimuth shifted by 0.1° or more do not. A
+// valid time never follows an invalid one, nor the other way round: one of the two clocks is
+// broken. Without usable times (both invalid, frozen: `last`'s time stood or `next`'s is the
+// same, no speed), the azimuth alone: a step of at most 90° either way.
+bool follows(const RotationPoint& last, const RotationPoint& next,
+             Turning turning = Turning::kForward) noexcept;
 
 // a - b on the circle, in [-18000, 18000) (0.01°).
 int signed_step_cdeg(int a, int b) noexcept;
@@ -46,6 +56,8 @@ int signed_step_cdeg(int a, int b) noexcept;
 struct AdmittedPacket {
   RotationPoint rotation;
   PacketTime time;
+  std::int64_t period_ns = 0;  // the sensor's packet period in its return mode
+  std::uint64_t arrival = 0;   // which packet accepted it was (StreamStats::accepted then)
 };
 
 // The held-back packets, oldest first: copies of their bytes and what the rule knows of them.
@@ -62,18 +74,32 @@ class HeldPackets {
     return {e.bytes.data(), e.size};
   }
   const AdmittedPacket& admitted(std::size_t i) const noexcept { return at(i).admitted; }
-  // The chain: the held packets from chain_start() on.
+  // The chain: the held packets from chain_start() on, and which way they turn (none yet for a
+  // chain of one).
   std::size_t chain_start() const noexcept { return chain_start_; }
   std::size_t chain_length() const noexcept { return count_ - chain_start_; }
+  std::optional<Turning> chain_turning() const noexcept { return chain_turning_; }
   const AdmittedPacket& newest() const noexcept { return at(count_ - 1).admitted; }
+  // Strays forgotten since the run began (pop_oldest()): the held packets' places in the run
+  // come after them.
+  std::size_t forgotten() const noexcept { return forgotten_; }
 
-  // Holds a copy of `payload` (not full()). `extends_chain`: it follows the chain's newest;
-  // otherwise it starts a new chain and every packet held before it is a stray.
+  // Holds a copy of `payload` (not full()). `extends`: the way it follows the chain's newest;
+  // none: it starts a new chain and every packet held before it is a stray.
   void push(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted,
-            bool extends_chain) noexcept;
+            std::optional<Turning> extends) noexcept;
+  // Puts held packet i's first block at `first_cdeg`: an outlier whose time says where it
+  // belongs, repaired in the copy before it is placed. Every block moves by the same shift when
+  // the packet's own blocks are a packet's span apart (`packet_step_cdeg`, within
+  // follow_tolerance_cdeg()): an azimuth shifted whole keeps its encoder's readings. Otherwise
+  // (every block the same garbage) each block's azimuth is where its firing round was.
+  void move_azimuth(std::size_t i, int first_cdeg, double packet_step_cdeg) noexcept;
   // Forgets the oldest (a stray: chain_start() > 0).
   void pop_oldest() noexcept;
-  void clear() noexcept { head_ = count_ = chain_start_ = 0; }
+  void clear() noexcept {
+    head_ = count_ = chain_start_ = forgotten_ = 0;
+    chain_turning_.reset();
+  }
 
  private:
   struct Entry {
@@ -82,9 +108,11 @@ class HeldPackets {
     AdmittedPacket admitted;
   };
   const Entry& at(std::size_t i) const noexcept { return entries_[(head_ + i) % kMaxHeldPackets]; }
+  Entry& at(std::size_t i) noexcept { return entries_[(head_ + i) % kMaxHeldPackets]; }
 
   std::array<Entry, kMaxHeldPackets> entries_{};
-  std::size_t head_ = 0, count_ = 0, chain_start_ = 0;
+  std::size_t head_ = 0, count_ = 0, chain_start_ = 0, forgotten_ = 0;
+  std::optional<Turning> chain_turning_;
 };
 
 }  // namespace pandarcap

@@ -66,6 +66,37 @@ bool is_valid(const TailDateTime& utc) noexcept {
   return utc.hour <= 23 && utc.minute <= 59 && utc.second <= 60;
 }
 
+std::string_view to_string(TimeField field) noexcept {
+  switch (field) {
+    case TimeField::kNone:
+      return "";
+    case TimeField::kMonth:
+      return "month";
+    case TimeField::kDay:
+      return "day";
+    case TimeField::kHour:
+      return "hour";
+    case TimeField::kMinute:
+      return "minute";
+    case TimeField::kSecond:
+      return "second";
+    case TimeField::kMicroseconds:
+      return "microseconds";
+  }
+  return "";
+}
+
+InvalidTimeField first_invalid_field(const TailDateTime& utc, std::uint32_t timestamp_us) noexcept {
+  if (utc.month < 1 || utc.month > 12) return {TimeField::kMonth, utc.month};
+  if (utc.day < 1 || utc.day > days_in_month(2000 + utc.year_since_2000, utc.month))
+    return {TimeField::kDay, utc.day};
+  if (utc.hour > 23) return {TimeField::kHour, utc.hour};
+  if (utc.minute > 59) return {TimeField::kMinute, utc.minute};
+  if (utc.second > 60) return {TimeField::kSecond, utc.second};
+  if (timestamp_us > 1'000'000) return {TimeField::kMicroseconds, timestamp_us};
+  return {};
+}
+
 PacketTime PacketClock::convert(const TailDateTime& utc, std::uint32_t timestamp_us) noexcept {
   if (!cached_ || !(utc == cached_date_)) {
     cached_ = true;

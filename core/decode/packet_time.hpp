@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string_view>
 
 #include "core/sensors/packet.hpp"
 
@@ -25,6 +26,16 @@ TailDateTime tail_datetime_from_unix(std::int64_t unix_seconds) noexcept;
 // True when every field is in range for a real calendar date (leap years included; second 60 is
 // accepted as a leap second).
 bool is_valid(const TailDateTime& utc) noexcept;
+
+// A tail time's first field out of range, in the tail's order (the health's reason names it:
+// "month 31"); the year byte is always a year (2000-2255).
+enum class TimeField : std::uint8_t { kNone, kMonth, kDay, kHour, kMinute, kSecond, kMicroseconds };
+std::string_view to_string(TimeField field) noexcept;  // "month", ..., "microseconds"; "" for none
+struct InvalidTimeField {
+  TimeField field = TimeField::kNone;
+  std::uint32_t value = 0;
+};
+InvalidTimeField first_invalid_field(const TailDateTime& utc, std::uint32_t timestamp_us) noexcept;
 
 enum class PacketTimeStatus : std::uint8_t {
   kValid,

@@ -50,7 +50,7 @@ std::uint64_t fingerprint(std::span<const std::uint8_t> payload) noexcept {
 }  // namespace
 
 void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, bool time_valid,
-                                  std::uint16_t rpm, ReturnMode mode, bool sequence_present) {
+                                  std::uint16_t rpm, ReturnMode mode) {
   const std::optional<std::uint16_t> previous = previous_azimuth_cdeg_;
   previous_azimuth_cdeg_ = azimuth_cdeg;
   if (!previous || !previous_t0_ns_) return;
@@ -62,9 +62,9 @@ void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns
   // The step one packet should make at the reported speed (600 RPM dual: 100 cdeg).
   const double expected = azimuth_step_per_packet_cdeg(mode, rpm);
   const bool gap = step > 1.5 * expected + 5;
-  if (gap && !sequence_present && step < 18000) ++stats_.azimuth_gaps;
-  // Spin is measured over consecutive packets only: a loss, a glitch or a restart is not spin.
-  // A standing motor's step is 0, and counts: it measures 0 RPM.
+  // Spin is measured over consecutive packets as they arrive (whether placed or not: a crawling
+  // motor's packets may all be outliers): a loss, a glitch or a restart is not spin. A standing
+  // motor's step is 0, and counts: it measures 0 RPM.
   const auto period = packet_period_ns(mode);
   if (times_valid && !gap && dt > 0 && dt <= period + period / 2) {
     stats_.measured_azimuth_cdeg += static_cast<std::uint64_t>(step);
@@ -128,44 +128,72 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   if (high_temperature) ++stats_.high_temperature;
   const bool sequence_present = packet.sequence().has_value();
 
-  if (time.status == PacketTimeStatus::kBadDate) ++stats_.bad_date;
-  if (time.status == PacketTimeStatus::kBadMicroseconds) ++stats_.bad_microseconds;
+  if (!time.valid()) {
+    ++(time.status == PacketTimeStatus::kBadDate ? stats_.bad_date : stats_.bad_microseconds);
+    const InvalidTimeField bad = first_invalid_field(packet.utc(), packet.timestamp_us());
+    stats_.last_invalid_field = bad.field;
+    stats_.last_invalid_value = bad.value;
+  }
   // A clock that froze is counted as the packets arrive. One that went back or leapt is judged
   // against the stream by the outlier rule, so the packet that returns to the stream after a
   // glitch is not taken for a step of its own.
   if (previous_t0_ns_ && time.t0_ns == *previous_t0_ns_) ++stats_.static_timestamps;
   const std::uint16_t azimuth = packet.azimuth_cdeg(0);
-  const bool standing =
-      previous_azimuth_cdeg_ &&
+  // Against the last packet placed and the packet before: the packet that returns to the stream
+  // after a glitch of shifted (or zeroed) azimuths is no standing motor, nor is a burst of equal
+  // azimuths, nor a shifted packet that happens to land on the last one placed.
+  bool standing =
+      last_placed_ && previous_azimuth_cdeg_ &&
+      std::abs(signed_step_cdeg(azimuth, last_placed_->azimuth_cdeg)) <= kStandingStepCdeg &&
       std::abs(signed_step_cdeg(azimuth, *previous_azimuth_cdeg_)) <= kStandingStepCdeg;
-  track_azimuth(azimuth, time.t0_ns, time.valid(), rpm, mode, sequence_present);
+  const RotationPoint rotation{azimuth, time.t0_ns, time.valid(), rpm};
+  if (standing && !stood_) {
+    // The first packet that stands may be a glitch that put it on the last one placed (shifted
+    // back a packet's step): held like any that does not follow, and repaired if the stream goes
+    // on. The next that stands too says the motor stopped: the held one stood as well.
+    if (held_.size() == 1 && std::abs(signed_step_cdeg(held_.newest().rotation.azimuth_cdeg,
+                                                       azimuth)) <= kStandingStepCdeg) {
+      held_.clear();
+      ++stats_.standing;
+      filter_packet(FilterReason::kStanding);
+    } else if (!follows(*last_placed_, rotation, turning_)) {
+      standing = false;  // (Without usable times, the azimuth alone says it stood.)
+    }
+  }
+  stood_ = standing;
+  track_azimuth(azimuth, time.t0_ns, time.valid(), rpm, mode);
   previous_t0_ns_ = time.t0_ns;
   previous_time_valid_ = time.valid();
   stats_.last_t0_ns = time.t0_ns;
   stats_.last_time_valid = time.status == PacketTimeStatus::kValid;
   stats_.last_rpm = rpm;
   stats_.last_high_temperature = high_temperature;
+  sequence_present_ = sequence_present;
 
   if (standing) {
     // The motor did not turn: counted, never placed (see the top of the header).
     ++stats_.standing;
     filter_packet(FilterReason::kStanding);
-    ++skipped_;
   } else {
-    place_or_hold(payload, AdmittedPacket{{azimuth, time.t0_ns, time.valid(), rpm}, time});
+    place_or_hold(payload, AdmittedPacket{rotation, time, packet_period_ns(mode), stats_.accepted});
   }
-  watch_frames(rpm, mode);
+  // A stream turning backwards closes no frame by design (its packets are counted as reversed).
+  if (turning_ == Turning::kForward) {
+    watch_frames(rpm, mode);
+  } else {
+    packets_since_frame_ = 0;
+  }
   return RejectReason::kNone;
 }
 
 void StreamDecoder::place_or_hold(std::span<const std::uint8_t> payload,
                                   const AdmittedPacket& admitted) {
-  const bool follows_stream = last_placed_ && follows(*last_placed_, admitted.rotation);
+  const bool follows_stream = last_placed_ && follows(*last_placed_, admitted.rotation, turning_);
   if (held_.empty()) {
     if (follows_stream) {
       place(payload, admitted);
     } else {
-      held_.push(payload, admitted, false);
+      held_.push(payload, admitted, std::nullopt);
     }
     return;
   }
@@ -175,16 +203,25 @@ void StreamDecoder::place_or_hold(std::span<const std::uint8_t> payload,
     place(payload, admitted);
     return;
   }
-  // The held run's newest is always the chain's newest.
-  const bool extends_chain = follows(held_.newest().rotation, admitted.rotation);
-  if (extends_chain && held_.chain_length() + 1 >= kChangeRunPackets) {
-    take_change();  // 17 packets that follow each other and not the stream: it changed
+  // The held run's newest is always the chain's newest. A chain turns one way: the first two
+  // packets say which.
+  const RotationPoint& newest = held_.newest().rotation;
+  const std::optional<Turning> turning = held_.chain_turning();
+  std::optional<Turning> extends;
+  if (turning != Turning::kBackward && follows(newest, admitted.rotation, Turning::kForward)) {
+    extends = Turning::kForward;
+  } else if (turning != Turning::kForward &&
+             follows(newest, admitted.rotation, Turning::kBackward)) {
+    extends = Turning::kBackward;
+  }
+  if (extends && held_.chain_length() + 1 >= kChangeRunPackets) {
+    take_change(true);  // 17 packets that follow each other and not the stream: it changed
     place(payload, admitted);
     return;
   }
   // Full: the oldest is a stray (a full chain would have made 17 with this one).
   if (held_.full()) drop_oldest_as_outlier();
-  held_.push(payload, admitted, extends_chain);
+  held_.push(payload, admitted, extends);
 }
 
 namespace {
@@ -205,32 +242,71 @@ void count_outlier_time(const PacketTime& time, const RotationPoint& before,
 
 void StreamDecoder::settle_outliers(const RotationPoint& after) {
   const RotationPoint before = *last_placed_;
+  if (turning_ == Turning::kBackward) {
+    // Nothing of a backwards stream is placed: its glitches are outliers, left out.
+    for (std::size_t i = 0; i < held_.size(); ++i) {
+      ++stats_.outliers;
+      count_outlier_time(held_.admitted(i).time, before, after, stats_);
+      filter_packet(FilterReason::kOutlier);
+    }
+    held_.clear();
+    return;
+  }
   const int to_after = signed_step_cdeg(after.azimuth_cdeg, before.azimuth_cdeg);
   const std::int64_t dt = after.t0_ns - before.t0_ns;
   // (Within a second: a stream without a speed follows by azimuth alone, whatever its times
   // say, and the interpolation below must not overflow.)
   const bool timed =
       to_after > 0 && dt > 0 && dt <= kTimestampJumpNs && before.time_valid && after.time_valid;
+  // The run's places: held packet i is the (forgotten + i + 1)-th packet after `before`, and
+  // `after` the (sent)-th. When the time says exactly these were sent (none lost among them),
+  // each has its place: a fraction of the way in time and in azimuth. Else only the order is
+  // known: between the neighbours, after the one placed before it.
+  const auto sent = static_cast<std::int64_t>(held_.forgotten() + held_.size() + 1);
+  const std::int64_t period = held_.admitted(0).period_ns;
+  const bool places_known = timed && period > 0 && std::llabs(dt - sent * period) < period / 2;
+  // The rotation's step a packet between the neighbours (a repaired azimuth's blocks follow it).
+  const double packet_step = static_cast<double>(to_after) * static_cast<double>(period) /
+                             static_cast<double>(std::max<std::int64_t>(dt, 1));
   int placed_to = 0;  // azimuth of the last one placed, from `before`: they stay in order
+  std::int64_t placed_t0 = before.t0_ns;
   for (std::size_t i = 0; i < held_.size(); ++i) {
     ++stats_.outliers;
     const AdmittedPacket& held = held_.admitted(i);
     count_outlier_time(held.time, before, after, stats_);
     const int to_held = signed_step_cdeg(held.rotation.azimuth_cdeg, before.azimuth_cdeg);
-    if (timed && to_held >= placed_to && to_held <= to_after) {
-      // Its azimuth sits between its neighbours': only its time was wrong (back, forward, a
-      // second off, zeroed). Placed where it belongs, at the time the rotation gives that
-      // azimuth, its points kept.
-      AdmittedPacket fixed = held;
-      fixed.time.t0_ns = before.t0_ns + dt * to_held / to_after;
-      fixed.time.status = PacketTimeStatus::kValid;
-      fixed.rotation.t0_ns = fixed.time.t0_ns;
-      fixed.rotation.time_valid = true;
-      place(held_.bytes(i), fixed);
+    const std::int64_t t_held = held.time.t0_ns;
+    bool time_right = false, azimuth_right = false;
+    if (places_known) {
+      const auto place = static_cast<std::int64_t>(held_.forgotten() + i + 1);
+      const std::int64_t t_place = before.t0_ns + dt * place / sent;
+      const double at_place =
+          static_cast<double>(to_after) * static_cast<double>(place) / static_cast<double>(sent);
+      time_right = held.time.valid() && std::llabs(t_held - t_place) < period / 2;
+      azimuth_right = std::abs(to_held - at_place) <= follow_tolerance_cdeg(at_place);
+    } else if (timed) {
+      time_right = held.time.valid() && t_held > placed_t0 && t_held < after.t0_ns;
+      azimuth_right = to_held >= placed_to && to_held <= to_after;
+    }
+    if (time_right) {
+      // Its time is its place: its azimuth is where the rotation was then (a shifted azimuth, or
+      // the packet's own within the jitter).
+      const auto at = static_cast<int>(to_after * (t_held - before.t0_ns) / dt);
+      const int shift = at - to_held;
+      place_repaired(i, before, std::abs(shift) <= kFollowJitterCdeg ? to_held : at, t_held,
+                     packet_step);
+      placed_to = std::abs(shift) <= kFollowJitterCdeg ? to_held : at;
+      placed_t0 = t_held;
+    } else if (azimuth_right) {
+      // Its azimuth is its place: only its time was wrong (back, forward, a second off, zeroed).
+      // Placed at the time the rotation gives that azimuth, its points kept.
+      const std::int64_t t_fixed = before.t0_ns + dt * to_held / to_after;
+      place_repaired(i, before, to_held, t_fixed, packet_step);
       placed_to = to_held;
+      placed_t0 = t_fixed;
     } else {
-      // Out of the rotation's order in azimuth: left out, its slots counted; the frame is told
-      // a packet was left out there.
+      // Neither: left out, its slots counted; the frame it belonged to is partial, and told a
+      // packet was left out there (not lost).
       filter_packet(FilterReason::kOutlier);
       ++skipped_;
     }
@@ -238,25 +314,53 @@ void StreamDecoder::settle_outliers(const RotationPoint& after) {
   held_.clear();
 }
 
-void StreamDecoder::take_change() {
+void StreamDecoder::place_repaired(std::size_t i, const RotationPoint& before, int at_cdeg,
+                                   std::int64_t t0_ns, double packet_step_cdeg) {
+  AdmittedPacket fixed = held_.admitted(i);
+  const int target = (before.azimuth_cdeg + at_cdeg % 36000 + 36000) % 36000;
+  if (target != fixed.rotation.azimuth_cdeg) {
+    held_.move_azimuth(i, target, packet_step_cdeg);
+    fixed.rotation.azimuth_cdeg = held_.admitted(i).rotation.azimuth_cdeg;
+  }
+  fixed.time.t0_ns = t0_ns;
+  fixed.time.status = PacketTimeStatus::kValid;
+  fixed.rotation.t0_ns = t0_ns;
+  fixed.rotation.time_valid = true;
+  place(held_.bytes(i), fixed);
+}
+
+void StreamDecoder::take_change(bool counted) {
   const std::size_t start = held_.chain_start();
   for (std::size_t i = 0; i < start; ++i) {
     ++stats_.outliers;
     filter_packet(FilterReason::kOutlier);
   }
   const AdmittedPacket& first = held_.admitted(start);
-  if (last_placed_ && last_placed_->time_valid && first.time.valid()) {
-    // The clock of the new stream against the old one's.
-    const std::int64_t dt = first.time.t0_ns - last_placed_->t0_ns;
-    if (dt < 0) ++stats_.backward_timestamps;
-    if (dt > kTimestampJumpNs) ++stats_.timestamp_jumps;
+  if (counted && last_placed_) {
+    ++stats_.stream_changes;
+    if (last_placed_->time_valid && first.time.valid()) {
+      // The clock of the new stream against the old one's: back, or on while the azimuth went
+      // on as if only the packets in between had passed (a clock that leapt, not a gap).
+      const std::int64_t dt = first.time.t0_ns - last_placed_->t0_ns;
+      // (Every packet that arrived in between: strays, outliers, a standing motor's.)
+      const auto between = static_cast<double>(first.arrival - placed_arrival_);
+      const double step =
+          last_placed_->rpm / 60.0 * kFullCircleCdeg * static_cast<double>(first.period_ns) * 1e-9;
+      const int moved = signed_step_cdeg(first.rotation.azimuth_cdeg, last_placed_->azimuth_cdeg);
+      const double expected = static_cast<int>(turning_) * step * between;
+      const bool azimuth_went_on = std::abs(moved - expected) <= follow_tolerance_cdeg(expected);
+      if (dt < 0) {
+        ++stats_.backward_timestamps;
+      } else if (azimuth_went_on &&
+                 static_cast<double>(dt) > static_cast<double>(first.period_ns) * (between + 0.5)) {
+        ++stats_.timestamp_jumps;
+      }
+    }
   }
-  // A rotation that resumes behind where it was is no continuation of it, however small the
-  // step: the frames in progress end there (a step forward is the assembler's to judge).
-  if (decode_points_ && last_placed_ &&
-      signed_step_cdeg(first.rotation.azimuth_cdeg, last_placed_->azimuth_cdeg) < 0) {
-    assembler_.discontinuity();
-  }
+  // The frames in progress end where the stream changed: its rotation (or its clock) is not the
+  // one they were cut by.
+  if (counted && decode_points_ && last_placed_) assembler_.discontinuity();
+  if (held_.chain_turning()) turning_ = *held_.chain_turning();
   // Whatever was left out belonged to the old stream.
   skipped_ = 0;
   for (std::size_t i = start; i < held_.size(); ++i)
@@ -293,10 +397,28 @@ void StreamDecoder::watch_frames(std::uint16_t rpm, ReturnMode mode) noexcept {
 }
 
 void StreamDecoder::place(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted) {
+  const std::optional<RotationPoint> previous = last_placed_;
   last_placed_ = admitted.rotation;
+  placed_arrival_ = admitted.arrival;
+  last_placed_->time_stood = previous && previous->time_valid && admitted.rotation.time_valid &&
+                             previous->t0_ns == admitted.rotation.t0_ns;
   const std::uint32_t skipped = std::exchange(skipped_, 0);
-  if (!decode_points_) return;  // the health needs only where the rotation is
+  if (turning_ == Turning::kBackward) {
+    // A stream turning backwards: counted and left out, never cut into frames.
+    ++stats_.reversed;
+    filter_packet(FilterReason::kReversed);
+    return;
+  }
   const PacketView packet = PacketView::assume_valid(payload);
+  // Without a UDP sequence, a loss shows as a step between packets placed wider than the tail's
+  // speed allows (the packets left out between them aside).
+  if (previous && !sequence_present_) {
+    const int step = (admitted.rotation.azimuth_cdeg - previous->azimuth_cdeg + 36000) % 36000;
+    const double expected =
+        azimuth_step_per_packet_cdeg(packet.return_mode(), admitted.rotation.rpm);
+    if (step > (1.5 + skipped) * expected + 5 && step < 18000) ++stats_.azimuth_gaps;
+  }
+  if (!decode_points_) return;  // the health needs only where the rotation is
   const DecodedPacket decoded =
       decoder_.decode(packet, admitted.time.t0_ns, points_, stats_.filtered);
   stats_.points += decoded.point_count;
@@ -315,9 +437,11 @@ void StreamDecoder::place(std::span<const std::uint8_t> payload, const AdmittedP
 void StreamDecoder::flush() {
   // Nothing came after the held run to say it was a glitch: its chain is placed (a change at the
   // very end), the strays before it are outliers.
-  if (!held_.empty()) take_change();
+  if (!held_.empty()) take_change(false);
   assembler_.flush();
   last_placed_.reset();
+  turning_ = Turning::kForward;
+  stood_ = false;
   skipped_ = 0;
 }
 

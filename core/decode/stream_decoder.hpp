@@ -8,34 +8,49 @@
 // is counted and not decoded again.
 //
 // The outlier rule: a glitch costs its packets, not the revolution around it. A packet that
-// does not follow the last one placed (follows(), core/decode/outlier_rule.hpp) is held back, with
-// the ones after it, up to kMaxHeldPackets (16). The run is decided by what comes next:
+// does not follow the last one placed (follows(), core/decode/outlier_rule.hpp: within 0.06° of
+// where its time puts it, for a dual packet) is held back, with the ones after it, up to
+// kMaxHeldPackets (16). The run is decided by what comes next:
 //  - the stream goes on: a packet follows the last one placed again. The held run was outliers,
-//    each counted (outliers). One whose azimuth sits between its neighbours' had only its time
-//    wrong: it is placed where it belongs, at the time the rotation gives its azimuth. One out of
-//    the azimuths' order is left out (its channel slots filtered as kOutlier), and the frame
-//    assembler is told how many packets were left out there (PacketMeta::skipped_before), so the
-//    revolution stays whole;
+//    each counted (outliers) and repaired where one of its two coordinates is right: the run's
+//    packets have their places between the two neighbours (the k-th of n held, when the time
+//    says no packet was lost among them; else in order between the neighbours' times and
+//    azimuths). One whose time is at its place had its azimuth shifted: every block's azimuth
+//    is re-derived from its time (one shift for the packet, patched in the held copy) and it is
+//    placed. One whose azimuth is at its place had its time wrong (back, forward, a second off,
+//    zeroed): placed at the time the rotation gives its azimuth. One with neither is left out
+//    (its channel slots filtered as kOutlier): its frame lacks its points and is partial, and the
+//    frame assembler is told a packet was left out there (PacketMeta::skipped_before), so it is
+//    not counted as lost;
 //  - the stream changed: kChangeRunPackets (17) packets follow each other and not the last one
-//    placed (a sensor restart, a long gap, a new speed, a clock that stepped for good). They are
-//    placed, and the frame assembler cuts as before (told to, when the rotation resumes behind
-//    where it was); held packets that were not part of that run are outliers.
+//    placed (a sensor restart, a long gap, a new speed, a clock that stepped for good, a stream
+//    turning backwards). They are taken: the frames in progress end (partial) and the change is
+//    counted (stream_changes); held packets that were not part of that run are outliers.
 // With no packet placed yet (the start, after flush()), the first 17 that follow each other
 // start the stream, so a glitch right after the start is an outlier too. flush() places the run
 // in progress.
+// A stream turning backwards is taken like any change, and from then on its packets (those that
+// follow the last one backwards) are counted (reversed) and filtered as kReversed, never placed:
+// frames are cut by a rotation that turns forwards. 17 that turn forwards again are a change back.
 // Timestamp counters are judged against the stream, not the packet before: an outlier whose time
 // is behind the stream's went back (backward_timestamps), one ahead of the packets after it leapt
-// forward (timestamp_jumps); a change that stepped the clock back, or more than a second on,
-// likewise. The packet that returns to the stream after a glitch is not counted.
+// forward (timestamp_jumps). A change whose clock stepped back counts once as going back; one
+// whose clock stepped forward while its azimuth went on as if only its packets' time had passed
+// (a clock that leapt, not a gap) counts once as leaping forward.
 //
-// A standing motor: a packet whose first azimuth moved less than kStandingStepCdeg from the
-// previous packet's (core/sensors/sensor_model.hpp) did not turn. It is counted (standing), its
-// slots filtered as kStanding, and never placed: a stopped motor must not pile revolutions of
-// packets into one frame. When the motor turns again after a pause, the time gap cuts the frame.
+// A standing motor: a packet whose first azimuth moved less than kStandingStepCdeg from the last
+// packet placed and from the packet before (core/sensors/sensor_model.hpp) did not turn. It is
+// counted (standing), its slots filtered as kStanding, and never placed: a stopped motor must not
+// pile revolutions of packets into one frame. When the motor turns again after a pause, the
+// stream has changed (its time went on without the azimuth): the frames are cut. Judged against
+// the last packet placed too: the packet that returns to the stream after a glitch is no
+// standing motor. The first that stands, when the times say it should have turned, is held as a
+// glitch (a packet shifted back a step lands there): the second that stands counts both.
 //
 // Counting rules (so every payload is accounted for):
 //   packets = accepted + sum(rejects) + duplicates
-//   every channel slot of an accepted packet is a point or a filtered count (by reason).
+//   every channel slot of an accepted packet is a point or a filtered count (by reason);
+//   every point is in a frame, late, or dropped (frame full, no frame): AssemblerStats.
 // With decode_points off (StreamDecoderConfig) the first identity still holds; the second is
 // not counted.
 // Not thread-safe; one per decode thread. No allocation after construction.
@@ -92,8 +107,17 @@ struct StreamStats {
   std::uint64_t high_temperature = 0;  // packets with the shutdown flag set
   std::uint64_t return_mode_changes = 0;
   std::uint64_t duplicates = 0;  // not decoded again (see the top of this file)
-  std::uint64_t outliers = 0;    // glitches; placed with their time fixed, or filtered kOutlier
-  std::uint64_t standing = 0;    // the motor did not turn: filtered kStanding, never placed
+  // Glitches: placed with their time or their azimuth re-derived from the other, or filtered
+  // kOutlier when neither is right.
+  std::uint64_t outliers = 0;
+  std::uint64_t standing = 0;  // the motor did not turn: filtered kStanding, never placed
+  std::uint64_t reversed = 0;  // the azimuth running backwards: filtered kReversed, never placed
+  // Changes taken (17 packets that follow each other and not the stream): the frames in progress
+  // end there. The stream's start is none.
+  std::uint64_t stream_changes = 0;
+  // The last invalid time's first field out of range, and its value (kNone: none yet).
+  TimeField last_invalid_field = TimeField::kNone;
+  std::uint32_t last_invalid_value = 0;
   // Packets accepted while no frame had closed for three revolutions' worth of packets (at the
   // tail's speed, 300 RPM at the least): a motor that does not turn, or an azimuth that goes
   // nowhere. Counted only where frames are cut (decode_points).
@@ -103,8 +127,9 @@ struct StreamStats {
   std::uint16_t rpm_min = 0, rpm_max = 0;  // over accepted packets (0 before the first)
   std::uint64_t points = 0;
   FilterCounts filtered;
-  // Without a UDP sequence, loss shows as an azimuth step between consecutive packets larger
-  // than the tail RPM allows (more than 1.5 packets' worth plus 0.05°).
+  // Without a UDP sequence, loss shows as an azimuth step between consecutive packets placed
+  // larger than the tail RPM allows (more than 1.5 packets' worth plus 0.05°, plus the packets
+  // left out between them).
   std::uint64_t azimuth_gaps = 0;
   // Measured spin: forward azimuth steps between consecutive packets (0.01°) and the packet time
   // they took (ns), summed over steps that are one packet apart in time (at most 1.5 packet
@@ -130,6 +155,14 @@ struct StreamStats {
   }
 };
 
+// Packets lost, for points_missing: the UDP sequence's count when the packets carry one, else the
+// azimuth the frames lacked (AssemblerStats::packets_missing). Never from the time: a clock that
+// steps, a glitch, a standing motor look like lost packets by their times.
+inline std::uint64_t packets_missing(const StreamStats& stream, const SequenceStats& sequence,
+                                     const AssemblerStats& frames) noexcept {
+  return stream.sequence_packets > 0 ? sequence.lost : frames.packets_missing;
+}
+
 class StreamDecoder {
  public:
   StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config, FrameSink& sink);
@@ -143,23 +176,31 @@ class StreamDecoder {
   const StreamStats& stats() const noexcept { return stats_; }
   const SequenceStats& sequence() const noexcept { return sequence_.stats(); }
   const AssemblerStats& frames() const noexcept { return assembler_.stats(); }
+  // Packets lost (see packets_missing() below).
+  std::uint64_t packets_missing() const noexcept {
+    return pandarcap::packets_missing(stats_, sequence_.stats(), assembler_.stats());
+  }
   const ScalarDecoder& decoder() const noexcept { return decoder_.scalar(); }
   DecoderTarget decoder_target() const noexcept { return decoder_.target(); }
 
  private:
   void track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, bool time_valid,
-                     std::uint16_t rpm, ReturnMode mode, bool sequence_present);
+                     std::uint16_t rpm, ReturnMode mode);
   bool duplicate(std::span<const std::uint8_t> payload) noexcept;
   // The outlier rule: places `payload` now, or holds it back, and decides the held run.
   void place_or_hold(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted);
   // Decodes `payload` and gives its points to the frame assembler.
   void place(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted);
   // The held run was outliers between the last packet placed and `after`, which follows it:
-  // each placed with its time re-derived from its azimuth when only its time was wrong, else
-  // left out.
+  // each repaired and placed where its time or its azimuth says, else left out.
   void settle_outliers(const RotationPoint& after);
+  // Held packet i, repaired to sit `at` (0.01°) past `before` at time `t0_ns` (its own, or
+  // re-derived), the rotation turning `packet_step` a packet: placed.
+  void place_repaired(std::size_t i, const RotationPoint& before, int at_cdeg, std::int64_t t0_ns,
+                      double packet_step_cdeg);
   // The held chain is the stream now: the strays before it are outliers, the chain is placed.
-  void take_change();
+  // `counted`: a change of the stream (not its start, nor the end of input).
+  void take_change(bool counted);
   void drop_oldest_as_outlier() noexcept;
   void filter_packet(FilterReason reason) noexcept;
   // Frames that do not close while packets arrive (frameless_packets).
@@ -179,10 +220,14 @@ class StreamDecoder {
   std::array<std::uint64_t, kDuplicateWindow> recent_{};
   std::size_t recent_next_ = 0;
   std::optional<RotationPoint> last_placed_;
+  Turning turning_ = Turning::kForward;  // the stream's, as the last change took it
+  bool stood_ = false;                   // the packet before was counted standing
+  std::uint64_t placed_arrival_ = 0;     // the last packet placed's AdmittedPacket::arrival
   HeldPackets held_;
-  // Packets left out (outliers, standing) since the last one placed: the frame assembler's
-  // allowance for the azimuth they leave uncovered.
+  // Outliers left out since the last one placed: the frame assembler's word that the azimuth
+  // they leave uncovered was not lost.
   std::uint32_t skipped_ = 0;
+  bool sequence_present_ = false;  // the packet being processed carried a UDP sequence
   // Frames closed so far, and packets accepted since the last one closed.
   std::uint64_t frames_closed_ = 0;
   std::uint64_t packets_since_frame_ = 0;

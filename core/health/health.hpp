@@ -39,10 +39,10 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
 // health state: receive_errors makes it "error"; kernel_drops, ring_overruns,
 // frames_dropped_no_arena, pcap_packets_not_recorded, sequence_lost, points_missing,
 // sequence_reordered, sequence_resets, azimuth_gaps, packets_rejected, duplicate_packets,
-// outlier_packets, standing_packets, frameless_packets, other_sensor_packets,
-// sensor_source_changes, the timestamp counters, write_errors and files_removed_before_upload
-// make it "degraded" while they grow
-// (core/health/health_policy.hpp).
+// outlier_packets, standing_packets, reversed_packets, stream_changes, frameless_packets,
+// other_sensor_packets,
+// sensor_source_changes, the timestamp counters (invalid_time_packets too), write_errors and
+// files_removed_before_upload make it "degraded" while they grow (core/health/health_policy.hpp).
 // clang-format off
 #define PANDARCAP_HEALTH_COUNTERS(X)                                                               \
   X(datagrams_received, "datagrams_received",                                                      \
@@ -72,14 +72,20 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(standing_packets, "standing_packets",                                                          \
     "Packets whose azimuth did not move from the packet before: the motor not turning. Left out "  \
     "of the frames (points filtered: standing)")                                                   \
+  X(reversed_packets, "reversed_packets",                                                          \
+    "Packets of a stream whose azimuth runs backwards (taken as a change after 17): left out of "  \
+    "the frames (points filtered: reversed)")                                                      \
+  X(stream_changes, "stream_changes",                                                              \
+    "Changes of the stream taken (17 packets that follow each other and not the stream: a "        \
+    "restart, a gap, a new speed, a clock that stepped, a reversal): the frames in progress end")  \
   X(frameless_packets, "frameless_packets",                                                        \
     "Packets that arrived while no frame had closed for three revolutions' worth of packets")      \
   X(sequence_gaps, "sequence_gaps", "Jumps forward in the UDP sequence number")                    \
   X(sequence_lost, "sequence_lost_packets",                                                        \
     "Packets missing from the UDP sequence (late arrivals forgiven)")                              \
   X(points_missing, "points_missing",                                                              \
-    "Channel slots of lost packets (400 a packet): the azimuth frames lacked, and the packets "    \
-    "the time says a gap of more than half a revolution held")                                     \
+    "Channel slots of lost packets (400 a packet): the UDP sequence's lost packets when the "      \
+    "packets carry one, else the azimuth frames lacked (never from the time)")                     \
   X(sequence_duplicates, "sequence_duplicate_packets",                                             \
     "Packets whose UDP sequence number had already arrived")                                       \
   X(sequence_reordered, "sequence_reordered_packets",                                              \
@@ -287,7 +293,10 @@ struct HealthGauges {
   // as pack_ipv4_source (core/ipv4.hpp); 0: none.
   std::uint64_t sensor_source = 0;
   std::uint64_t other_sensor_source = 0;
-  std::string return_mode;        // "last", "strongest", "dual", or "" before the first packet
+  std::string return_mode;  // "last", "strongest", "dual", or "" before the first packet
+  // The last impossible tail time's first field out of range and its value ("month 31",
+  // "microseconds 1200000"; core/decode/packet_time.hpp), "" before one.
+  std::string last_invalid_time;
   bool high_temperature = false;  // the last packet's flag
   // The sensor's clock minus the host's: the last accepted packet's time (its tail) minus the
   // kernel's receive time of it (a replay: the recording's capture time). A synchronised sensor

@@ -446,6 +446,12 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
   append_json_string(out, h.gauges.return_mode);
   // The sensor's source, and another sensor's (core/decode/source_lock.hpp): "a.b.c.d:port" or
   // null.
+  out += ",\"last_invalid_time\":";
+  if (h.gauges.last_invalid_time.empty()) {
+    out += "null";
+  } else {
+    append_json_string(out, h.gauges.last_invalid_time);
+  }
   out += ",\"sensor_source\":";
   append_ipv4_source_json(out, h.gauges.sensor_source);
   out += ",\"other_sensor_source\":";

@@ -124,9 +124,18 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   grew(c.packets_rejected, p.packets_rejected, "packets rejected");
   grew(c.duplicate_packets, p.duplicate_packets, "duplicate packets");
   grew(c.outlier_packets, p.outlier_packets, "isolated outlier packets");
+  grew(c.stream_changes, p.stream_changes,
+       "stream changes (a restart, a gap, a new speed, a clock step or a reversal)");
+  grew(c.reversed_packets, p.reversed_packets, "packets turning backwards (left out)");
   grew(c.static_timestamp_packets, p.static_timestamp_packets, "static timestamps");
   grew(c.backward_timestamp_packets, p.backward_timestamp_packets, "timestamps going back");
   grew(c.timestamp_jump_packets, p.timestamp_jump_packets, "timestamps leaping forward");
+  if (c.invalid_time_packets > p.invalid_time_packets) {
+    problem("{} packets with an impossible tail time (the last: {})",
+            c.invalid_time_packets - p.invalid_time_packets,
+            g.last_invalid_time.empty() ? std::string_view("date or microseconds")
+                                        : std::string_view(g.last_invalid_time));
+  }
   if (g.high_temperature) problem("sensor high-temperature flag set");
   if (expected.return_mode != "any" && !g.return_mode.empty() &&
       g.return_mode != expected.return_mode) {

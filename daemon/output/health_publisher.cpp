@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <initializer_list>
+#include <iterator>
 #include <string_view>
 #include <system_error>
 
@@ -54,6 +55,7 @@ void HealthPublisher::prepare(std::int64_t start_monotonic_ns) {
   health_.gauges.reason.reserve(8 * 1024);
   health_.gauges.sensor_status.implausible_reason.reserve(1024);
   health_.gauges.standing.reserve(2 * ReceiveCounters::kDamageTextBytes + 512);
+  health_.gauges.last_invalid_time.reserve(32);  // "microseconds 4294967295"
 }
 
 namespace {
@@ -164,7 +166,15 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.sensor_source_changes = receive.source_changes.load(std::memory_order_relaxed);
   c.standing_packets = s.standing;
   c.frameless_packets = s.frameless_packets;
-  c.points_missing = decode.frames.packets_missing * kBlocks * kChannels;
+  if (s.last_invalid_field != TimeField::kNone) {
+    std::string& text = h.gauges.last_invalid_time;  // (in place: its room was reserved)
+    text.clear();
+    fmt::format_to(std::back_inserter(text), "{} {}", to_string(s.last_invalid_field),
+                   s.last_invalid_value);
+  }
+  c.reversed_packets = s.reversed;
+  c.stream_changes = s.stream_changes;
+  c.points_missing = packets_missing(s, decode.sequence, decode.frames) * kBlocks * kChannels;
 
   HealthGauges& g = h.gauges;
   g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;

@@ -67,6 +67,16 @@ std::optional<RetimedCapture> RetimedCapture::load(ReturnMode mode) {
       stream.bodies_.push_back(body);
     }
     stream.per_second_ = 1800;
+    // 1439 dual packets make 719 single ones: the loop skips a dual packet where it joins, a
+    // step of 2.85° where 2° is due. Each loop is turned back by the difference, so the stream
+    // is a sensor's (the dual one keeps its own seam, 0.15° short: the capture's).
+    const auto azimuth = [&](std::size_t i) {
+      return static_cast<int>(load_u16_le(stream.bodies_[i].data() + 2));
+    };
+    const std::size_t last = stream.bodies_.size() - 1;
+    const int seam = ((azimuth(0) - azimuth(last)) % 36000 + 36000) % 36000;
+    const int usual = ((azimuth(last) - azimuth(last - 1)) % 36000 + 36000) % 36000;
+    stream.seam_cdeg_ = seam - usual;
   }
   stream.period_ns_ = 1'000'000'000 / static_cast<std::int64_t>(stream.per_second_);
   return stream;
@@ -75,6 +85,10 @@ std::optional<RetimedCapture> RetimedCapture::load(ReturnMode mode) {
 std::size_t RetimedCapture::packet(std::uint64_t k, std::span<std::uint8_t, kMaxPacketBytes> out,
                                    std::optional<std::uint32_t> sequence) const {
   std::memcpy(out.data(), bodies_[k % bodies_.size()].data(), kPacketBytes);
+  const auto loops = static_cast<std::int64_t>(k / bodies_.size());
+  if (seam_cdeg_ != 0 && loops > 0) {
+    shift_azimuth(out.first(kPacketBytes), static_cast<int>(-loops * seam_cdeg_ % 36000));
+  }
   set_time(out.first(kPacketBytes), time_ns(k));
   if (!sequence) return kPacketBytes;
   put_u32(out.data() + kPacketBytes, *sequence);

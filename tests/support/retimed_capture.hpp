@@ -3,7 +3,9 @@
 // joins its first within a degree), each with its tail time from a running sensor clock, 1/3600 s
 // apart. For single return, two consecutive dual packets' last-return blocks make one packet (ten
 // blocks 0.2° apart: a real single-return packet's geometry, real distances), 1/1800 s apart,
-// with the return-mode byte of the mode asked for. Optionally with the 4-byte UDP sequence.
+// with the return-mode byte of the mode asked for, each loop turned so it joins the last at a
+// packet's step (the dual loop joins 0.15° short, as the capture's end meets its start).
+// Optionally with the 4-byte UDP sequence.
 //
 // The faults the tests put into such a stream (set_time, shift_azimuth, ...) rewrite a packet's
 // bytes as a sensor's or a network's glitch would.
@@ -49,6 +51,7 @@ class RetimedCapture {
   std::int64_t period_ns_ = 0;
   std::uint64_t per_second_ = 0;
   std::vector<std::array<std::uint8_t, kPacketBytes>> bodies_;
+  int seam_cdeg_ = 0;  // how far each loop is turned back where it joins the last (single return)
 };
 
 // Faults, on a packet's bytes (1262 or 1266).
