@@ -15,6 +15,10 @@ namespace pandarcap {
 namespace {
 
 constexpr std::size_t kDecodeBatch = 64;
+// The writer writes health on its own 1 s tick from the latest snapshot: one a second, out of
+// phase, left a record up to a second behind the stream (a motor stop said after 2 s). Ten a
+// second keep every record within 0.1 s of it.
+constexpr std::int64_t kSnapshotIntervalNs = 100'000'000;
 
 }  // namespace
 
@@ -168,7 +172,7 @@ void DecodeWorker::send_snapshot(WriterMessage::Kind kind) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
   } else {
-    to_writer_.try_push(message);  // a full queue skips one second's snapshot; the next follows
+    to_writer_.try_push(message);  // a full queue skips one snapshot; the next follows
   }
   to_writer_.notify();
 }
@@ -214,7 +218,7 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
     }
     if (now >= next_snapshot_ns) {
       send_snapshot(WriterMessage::Kind::kSnapshot);
-      next_snapshot_ns = now + 1'000'000'000;
+      next_snapshot_ns = now + kSnapshotIntervalNs;
     }
   }
   alloc::mark_this_thread_cold();
