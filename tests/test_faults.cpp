@@ -222,9 +222,10 @@ TEST_CASE(
   INFO(leftovers_seen << " unfinished files found at start, " << parts_seen << " of them pcaps; "
                       << health_cuts_seen << " health lines cut");
   CHECK(parts_seen >= 10);
-  // The same descriptors in every run (±2: a frame or pcap may be open at the moment of the
-  // count).
-  CHECK(most_fds - fewest_fds <= 2);
+  // The same descriptors in every run, but for those open for a moment whenever the count is
+  // taken: the frame and the pcap being written, a health file being replaced and the file the
+  // finisher syncs (a leak of one a run would be 50 more).
+  CHECK(most_fds - fewest_fds <= 4);
 
   // A last, clean run finishes everything and leaves nothing unfinished behind.
   harness::ChildProcess last(test::binary("pandarcapd"),

@@ -186,6 +186,67 @@ std::uint64_t two_seconds(const RetimedCapture& s) {
 }  // namespace
 
 TEST_CASE(
+    "a burst of 1 to 16 packets whose tail says another speed or return mode costs at most its "
+    "packets",
+    "[stream][faults]") {
+  const RetimedCapture* stream = stream_in(ReturnMode::kDual);
+  if (stream == nullptr) return;
+  const std::uint64_t packets = two_seconds(*stream);
+  const Outcome clean = run(*stream, packets, {});
+  for (const std::uint64_t length : kBurstLengths) {
+    const auto in_burst = [&](std::uint64_t k) { return k % 500 >= 250 && k % 500 < 250 + length; };
+    // The tail's speed: the azimuth and the time say the stream goes on at 600 RPM.
+    for (const std::uint16_t rpm : {std::uint16_t{0}, std::uint16_t{300}, std::uint16_t{1200}}) {
+      INFO("bursts of " << length << ", tail " << rpm << " RPM");
+      std::uint64_t glitched = 0;
+      const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+        if (in_burst(k)) {
+          test::set_rpm(p, rpm);
+          ++glitched;
+        }
+        return true;
+      });
+      check_accounting(o);
+      CHECK(o.frames.discontinuities == 0);
+      CHECK(o.stats.stream_changes == 0);
+      CHECK(o.frames.frames_complete == clean.frames.frames_complete);
+      CHECK(o.frames.frames_holed == 0);
+      CHECK(o.frames.packets_missing == 0);
+      // One alone is not the stream's speed: nothing held. Two or more in a row are taken for
+      // it, and those that then do not follow are held and repaired (never more than the burst).
+      CHECK(o.stats.outliers <= (length == 1 ? 0 : glitched));
+    }
+    // The return-mode byte: the stream is dual; the burst says last return.
+    INFO("bursts of " << length << ", return mode byte");
+    std::uint64_t glitched = 0;
+    const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+      if (in_burst(k)) {
+        p[kBodyBytes + 14] = static_cast<std::uint8_t>(ReturnMode::kLast);
+        ++glitched;
+      }
+      return true;
+    });
+    check_accounting(o);
+    // Each decoded in the stream's mode (its byte mended), every point kept.
+    CHECK(o.stats.outliers == glitched);
+    CHECK(o.stats.filtered[FilterReason::kOutlier] == 0);
+    CHECK(o.stats.points == clean.stats.points);
+    CHECK(o.stats.return_mode_changes == 0);
+    CHECK(o.frames.discontinuities == 0);
+    CHECK(o.frames.frames_complete == clean.frames.frames_complete);
+  }
+  // 17 in a row in another mode are a change of mode, taken (and the 16 before it, outliers).
+  const Outcome change = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+    if (k >= 1000) p[kBodyBytes + 14] = static_cast<std::uint8_t>(ReturnMode::kLast);
+    return true;
+  });
+  check_accounting(change);
+  CHECK(change.stats.return_mode_changes == 1);
+  CHECK(change.stats.outliers == kMaxHeldPackets);
+  CHECK(change.stats.return_mode == ReturnMode::kLast);
+}
+
+TEST_CASE(
     "a burst of 1 to 16 glitched packets costs its packets, not a revolution, in every kind "
     "and return mode",
     "[stream][faults]") {

@@ -26,13 +26,18 @@ bool follows(const RotationPoint& last, const RotationPoint& next, Turning turni
   if (!last.time_valid || last.time_stood || dt == 0 || last.rpm == 0) {
     return std::abs(step) <= 9000;
   }
-  // Half a revolution without packets is a gap whole revolutions may hide in (the assembler's
-  // rule): never "follows".
-  const double revolution_ns = 60e9 / last.rpm;
-  if (std::abs(static_cast<double>(dt)) > revolution_ns / 2) return false;
-  const double expected_cdeg =
-      static_cast<int>(turning) * static_cast<double>(dt) / revolution_ns * kFullCircleCdeg;
-  return std::abs(step - expected_cdeg) <= follow_tolerance_cdeg(expected_cdeg);
+  // At the speed of the last packet placed, or at the next one's where the stream's speed has
+  // just changed (the stream decoder takes a tail speed only once two packets in a row say it).
+  const auto at_speed = [&](std::uint16_t rpm) {
+    // Half a revolution without packets is a gap whole revolutions may hide in (the assembler's
+    // rule): never "follows".
+    const double revolution_ns = 60e9 / rpm;
+    if (std::abs(static_cast<double>(dt)) > revolution_ns / 2) return false;
+    const double expected_cdeg =
+        static_cast<int>(turning) * static_cast<double>(dt) / revolution_ns * kFullCircleCdeg;
+    return std::abs(step - expected_cdeg) <= follow_tolerance_cdeg(expected_cdeg);
+  };
+  return at_speed(last.rpm) || (next.rpm != last.rpm && next.rpm != 0 && at_speed(next.rpm));
 }
 
 void HeldPackets::push(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted,

@@ -40,12 +40,13 @@ enum class Turning : std::int8_t { kForward = 1, kBackward = -1 };
 
 // Whether `next` follows `last` in one rotation turning `turning`. With valid times that moved,
 // the azimuth must have advanced (or, backwards, gone back) by what the time took at `last`'s
-// speed, within follow_tolerance_cdeg() (core/sensors/sensor_model.hpp: 0.06° for one dual
-// packet), and by less than half a revolution: a packet loss, a reordered pair and a slow speed
-// change follow; a time that leaps or goes back, an azimuth shifted by 0.1° or more do not. A
-// valid time never follows an invalid one, nor the other way round: one of the two clocks is
-// broken. Without usable times (both invalid, frozen: `last`'s time stood or `next`'s is the
-// same, no speed), the azimuth alone: a step of at most 90° either way.
+// speed (or at `next`'s, the stream's speed having just changed), within follow_tolerance_cdeg()
+// (core/sensors/sensor_model.hpp: 0.06° for one dual packet), and by less than half a revolution: a
+// packet loss, a reordered pair and a slow speed change follow; a time that leaps or goes back, an
+// azimuth shifted by 0.1° or more do not. A valid time never follows an invalid one, nor the other
+// way round: one of the two clocks is broken. Without usable times (both invalid, frozen: `last`'s
+// time stood or `next`'s is the same, no speed), the azimuth alone: a step of at most 90° either
+// way.
 bool follows(const RotationPoint& last, const RotationPoint& next,
              Turning turning = Turning::kForward) noexcept;
 

@@ -20,6 +20,8 @@ std::uint64_t StreamStats::rejected() const noexcept {
 
 namespace {
 
+constexpr std::size_t kReturnModeByte = kBodyBytes + 14;  // the tail's (PacketView::return_mode)
+
 FrameAssemblerConfig assembler_config(const ScalarDecoder& decoder, double cut_angle_deg) {
   const auto [lo, hi] = decoder.relative_azimuth_bounds_cdeg();
   return {cut_angle_deg, lo, hi};
@@ -98,6 +100,23 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   const RejectReason reason = validate(payload);
   ++stats_.rejects[static_cast<std::size_t>(reason)];
   if (reason != RejectReason::kNone) return reason;
+  // A burst's return mode (see other_mode_run_): up to kMaxHeldPackets in a row that say another
+  // mode than the stream's are a glitch of that byte, decoded in the stream's mode (the blocks
+  // are laid out alike) and counted as outliers; the next one is a change of mode, taken.
+  bool mode_repaired = false;
+  if (const ReturnMode said = PacketView::assume_valid(payload).return_mode();
+      stream_mode_ && said != *stream_mode_) {
+    other_mode_run_ = other_mode_run_ > 0 && said == other_mode_ ? other_mode_run_ + 1 : 1;
+    other_mode_ = said;
+    if (other_mode_run_ <= kMaxHeldPackets) {
+      std::memcpy(repaired_.data(), payload.data(), payload.size());
+      repaired_[kReturnModeByte] = static_cast<std::uint8_t>(*stream_mode_);
+      payload = std::span<const std::uint8_t>(repaired_).first(payload.size());
+      mode_repaired = true;
+    }
+  } else {
+    other_mode_run_ = 0;
+  }
   const PacketView packet = PacketView::assume_valid(payload);
   // A copy is counted once, and nothing of it is decoded again or counted as the stream's.
   if (duplicate(payload)) {
@@ -119,10 +138,17 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   }
   ++stats_.accepted;
 
-  const std::uint16_t rpm = packet.motor_rpm();
-  stats_.rpm_min = stats_.accepted == 1 ? rpm : std::min(stats_.rpm_min, rpm);
-  stats_.rpm_max = stats_.accepted == 1 ? rpm : std::max(stats_.rpm_max, rpm);
-  if (stats_.return_mode && *stats_.return_mode != mode) ++stats_.return_mode_changes;
+  const std::uint16_t tail_rpm = packet.motor_rpm();
+  stats_.rpm_min = stats_.accepted == 1 ? tail_rpm : std::min(stats_.rpm_min, tail_rpm);
+  stats_.rpm_max = stats_.accepted == 1 ? tail_rpm : std::max(stats_.rpm_max, tail_rpm);
+  // One packet's tail speed is not the stream's (see stream_rpm_): a real change is taken at
+  // its second packet.
+  if (!stream_rpm_ || tail_rpm == previous_tail_rpm_) stream_rpm_ = tail_rpm;
+  previous_tail_rpm_ = tail_rpm;
+  const std::uint16_t rpm = *stream_rpm_;
+  if (mode_repaired) ++stats_.outliers;
+  if (stream_mode_ && *stream_mode_ != mode) ++stats_.return_mode_changes;
+  stream_mode_ = mode;
   stats_.return_mode = mode;
   const bool high_temperature = packet.tail_bytes()[5] != 0;
   if (high_temperature) ++stats_.high_temperature;

@@ -228,6 +228,19 @@ class StreamDecoder {
   // they leave uncovered was not lost.
   std::uint32_t skipped_ = 0;
   bool sequence_present_ = false;  // the packet being processed carried a UDP sequence
+  // The tail's speed as the stream has it: a value is taken once two packets in a row carry it
+  // (or at the first packet), so that one glitched byte does not change the speed the outlier
+  // rule expects (a real change of speed moves the azimuth too, which follows() allows for).
+  std::optional<std::uint16_t> stream_rpm_;
+  std::uint16_t previous_tail_rpm_ = 0;
+  // The stream's return mode, and the packets in a row that carry another one: up to
+  // kMaxHeldPackets of them are a glitch of that byte, each decoded in the stream's mode from
+  // a copy with the byte mended (repaired_) and counted as an outlier; the next is a change of
+  // mode, taken.
+  std::optional<ReturnMode> stream_mode_;
+  ReturnMode other_mode_ = ReturnMode::kDual;
+  std::uint32_t other_mode_run_ = 0;
+  std::array<std::uint8_t, kMaxPacketBytes> repaired_{};
   // Frames closed so far, and packets accepted since the last one closed.
   std::uint64_t frames_closed_ = 0;
   std::uint64_t packets_since_frame_ = 0;
