@@ -8,6 +8,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -45,16 +46,17 @@ class FileList {
     --count_;
   }
   // The first (oldest) file named `path` off the list, the later ones moving up one slot (their
-  // strings swapped, not copied). Returns whether it was listed. Allocates nothing.
-  bool erase(std::string_view path) noexcept {
+  // strings swapped, not copied). Returns its number if it was listed. Allocates nothing.
+  std::optional<std::uint64_t> erase(std::string_view path) noexcept {
     for (std::size_t i = 0; i < count_; ++i) {
       if (slot(i).path != path) continue;
+      const std::uint64_t value = slot(i).value;
       for (std::size_t j = i; j + 1 < count_; ++j)
         std::swap(slot(j), slot(j + 1));
       --count_;
-      return true;
+      return value;
     }
-    return false;
+    return std::nullopt;
   }
   void clear() noexcept { head_ = count_ = 0; }
 

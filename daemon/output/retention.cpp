@@ -46,12 +46,7 @@ std::size_t Retention::enforce() {
 }
 
 void Retention::forget(std::string_view path) noexcept {
-  for (std::size_t i = 0; i < files_.size(); ++i) {
-    if (files_[i].path != path) continue;
-    bytes_ -= files_[i].value;
-    files_.erase(path);
-    return;
-  }
+  if (const std::optional<std::uint64_t> bytes = files_.erase(path)) bytes_ -= *bytes;
 }
 
 void RecordedFiles::forget(std::string_view path) noexcept {
