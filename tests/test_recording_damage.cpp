@@ -80,17 +80,6 @@ std::string flip(std::string bytes, std::size_t at, std::size_t n) {
   return bytes;
 }
 
-// The byte offset of record `index`'s header in a classic pcap (PcapWriter's layout).
-std::size_t record_offset(const std::string& pcap, std::size_t index) {
-  std::size_t at = kPcapGlobalHeaderBytes;
-  for (std::size_t i = 0; i < index; ++i) {
-    std::uint32_t captured = 0;
-    std::memcpy(&captured, pcap.data() + at + 8, 4);
-    at += kPcapRecordHeaderBytes + captured;
-  }
-  return at;
-}
-
 // The recording as pandarcapd compresses it: one zstd frame with its content checksum.
 std::string compress_as_recorder(const std::string& pcap) {
   ZstdStreamCompressor compressor(pcap.size(), 1);
@@ -174,7 +163,7 @@ TEST_CASE("a damaged pcap is caught and named, header by header", "[capture][dam
   // are not checked, but every header field that no capture tool writes is.
   for (const std::size_t record :
        {std::size_t{0}, std::size_t{kPackets / 2}, std::size_t{kPackets - 1}}) {
-    const std::size_t header = record_offset(bytes, record);
+    const std::size_t header = test::pcap_record_offset(bytes, record);
     for (const auto& [field, offset] :
          std::vector<std::pair<const char*, std::size_t>>{{"ts_usec high byte", 7},
                                                           {"caplen low byte", 8},
@@ -196,7 +185,7 @@ TEST_CASE("a damaged pcap is caught and named, header by header", "[capture][dam
   }
   // Cut inside a record: kTruncated, "cut off".
   const fs::path cut = dir / "cut.pcap";
-  write_bytes(cut, bytes.substr(0, record_offset(bytes, kPackets / 2) + 100));
+  write_bytes(cut, bytes.substr(0, test::pcap_record_offset(bytes, kPackets / 2) + 100));
   const Outcome o = read_file(cut);
   CHECK(o.status == CaptureStatus::kTruncated);
   CHECK(o.payloads.size() == kPackets / 2);

@@ -156,12 +156,7 @@ void check_round_trip(const fs::path& pcap, const fs::path& dir, const std::stri
 // A killed recorder's file: the capture streamed into one zstd frame, flushed after the global
 // header and `records` records (as the recorder flushes every second), never ended.
 std::string unfinished_zstd(const std::string& pcap, std::size_t records) {
-  std::size_t cut = kPcapGlobalHeaderBytes;
-  for (std::size_t i = 0; i < records; ++i) {
-    std::uint32_t captured = 0;
-    std::memcpy(&captured, pcap.data() + cut + 8, 4);
-    cut += kPcapRecordHeaderBytes + captured;
-  }
+  const std::size_t cut = test::pcap_record_offset(pcap, records);
   ZSTD_CCtx* cctx = ZSTD_createCCtx();
   ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, 3);
   std::string out(ZSTD_compressBound(cut) + 1024, '\0');

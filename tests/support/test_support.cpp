@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <random>
 #include <sstream>
@@ -67,6 +68,16 @@ std::string quoted(const std::filesystem::path& path) {
 void write_bytes(const std::filesystem::path& path, std::string_view bytes) {
   std::ofstream(path, std::ios::binary | std::ios::trunc)
       .write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+std::size_t pcap_record_offset(std::string_view pcap, std::size_t index) {
+  std::size_t at = kPcapGlobalHeaderBytes;
+  for (std::size_t i = 0; i < index; ++i) {
+    std::uint32_t captured = 0;
+    std::memcpy(&captured, pcap.data() + at + 8, 4);
+    at += kPcapRecordHeaderBytes + captured;
+  }
+  return at;
 }
 
 CommandResult run_command(const std::string& command) {

@@ -75,6 +75,9 @@ std::filesystem::path binary(const std::string& name);
 std::string quoted(const std::filesystem::path& path);
 // `bytes` written to `path`, replacing it.
 void write_bytes(const std::filesystem::path& path, std::string_view bytes);
+// The byte offset of record `index`'s header in a classic pcap's bytes (PcapWriter's layout):
+// where a test cuts or damages a recording.
+std::size_t pcap_record_offset(std::string_view pcap, std::size_t index);
 
 // Runs a command through /bin/sh, returning its exit status and standard output.
 struct CommandResult {
