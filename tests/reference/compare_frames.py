@@ -27,6 +27,8 @@ import sys
 import time
 from array import array
 
+# No __pycache__ in the source tree (it may be read-only; git status stays clean).
+sys.dont_write_bytecode = True
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import hesai_reference  # noqa: E402
 
@@ -265,6 +267,15 @@ def match(queries, target_hash, tolerance):
     return matched, math.sqrt(worst)
 
 
+def compare_points(reference, ours, tolerance):
+    """(fraction of ours with a reference point within tolerance, fraction of the reference
+    with one of ours within it, largest distance of a matched point either way)."""
+    ours_matched, worst_ours = match(ours, VoxelHash(reference, tolerance), tolerance)
+    ref_matched, worst_ref = match(reference, VoxelHash(ours, tolerance), tolerance)
+    return (ours_matched / len(ours) if ours else 0.0,
+            ref_matched / len(reference) if reference else 0.0, max(worst_ours, worst_ref))
+
+
 def sample(points, n):
     if len(points) <= n:
         return points
@@ -335,13 +346,10 @@ def main(argv=None):
         if not reference:
             raise InputError("the reference frame is empty")
         path, ours, scores = choose_file(reference, candidates, a.tolerance_m)
-        ours_matched, worst_ours = match(ours, VoxelHash(reference, a.tolerance_m), a.tolerance_m)
-        ref_matched, worst_ref = match(reference, VoxelHash(ours, a.tolerance_m), a.tolerance_m)
+        f_ours, f_ref, worst = compare_points(reference, ours, a.tolerance_m)
     except (InputError, hesai_reference.ReferenceError) as e:
         print("compare_frames: %s" % e, file=sys.stderr)
         return 2
-    f_ours = ours_matched / len(ours) if ours else 0.0
-    f_ref = ref_matched / len(reference)
     ok = f_ours >= a.min_fraction and f_ref >= a.min_fraction
     print(json.dumps({
         "model": ref["model"], "capture": a.capture,
@@ -352,7 +360,7 @@ def main(argv=None):
         "our_file": path, "file_chosen_by": "largest overlap with a 500-point sample",
         "overlap_scores": scores,
         "fraction_ours_matched": round(f_ours, 6), "fraction_reference_matched": round(f_ref, 6),
-        "max_matched_distance_m": max(worst_ours, worst_ref),
+        "max_matched_distance_m": worst,
         "tolerance_m": a.tolerance_m, "min_fraction": a.min_fraction, "pass": ok,
         "decode_seconds": round(t_decode, 3), "seconds": round(time.monotonic() - t0, 3)}))
     return 0 if ok else 1
