@@ -313,7 +313,7 @@ def main(argv=None):
     ap.add_argument("--min-range", type=float, required=True, help="metres, as given pandarcapd")
     ap.add_argument("--max-range", type=float, required=True, help="metres, as given pandarcapd")
     ap.add_argument("--frames", required=True,
-                    help="pandarcapd's frames directory (DIR/frames), or one PCD file")
+                    help="pandarcapd's frames directory (DIR/frames; DIR itself will do), or one PCD file")
     ap.add_argument("--frame", default="last",
                     help="'last' (the last complete frame, default) or N: the N-th frame the "
                          "reference emits from the capture's start (1-based)")
@@ -328,8 +328,12 @@ def main(argv=None):
         ap.error("--tolerance-m must be > 0 and --min-fraction within 0..1")
     try:
         t0 = time.monotonic()
-        if os.path.isdir(a.frames):
-            candidates = sorted(os.path.join(a.frames, n) for n in os.listdir(a.frames)
+        frames_dir = a.frames
+        if os.path.isdir(os.path.join(frames_dir, "frames")) and not any(
+                n.endswith(".pcd") for n in os.listdir(frames_dir)):
+            frames_dir = os.path.join(frames_dir, "frames")  # given the output directory
+        if os.path.isdir(frames_dir):
+            candidates = sorted(os.path.join(frames_dir, n) for n in os.listdir(frames_dir)
                                 if n.endswith(".pcd") and not n.startswith("."))
         elif os.path.isfile(a.frames):
             candidates = [a.frames]
