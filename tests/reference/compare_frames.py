@@ -5,7 +5,7 @@ points both ways).
 
     compare_frames.py --capture PCAP --calibration CSV --min-range A --max-range B
                       --frames DIR/frames [--frame last|N] [--tolerance-m 0.005]
-                      [--min-fraction 0.99]
+                      [--min-fraction 0.99] [--one-to-one]
 
 The reference frame is the last complete one nebula would emit (--frame last: what nebula's own
 test checks for the 40P, 64, XT32 and QT128 captures), or the N-th emitted from the capture's
@@ -13,6 +13,9 @@ start (--frame 3 for nebula's XT16 bag). Among the PCD files in --frames (or the
 names) the one that overlaps it most is compared (pandarcapd names its files by time, in a clock
 this tool cannot know for sure; the overlap cannot be fooled by names). x y z are read in the
 sensor's own axes (pandarcapd's default `--frame hesai`).
+
+Nearest neighbours cannot see a duplicated point: --one-to-one also requires the fractions
+of points paired at most once (printed then; null otherwise).
 
 Prints one JSON line. Exit 0: both fractions >= --min-fraction; 1: not; 2: bad usage or input.
 Pure Python 3 standard library.
@@ -276,6 +279,36 @@ def compare_points(reference, ours, tolerance):
             ref_matched / len(reference) if reference else 0.0, max(worst_ours, worst_ref))
 
 
+def one_to_one(ours, reference, tolerance):
+    """Pairs of (our point, reference point) within tolerance, each point in one pair at most:
+    each of ours, in order, takes the nearest reference point not yet taken. Nearest-neighbour
+    fractions cannot see duplicates (a frame that keeps both of two identical returns matches
+    100 % both ways); this count can. Greedy, which is exact when the two clouds agree to far
+    better than the tolerance, as a right decode does."""
+    index = VoxelHash([(p[0], p[1], p[2], i) for i, p in enumerate(reference)], tolerance)
+    taken = bytearray(len(reference))
+    tol2, cell = tolerance * tolerance, tolerance
+    grid = index.grid
+    floor = math.floor
+    pairs = 0
+    for x, y, z in ours:
+        key = floor(x / cell) * _K2 + floor(y / cell) * _K1 + floor(z / cell)
+        best, best_i = tol2, -1
+        for off in _NEIGHBOURS:
+            bucket = grid.get(key + off)
+            if bucket:
+                for q in bucket:
+                    if taken[q[3]]:
+                        continue
+                    d = (q[0] - x) ** 2 + (q[1] - y) ** 2 + (q[2] - z) ** 2
+                    if d <= best:
+                        best, best_i = d, q[3]
+        if best_i >= 0:
+            taken[best_i] = 1
+            pairs += 1
+    return pairs
+
+
 def sample(points, n):
     if len(points) <= n:
         return points
@@ -321,6 +354,10 @@ def main(argv=None):
     ap.add_argument("--min-fraction", type=float, default=0.99)
     ap.add_argument("--dual-threshold", type=float, default=0.1,
                     help="dual-return distance threshold, metres (nebula's test: 0.1)")
+    ap.add_argument("--one-to-one", action="store_true",
+                    help="also require the fractions with each point paired at most once "
+                         "(catches duplicated or missing repeats, which nearest neighbours "
+                         "cannot see)")
     a = ap.parse_args(argv)
     if a.frame != "last" and not (a.frame.isdigit() and int(a.frame) >= 1):
         ap.error("--frame must be 'last' or a number >= 1")
@@ -351,10 +388,16 @@ def main(argv=None):
             raise InputError("the reference frame is empty")
         path, ours, scores = choose_file(reference, candidates, a.tolerance_m)
         f_ours, f_ref, worst = compare_points(reference, ours, a.tolerance_m)
+        pairs = one_to_one(ours, reference, a.tolerance_m) if a.one_to_one else None
     except (InputError, hesai_reference.ReferenceError) as e:
         print("compare_frames: %s" % e, file=sys.stderr)
         return 2
     ok = f_ours >= a.min_fraction and f_ref >= a.min_fraction
+    p_ours = p_ref = None
+    if a.one_to_one:
+        p_ours = round(pairs / len(ours), 6) if ours else 0.0
+        p_ref = round(pairs / len(reference), 6)
+        ok = ok and p_ours >= a.min_fraction and p_ref >= a.min_fraction
     print(json.dumps({
         "model": ref["model"], "capture": a.capture,
         "reference_frame": {"which": a.frame, "number": frame.number,
@@ -365,6 +408,8 @@ def main(argv=None):
         "overlap_scores": scores,
         "fraction_ours_matched": round(f_ours, 6), "fraction_reference_matched": round(f_ref, 6),
         "max_matched_distance_m": worst,
+        "one_to_one_pairs": pairs, "fraction_ours_paired": p_ours,
+        "fraction_reference_paired": p_ref,
         "tolerance_m": a.tolerance_m, "min_fraction": a.min_fraction, "pass": ok,
         "decode_seconds": round(t_decode, 3), "seconds": round(time.monotonic() - t0, 3)}))
     return 0 if ok else 1
