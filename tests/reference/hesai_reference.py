@@ -53,9 +53,9 @@ _LINK_NULL = 0
 
 
 def _ip_payload_offset(link_type, frame):
-    """(offset of the IP header in frame, ethertype-like version hint) or None if not IP."""
+    """Offset of the IP header in a record of this link type, or None if it holds no IP."""
     if link_type == _LINK_ETHERNET:
-        off, ethertype = 14, None
+        off = 14
         if len(frame) < 14:
             return None
         ethertype = struct.unpack_from(">H", frame, 12)[0]
