@@ -24,6 +24,7 @@
 #include "core/sim/any_model_sensor.hpp"
 #include "core/sim/model_sensor.hpp"
 #include "core/sim/room_scene.hpp"
+#include "core/sim/simulated_unit.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 
 using namespace pandarcap;
@@ -219,13 +220,9 @@ TEST_CASE("simulated models: valid, detected, timed and turning as the model, ev
 
 TEST_CASE("simulated models' points, decoded here, lie on the room's surfaces", "[sim][sensors]") {
   for_each_simulated_model([]<class M>(std::type_identity<M>) {
-    // A unit's own table, away from the nominal one, so that a ray not using it would miss.
-    Calibration unit = Calibration::nominal(M::kId);
-    unit.source = "a unit's";
-    for (int c = 0; c < M::kChannels; ++c) {
-      unit.elevation_deg[static_cast<std::size_t>(c)] += 0.3 * std::sin(1.3 * c);
-      unit.azimuth_offset_deg[static_cast<std::size_t>(c)] += 0.2 * std::cos(0.7 * c);
-    }
+    // A unit's own table (0.4° and 0.2° away from the nominal one at most), so that a ray not
+    // using it would miss.
+    const Calibration unit = simulated_unit_calibration(M::kId);
     for (const Calibration& calibration : {Calibration::nominal(M::kId), unit}) {
       INFO(display_name(M::kId) << " calibration "
                                 << (calibration.is_nominal() ? "nominal" : "unit"));
@@ -402,4 +399,34 @@ TEST_CASE("AnyModelSensor: the model's simulator by id, its Pandar40P SyntheticS
   CHECK_THROWS_AS(
       AnyModelSensor(SensorModelId::kPandar40P, {}, Calibration::nominal(SensorModelId::kPandar64)),
       std::invalid_argument);
+}
+
+TEST_CASE("a simulated unit's table for every model: the 40P's as its PTC serves, CSV round trip",
+          "[sim][sensors]") {
+  const Calibration served = simulated_unit().calibration;
+  const Calibration forty = simulated_unit_calibration(SensorModelId::kPandar40P);
+  CHECK(forty.elevation_deg == served.elevation_deg);
+  CHECK(forty.azimuth_offset_deg == served.azimuth_offset_deg);
+  for (const SensorModelId id : kSensorModelIds) {
+    INFO(display_name(id));
+    const Calibration unit = simulated_unit_calibration(id);
+    const Calibration nominal = Calibration::nominal(id);
+    REQUIRE(unit.channel_count == channel_count(id));
+    CHECK(unit.source == "simulated unit");
+    double most_elevation = 0, most_azimuth = 0;
+    for (std::size_t c = 0; c < static_cast<std::size_t>(unit.channel_count); ++c) {
+      most_elevation =
+          std::max(most_elevation, std::abs(unit.elevation_deg[c] - nominal.elevation_deg[c]));
+      most_azimuth = std::max(most_azimuth,
+                              std::abs(unit.azimuth_offset_deg[c] - nominal.azimuth_offset_deg[c]));
+    }
+    // Within the pattern's 0.40° / 0.20° (and the rounding to three decimals), and using it.
+    CHECK(most_elevation <= 0.4006);
+    CHECK(most_elevation > 0.3);
+    CHECK(most_azimuth <= 0.2006);
+    CHECK(most_azimuth > 0.15);
+    const Calibration parsed = Calibration::parse(unit.to_csv(), "served", id);
+    CHECK(parsed.elevation_deg == unit.elevation_deg);
+    CHECK(parsed.azimuth_offset_deg == unit.azimuth_offset_deg);
+  }
 }
