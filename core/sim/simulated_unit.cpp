@@ -4,20 +4,25 @@
 
 namespace pandarcap {
 
+Calibration simulated_unit_calibration(SensorModelId model) {
+  Calibration calibration = Calibration::nominal(model);
+  for (int c = 0; c < calibration.channel_count; ++c) {
+    const auto i = static_cast<std::size_t>(c);
+    // Two incommensurate sines: every channel a different, repeatable offset within bounds.
+    calibration.elevation_deg[i] += 0.40 * std::sin(1.7 * c + 0.3);
+    calibration.azimuth_offset_deg[i] += 0.20 * std::cos(2.3 * c + 1.1);
+    // Kept to the three decimals of the CSV, so the served text parses back to these values.
+    calibration.elevation_deg[i] = std::round(calibration.elevation_deg[i] * 1e3) / 1e3;
+    calibration.azimuth_offset_deg[i] = std::round(calibration.azimuth_offset_deg[i] * 1e3) / 1e3;
+  }
+  calibration.source = "simulated unit";
+  return calibration;
+}
+
 SimulatedUnit simulated_unit(int rpm, std::uint8_t return_mode_code, bool udp_sequence,
                              std::uint16_t data_port) {
   SimulatedUnit unit;
-  unit.calibration = Calibration::nominal();
-  for (int c = 0; c < kChannels; ++c) {
-    // Two incommensurate sines: every channel a different, repeatable offset within bounds.
-    unit.calibration.elevation_deg[c] += 0.40 * std::sin(1.7 * c + 0.3);
-    unit.calibration.azimuth_offset_deg[c] += 0.20 * std::cos(2.3 * c + 1.1);
-    // Kept to the three decimals of the CSV, so the served text parses back to these values.
-    unit.calibration.elevation_deg[c] = std::round(unit.calibration.elevation_deg[c] * 1e3) / 1e3;
-    unit.calibration.azimuth_offset_deg[c] =
-        std::round(unit.calibration.azimuth_offset_deg[c] * 1e3) / 1e3;
-  }
-  unit.calibration.source = "simulated unit";
+  unit.calibration = simulated_unit_calibration(SensorModelId::kPandar40P);
 
   ptc::SensorInventory& inv = unit.inventory;
   inv.serial = "PCSIM40P00000001";

@@ -28,6 +28,12 @@ struct SimulatedUnit {
   ptc::SensorStatus status(std::uint32_t uptime_s) const;
 };
 
+// The table of a simulated unit of `model`: its nominal table moved by the pattern above (the
+// same per channel index for every model), kept to three decimals. The Pandar40P's is
+// SimulatedUnit::calibration; the other models' simulators (model_sensor.hpp) render with theirs
+// where a run is to decode with a table fetched or loaded rather than the nominal one.
+Calibration simulated_unit_calibration(SensorModelId model);
+
 // The simulated unit, spinning at `rpm`, sending `return_mode_code` (the packets' tail code)
 // with or without a UDP sequence, to `data_port`.
 SimulatedUnit simulated_unit(int rpm = 600, std::uint8_t return_mode_code = 0x39,

@@ -2,35 +2,16 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-#include <numbers>
 
 #include "core/decode/packet_time.hpp"
 #include "core/sensors/timing.hpp"
+#include "core/sim/room_scene.hpp"
 
 namespace pandarcap {
 
 namespace {
 
-constexpr double kDegToRad = std::numbers::pi / 180.0;
-constexpr double kFloorZ = -1.8, kCeilingZ = 3.0;
-constexpr double kWallXMin = -12.0, kWallXMax = 18.0, kWallYMin = -7.0, kWallYMax = 9.0;
-constexpr double kDoorXMin = 0.0, kDoorXMax = 4.0, kDoorTopZ = kFloorZ + 2.2;
-constexpr double kPillarX = 5.0, kPillarY = 3.0, kPillarRadius = 0.5;
-constexpr double kFenceX = 4.0, kFenceYMin = -6.0, kFenceYMax = -2.0, kFenceTopZ = kFloorZ + 2.0;
 constexpr double kStatusPeriodUs = 389.0;  // the status id advances on this time base
-
-// splitmix64: a small, well-mixed hash for deterministic noise.
-std::uint64_t mix(std::uint64_t x) {
-  x += 0x9E3779B97F4A7C15ULL;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-  return x ^ (x >> 31);
-}
-
-std::uint16_t to_raw(double metres) {
-  return static_cast<std::uint16_t>(std::clamp(std::lround(metres / kDistanceUnitM), 1L, 65535L));
-}
 
 // Status word for an id, as real units send it (spec §1.3): numbers for ids 0-7, the firmware
 // string "4.3.40a " plus a build id for 8-19 (two ASCII bytes per id, low byte first), "DG" after.
@@ -57,48 +38,12 @@ std::int64_t SyntheticSensor::packet_period_ns() const noexcept {
 }
 
 SyntheticSensor::Echoes SyntheticSensor::trace(double elevation_deg, double azimuth_deg) {
-  const double ce = std::cos(elevation_deg * kDegToRad);
-  const double dx = ce * std::sin(azimuth_deg * kDegToRad);
-  const double dy = ce * std::cos(azimuth_deg * kDegToRad);
-  const double dz = std::sin(elevation_deg * kDegToRad);
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-
-  // The room is a box around the origin: the nearest plane along the ray is the surface hit.
-  const double tx = dx > 0 ? kWallXMax / dx : dx < 0 ? kWallXMin / dx : kInf;
-  const double ty = dy > 0 ? kWallYMax / dy : dy < 0 ? kWallYMin / dy : kInf;
-  const double tz = dz > 0 ? kCeilingZ / dz : dz < 0 ? kFloorZ / dz : kInf;
-  double t = std::min({tx, ty, tz});
-  std::uint8_t reflectivity = t == tz ? (dz < 0 ? 20 : 40) : 60;
-  if (t == ty && dy > 0) {
-    const double x = t * dx, z = t * dz;
-    if (x > kDoorXMin && x < kDoorXMax && z < kDoorTopZ) t = kInf;  // out through the doorway
-  }
-
-  // Pillar: |(t·dx, t·dy) - centre| = radius, nearest positive root.
-  const double a = dx * dx + dy * dy;
-  if (a > 0) {
-    const double b = -2 * (dx * kPillarX + dy * kPillarY);
-    const double c = kPillarX * kPillarX + kPillarY * kPillarY - kPillarRadius * kPillarRadius;
-    const double disc = b * b - 4 * a * c;
-    if (disc >= 0) {
-      const double root = (-b - std::sqrt(disc)) / (2 * a);
-      if (root > 0 && root < t && root * dz > kFloorZ && root * dz < kCeilingZ) {
-        t = root;
-        reflectivity = 200;
-      }
-    }
-  }
-
+  const RoomEchoes room = trace_room(elevation_deg, azimuth_deg);
   Echoes echoes;
-  if (std::isinf(t)) return echoes;
-  echoes.last = {to_raw(t), reflectivity};
-  echoes.strongest = echoes.last;
-  if (dx > 0) {
-    const double tf = kFenceX / dx;
-    const double y = tf * dy, z = tf * dz;
-    if (tf < t && y > kFenceYMin && y < kFenceYMax && z < kFenceTopZ)
-      echoes.strongest = {to_raw(tf), 120};
-  }
+  if (room.last.range_m == 0.0) return echoes;  // nothing returns
+  echoes.last = {range_to_raw(room.last.range_m, kDistanceUnitM), room.last.reflectivity};
+  echoes.strongest = {range_to_raw(room.strongest.range_m, kDistanceUnitM),
+                      room.strongest.reflectivity};
   return echoes;
 }
 
@@ -128,7 +73,7 @@ PacketContents SyntheticSensor::next_contents() {
         Echo e = want_last ? echoes.last : echoes.strongest;
         if (e.distance_raw != 0) {
           // ±2 raw units (±8 mm) of noise, the same for both echoes of a firing.
-          const auto noise = static_cast<int>(mix(config_.seed ^ (round * 64 + c)) % 5) - 2;
+          const auto noise = static_cast<int>(scene_hash(config_.seed ^ (round * 64 + c)) % 5) - 2;
           e.distance_raw = static_cast<std::uint16_t>(std::max(1, e.distance_raw + noise));
         }
         p.distance_raw[b][c] = e.distance_raw;
@@ -145,7 +90,8 @@ PacketContents SyntheticSensor::next_contents() {
   Tail& tail = p.tail;
   tail.utc = tail_datetime_from_unix(unix_s);
   tail.timestamp_us = static_cast<std::uint32_t>((t0 % 1'000'000'000) / 1000);
-  tail.motor_rpm = static_cast<std::uint16_t>(config_.rpm + static_cast<int>(mix(k / 97) % 5) - 2);
+  tail.motor_rpm =
+      static_cast<std::uint16_t>(config_.rpm + static_cast<int>(scene_hash(k / 97) % 5) - 2);
   tail.return_mode_byte = static_cast<std::uint8_t>(mode);
   tail.factory = 0x42;
   tail.reserved_opaque[0] = 0x72;

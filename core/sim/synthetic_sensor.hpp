@@ -2,14 +2,8 @@
 // hardware. It is the project's embedded default (the demo and `--simulate` run on it) and what
 // tests and benchmarks use when they need packets.
 //
-// The scene is a room seen from a sensor 1.8 m above the floor:
-//   walls x = -12 m / +18 m, y = -7 m / +9 m, floor z = -1.8 m, ceiling z = +3.0 m;
-//   a doorway in the +y wall (x 0..4 m, up to 2.2 m above the floor) through which beams return
-//   nothing (distance 0);
-//   a pillar of radius 0.5 m at (5, 3);
-//   a wire fence at x = +4 m, y -6..-2 m, up to 2 m high, that returns the strongest echo while
-//   the wall behind it returns the last echo (so dual-return mode carries two different echoes
-//   there, and byte-identical ones everywhere else, as real sensors do).
+// The scene is the room of room_scene.hpp (walls, floor, ceiling, a doorway, a pillar and a wire
+// fence whose strongest and last echoes differ), shared with the other models' ModelSensor.
 // Rays use the calibration's corrected azimuth (block azimuth + offset), so decoding a packet
 // with the same calibration puts every point on these surfaces (up to the ±2 raw-unit noise).
 //
