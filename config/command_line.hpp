@@ -45,6 +45,7 @@ inline constexpr std::array kKeyOptions{
     KeyOption{"--firing-time-correction", "sensor.firing_time_correction", true},
     KeyOption{"--rpm", "sensor.rotation_speed"},
     KeyOption{"--return-mode", "sensor.return_mode"},
+    KeyOption{"--sensor-model", "sensor.model"},
     KeyOption{"--mcap", "output.mcap", true},
     KeyOption{"--mcap-packets", "output.mcap_packets", true},
     KeyOption{"--mcap-compression", "output.mcap_compression"},

@@ -37,6 +37,7 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("sensor", "data_port", s.data_port, IntRange{1, 65535});
   v("sensor", "udp_socket_receive_buffer_size_bytes", s.udp_socket_receive_buffer_size_bytes,
     IntRange{0, std::numeric_limits<std::int32_t>::max()});
+  v("sensor", "model", s.model, &sensor_model);
   v("sensor", "return_mode", s.return_mode, &return_mode);
   v("sensor", "rotation_speed", s.rotation_speed, IntRange{600, 1200});
   v("sensor", "cut_angle", s.cut_angle, RealRange{0.0, false, 360.0, true});
@@ -98,7 +99,7 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("output", "upload_frames", o.upload_frames, std::monostate{});
 
   auto& h = c.health;
-  v("health", "sensor_name", h.sensor_name, &label);
+  v("health", "sensor_name", h.sensor_name, &label_or_empty);
   v("health", "no_data_timeout_seconds", h.no_data_timeout_seconds,
     RealRange{0.0, true, 86400.0, false});
   v("health", "max_sensor_clock_offset_seconds", h.max_sensor_clock_offset_seconds,

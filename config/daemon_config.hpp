@@ -17,6 +17,9 @@ struct SensorSection {
   std::string multicast_interface_ip;  // local interface address for the join; "" = any
   std::uint16_t data_port = 2368;      // 1..65535
   std::uint64_t udp_socket_receive_buffer_size_bytes = 8u << 20;  // requested SO_RCVBUF
+  // The sensor model: "auto" (from the packets: core/sensors/model_detection.hpp) or one of
+  // "Pandar40P", "Pandar64", "PandarXT32", "PandarXT16", "PandarQT128" (any case).
+  std::string model = "auto";
   std::string return_mode = "any";              // expected: "any", "last", "strongest", "dual"
   int rotation_speed = 600;                     // expected motor speed, RPM: 600 or 1200
   double cut_angle = 0.0;                       // degrees, [0, 360)
@@ -105,7 +108,7 @@ struct OutputSection {
 };
 
 struct HealthSection {
-  std::string sensor_name = "pandar40p";         // the `sensor` label on every metric
+  std::string sensor_name;  // the `sensor` label on every metric; "" = the model's lower-case name
   double no_data_timeout_seconds = 1.0;          // silence longer than this: state no_data
   double max_sensor_clock_offset_seconds = 1.0;  // sensor clock further off: degraded; 0 = off
   bool prometheus = true;                        // health/pandarcap.prom

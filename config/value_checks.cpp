@@ -8,6 +8,7 @@
 
 #include "core/decode/decoder_target.hpp"
 #include "core/ipv4.hpp"
+#include "core/sensors/sensor_model_id.hpp"
 
 namespace pandarcap::config_detail {
 namespace {
@@ -80,6 +81,14 @@ std::optional<std::string> prom_file_or_empty(const std::string& s) {
   return std::nullopt;
 }
 
+std::optional<std::string> sensor_model(const std::string& s) {
+  if (s == "auto" || parse_sensor_model(s)) return std::nullopt;
+  return fmt::format(
+      "\"{}\" is not a sensor model: \"auto\", \"Pandar40P\", \"Pandar64\", \"PandarXT32\", "
+      "\"PandarXT16\" or \"PandarQT128\" (any case)",
+      s);
+}
+
 std::optional<std::string> return_mode(const std::string& s) {
   return one_of(s, {"any", "last", "strongest", "dual"});
 }
@@ -136,6 +145,10 @@ std::optional<std::string> label(const std::string& s) {
     }
   }
   return std::nullopt;
+}
+
+std::optional<std::string> label_or_empty(const std::string& s) {
+  return s.empty() ? std::nullopt : label(s);
 }
 
 std::optional<std::string> device_name(const std::string& s) {

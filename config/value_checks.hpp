@@ -39,6 +39,8 @@ std::optional<std::string> multicast_or_empty(const std::string& s);
 // node_exporter's textfile collector reads only files named *.prom.
 std::optional<std::string> prom_file_or_empty(const std::string& s);
 std::optional<std::string> return_mode(const std::string& s);
+std::optional<std::string> sensor_model(const std::string& s);
+std::optional<std::string> label_or_empty(const std::string& s);
 std::optional<std::string> calibration_source(const std::string& s);
 std::optional<std::string> pcd_fields(const std::string& s);
 std::optional<std::string> axes(const std::string& s);

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <string_view>
@@ -11,6 +12,7 @@
 #include "config/command_line.hpp"
 #include "config/config_loader.hpp"
 #include "core/mcap/ros2_messages.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "daemon/live/live_publish.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/pcap/xxh64.hpp"
@@ -56,7 +58,26 @@ ProgressLine replay_progress_line() {
   return ProgressLine();
 }
 
-WriterOptions writer_options(const DaemonConfig& config) {
+std::uint32_t arena_points(const DaemonConfig& config, std::optional<SensorModelId> model) {
+  std::uint32_t points = config.arenas.points_per_frame;
+  for (SensorModelId id : kSensorModelIds) {
+    if (model && *model != id) continue;
+    const double need = with_model(id, [&]<class M>(std::type_identity<M>) {
+      return std::ceil(M::packets_per_revolution(2, config.sensor.rotation_speed) *
+                       M::kMaxPointsPerPacket * 1.05);
+    });
+    points = std::max(points, static_cast<std::uint32_t>(need));
+  }
+  return points;
+}
+
+std::string sensor_label(const DaemonConfig& config, std::optional<SensorModelId> model) {
+  if (!config.health.sensor_name.empty()) return config.health.sensor_name;
+  if (!model && config.sensor.model != "auto") model = parse_sensor_model(config.sensor.model);
+  return std::string(lower_case_name(model.value_or(SensorModelId::kPandar40P)));
+}
+
+WriterOptions writer_options(const DaemonConfig& config, std::optional<SensorModelId> model) {
   const std::filesystem::path output_dir = config.output.directory;
   WriterOptions wo;
   wo.output_dir = output_dir;
@@ -91,7 +112,7 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.upload_frames = config.output.upload_frames;
   wo.min_hours_left = config.health.min_hours_left;
   wo.sync_interval_seconds = config.output.sync_interval_seconds;
-  wo.health_fallback_dirs = health_fallback_directories(config.health);
+  wo.health_fallback_dirs = health_fallback_directories(config.health, sensor_label(config, model));
   const OutputSection& o = config.output;
   wo.mcap = o.mcap;
   wo.pcd_format = pcd_format(config);
@@ -115,7 +136,9 @@ WriterOptions writer_options(const DaemonConfig& config) {
   wo.prometheus = config.health.prometheus;
   wo.jsonl = config.health.jsonl;
   wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;
-  wo.sensor_name = config.health.sensor_name;
+  wo.sensor_name = sensor_label(config, model);
+  // A live "auto" learns its model from the packets: the label follows it.
+  wo.sensor_name_from_model = config.health.sensor_name.empty() && config.sensor.model == "auto";
   wo.version = PANDARCAP_VERSION;
   wo.no_data_timeout_seconds = config.health.no_data_timeout_seconds;
   wo.max_sensor_clock_offset_seconds = config.health.max_sensor_clock_offset_seconds;
@@ -124,7 +147,8 @@ WriterOptions writer_options(const DaemonConfig& config) {
   return wo;
 }
 
-std::vector<std::filesystem::path> health_fallback_directories(const HealthSection& health) {
+std::vector<std::filesystem::path> health_fallback_directories(const HealthSection& health,
+                                                               std::string_view label) {
   std::vector<std::filesystem::path> dirs;
   const auto add = [&](std::filesystem::path dir) {
     if (std::find(dirs.begin(), dirs.end(), dir) == dirs.end()) dirs.push_back(std::move(dir));
@@ -139,18 +163,23 @@ std::vector<std::filesystem::path> health_fallback_directories(const HealthSecti
   }
   // Outside systemd, one directory per sensor label (unique per sensor, as its metrics are).
   if (const char* user = std::getenv("XDG_RUNTIME_DIR"); user != nullptr && *user) {
-    add(std::filesystem::path(user) / "pandarcap" / health.sensor_name);
+    add(std::filesystem::path(user) / "pandarcap" / label);
   }
-  add(std::filesystem::path(fmt::format("/tmp/pandarcap-{}", ::getuid())) / health.sensor_name);
+  add(std::filesystem::path(fmt::format("/tmp/pandarcap-{}", ::getuid())) / label);
   return dirs;
 }
 
 DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTarget target,
-                                          const RunSource& source) {
+                                          const RunSource& source,
+                                          SensorModelId calibration_model) {
   const bool replay = source.kind == RunSource::Kind::kReplay;
   DecodeWorkerOptions dopt;
   dopt.decoder = stream_decoder_config(config);
   dopt.decoder.decoder_target = target;
+  dopt.detect_model = source.detect_model;
+  // A live "auto" starts as the table's model (a Pandar40P's nominal one, or a file's), until
+  // the first packet names it.
+  dopt.model = source.model.value_or(calibration_model);
   dopt.frame_decimation = config.output.frame_decimation;
   dopt.write_frames = points_decoded(config);
   dopt.decoder.decode_points = dopt.write_frames;
@@ -233,7 +262,7 @@ live::LiveOptions live_options(const DaemonConfig& config, std::string_view vers
   if (const char* retry = std::getenv("PANDARCAP_TEST_LIVE_RETRY_MS"))
     o.listen_retry_ms = static_cast<std::uint32_t>(std::strtoul(retry, nullptr, 10));
 #endif
-  o.name = fmt::format("pandarcap {} ({})", version, config.health.sensor_name);
+  o.name = fmt::format("pandarcap {} ({})", version, sensor_label(config, std::nullopt));
   o.points_topic = config.output.mcap_points_topic;
   o.health_topic = config.output.mcap_health_topic;
   o.points_schema_name = std::string(mcap::kPointCloud2Name);

@@ -34,10 +34,21 @@ bool points_decoded(const DaemonConfig& config);
 // The writer's options. The decoder's name, the calibration and the recorded destination port
 // are known only at start (the caller fills them in); the test hook only in builds with
 // PANDARCAP_TEST_HOOKS (the test builds; never the package).
-WriterOptions writer_options(const DaemonConfig& config);
+// `model`: the sensor's as the start knows it (none: the configured one, else the Pandar40P),
+// whose lower-case name is the `sensor` label when health.sensor_name is "".
+WriterOptions writer_options(const DaemonConfig& config,
+                             std::optional<SensorModelId> model = std::nullopt);
+// Points an arena holds: arenas.points_per_frame, raised to what a revolution of the model can
+// hold at sensor.rotation_speed in dual return, with 5 % to spare (the Pandar64's and the
+// QT128's 230 400 at 600 RPM; the 40P's 151 200 stays under the default 180 000). A source whose
+// packets choose the model (`model` none) is sized for the largest.
+std::uint32_t arena_points(const DaemonConfig& config, std::optional<SensorModelId> model);
+// health.sensor_name, or the model's lower-case name when it is "".
+std::string sensor_label(const DaemonConfig& config, std::optional<SensorModelId> model);
 // Where the health files go while their own directory cannot be written, in the order tried:
 // health.fallback_directory when set, then the defaults (config/daemon_config.hpp), each once.
-std::vector<std::filesystem::path> health_fallback_directories(const HealthSection& health);
+std::vector<std::filesystem::path> health_fallback_directories(const HealthSection& health,
+                                                               std::string_view label);
 // A replay shows its progress (core/progress_line.hpp) on stderr when that is a terminal and not
 // systemd's journal (JOURNAL_STREAM): never in a pipe, a file or a service's log.
 bool replay_progress_wanted();
@@ -55,8 +66,9 @@ std::string config_hash(const DaemonConfig& config);
 PcdFormat pcd_format(const DaemonConfig& config);
 
 // The decode worker's options for the chosen decoder target and source.
-DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTarget target,
-                                          const RunSource& source);
+DecodeWorkerOptions decode_worker_options(
+    const DaemonConfig& config, DecoderTarget target, const RunSource& source,
+    SensorModelId calibration_model = SensorModelId::kPandar40P);
 
 // The live socket's options; the simulator's socket is on 127.0.0.1 (a free port unless
 // --port), never a multicast group.

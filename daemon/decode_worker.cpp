@@ -6,8 +6,11 @@
 #include <chrono>
 #include <cstring>
 #include <thread>
+#include <utility>
 
+#include "core/sensors/model_detection.hpp"
 #include "core/sensors/sensor_model.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 
@@ -30,7 +33,42 @@ DecodeWorker::DecodeWorker(const Calibration& calibration, const DecodeWorkerOpt
       to_writer_(to_writer),
       free_arenas_(free_arenas),
       free_raw_(free_raw),
-      decoder_(calibration, options.decoder, *this) {}
+      calibration_(calibration),
+      decoder_(options.model, calibration, options.decoder, *this),
+      detecting_(options.detect_model) {}
+
+void DecodeWorker::choose_model(SensorModelId model) {
+  const bool own = calibration_.channel_count == channel_count(model);
+  decoder_.choose(model, own ? calibration_ : Calibration::nominal(model), options_.decoder, *this);
+}
+
+template <class Decoder>
+std::size_t DecodeWorker::process_batch(Decoder& decoder, std::span<const PacketSlot> batch,
+                                        std::size_t from) {
+  for (std::size_t i = from; i < batch.size(); ++i) {
+    const PacketSlot& slot = batch[i];
+    if (detecting_ && !slot.truncated) {
+      if (decoder.stats().accepted > 0) {
+        detecting_ = false;  // the model is the stream's now
+      } else {
+        const DetectedModel d = detect_model(std::span<const std::uint8_t>(
+            slot.payload, std::min<std::size_t>(slot.length, sizeof slot.payload)));
+        if (d.kind == DetectionKind::kKnown && d.model != Decoder::ModelType::kId) {
+          pending_model_ = d.model;
+          return i;
+        }
+      }
+    }
+    process(decoder, slot);
+  }
+  return batch.size();
+}
+
+double DecodeWorker::single_return_revolution_packets() const {
+  return with_model(decoder_.model(), [&]<class M>(std::type_identity<M>) {
+    return M::packets_per_revolution(1, options_.expected_rpm);
+  });
+}
 
 Frame* DecodeWorker::acquire_frame() {
   FrameArena* arena = nullptr;
@@ -69,8 +107,7 @@ void DecodeWorker::frame_done(Frame& frame) {
   if (arena == nullptr) return;
   if (frame.info.partial &&
       (frame.info.azimuth_span_cdeg < options_.min_frame_fraction * kFullCircleCdeg ||
-       frame.info.packets < options_.min_frame_fraction *
-                                packets_per_revolution(ReturnMode::kLast, options_.expected_rpm))) {
+       frame.info.packets < options_.min_frame_fraction * single_return_revolution_packets())) {
     ++frames_fragment_;
     keep_spare(arena);
     return;
@@ -131,7 +168,8 @@ void DecodeWorker::flush_raw() {
   }
 }
 
-void DecodeWorker::process(const PacketSlot& slot) {
+template <class Decoder>
+void DecodeWorker::process(Decoder& decoder, const PacketSlot& slot) {
   if (options_.record_raw) record_raw(slot);
   current_receive_ns_ = slot.receive_time_ns;
   last_receive_ns_ = slot.receive_time_ns;
@@ -139,11 +177,11 @@ void DecodeWorker::process(const PacketSlot& slot) {
   // kept length: an empty payload is exactly that reject. The kept length never exceeds the slot.
   const std::size_t length =
       slot.truncated ? 0 : std::min<std::size_t>(slot.length, sizeof slot.payload);
-  const std::uint64_t accepted_before = decoder_.stats().accepted;
-  decoder_.process(std::span<const std::uint8_t>(slot.payload, length));
+  const std::uint64_t accepted_before = decoder.stats().accepted;
+  decoder.process(std::span<const std::uint8_t>(slot.payload, length));
   // The sensor's clock against this datagram's arrival: for an accepted packet only (a copy
   // arrives later than its original did).
-  const StreamStats& stats = decoder_.stats();
+  const StreamStats& stats = decoder.stats();
   if (stats.accepted != accepted_before && stats.last_time_valid && slot.receive_time_ns > 0)
     clock_offset_ns_ = stats.last_t0_ns - slot.receive_time_ns;
 }
@@ -153,6 +191,7 @@ DecodeSnapshot DecodeWorker::snapshot() const {
   s.stream = decoder_.stats();
   s.sequence = decoder_.sequence();
   s.frames = decoder_.frames();
+  s.model = decoder_.model();
   s.frames_decimated = frames_decimated_;
   s.frames_fragment = frames_fragment_;
   s.raw_packets_dropped = raw_dropped_;
@@ -194,8 +233,12 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
       ring_.wait_for_data(std::chrono::milliseconds(100));
       ReceiveCounters::add(live.wakeups, 1);
     } else {
-      for (const PacketSlot& slot : batch)
-        process(slot);
+      // The model's loop, a batch at a time (no packet pays a branch on the model).
+      std::size_t taken = 0;
+      while (taken < batch.size()) {
+        taken = decoder_.visit([&](auto& d) { return process_batch(d, batch, taken); });
+        if (pending_model_) choose_model(*std::exchange(pending_model_, std::nullopt));
+      }
       if (options_.measure_latency) {
         // One clock read per batch: "decoded" is when the batch is done.
         const std::int64_t decoded_ns = realtime_ns();

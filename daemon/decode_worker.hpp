@@ -14,6 +14,7 @@
 #include <optional>
 #include <vector>
 
+#include "core/decode/any_stream_decoder.hpp"
 #include "core/decode/calibration.hpp"
 #include "core/decode/stream_decoder.hpp"
 #include "daemon/packet_slot.hpp"
@@ -24,6 +25,12 @@ namespace pandarcap {
 
 struct DecodeWorkerOptions {
   StreamDecoderConfig decoder;
+  // The model decoded from the start (a fixed sensor.model, or the one a replay's first valid
+  // packet named), and whether the packets choose it: "auto" on a live source, where the first
+  // packet of a known model, before any was accepted, switches to that model's decoder (with the
+  // calibration given when it has that model's channels, else the model's nominal table).
+  SensorModelId model = SensorModelId::kPandar40P;
+  bool detect_model = false;
   std::uint32_t frame_decimation = 1;  // 1 = every frame
   bool write_frames = true;            // false: every frame is returned at once (not written)
   // A partial frame covering less than this fraction of a revolution is a fragment: counted
@@ -63,7 +70,15 @@ class DecodeWorker final : public FrameSink {
   void frame_done(Frame& frame) override;
 
  private:
-  void process(const PacketSlot& slot);
+  template <class Decoder>
+  void process(Decoder& decoder, const PacketSlot& slot);
+  // Decodes batch[from..] with `decoder`; returns where it stopped: the end, or a packet of
+  // another model that chooses the decoder (pending_model_).
+  template <class Decoder>
+  std::size_t process_batch(Decoder& decoder, std::span<const PacketSlot> batch, std::size_t from);
+  void choose_model(SensorModelId model);
+  // The fewest packets a revolution has (single return at expected_rpm), for the model decoded.
+  double single_return_revolution_packets() const;
   void record_raw(const PacketSlot& slot);
   void flush_raw();
   DecodeSnapshot snapshot() const;
@@ -74,7 +89,10 @@ class DecodeWorker final : public FrameSink {
   WriterQueue& to_writer_;
   ArenaQueue& free_arenas_;
   RawQueue& free_raw_;
-  StreamDecoder decoder_;
+  Calibration calibration_;  // as given: used again when the packets choose another model
+  AnyStreamDecoder decoder_;
+  bool detecting_ = false;  // still choosing the model (see DecodeWorkerOptions::detect_model)
+  std::optional<SensorModelId> pending_model_;
   // Arenas currently being filled by the assembler (at most two frames are open at once), so a
   // Frame& from the assembler can be mapped back to its arena without searching the pool.
   std::array<FrameArena*, 4> open_{};

@@ -266,7 +266,8 @@ int report_replay(const PacketSource& source, const RunSource& run_source) {
 }
 
 // The daemon's life, in order; shutdown is the reverse (PipelineThreads).
-int run(const CommandLine& options) {
+int run(const CommandLine& command_line) {
+  CommandLine options = command_line;  // the start fills in the sensor model
   // A stop asked for from here on ends the start within a second, at whatever step it is.
   take_signals_for_startup();
   const std::string source_name = options.config_path.value_or("command line");
@@ -283,6 +284,7 @@ int run(const CommandLine& options) {
   }
   std::unique_ptr<SimulatedPtcServer> simulated_ptc;  // outlives every thread that asks it
   std::optional<PtcClientOptions> ptc;
+  choose_sensor_model(config, options.source);
   const SensorAtStart sensor = learn_sensor(config, options.source, simulated_ptc, ptc);
   stop_if_requested("asking the sensor");
   const Calibration& calibration = sensor.calibration;
@@ -294,16 +296,18 @@ int run(const CommandLine& options) {
   log_sensor(sensor, config, options.source);
   const DecoderTarget decoder = choose_decoder(config);
 
-  Pipeline pipe(config);  // all the memory, now
+  // All the memory, now: arenas sized for the model (every model's when the packets choose it).
+  const std::uint32_t points_per_arena = arena_points(config, options.source.model);
+  Pipeline pipe(config, points_per_arena);
   spdlog::info(
       "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
       "packets",
-      config.ring.slots, sizeof(PacketSlot), config.arenas.count, config.arenas.points_per_frame,
+      config.ring.slots, sizeof(PacketSlot), config.arenas.count, points_per_arena,
       Pipeline::raw_batches(config), config.arenas.packets_per_frame);
   stop_if_requested("allocating memory");
 
   const std::unique_ptr<PacketSource> source = open_source(config, options.source);
-  WriterOptions wo = writer_options(config);
+  WriterOptions wo = writer_options(config, options.source.model);
   wo.decoder = std::string(to_string(decoder));
   wo.calibration_csv = calibration.to_csv();
   wo.sensor_identity = SensorIdentity{sensor.inventory ? sensor.inventory->serial : "",
@@ -347,7 +351,8 @@ int run(const CommandLine& options) {
   } catch (const std::exception& error) {
     throw StartupError{kExitCantCreate, fmt::format("outputs: {}", error.what())};
   }
-  DecodeWorker worker(calibration, decode_worker_options(config, decoder, options.source),
+  DecodeWorker worker(calibration,
+                      decode_worker_options(config, decoder, options.source, calibration.model()),
                       pipe.ring, pipe.to_writer, pipe.free_arenas, pipe.free_raw);
   // From here the signals are supervise()'s: blocked before the first pipeline thread starts,
   // so every thread inherits the mask (a SIGTERM taken by another thread would be lost to it).

@@ -81,6 +81,9 @@ Overrides (same names as the configuration keys):
                          sensor.dual_return_distance_threshold (default 0.1)
   --firing-time-correction
                          sensor.firing_time_correction = true
+  --sensor-model NAME    sensor.model: auto (default: from the packets), Pandar40P, Pandar64,
+                         PandarXT32, PandarXT16 or PandarQT128 (any case); with --simulate,
+                         the model the simulated sensor is
   --rpm N                simulated (and expected) motor speed, 600 or 1200
   --return-mode MODE     simulated (and expected) return mode: dual, strongest or last
   --udp-sequence         the simulated sensor appends a UDP sequence number

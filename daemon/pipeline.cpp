@@ -18,14 +18,14 @@ std::size_t power_of_two_at_least(std::size_t n) {
 
 }  // namespace
 
-Pipeline::Pipeline(const DaemonConfig& c)
+Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame)
     : ring(c.ring.slots),
       free_arenas(power_of_two_at_least(c.arenas.count)),
       free_raw(power_of_two_at_least(raw_batches(c))),
       to_writer(power_of_two_at_least(c.arenas.count + raw_batches(c) + 16)),
       status(4) {
   for (std::uint32_t i = 0; i < c.arenas.count; ++i) {
-    arenas.push_back(std::make_unique<FrameArena>(c.arenas.points_per_frame, pcd_format(c)));
+    arenas.push_back(std::make_unique<FrameArena>(points_per_frame, pcd_format(c)));
     free_arenas.try_push(arenas.back().get());
   }
   for (std::uint32_t i = 0; i < raw_batches(c); ++i) {

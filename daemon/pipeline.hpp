@@ -28,7 +28,8 @@
 namespace pandarcap {
 
 struct Pipeline {
-  explicit Pipeline(const DaemonConfig& config);
+  // `points_per_frame`: each arena's (arena_points(), daemon_options.hpp).
+  Pipeline(const DaemonConfig& config, std::uint32_t points_per_frame);
 
   // As many raw batches as arenas: the recording may fall behind as far as the frames can.
   static std::uint32_t raw_batches(const DaemonConfig& config) { return config.arenas.count; }

@@ -92,6 +92,7 @@ struct DecodeSnapshot {
   LatencyHistogram latency;       // kernel receive timestamp -> decoded (live sources only)
   // The last accepted packet's time minus its receive time (see HealthGauges); none before one.
   std::optional<std::int64_t> sensor_clock_offset_ns;
+  SensorModelId model = SensorModelId::kPandar40P;  // whose decoder runs
 };
 
 // Messages are copied into the queue's preallocated cells; a snapshot travels by value.

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/sensors/packet.hpp"
+#include "core/sensors/sensor_model_id.hpp"
 
 namespace pandarcap {
 
@@ -26,6 +27,13 @@ struct RunSource {
   int simulated_rpm = 600;
   ReturnMode simulated_mode = ReturnMode::kDual;
   bool simulated_udp_sequence = false;
+  // The sensor model, once the start has chosen it (choose_sensor_model, startup_steps.hpp):
+  // a fixed sensor.model, the one a replay's packets name, the simulated sensor's; none for a
+  // live "auto", where the packets choose it (detect_model).
+  std::optional<SensorModelId> model;
+  bool detect_model = false;
+  // The model --simulate plays (--sensor-model; the Pandar40P by default).
+  SensorModelId simulated_model = SensorModelId::kPandar40P;
 };
 
 }  // namespace pandarcap

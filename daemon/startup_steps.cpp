@@ -8,6 +8,7 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -18,6 +19,7 @@
 #include "config/config_loader.hpp"
 #include "core/decode/calibration.hpp"
 #include "core/log_text.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "core/sim/simulated_unit.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/daemon_options.hpp"
@@ -26,6 +28,7 @@
 #include "daemon/live/live_port_probe.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/recording_calibration.hpp"
+#include "daemon/pcap/recording_model.hpp"
 
 namespace pandarcap {
 
@@ -146,8 +149,11 @@ int check_config(const DaemonConfig& config, const std::string& source_name) {
   try {
     // The file the start would read; the sensor is not asked (no network here).
     const SensorSection& s = config.sensor;
-    if (s.calibration_source != "nominal" && !s.calibration_file.empty())
-      load_calibration(s.calibration_file);
+    if (s.calibration_source != "nominal" && !s.calibration_file.empty()) {
+      std::optional<SensorModelId> model;  // "auto": any supported model's table
+      if (s.model != "auto") model = parse_sensor_model(s.model);
+      load_calibration(s.calibration_file, model);
+    }
   } catch (const std::exception& error) {
     std::fprintf(stderr, "pandarcapd: %s\n", escaped_control(error.what()).c_str());
     return kExitConfig;
@@ -218,8 +224,9 @@ void refuse_root_unless_allowed(const CommandLine& options) {
 void log_sensor(const SensorAtStart& sensor, const DaemonConfig& config, const RunSource& source) {
   if (sensor.calibration_source == "nominal") {
     spdlog::warn(
-        "calibration: nominal Pandar40P table in use (no sensor answer, no calibration_file); "
-        "per-unit elevations differ by up to ~0.45 degrees");
+        "calibration: nominal {} table in use (no sensor answer, no calibration_file); "
+        "per-unit angles differ from it by up to ~0.5 degrees",
+        display_name(sensor.calibration.model()));
   } else {
     spdlog::info("calibration: {}", sensor.describe());
   }
@@ -247,9 +254,10 @@ namespace {
 // The calibration a replayed recording carries (daemon/pcap/recording_calibration.hpp), as the
 // sensor's facts at start: calibration_source "recording". None: nothing, said in the log (the
 // nominal table follows). One there but unusable: a CalibrationError (exit 78).
-std::optional<SensorAtStart> recording_sensor(const std::string& path) {
+std::optional<SensorAtStart> recording_sensor(const std::string& path,
+                                              std::optional<SensorModelId> model) {
   std::string looked_for;
-  std::optional<Calibration> table = recording_calibration(path, looked_for);
+  std::optional<Calibration> table = recording_calibration(path, looked_for, model);
   if (!table) {
     spdlog::warn(
         "calibration: the recording carries none (looked for {}): the nominal table is used; give "
@@ -265,25 +273,98 @@ std::optional<SensorAtStart> recording_sensor(const std::string& path) {
 
 }  // namespace
 
+namespace {
+
+// The simulated sensor spins and returns as its model can (a QT128 at 600 RPM only).
+void check_simulated(const RunSource& source) {
+  with_model(source.simulated_model, [&]<class M>(std::type_identity<M>) {
+    if (std::find(M::kSupportedRpms.begin(), M::kSupportedRpms.end(), source.simulated_rpm) ==
+        M::kSupportedRpms.end()) {
+      throw StartupError{kExitConfig, fmt::format("a simulated {} does not spin at {} RPM",
+                                                  display_name(M::kId), source.simulated_rpm)};
+    }
+    if (!mode_listed(M::kReturnModes, source.simulated_mode)) {
+      throw StartupError{kExitConfig,
+                         fmt::format("a simulated {} does not send {} return", display_name(M::kId),
+                                     to_string(source.simulated_mode))};
+    }
+  });
+}
+
+}  // namespace
+
+void choose_sensor_model(const DaemonConfig& config, RunSource& source) {
+  if (config.sensor.model != "auto") {
+    source.model = parse_sensor_model(config.sensor.model);  // checked with the configuration
+    spdlog::info("sensor model: {} (sensor.model)", display_name(*source.model));
+    if (source.kind == RunSource::Kind::kSimulated) {
+      source.simulated_model = *source.model;
+      check_simulated(source);
+    }
+    return;
+  }
+  switch (source.kind) {
+    case RunSource::Kind::kSimulated:
+      source.model = source.simulated_model;
+      spdlog::info("sensor model: {} (the simulated sensor)", display_name(*source.model));
+      break;
+    case RunSource::Kind::kLive:
+      source.detect_model = true;
+      spdlog::info("sensor model: auto (the first packets name it)");
+      return;
+    case RunSource::Kind::kReplay:
+      break;
+  }
+  if (source.kind == RunSource::Kind::kSimulated) {
+    check_simulated(source);
+    return;
+  }
+  std::optional<RecordingModel> found;
+  try {
+    std::optional<std::uint16_t> port;
+    if (source.port_given) port = config.sensor.data_port;
+    found = recording_model(source.replay_path, port);
+  } catch (const CaptureError&) {
+    return;  // the replay's own open says what is wrong with the file
+  }
+  if (!found) {
+    spdlog::warn("sensor model: no packet of {} names a model pandarcap knows: read as {}",
+                 source.replay_path, display_name(SensorModelId::kPandar40P));
+    source.model = SensorModelId::kPandar40P;
+    return;
+  }
+  if (found->detected.kind == DetectionKind::kUnsupported) {
+    throw StartupError{
+        kExitConfig,
+        fmt::format("{}: its packets are a Hesai {}, which pandarcap does not decode (it decodes "
+                    "the Pandar40P, Pandar64, PandarXT32, PandarXT16 and PandarQT128)",
+                    source.replay_path, found->detected.unsupported_name)};
+  }
+  source.model = found->detected.model;
+  spdlog::info("sensor model: {} (from the recording's packets)", display_name(*source.model));
+}
+
 SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
                            std::unique_ptr<SimulatedPtcServer>& simulated_ptc,
                            std::optional<PtcClientOptions>& ptc) {
   try {
     if (source.kind == RunSource::Kind::kSimulated && !source.ptc_port_given) {
       const SignalsBlocked blocked;  // its thread must never take the daemon's signals
-      simulated_ptc = std::make_unique<SimulatedPtcServer>(
-          simulated_unit(source.simulated_rpm, static_cast<std::uint8_t>(source.simulated_mode),
-                         source.simulated_udp_sequence, config.sensor.data_port));
+      simulated_ptc = std::make_unique<SimulatedPtcServer>(simulated_unit(
+          source.simulated_rpm, static_cast<std::uint8_t>(source.simulated_mode),
+          source.simulated_udp_sequence, config.sensor.data_port, source.simulated_model));
     }
     ptc = ptc_client_options(config, source, simulated_ptc ? simulated_ptc->port() : 0);
     if (ptc) ptc->cancel = &stop_requested();
     // A replay given no calibration takes the recording's own, before the nominal table.
     if (source.kind == RunSource::Kind::kReplay && config.sensor.calibration_source == "auto" &&
         config.sensor.calibration_file.empty()) {
-      if (std::optional<SensorAtStart> own = recording_sensor(source.replay_path)) return *own;
+      if (std::optional<SensorAtStart> own = recording_sensor(source.replay_path, source.model)) {
+        return *own;
+      }
     }
     return resolve_sensor_at_start(config.sensor.calibration_source, config.sensor.calibration_file,
-                                   ptc);
+                                   ptc, source.model);
   } catch (const SensorUnavailable& error) {
     stop_if_requested("asking the sensor");  // it did not answer because the wait was cut short
     throw StartupError{kExitUnavailable, error.what()};
@@ -308,7 +389,7 @@ std::unique_ptr<PacketSource> open_source(const DaemonConfig& config, const RunS
       case RunSource::Kind::kReplay:
         return PacketSource::replay(replay_options(config, source));
       case RunSource::Kind::kSimulated:
-        return PacketSource::simulated(receiver_options(config, source),
+        return PacketSource::simulated(receiver_options(config, source), source.simulated_model,
                                        simulated_sensor_config(source, realtime_ns()));
       case RunSource::Kind::kLive:
         break;

@@ -87,6 +87,11 @@ std::vector<std::string> live_port_warnings(const LiveSection& live);
 // the result.
 int check_config(const DaemonConfig& config, const std::string& source_name);
 
+// 1b. The sensor model (sensor.model): fixed, or for "auto" the one a replay's first packets name
+// (an unsupported model's: a StartupError naming it), the simulated sensor's, or none yet for a
+// live source (its packets choose it). Sets source.model and source.detect_model; logged.
+void choose_sensor_model(const DaemonConfig& config, RunSource& source);
+
 // 2. The sensor: its calibration (by calibration_source), identity and configuration. A
 // simulated run first starts the simulated sensor's PTC server (`simulated_ptc`), to be asked as
 // a real sensor is; `ptc` is where the sensor is asked, if anywhere.

@@ -53,6 +53,18 @@ std::vector<Malformed> malformed_from(const Bytes& good) {
     bytes[kBodyBytes + 14] = static_cast<std::uint8_t>(mode);  // the tail's return mode byte
     cases.push_back({"return mode " + std::to_string(mode), bytes, RejectReason::kBadReturnMode});
   }
+  // Another model's header: a Pandar64's (by its length and counts), an XT32's (protocol 6.1,
+  // 32 lasers, 8 blocks) are wrong_model; an AT128's (protocol 4.1) is a model pandarcap does not
+  // decode. None is ever read as the 40P's bytes.
+  Bytes p64(1194, 0x11);
+  p64[0] = 0xEE, p64[1] = 0xFF, p64[2] = 64, p64[3] = 6;
+  cases.push_back({"a Pandar64 header", p64, RejectReason::kWrongModel});
+  Bytes xt32(1080, 0x22);
+  xt32[0] = 0xEE, xt32[1] = 0xFF, xt32[2] = 6, xt32[3] = 1, xt32[6] = 32, xt32[7] = 8;
+  cases.push_back({"a PandarXT32 header", xt32, RejectReason::kWrongModel});
+  Bytes at128(1118, 0x33);
+  at128[0] = 0xEE, at128[1] = 0xFF, at128[2] = 4, at128[3] = 1;
+  cases.push_back({"an AT128 header", at128, RejectReason::kUnsupportedModel});
   cases.push_back({"all zeros", Bytes(kPacketBytes, 0x00), RejectReason::kBadMarker});
   cases.push_back({"all 0xFF", Bytes(kPacketBytes, 0xFF), RejectReason::kBadMarker});
   cases.push_back(
@@ -156,11 +168,10 @@ TEST_CASE(
     CHECK(got.stats.accepted == expected.stats.accepted);
     for (std::size_t r = 1; r < kRejectReasonCount; ++r) {  // 0 is kNone, not a reject
       CHECK(got.stats.rejects[r] == injected[r]);
-      // Every reason the Pandar40P's validate() gives is injected. bad_crc (the QT128's CRCs)
-      // and wrong_model (a fixed model meeting another model's packets) cannot come from a 40P
-      // stream until the stream decoder is generic over the model (issue 39, part 2).
+      // Every reason a Pandar40P stream can meet is injected. bad_crc is the QT128's own (its
+      // packet in a 40P stream is wrong_model).
       const auto reason = static_cast<RejectReason>(r);
-      if (reason != RejectReason::kBadCrc && reason != RejectReason::kWrongModel) {
+      if (reason != RejectReason::kBadCrc) {
         CHECK(injected[r] > 0);
       }
     }

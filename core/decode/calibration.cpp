@@ -185,6 +185,23 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
   return calibration;
 }
 
+Calibration Calibration::parse_any(std::string_view text, const std::string& source_name) {
+  const std::size_t rows = data_rows(text);
+  for (SensorModelId id : kSensorModelIds) {
+    if (static_cast<std::size_t>(pandarcap::channel_count(id)) == rows) {
+      return parse(text, source_name, id);
+    }
+  }
+  return parse(text, source_name, SensorModelId::kPandar40P);
+}
+
+SensorModelId Calibration::model() const noexcept {
+  for (SensorModelId id : kSensorModelIds) {
+    if (pandarcap::channel_count(id) == channel_count) return id;
+  }
+  return SensorModelId::kPandar40P;
+}
+
 std::string Calibration::to_csv() const {
   std::string out = "Laser id,Elevation,Azimuth\n";
   for (int c = 0; c < channel_count; ++c) {

@@ -18,6 +18,7 @@
 #pragma once
 
 #include <array>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -46,6 +47,17 @@ struct Calibration {
   // messages and stored in `source`.
   static Calibration parse(std::string_view text, const std::string& source_name,
                            SensorModelId model = SensorModelId::kPandar40P);
+
+  // The same for a model not yet known ("auto"): the table's row count names it (40, 64, 32, 16
+  // or 128 channels); other counts are read as the Pandar40P's, whose error says what was found.
+  static Calibration parse_any(std::string_view text, const std::string& source_name);
+  // parse() for `model`, parse_any() for none.
+  static Calibration parse_for(std::string_view text, const std::string& source_name,
+                               std::optional<SensorModelId> model) {
+    return model ? parse(text, source_name, *model) : parse_any(text, source_name);
+  }
+  // The model a table is for, by its channel count (the Pandar40P for 40).
+  SensorModelId model() const noexcept;
 
   bool is_nominal() const noexcept { return source == "nominal"; }
   // The table as CSV in the same format (saved next to recordings).

@@ -72,7 +72,8 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
       if (!slot.in_use) continue;
       const double rpm =
           std::clamp<double>(std::min(slot.slowest_rpm, meta.motor_rpm), kSlowestRpm, kFastestRpm);
-      if (slot.packets + 1 > frame_packet_limit(meta.return_mode, rpm, channel_span_cdeg_)) {
+      if (slot.packets + 1 >
+          frame_packet_limit_at(meta.packets_per_second, rpm, channel_span_cdeg_)) {
         ++stats_.frames_overlong;
         discontinuity();
         break;
@@ -82,18 +83,25 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
   previous_t0_ns_ = meta.t0_ns;
   previous_time_valid_ = meta.time_valid;
   // One block's firing turns the azimuth by this much: the packet's own span over its rounds.
-  const int rounds = rounds_per_packet(meta.return_mode);
-  const int span = signed_step(meta.block_azimuth_cdeg[kBlocks - 1], meta.block_azimuth_cdeg[0]);
-  if (span > 0 && span < kMaxStepCdeg) {
+  const int rounds = meta.firings;
+  const int span =
+      signed_step(meta.block_azimuth_cdeg[meta.block_count - 1], meta.block_azimuth_cdeg[0]);
+  if (rounds > 1 && span > 0 && span < kMaxStepCdeg) {
     block_step_cdeg_ = static_cast<double>(span) / (rounds - 1);
     packet_step_cdeg_ = block_step_cdeg_ * rounds;
+  } else if (rounds == 1 && meta.motor_rpm > 0 && meta.packets_per_second > 0) {
+    // One firing a packet (a QT128 in dual return): no span to measure; the tail's speed says
+    // how far a packet turns.
+    const double rpm = std::clamp<double>(meta.motor_rpm, kSlowestRpm, kFastestRpm);
+    packet_step_cdeg_ = rpm / 60.0 * kFullCircleCdeg / meta.packets_per_second;
+    block_step_cdeg_ = packet_step_cdeg_;
   }
   const auto block_step = static_cast<std::int64_t>(std::lround(block_step_cdeg_));
   const std::int64_t margin = block_step / 2;  // the encoder's jitter, and rounding
   const std::int64_t previous_position = position_;
   const bool continued = started_;
 
-  for (int b = 0; b < kBlocks; ++b) {
+  for (int b = 0; b < meta.block_count; ++b) {
     const std::uint16_t azimuth = meta.block_azimuth_cdeg[b];
     bool restarted = false;
     if (!started_) {

@@ -55,9 +55,15 @@ struct FrameAssemblerConfig {
   int relative_azimuth_max_cdeg = 400;
 };
 
-// What the assembler needs of a packet besides its points.
+// What the assembler needs of a packet besides its points. Sized for the model with the most
+// blocks (the 40P's 10); the model's stream decoder fills block_count of them and its rates.
 struct PacketMeta {
   std::array<std::uint16_t, kBlocks> block_azimuth_cdeg{};
+  int block_count = kBlocks;
+  // Firings in this packet (blocks / returns per firing) and the model's packet rate in its
+  // return mode: a revolution's packets at the tail's speed follow from them.
+  int firings = kBlocks / 2;
+  double packets_per_second = 3600;
   std::int64_t t0_ns = 0;
   bool time_valid = true;
   std::uint16_t motor_rpm = 0;

@@ -51,30 +51,6 @@ void HeldPackets::push(std::span<const std::uint8_t> payload, const AdmittedPack
   ++count_;
 }
 
-void HeldPackets::move_azimuth(std::size_t i, int first_cdeg, double packet_step_cdeg) noexcept {
-  Entry& e = at(i);
-  const PacketView packet = PacketView::assume_valid({e.bytes.data(), e.size});
-  const int rounds = rounds_per_packet(packet.return_mode());
-  const int pairing = kBlocks / rounds;  // blocks a firing round gives (2 in dual return)
-  const double round_step = packet_step_cdeg / rounds;
-  const double span = round_step * (rounds - 1);
-  const int own_span = signed_step_cdeg(packet.azimuth_cdeg(kBlocks - 1), packet.azimuth_cdeg(0));
-  const bool whole = std::abs(own_span - span) <= follow_tolerance_cdeg(span);
-  const int shift = first_cdeg - packet.azimuth_cdeg(0);
-  std::array<int, kBlocks> azimuths{};
-  for (int b = 0; b < kBlocks; ++b) {
-    azimuths[b] = whole ? packet.azimuth_cdeg(b) + shift
-                        : first_cdeg + static_cast<int>(std::lround(round_step * (b / pairing)));
-  }
-  for (int b = 0; b < kBlocks; ++b) {
-    const auto azimuth = static_cast<std::uint16_t>((azimuths[b] % 36000 + 36000) % 36000);
-    std::uint8_t* field = e.bytes.data() + kBlockBytes * b + 2;
-    field[0] = static_cast<std::uint8_t>(azimuth);
-    field[1] = static_cast<std::uint8_t>(azimuth >> 8);
-  }
-  e.admitted.rotation.azimuth_cdeg = static_cast<std::uint16_t>(azimuths[0] % 36000);
-}
-
 void HeldPackets::pop_oldest() noexcept {
   head_ = (head_ + 1) % kMaxHeldPackets;
   --count_;

@@ -11,13 +11,17 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <optional>
 #include <span>
 
 #include "core/decode/packet_time.hpp"
+#include "core/sensors/model_access.hpp"
 #include "core/sensors/packet.hpp"
+#include "core/sensors/sensor_model.hpp"
 
 namespace pandarcap {
 
@@ -94,7 +98,31 @@ class HeldPackets {
   // the packet's own blocks are a packet's span apart (`packet_step_cdeg`, within
   // follow_tolerance_cdeg()): an azimuth shifted whole keeps its encoder's readings. Otherwise
   // (every block the same garbage) each block's azimuth is where its firing round was.
-  void move_azimuth(std::size_t i, int first_cdeg, double packet_step_cdeg) noexcept;
+  template <class Model>
+  void move_azimuth(std::size_t i, int first_cdeg, double packet_step_cdeg) noexcept {
+    Entry& e = at(i);
+    const std::span<const std::uint8_t> p(e.bytes.data(), e.size);
+    const int rounds = Model::firings_per_packet(returns_per_firing(Model::return_mode(p)));
+    const int pairing = Model::kBlocks / rounds;  // blocks a firing round gives (2 in dual)
+    const double round_step = packet_step_cdeg / rounds;
+    const double span = round_step * (rounds - 1);
+    const int own_span =
+        signed_step_cdeg(Model::azimuth_cdeg(p, Model::kBlocks - 1), Model::azimuth_cdeg(p, 0));
+    const bool whole = std::abs(own_span - span) <= follow_tolerance_cdeg(span);
+    const int shift = first_cdeg - Model::azimuth_cdeg(p, 0);
+    std::array<int, Model::kBlocks> azimuths{};
+    for (int b = 0; b < Model::kBlocks; ++b) {
+      azimuths[b] = whole ? Model::azimuth_cdeg(p, b) + shift
+                          : first_cdeg + static_cast<int>(std::lround(round_step * (b / pairing)));
+    }
+    for (int b = 0; b < Model::kBlocks; ++b) {
+      const auto azimuth = static_cast<std::uint16_t>((azimuths[b] % 36000 + 36000) % 36000);
+      std::uint8_t* field = e.bytes.data() + block_azimuth_offset<Model>(p, b);
+      field[0] = static_cast<std::uint8_t>(azimuth);
+      field[1] = static_cast<std::uint8_t>(azimuth >> 8);
+    }
+    e.admitted.rotation.azimuth_cdeg = static_cast<std::uint16_t>(azimuths[0] % 36000);
+  }
   // Forgets the oldest (a stray: chain_start() > 0).
   void pop_oldest() noexcept;
   void clear() noexcept {

@@ -4,9 +4,14 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <stdexcept>
+#include <string>
 #include <utility>
 
+#include "core/sensors/model_access.hpp"
+#include "core/sensors/model_detection.hpp"
 #include "core/sensors/sensor_model.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "core/sensors/timing.hpp"
 
 namespace pandarcap {
@@ -20,9 +25,8 @@ std::uint64_t StreamStats::rejected() const noexcept {
 
 namespace {
 
-constexpr std::size_t kReturnModeByte = kBodyBytes + 14;  // the tail's (PacketView::return_mode)
-
-FrameAssemblerConfig assembler_config(const ScalarDecoder& decoder, double cut_angle_deg) {
+template <class Decoder>
+FrameAssemblerConfig assembler_config(const Decoder& decoder, double cut_angle_deg) {
   const auto [lo, hi] = decoder.relative_azimuth_bounds_cdeg();
   return {cut_angle_deg, lo, hi};
 }
@@ -51,8 +55,9 @@ std::uint64_t fingerprint(std::span<const std::uint8_t> payload) noexcept {
 
 }  // namespace
 
-void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns, bool time_valid,
-                                  std::uint16_t rpm, ReturnMode mode) {
+template <class Model>
+void BasicStreamDecoder<Model>::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns,
+                                              bool time_valid, std::uint16_t rpm, ReturnMode mode) {
   const std::optional<std::uint16_t> previous = previous_azimuth_cdeg_;
   previous_azimuth_cdeg_ = azimuth_cdeg;
   if (!previous || !previous_t0_ns_) return;
@@ -62,12 +67,13 @@ void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns
   // without a date), but a good time and a bad one are not comparable.
   const bool times_valid = time_valid == previous_time_valid_;
   // The step one packet should make at the reported speed (600 RPM dual: 100 cdeg).
-  const double expected = azimuth_step_per_packet_cdeg(mode, rpm);
+  const int returns = returns_per_firing(mode);
+  const double expected = Model::azimuth_step_per_packet_cdeg(returns, rpm);
   const bool gap = step > 1.5 * expected + 5;
   // Spin is measured over consecutive packets as they arrive (whether placed or not: a crawling
   // motor's packets may all be outliers): a loss, a glitch or a restart is not spin. A standing
   // motor's step is 0, and counts: it measures 0 RPM.
-  const auto period = packet_period_ns(mode);
+  const auto period = Model::packet_period_ns(returns);
   if (times_valid && !gap && dt > 0 && dt <= period + period / 2) {
     stats_.measured_azimuth_cdeg += static_cast<std::uint64_t>(step);
     stats_.measured_time_ns += static_cast<std::uint64_t>(dt);
@@ -79,13 +85,27 @@ void StreamDecoder::track_azimuth(std::uint16_t azimuth_cdeg, std::int64_t t0_ns
   }
 }
 
-StreamDecoder::StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
-                             FrameSink& sink)
-    : decoder_(calibration, config.decoder, config.decoder_target),
-      assembler_(assembler_config(decoder_.scalar(), config.cut_angle_deg), sink),
+namespace {
+
+const Calibration& checked(const Calibration& calibration, int channels) {
+  if (calibration.channel_count != channels) {
+    throw std::invalid_argument("the calibration has " + std::to_string(calibration.channel_count) +
+                                " channels, the sensor model " + std::to_string(channels));
+  }
+  return calibration;
+}
+
+}  // namespace
+
+template <class Model>
+BasicStreamDecoder<Model>::BasicStreamDecoder(const Calibration& calibration,
+                                              const StreamDecoderConfig& config, FrameSink& sink)
+    : decoder_(checked(calibration, Model::kChannels), config.decoder, config.decoder_target),
+      assembler_(assembler_config(decoder_, config.cut_angle_deg), sink),
       decode_points_(config.decode_points) {}
 
-bool StreamDecoder::duplicate(std::span<const std::uint8_t> payload) noexcept {
+template <class Model>
+bool BasicStreamDecoder<Model>::duplicate(std::span<const std::uint8_t> payload) noexcept {
   const std::uint64_t print = fingerprint(payload);
   for (const std::uint64_t recent : recent_) {
     if (recent == print) return true;
@@ -95,41 +115,54 @@ bool StreamDecoder::duplicate(std::span<const std::uint8_t> payload) noexcept {
   return false;
 }
 
-RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
+template <class Model>
+RejectReason BasicStreamDecoder<Model>::process(std::span<const std::uint8_t> payload) {
   ++stats_.packets;
-  const RejectReason reason = validate(payload);
+  RejectReason reason = Model::validate(payload);
+  if (reason != RejectReason::kNone) {
+    // Another model's packet is its own reason, whatever this model's check tripped on (a 64's
+    // packet is no 40P length): a second sensor, or the wrong --sensor-model.
+    const DetectedModel other = identify_model(payload);
+    if (other.kind == DetectionKind::kKnown && other.model != Model::kId) {
+      reason = RejectReason::kWrongModel;
+    } else if (other.kind == DetectionKind::kUnsupported) {
+      reason = RejectReason::kUnsupportedModel;
+    }
+  }
   ++stats_.rejects[static_cast<std::size_t>(reason)];
   if (reason != RejectReason::kNone) return reason;
   // A burst's return mode (see other_mode_run_): up to kMaxHeldPackets in a row that say another
   // mode than the stream's are a glitch of that byte, decoded in the stream's mode (the blocks
   // are laid out alike) and counted as outliers; the next one is a change of mode, taken.
   bool mode_repaired = false;
-  if (const ReturnMode said = PacketView::assume_valid(payload).return_mode();
-      stream_mode_ && said != *stream_mode_) {
+  if (const ReturnMode said = Model::return_mode(payload); stream_mode_ && said != *stream_mode_) {
     other_mode_run_ = other_mode_run_ > 0 && said == other_mode_ ? other_mode_run_ + 1 : 1;
     other_mode_ = said;
     if (other_mode_run_ <= kMaxHeldPackets) {
       std::memcpy(repaired_.data(), payload.data(), payload.size());
-      repaired_[kReturnModeByte] = static_cast<std::uint8_t>(*stream_mode_);
+      repaired_[return_mode_offset<Model>(payload)] = static_cast<std::uint8_t>(*stream_mode_);
       payload = std::span<const std::uint8_t>(repaired_).first(payload.size());
       mode_repaired = true;
     }
   } else {
     other_mode_run_ = 0;
   }
-  const PacketView packet = PacketView::assume_valid(payload);
   // A copy is counted once, and nothing of it is decoded again or counted as the stream's.
   if (duplicate(payload)) {
     ++stats_.duplicates;
     return RejectReason::kNone;
   }
-  const ReturnMode mode = packet.return_mode();
-  const PacketTime time = clock_.convert(packet.utc(), packet.timestamp_us());
-  if (const auto sequence = packet.sequence()) {
+  const ReturnMode mode = Model::return_mode(payload);
+  const std::int64_t period = Model::packet_period_ns(returns_per_firing(mode));
+  const TailDateTime utc = tail_datetime<Model>(payload);
+  const std::uint32_t timestamp_us = Model::timestamp_us(payload);
+  const PacketTime time = clock_.convert(utc, timestamp_us);
+  const std::optional<std::uint32_t> sequence_number = Model::sequence(payload);
+  if (const auto sequence = sequence_number) {
     // The packet's time tells a late copy (as old as its number says) from a sensor that
     // restarted its counter (a number already seen, at a new time).
     std::optional<SequenceClock> clock;
-    if (time.valid()) clock = SequenceClock{time.t0_ns, packet_period_ns(mode)};
+    if (time.valid()) clock = SequenceClock{time.t0_ns, period};
     if (sequence_.observe(*sequence, clock) == SequenceTracker::Verdict::kDuplicate) {
       ++stats_.duplicates;
       return RejectReason::kNone;
@@ -138,7 +171,7 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   }
   ++stats_.accepted;
 
-  const std::uint16_t tail_rpm = packet.motor_rpm();
+  const std::uint16_t tail_rpm = Model::motor_rpm(payload);
   stats_.rpm_min = stats_.accepted == 1 ? tail_rpm : std::min(stats_.rpm_min, tail_rpm);
   stats_.rpm_max = stats_.accepted == 1 ? tail_rpm : std::max(stats_.rpm_max, tail_rpm);
   // One packet's tail speed is not the stream's (see stream_rpm_): a real change is taken at
@@ -150,13 +183,13 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   if (stream_mode_ && *stream_mode_ != mode) ++stats_.return_mode_changes;
   stream_mode_ = mode;
   stats_.return_mode = mode;
-  const bool high_temperature = packet.tail_bytes()[5] != 0;
+  const bool high_temperature = Model::high_temperature(payload);
   if (high_temperature) ++stats_.high_temperature;
-  const bool sequence_present = packet.sequence().has_value();
+  const bool sequence_present = sequence_number.has_value();
 
   if (!time.valid()) {
     ++(time.status == PacketTimeStatus::kBadDate ? stats_.bad_date : stats_.bad_microseconds);
-    const InvalidTimeField bad = first_invalid_field(packet.utc(), packet.timestamp_us());
+    const InvalidTimeField bad = first_invalid_field(utc, timestamp_us);
     stats_.last_invalid_field = bad.field;
     stats_.last_invalid_value = bad.value;
   }
@@ -164,7 +197,7 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   // against the stream by the outlier rule, so the packet that returns to the stream after a
   // glitch is not taken for a step of its own.
   if (previous_t0_ns_ && time.t0_ns == *previous_t0_ns_) ++stats_.static_timestamps;
-  const std::uint16_t azimuth = packet.azimuth_cdeg(0);
+  const std::uint16_t azimuth = Model::azimuth_cdeg(payload, 0);
   // Against the last packet placed and the packet before: the packet that returns to the stream
   // after a glitch of shifted (or zeroed) azimuths is no standing motor, nor is a burst of equal
   // azimuths, nor a shifted packet that happens to land on the last one placed.
@@ -201,7 +234,7 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
     ++stats_.standing;
     filter_packet(FilterReason::kStanding);
   } else {
-    place_or_hold(payload, AdmittedPacket{rotation, time, packet_period_ns(mode), stats_.accepted});
+    place_or_hold(payload, AdmittedPacket{rotation, time, period, stats_.accepted});
   }
   // A stream turning backwards closes no frame by design (its packets are counted as reversed).
   if (turning_ == Turning::kForward) {
@@ -212,8 +245,9 @@ RejectReason StreamDecoder::process(std::span<const std::uint8_t> payload) {
   return RejectReason::kNone;
 }
 
-void StreamDecoder::place_or_hold(std::span<const std::uint8_t> payload,
-                                  const AdmittedPacket& admitted) {
+template <class Model>
+void BasicStreamDecoder<Model>::place_or_hold(std::span<const std::uint8_t> payload,
+                                              const AdmittedPacket& admitted) {
   const bool follows_stream = last_placed_ && follows(*last_placed_, admitted.rotation, turning_);
   if (held_.empty()) {
     if (follows_stream) {
@@ -266,7 +300,8 @@ void count_outlier_time(const PacketTime& time, const RotationPoint& before,
 
 }  // namespace
 
-void StreamDecoder::settle_outliers(const RotationPoint& after) {
+template <class Model>
+void BasicStreamDecoder<Model>::settle_outliers(const RotationPoint& after) {
   const RotationPoint before = *last_placed_;
   if (turning_ == Turning::kBackward) {
     // Nothing of a backwards stream is placed: its glitches are outliers, left out.
@@ -340,12 +375,14 @@ void StreamDecoder::settle_outliers(const RotationPoint& after) {
   held_.clear();
 }
 
-void StreamDecoder::place_repaired(std::size_t i, const RotationPoint& before, int at_cdeg,
-                                   std::int64_t t0_ns, double packet_step_cdeg) {
+template <class Model>
+void BasicStreamDecoder<Model>::place_repaired(std::size_t i, const RotationPoint& before,
+                                               int at_cdeg, std::int64_t t0_ns,
+                                               double packet_step_cdeg) {
   AdmittedPacket fixed = held_.admitted(i);
   const int target = (before.azimuth_cdeg + at_cdeg % 36000 + 36000) % 36000;
   if (target != fixed.rotation.azimuth_cdeg) {
-    held_.move_azimuth(i, target, packet_step_cdeg);
+    held_.template move_azimuth<Model>(i, target, packet_step_cdeg);
     fixed.rotation.azimuth_cdeg = held_.admitted(i).rotation.azimuth_cdeg;
   }
   fixed.time.t0_ns = t0_ns;
@@ -355,7 +392,8 @@ void StreamDecoder::place_repaired(std::size_t i, const RotationPoint& before, i
   place(held_.bytes(i), fixed);
 }
 
-void StreamDecoder::take_change(bool counted) {
+template <class Model>
+void BasicStreamDecoder<Model>::take_change(bool counted) {
   const std::size_t start = held_.chain_start();
   for (std::size_t i = 0; i < start; ++i) {
     ++stats_.outliers;
@@ -394,18 +432,21 @@ void StreamDecoder::take_change(bool counted) {
   held_.clear();
 }
 
-void StreamDecoder::drop_oldest_as_outlier() noexcept {
+template <class Model>
+void BasicStreamDecoder<Model>::drop_oldest_as_outlier() noexcept {
   ++stats_.outliers;
   filter_packet(FilterReason::kOutlier);
   ++skipped_;
   held_.pop_oldest();
 }
 
-void StreamDecoder::filter_packet(FilterReason reason) noexcept {
-  stats_.filtered.add(reason, std::uint64_t{kBlocks} * kChannels);
+template <class Model>
+void BasicStreamDecoder<Model>::filter_packet(FilterReason reason) noexcept {
+  stats_.filtered.add(reason, std::uint64_t{Model::kBlocks} * Model::kChannels);
 }
 
-void StreamDecoder::watch_frames(std::uint16_t rpm, ReturnMode mode) noexcept {
+template <class Model>
+void BasicStreamDecoder<Model>::watch_frames(std::uint16_t rpm, ReturnMode mode) noexcept {
   if (!decode_points_) return;
   const AssemblerStats& f = assembler_.stats();
   const std::uint64_t closed = f.frames_complete + f.frames_partial + f.frames_dropped;
@@ -417,12 +458,15 @@ void StreamDecoder::watch_frames(std::uint16_t rpm, ReturnMode mode) noexcept {
   // Three revolutions at the tail's speed (kept to the speeds a sensor runs at: a tail of 0 or
   // of garbage says nothing of how long a revolution is).
   const double speed = std::clamp<double>(rpm, kSlowestRpm, kFastestRpm);
-  if (static_cast<double>(++packets_since_frame_) > 3 * packets_per_revolution(mode, speed)) {
+  if (static_cast<double>(++packets_since_frame_) >
+      3 * Model::packets_per_revolution(returns_per_firing(mode), speed)) {
     ++stats_.frameless_packets;
   }
 }
 
-void StreamDecoder::place(std::span<const std::uint8_t> payload, const AdmittedPacket& admitted) {
+template <class Model>
+void BasicStreamDecoder<Model>::place(std::span<const std::uint8_t> payload,
+                                      const AdmittedPacket& admitted) {
   const std::optional<RotationPoint> previous = last_placed_;
   last_placed_ = admitted.rotation;
   placed_arrival_ = admitted.arrival;
@@ -435,32 +479,36 @@ void StreamDecoder::place(std::span<const std::uint8_t> payload, const AdmittedP
     filter_packet(FilterReason::kReversed);
     return;
   }
-  const PacketView packet = PacketView::assume_valid(payload);
+  const ReturnMode mode = Model::return_mode(payload);
+  const int returns = returns_per_firing(mode);
   // Without a UDP sequence, a loss shows as a step between packets placed wider than the tail's
   // speed allows (the packets left out between them aside).
   if (previous && !sequence_present_) {
     const int step = (admitted.rotation.azimuth_cdeg - previous->azimuth_cdeg + 36000) % 36000;
-    const double expected =
-        azimuth_step_per_packet_cdeg(packet.return_mode(), admitted.rotation.rpm);
+    const double expected = Model::azimuth_step_per_packet_cdeg(returns, admitted.rotation.rpm);
     if (step > (1.5 + skipped) * expected + 5 && step < 18000) ++stats_.azimuth_gaps;
   }
   if (!decode_points_) return;  // the health needs only where the rotation is
   const DecodedPacket decoded =
-      decoder_.decode(packet, admitted.time.t0_ns, points_, stats_.filtered);
+      decoder_.decode(payload, admitted.time.t0_ns, points_, stats_.filtered);
   stats_.points += decoded.point_count;
 
   PacketMeta meta;
-  for (int b = 0; b < kBlocks; ++b)
-    meta.block_azimuth_cdeg[b] = packet.azimuth_cdeg(b);
+  for (int b = 0; b < Model::kBlocks; ++b)
+    meta.block_azimuth_cdeg[b] = Model::azimuth_cdeg(payload, b);
+  meta.block_count = Model::kBlocks;
+  meta.firings = Model::firings_per_packet(returns);
+  meta.packets_per_second = Model::packets_per_second(returns);
   meta.t0_ns = admitted.time.t0_ns;
   meta.time_valid = admitted.time.valid();
   meta.motor_rpm = admitted.rotation.rpm;
-  meta.return_mode = packet.return_mode();
+  meta.return_mode = mode;
   meta.skipped_before = skipped;
   assembler_.add_packet(meta, std::span<const Point>(points_).first(decoded.point_count), decoded);
 }
 
-void StreamDecoder::flush() {
+template <class Model>
+void BasicStreamDecoder<Model>::flush() {
   // Nothing came after the held run to say it was a glitch: its chain is placed (a change at the
   // very end), the strays before it are outliers.
   if (!held_.empty()) take_change(false);
@@ -470,5 +518,11 @@ void StreamDecoder::flush() {
   stood_ = false;
   skipped_ = 0;
 }
+
+template class BasicStreamDecoder<Pandar40P>;
+template class BasicStreamDecoder<Pandar64>;
+template class BasicStreamDecoder<PandarXT32>;
+template class BasicStreamDecoder<PandarXT16>;
+template class BasicStreamDecoder<PandarQT128>;
 
 }  // namespace pandarcap

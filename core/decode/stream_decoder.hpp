@@ -57,6 +57,7 @@
 #pragma once
 
 #include <array>
+#include <concepts>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -65,11 +66,13 @@
 #include "core/decode/decoder.hpp"
 #include "core/decode/decoder_target.hpp"
 #include "core/decode/frame_assembler.hpp"
+#include "core/decode/model_decoder.hpp"
 #include "core/decode/outlier_rule.hpp"
 #include "core/decode/packet_decoder.hpp"
 #include "core/decode/packet_time.hpp"
 #include "core/decode/sequence_tracker.hpp"
 #include "core/sensors/packet.hpp"
+#include "core/sensors/pandar40p.hpp"
 
 namespace pandarcap {
 
@@ -163,9 +166,16 @@ inline std::uint64_t packets_missing(const StreamStats& stream, const SequenceSt
   return stream.sequence_packets > 0 ? sequence.lost : frames.packets_missing;
 }
 
-class StreamDecoder {
+// One per model (core/sensors/sensor_models.hpp), instantiated in stream_decoder.cpp for every
+// supported model; StreamDecoder is the Pandar40P's. Everything the rules need of a packet comes
+// through Model's accessors, so no packet pays a branch on the model.
+template <class Model>
+class BasicStreamDecoder {
  public:
-  StreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config, FrameSink& sink);
+  using ModelType = Model;
+  // Throws std::invalid_argument when the calibration is not the model's channel count.
+  BasicStreamDecoder(const Calibration& calibration, const StreamDecoderConfig& config,
+                     FrameSink& sink);
 
   // Processes one UDP payload; returns why it was rejected, or kNone (a duplicate too: it is not
   // malformed, see stats().duplicates).
@@ -180,7 +190,9 @@ class StreamDecoder {
   std::uint64_t packets_missing() const noexcept {
     return pandarcap::packets_missing(stats_, sequence_.stats(), assembler_.stats());
   }
-  const ScalarDecoder& decoder() const noexcept { return decoder_.scalar(); }
+  const ScalarDecoder& decoder() const noexcept requires std::same_as<Model, Pandar40P> {
+    return decoder_.scalar();
+  }
   DecoderTarget decoder_target() const noexcept { return decoder_.target(); }
 
  private:
@@ -206,7 +218,7 @@ class StreamDecoder {
   // Frames that do not close while packets arrive (frameless_packets).
   void watch_frames(std::uint16_t rpm, ReturnMode mode) noexcept;
 
-  PacketDecoder decoder_;
+  ModelDecoder<Model> decoder_;
   FrameAssembler assembler_;
   bool decode_points_;
   PacketClock clock_;
@@ -245,5 +257,7 @@ class StreamDecoder {
   std::uint64_t frames_closed_ = 0;
   std::uint64_t packets_since_frame_ = 0;
 };
+
+using StreamDecoder = BasicStreamDecoder<Pandar40P>;
 
 }  // namespace pandarcap

@@ -10,6 +10,7 @@
 #include "core/ptc/ptc_messages.hpp"
 #include "core/ptc/status_plausibility.hpp"
 #include "core/sensors/sensor_model.hpp"
+#include "core/sensors/sensor_models.hpp"
 
 namespace pandarcap {
 
@@ -55,7 +56,12 @@ void motor_problems(const HealthCounters& c, const HealthCounters& p,
     const double rpm = g.rpm_measured > 0 ? g.rpm_measured
                        : g.rpm_tail > 0   ? g.rpm_tail
                                           : static_cast<double>(expected.rpm);
-    const double rate = packets_per_revolution(*mode, rpm) * rpm / 60.0;
+    const double rate =
+        with_model(expected.model,
+                   [&]<class M>(std::type_identity<M>) {
+                     return M::packets_per_revolution(returns_per_firing(*mode), rpm);
+                   }) *
+        rpm / 60.0;
     if (std::abs(g.packet_rate_hz - rate) > 0.1 * rate) {
       problem("packet rate {:.0f}/s (expected {:.0f} in {} return)", g.packet_rate_hz, rate,
               g.return_mode);

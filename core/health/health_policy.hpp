@@ -41,6 +41,7 @@
 #include <string_view>
 
 #include "core/health/health.hpp"
+#include "core/sensors/sensor_model_id.hpp"
 
 namespace pandarcap {
 
@@ -58,6 +59,8 @@ struct HealthExpectations {
   // Fewer hours of disk left than this (gauges' storage.hours_left) is a problem; 0 = not
   // checked (health.min_hours_left).
   double min_hours_left = 0;
+  // Whose packet rate the stream is judged by.
+  SensorModelId model = SensorModelId::kPandar40P;
 };
 
 // Sets gauges.state and gauges.reason from `now` against `before` (the counters of the previous

@@ -58,6 +58,8 @@ std::string_view to_string(RejectReason reason) noexcept {
       return "bad_crc";
     case RejectReason::kWrongModel:
       return "wrong_model";
+    case RejectReason::kUnsupportedModel:
+      return "unsupported_model";
   }
   return "unknown";
 }

@@ -110,8 +110,11 @@ enum class RejectReason : std::uint8_t {
   // New values go at the end: the names are JSON keys and the numbers index counters.
   kBadCrc,      // a CRC the packet carries does not match its bytes (PandarQT128)
   kWrongModel,  // the header names another model: protocol version, laser or block count
+  // A Hesai model pandarcap knows of and does not decode (AT128, OT128, ...: model_detection.hpp):
+  // counted, never decoded as garbage.
+  kUnsupportedModel,
 };
-inline constexpr std::size_t kRejectReasonCount = 7;
+inline constexpr std::size_t kRejectReasonCount = 8;
 // Stable snake_case name, used as a JSON key and a Prometheus label value ("bad_length", ...).
 std::string_view to_string(RejectReason reason) noexcept;
 

@@ -66,6 +66,13 @@ constexpr double follow_tolerance_cdeg(double expected_cdeg) noexcept {
 // calibration) and one packet (the one a frame's first and last points share), with the tail's
 // speed share (kFollowSpeedShare) and two packets to spare for reordering. The real capture's
 // whole frames hold 364-369 packets at 598-602 RPM; this is 371-376.
+// The same for a model sending `packets_per_second` in the stream's return mode.
+constexpr double frame_packet_limit_at(double packets_per_second, double rpm,
+                                       double channel_span_cdeg) noexcept {
+  const double per_revolution = rpm > 0 ? packets_per_second * 60.0 / rpm : 0.0;
+  return per_revolution * (1 + channel_span_cdeg / kFullCircleCdeg) * (1 + kFollowSpeedShare) + 1 +
+         2;
+}
 constexpr double frame_packet_limit(ReturnMode mode, double rpm,
                                     double channel_span_cdeg) noexcept {
   const double per_revolution = packets_per_revolution(mode, rpm);

@@ -20,9 +20,9 @@ Calibration simulated_unit_calibration(SensorModelId model) {
 }
 
 SimulatedUnit simulated_unit(int rpm, std::uint8_t return_mode_code, bool udp_sequence,
-                             std::uint16_t data_port) {
+                             std::uint16_t data_port, SensorModelId model) {
   SimulatedUnit unit;
-  unit.calibration = simulated_unit_calibration(SensorModelId::kPandar40P);
+  unit.calibration = simulated_unit_calibration(model);
 
   ptc::SensorInventory& inv = unit.inventory;
   inv.serial = "PCSIM40P00000001";
@@ -33,7 +33,7 @@ SimulatedUnit simulated_unit(int rpm, std::uint8_t return_mode_code, bool udp_se
   inv.control_firmware = "sim-ctl-1.0";
   inv.sensor_firmware = "sim-fw-1.0";
   inv.model = 0;
-  inv.lines = kChannels;
+  inv.lines = static_cast<std::uint8_t>(unit.calibration.channel_count);
 
   ptc::SensorSettings& s = unit.settings;
   s.ip = {127, 0, 0, 1};

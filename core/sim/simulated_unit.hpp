@@ -36,7 +36,9 @@ Calibration simulated_unit_calibration(SensorModelId model);
 
 // The simulated unit, spinning at `rpm`, sending `return_mode_code` (the packets' tail code)
 // with or without a UDP sequence, to `data_port`.
+// `model`: whose table and laser count its PTC answers.
 SimulatedUnit simulated_unit(int rpm = 600, std::uint8_t return_mode_code = 0x39,
-                             bool udp_sequence = false, std::uint16_t data_port = 2368);
+                             bool udp_sequence = false, std::uint16_t data_port = 2368,
+                             SensorModelId model = SensorModelId::kPandar40P);
 
 }  // namespace pandarcap

@@ -6,7 +6,7 @@
 
 namespace pandarcap {
 
-Calibration load_calibration(const std::string& path) {
+Calibration load_calibration(const std::string& path, std::optional<SensorModelId> model) {
   const TextFile file = read_text_file(path);
   switch (file.status) {
     case TextFile::Status::kOk:
@@ -24,7 +24,7 @@ Calibration load_calibration(const std::string& path) {
       throw CalibrationError(fmt::format("{}:1:1: larger than {} bytes: not a calibration table",
                                          path, kMaxOperatorFileBytes));
   }
-  return Calibration::parse(file.text, path);
+  return Calibration::parse_for(file.text, path, model);
 }
 
 }  // namespace pandarcap

@@ -89,7 +89,12 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   const ReceiveCounters& receive = sources.receive;
   const DecodeSnapshot& decode = sources.decode;
   h.unix_time_ns = realtime_ns();
-  h.sensor = options_.sensor_name;
+  if (options_.sensor_name_from_model) {
+    h.sensor = lower_case_name(decode.model);
+  } else {
+    h.sensor = options_.sensor_name;
+  }
+  model_ = decode.model;
   h.version = options_.version;
   h.decoder = options_.decoder;
   h.points_counted = options_.points_counted;
@@ -243,7 +248,7 @@ void HealthPublisher::reclassify() {
   classify_health(
       c, previous_counters_,
       HealthExpectations{options_.expected_return_mode, options_.expected_rpm,
-                         options_.max_sensor_clock_offset_seconds, options_.min_hours_left},
+                         options_.max_sensor_clock_offset_seconds, options_.min_hours_left, model_},
       silent_, accounting_.last_error(), health_.gauges);
   json_text_current_ = false;
 }

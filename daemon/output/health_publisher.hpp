@@ -117,6 +117,7 @@ class HealthPublisher {
   std::uint64_t jsonl_bytes_written() const noexcept { return jsonl_bytes_written_; }
 
  private:
+  SensorModelId model_ = SensorModelId::kPandar40P;  // the decode worker's, at the last build
   // The health directory: true when both files were written (the .prom handed to the finisher).
   bool write_home(std::int64_t now);
   void write_prometheus(std::int64_t now);  // throws

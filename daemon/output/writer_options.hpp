@@ -59,6 +59,9 @@ struct WriterOptions {
   std::vector<std::filesystem::path> health_fallback_dirs;
   std::uint64_t jsonl_rotate_bytes = 0;
   std::string sensor_name;
+  // The label is the decoded model's name, which the packets choose (a live "auto" with no
+  // health.sensor_name): the health follows the decode worker's model.
+  bool sensor_name_from_model = false;
   std::string version;
   std::string decoder;  // decoder target in use, reported in the health output
   double no_data_timeout_seconds = 1.0;

@@ -36,7 +36,8 @@ bool read_at(int fd, std::uint64_t offset, std::uint8_t* out, std::size_t n) {
 // The calibration.csv attachment of an MCAP file: its top-level records are walked by their
 // lengths (chunks are not read) to the first attachment of that name, before the data end.
 std::optional<Calibration> mcap_attachment(int fd, std::uint64_t size, const std::string& path,
-                                           std::string& looked_for) {
+                                           std::string& looked_for,
+                                           std::optional<SensorModelId> model) {
   looked_for = path + " (attachment " + std::string(kAttachmentName) + ")";
   std::uint64_t at = mcap::kMagic.size();
   std::vector<std::uint8_t> record;
@@ -64,8 +65,9 @@ std::optional<Calibration> mcap_attachment(int fd, std::uint64_t size, const std
         a.string();  // media type
         const std::uint64_t data_size = a.u64();
         const auto data = a.bytes(data_size);
-        return Calibration::parse(
-            std::string_view(reinterpret_cast<const char*>(data.data()), data.size()), where);
+        return Calibration::parse_for(
+            std::string_view(reinterpret_cast<const char*>(data.data()), data.size()), where,
+            model);
       }
     }
     at += sizeof prefix + length;
@@ -76,7 +78,8 @@ std::optional<Calibration> mcap_attachment(int fd, std::uint64_t size, const std
 }  // namespace
 
 std::optional<Calibration> recording_calibration(const std::string& recording_path,
-                                                 std::string& looked_for) {
+                                                 std::string& looked_for,
+                                                 std::optional<SensorModelId> model) {
   const io::UniqueFd fd(::open(recording_path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC));
   struct stat info {};
   std::uint8_t magic[mcap::kMagic.size()] = {};
@@ -84,7 +87,7 @@ std::optional<Calibration> recording_calibration(const std::string& recording_pa
       read_at(fd.get(), 0, magic, sizeof magic) &&
       std::equal(mcap::kMagic.begin(), mcap::kMagic.end(), magic)) {
     return mcap_attachment(fd.get(), static_cast<std::uint64_t>(info.st_size), recording_path,
-                           looked_for);
+                           looked_for, model);
   }
   const std::optional<RecordingSidecars> sidecars = recording_sidecars(recording_path);
   if (!sidecars) {
@@ -95,7 +98,7 @@ std::optional<Calibration> recording_calibration(const std::string& recording_pa
   looked_for = sidecars->calibration_csv;
   std::error_code ec;
   if (std::filesystem::exists(sidecars->calibration_csv, ec)) {
-    return load_calibration(sidecars->calibration_csv);
+    return load_calibration(sidecars->calibration_csv, model);
   }
   // A recording still open (a killed run's NAME.pcap.part) has no sidecars yet: its run's table
   // is the directory's calibration.csv, which the next start gives it as its sidecar.
@@ -103,7 +106,7 @@ std::optional<Calibration> recording_calibration(const std::string& recording_pa
     const std::filesystem::path beside =
         std::filesystem::path(recording_path).parent_path() / "calibration.csv";
     looked_for += " or " + beside.string();
-    if (std::filesystem::exists(beside, ec)) return load_calibration(beside.string());
+    if (std::filesystem::exists(beside, ec)) return load_calibration(beside.string(), model);
   }
   return std::nullopt;
 }

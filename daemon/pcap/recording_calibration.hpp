@@ -21,7 +21,9 @@
 namespace pandarcap {
 
 // Throws CalibrationError as said above.
-std::optional<Calibration> recording_calibration(const std::string& recording_path,
-                                                 std::string& looked_for);
+// `model`: the table must have its channels (none: any supported model's count).
+std::optional<Calibration> recording_calibration(
+    const std::string& recording_path, std::string& looked_for,
+    std::optional<SensorModelId> model = SensorModelId::kPandar40P);
 
 }  // namespace pandarcap

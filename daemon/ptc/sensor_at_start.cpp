@@ -18,7 +18,7 @@ std::string SensorAtStart::describe() const {
   }
   if (calibration_source == "file") return "from file " + calibration.source;
   if (calibration_source == "recording") return "from the recording: " + calibration.source;
-  return "nominal Pandar40P table";
+  return fmt::format("nominal {} table", display_name(calibration.model()));
 }
 
 std::string SensorAtStart::to_json(const std::string& device_name,
@@ -36,15 +36,17 @@ std::string SensorAtStart::to_json(const std::string& device_name,
 }
 
 SensorAtStart resolve_sensor_at_start(const std::string& source, const std::string& file,
-                                      const std::optional<PtcClientOptions>& ptc) {
+                                      const std::optional<PtcClientOptions>& ptc,
+                                      std::optional<SensorModelId> model) {
+  const SensorModelId nominal_model = model.value_or(SensorModelId::kPandar40P);
   SensorAtStart out;
   if (source == "nominal") {
-    out.calibration = Calibration::nominal();
+    out.calibration = Calibration::nominal(nominal_model);
     out.calibration_source = "nominal";
     return out;
   }
   if (source == "file") {
-    out.calibration = load_calibration(file);
+    out.calibration = load_calibration(file, model);
     out.calibration_source = "file";
     return out;
   }
@@ -56,10 +58,10 @@ SensorAtStart resolve_sensor_at_start(const std::string& source, const std::stri
   // A calibration_file named beside "auto" is checked now, whatever the sensor answers: a broken
   // fallback is a configuration error to hear about today, not on the day the sensor is silent.
   std::optional<Calibration> file_table;
-  if (!file.empty()) file_table = load_calibration(file);
+  if (!file.empty()) file_table = load_calibration(file, model);
   const auto fall_back = [&] {
     out.calibration_source = file_table ? "file" : "nominal";
-    out.calibration = file_table ? std::move(*file_table) : Calibration::nominal();
+    out.calibration = file_table ? std::move(*file_table) : Calibration::nominal(nominal_model);
   };
   if (!ptc) {
     fall_back();
@@ -68,7 +70,7 @@ SensorAtStart resolve_sensor_at_start(const std::string& source, const std::stri
 
   PtcClient client(*ptc);
   out.endpoint = client.endpoint();
-  Fetched<Calibration> table = fetch_calibration(client);
+  Fetched<Calibration> table = fetch_calibration(client, model);
   if (table.value) {
     out.calibration = std::move(*table.value);
     out.calibration_source = "sensor";

@@ -50,8 +50,11 @@ struct SensorAtStart {
 
 // Throws CalibrationError for a calibration file that is missing or invalid, SensorUnavailable
 // when the source is "sensor" and it does not answer with a valid table.
-SensorAtStart resolve_sensor_at_start(const std::string& calibration_source,
-                                      const std::string& calibration_file,
-                                      const std::optional<PtcClientOptions>& ptc);
+// `model`: the sensor's, when known (a fixed sensor.model, a replay's packets); none: live
+// "auto", where a table of any supported model's channel count is taken.
+SensorAtStart resolve_sensor_at_start(
+    const std::string& calibration_source, const std::string& calibration_file,
+    const std::optional<PtcClientOptions>& ptc,
+    std::optional<SensorModelId> model = SensorModelId::kPandar40P);
 
 }  // namespace pandarcap

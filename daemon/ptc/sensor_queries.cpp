@@ -29,7 +29,7 @@ Fetched<T> fetch(PtcClient& client, ptc::Command command, Parse parse,
 
 }  // namespace
 
-Fetched<Calibration> fetch_calibration(PtcClient& client) {
+Fetched<Calibration> fetch_calibration(PtcClient& client, std::optional<SensorModelId> model) {
   Fetched<Calibration> out;
   PtcReply reply = client.request(ptc::Command::kGetCalibration);
   if (!reply.ok()) {
@@ -40,10 +40,12 @@ Fetched<Calibration> fetch_calibration(PtcClient& client) {
   // Some firmware terminates the text with NULs; nothing after them is table.
   if (const auto nul = text.find('\0'); nul != std::string_view::npos) text = text.substr(0, nul);
   try {
-    out.value = Calibration::parse(text, "sensor " + client.endpoint());
+    out.value = Calibration::parse_for(text, "sensor " + client.endpoint(), model);
   } catch (const CalibrationError& error) {
-    out.error = client.fail(ptc::Command::kGetCalibration, ptc::ErrorKind::kUnexpectedPayload,
-                            fmt::format("not a Pandar40P calibration table: {}", error.what()));
+    out.error =
+        client.fail(ptc::Command::kGetCalibration, ptc::ErrorKind::kUnexpectedPayload,
+                    fmt::format("not a {} calibration table: {}",
+                                model ? display_name(*model) : "supported model's", error.what()));
   }
   return out;
 }

@@ -27,7 +27,8 @@ struct Fetched {
 };
 
 // The table's `source` is "sensor ADDRESS:PORT".
-Fetched<Calibration> fetch_calibration(PtcClient& client);
+Fetched<Calibration> fetch_calibration(
+    PtcClient& client, std::optional<SensorModelId> model = SensorModelId::kPandar40P);
 Fetched<ptc::SensorInventory> fetch_inventory(PtcClient& client);
 Fetched<ptc::SensorSettings> fetch_settings(PtcClient& client);
 Fetched<ptc::SensorStatus> fetch_status(PtcClient& client);

@@ -11,12 +11,15 @@ std::unique_ptr<PacketSource> PacketSource::live(const UdpReceiverOptions& optio
 }
 
 std::unique_ptr<PacketSource> PacketSource::simulated(const UdpReceiverOptions& options,
+                                                      SensorModelId model,
                                                       const SyntheticSensorConfig& sensor) {
   std::unique_ptr<PacketSource> source = live(options);
   const std::uint16_t port = source->receiver_->bound_port();
-  source->simulator_ = std::make_unique<SimulatedSender>(sensor, "127.0.0.1", "127.0.0.1", port);
-  spdlog::info("simulated sensor: {} RPM, {} return{}, sending to 127.0.0.1:{}", sensor.rpm,
-               to_string(sensor.return_mode), sensor.udp_sequence ? ", UDP sequence" : "", port);
+  source->simulator_ =
+      std::make_unique<SimulatedSender>(model, sensor, "127.0.0.1", "127.0.0.1", port);
+  spdlog::info("simulated sensor: {}, {} RPM, {} return{}, sending to 127.0.0.1:{}",
+               display_name(model), sensor.rpm, to_string(sensor.return_mode),
+               sensor.udp_sequence ? ", UDP sequence" : "", port);
   return source;
 }
 

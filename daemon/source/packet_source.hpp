@@ -27,6 +27,7 @@ class PacketSource {
   static std::unique_ptr<PacketSource> live(const UdpReceiverOptions& options);
   // A socket as live, and the built-in simulated sensor `sensor` sending to it over loopback.
   static std::unique_ptr<PacketSource> simulated(const UdpReceiverOptions& options,
+                                                 SensorModelId model,
                                                  const SyntheticSensorConfig& sensor);
   // A capture file. Throws CaptureError for a capture that cannot be read.
   static std::unique_ptr<PacketSource> replay(const ReplayOptions& options);

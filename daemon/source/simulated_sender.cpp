@@ -12,6 +12,7 @@
 #include <system_error>
 
 #include "core/ipv4.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "core/sim/simulated_unit.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
@@ -23,9 +24,27 @@ constexpr std::size_t kMaxBurst = 64;
 
 }  // namespace
 
-SimulatedSender::SimulatedSender(const SyntheticSensorConfig& config, const std::string& source_ip,
-                                 const std::string& destination_ip, std::uint16_t destination_port)
-    : sensor_(config, simulated_unit(config.rpm).calibration) {
+namespace {
+
+ModelSensorConfig model_config(const SyntheticSensorConfig& c) {
+  ModelSensorConfig m;
+  m.rpm = c.rpm;
+  m.return_mode = c.return_mode;
+  m.udp_sequence = c.udp_sequence;
+  m.first_sequence = c.first_sequence;
+  m.start_unix_ns = c.start_unix_ns;
+  m.start_azimuth_deg = c.start_azimuth_deg;
+  m.seed = c.seed;
+  return m;
+}
+
+}  // namespace
+
+SimulatedSender::SimulatedSender(SensorModelId model, const SyntheticSensorConfig& config,
+                                 const std::string& source_ip, const std::string& destination_ip,
+                                 std::uint16_t destination_port)
+    // Rendered with the simulated unit's own table, the one its PTC serves.
+    : sensor_(model, model_config(config), simulated_unit_calibration(model)) {
   const sockaddr_in source = ipv4_endpoint(source_ip, 0, "simulator source");
   const sockaddr_in destination =
       ipv4_endpoint(destination_ip, destination_port, "simulator destination");
@@ -44,7 +63,7 @@ SimulatedSender::~SimulatedSender() {
 }
 
 void SimulatedSender::run(const std::atomic<bool>& stop) {
-  std::array<std::array<std::uint8_t, kMaxPacketBytes>, kMaxBurst> packets{};
+  std::array<std::array<std::uint8_t, kLargestDatagramBytes>, kMaxBurst> packets{};
   std::array<iovec, kMaxBurst> iov{};
   std::array<mmsghdr, kMaxBurst> messages{};
   const std::int64_t period = sensor_.packet_period_ns();
