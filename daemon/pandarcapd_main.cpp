@@ -310,6 +310,10 @@ int run(const CommandLine& command_line) {
   WriterOptions wo = writer_options(config, options.source.model);
   wo.decoder = std::string(to_string(decoder));
   wo.calibration_csv = calibration.to_csv();
+  // A nominal table is the model's own whatever the packets say (the decoder takes that model's).
+  wo.calibration_channels =
+      sensor.calibration_source == "nominal" ? 0 : calibration.channel_count;
+  wo.inventory_lasers = sensor.inventory ? sensor.inventory->lines : 0;
   wo.sensor_identity = SensorIdentity{sensor.inventory ? sensor.inventory->serial : "",
                                       sensor.inventory ? sensor.inventory->sensor_firmware : "",
                                       sensor.calibration_source};

@@ -190,9 +190,11 @@ class BasicStreamDecoder {
   std::uint64_t packets_missing() const noexcept {
     return pandarcap::packets_missing(stats_, sequence_.stats(), assembler_.stats());
   }
-  const ScalarDecoder& decoder() const noexcept requires std::same_as<Model, Pandar40P> {
-    return decoder_.scalar();
-  }
+  // The Pandar40P's scalar reference (a member template, so the other models' explicit
+  // instantiations do not instantiate it).
+  template <class M = Model>
+  requires std::same_as<M, Pandar40P>
+  const ScalarDecoder& decoder() const noexcept { return decoder_.scalar(); }
   DecoderTarget decoder_target() const noexcept { return decoder_.target(); }
 
  private:

@@ -143,6 +143,20 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
                                         : std::string_view(g.last_invalid_time));
   }
   if (g.high_temperature) problem("sensor high-temperature flag set");
+  if (c.packets_accepted > 0) {
+    const int channels = channel_count(expected.model);
+    const std::string_view model = display_name(expected.model);
+    if (expected.inventory_lasers > 0 && expected.inventory_lasers != channels) {
+      problem("the sensor reports {} lasers over PTC, its packets are a {}'s ({} channels)",
+              expected.inventory_lasers, model, channels);
+    }
+    if (expected.calibration_channels > 0 && expected.calibration_channels != channels) {
+      problem(
+          "the calibration has {} channels, the packets are a {}'s ({}): its nominal table "
+          "is used",
+          expected.calibration_channels, model, channels);
+    }
+  }
   if (expected.return_mode != "any" && !g.return_mode.empty() &&
       g.return_mode != expected.return_mode) {
     problem("return mode {} (expected {})", g.return_mode, expected.return_mode);

@@ -59,8 +59,14 @@ struct HealthExpectations {
   // Fewer hours of disk left than this (gauges' storage.hours_left) is a problem; 0 = not
   // checked (health.min_hours_left).
   double min_hours_left = 0;
-  // Whose packet rate the stream is judged by.
+  // Whose packet rate the stream is judged by: the model the packets are decoded as.
   SensorModelId model = SensorModelId::kPandar40P;
+  // What else names a model, checked against it once packets are accepted (0: not known): the
+  // calibration's channels, and the lasers the sensor's PTC inventory reports. A mismatch is a
+  // problem naming both (a live "auto" whose packets are another model than its table: the
+  // model's nominal table is then used).
+  int calibration_channels = 0;
+  int inventory_lasers = 0;
 };
 
 // Sets gauges.state and gauges.reason from `now` against `before` (the counters of the previous

@@ -248,7 +248,8 @@ void HealthPublisher::reclassify() {
   classify_health(
       c, previous_counters_,
       HealthExpectations{options_.expected_return_mode, options_.expected_rpm,
-                         options_.max_sensor_clock_offset_seconds, options_.min_hours_left, model_},
+                         options_.max_sensor_clock_offset_seconds, options_.min_hours_left, model_,
+                         options_.calibration_channels, options_.inventory_lasers},
       silent_, accounting_.last_error(), health_.gauges);
   json_text_current_ = false;
 }

@@ -62,6 +62,10 @@ struct WriterOptions {
   // The label is the decoded model's name, which the packets choose (a live "auto" with no
   // health.sensor_name): the health follows the decode worker's model.
   bool sensor_name_from_model = false;
+  // What names the model besides the packets (health_policy.hpp, HealthExpectations): the
+  // calibration's channels at start, the lasers the PTC inventory reports (0: none).
+  int calibration_channels = 0;
+  int inventory_lasers = 0;
   std::string version;
   std::string decoder;  // decoder target in use, reported in the health output
   double no_data_timeout_seconds = 1.0;
