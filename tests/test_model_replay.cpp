@@ -3,15 +3,25 @@
 // reference decoder (tests/reference/, nebula's decode path re-implemented in Python and checked
 // against nebula's own reference clouds: docs/sensors.md); and the simulated sensor of each
 // model, live over loopback.
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
 #include <catch2/catch.hpp>
+#include <chrono>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <thread>
 
+#include "bench/child_process.hpp"
+#include "core/ipv4.hpp"
 #include "core/sensors/sensor_model_id.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;
 using namespace pandarcap::test;
+using namespace std::chrono_literals;
 
 namespace {
 
@@ -122,5 +132,85 @@ TEST_CASE("the simulated sensor of each model: its packets arrive, frames whole,
     for (const auto& f : files_ending(dir / "frames", ".pcd"))
       partial += f.filename().string().find("_partial") != std::string::npos;
     CHECK(partial <= 2);
+  }
+}
+
+TEST_CASE("live with sensor.model auto: the first packets name the model, and it is decoded as it",
+          "[sensors][daemon][threads]") {
+  struct LiveCase {
+    const char* capture;
+    const char* calibration;  // "" : none (the nominal table of the model the packets name)
+    const char* sensor;
+    int packets_per_second;
+    const char* said;  // in a degraded record's reason; "" : none is degraded
+  };
+  const LiveCase cases[] = {
+      {"pandarxt32_nebula_dual_1080B.pcap", "", "pandarxt32", 5000, ""},
+      {"pandar64_nebula_dual_1198B.pcap", "nebula_Pandar64_calibration.csv", "pandar64", 6000, ""},
+      // A table of another model than the packets: the packets' model is decoded, with its
+      // nominal table, and the health says so.
+      {"pandarxt32_nebula_dual_1080B.pcap", "nebula_Pandar64_calibration.csv", "pandarxt32", 5000,
+       "the calibration has 64 channels, the packets are a PandarXT32's (32): its nominal table "
+       "is used"},
+  };
+  for (const LiveCase& c : cases) {
+    CAPTURE(c.capture);
+    const auto capture = real_capture(c.capture);
+    if (!capture) continue;
+    std::optional<std::filesystem::path> csv;
+    if (*c.calibration != 0) {
+      csv = real_capture(c.calibration);
+      if (!csv) continue;
+    }
+    const auto payloads = capture_payloads(*capture);
+    ScratchDir dir("model-live");
+    const std::uint16_t port = harness::free_udp_port();
+    std::vector<std::string> args = {"--allow-root",
+                                     "--port",
+                                     std::to_string(port),
+                                     "--max-clock-offset",
+                                     "0",
+                                     "--duration",
+                                     "4",
+                                     "--calibration-source",
+                                     csv ? "file" : "nominal",
+                                     "--output-dir",
+                                     (dir / "out").string()};
+    if (csv) args.insert(args.end(), {"--calibration", csv->string()});
+    harness::ChildProcess daemon(binary("pandarcapd"), args, dir / "log.txt");
+    INFO(daemon.log());
+    REQUIRE(
+        harness::wait_until([&] { return daemon.log().find("ready:") != std::string::npos; }, 20s));
+    // The capture at the sensor's pace (paced, not synchronised: 10 ms of packets at a time).
+    const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    REQUIRE(fd >= 0);
+    const sockaddr_in to = ipv4_endpoint("127.0.0.1", port, "daemon");
+    const auto start = std::chrono::steady_clock::now();
+    const std::size_t step = static_cast<std::size_t>(c.packets_per_second / 100);
+    for (std::size_t k = 0; k < payloads.size(); ++k) {
+      if (k % step == 0) std::this_thread::sleep_until(start + (k / step) * 10ms);
+      ::sendto(fd, payloads[k].data(), payloads[k].size(), 0,
+               reinterpret_cast<const sockaddr*>(&to), sizeof to);
+    }
+    ::close(fd);
+    REQUIRE(daemon.wait_exit(30s) == 0);
+    const nlohmann::json h = last_health_record(dir / "out");
+    INFO(h.dump());
+    REQUIRE(h.is_object());
+    const std::uint64_t overruns = check_ring_overruns(h);
+    CHECK(h.value("sensor", "") == c.sensor);
+    CHECK(health_counter(h, "packets_rejected") == 0);
+    CHECK(health_counter(h, "packets_accepted") + overruns == payloads.size());
+    CHECK(health_counter(h, "kernel_drops") == 0);
+    if (overruns == 0) CHECK(health_counter(h, "frames_complete") >= 2);
+    bool said = false, degraded = false;
+    for (const nlohmann::json& record : health_records(dir / "out")) {
+      degraded = degraded || record.value("state", "") == "degraded";
+      said = said || (record.value("state", "") == "degraded" &&
+                      record.value("reason", "").find(c.said) != std::string::npos);
+    }
+    CHECK(degraded == (*c.said != 0));
+    CHECK(said == (*c.said != 0));
+    CHECK(daemon.log().find("sensor model: auto") != std::string::npos);
   }
 }
