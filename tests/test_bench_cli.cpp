@@ -120,6 +120,48 @@ TEST_CASE("pandarcap-bench decode --json: every supported target, ratios from on
   }
 }
 
+TEST_CASE("pandarcap-bench decode --sensor-model all: a stream-decoder row per model, one run",
+          "[bench][cli]") {
+  const auto result = test::run_command(bench() +
+                                        " decode --json --sensor-model all --target scalar"
+                                        " --seconds 0.005 --rounds 1 2>&1");
+  INFO(result.out);
+  REQUIRE(result.exit_code == 0);
+  const json report = json::parse(result.out);
+  const json& rows = report["models"];
+  REQUIRE(rows.size() == kSensorModelIds.size());  // the 40P at the one target asked for
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const json& row = rows[i];
+    const SensorModelId model = kSensorModelIds[i];
+    INFO(lower_case_name(model));
+    CHECK(row["sensor_model"] == std::string(lower_case_name(model)));
+    CHECK(row["target"] == "scalar");
+    with_model(model, [&]<class M>(std::type_identity<M>) {
+      // One second of the model's own stream in dual return, every packet through its decoder.
+      CHECK(row["packets"] == std::llround(M::packets_per_second(2)));
+      CHECK(row["slots_per_packet"] == M::kBlocks * M::kChannels);
+    });
+    CHECK(row["accepted"] == row["packets"]);
+    CHECK(row["rejected"] == 0);
+    CHECK(row["outliers"] == 0);
+    CHECK(row["points_per_pass"].get<std::uint64_t>() > 0);
+    CHECK(row["frames_complete"].get<std::uint64_t>() >= 8);  // ten turns, the first and last cut
+    CHECK(row["frames_dropped"] == 0);
+    CHECK(row["points_dropped"] == 0);
+    const double pps = row["packets_per_s"];
+    CHECK(row["channel_measurements_per_s"].get<double>() ==
+          Approx(pps * row["slots_per_packet"].get<double>()));
+    CHECK(row["ns_per_measurement"].get<double>() ==
+          Approx(1e9 / row["channel_measurements_per_s"].get<double>()));
+  }
+  CHECK(rows[0]["ns_per_measurement_vs_pandar40p_scalar"] == 1.0);
+  // The per-model rows decode the simulated sensors: a capture is the 40P's target rows' input.
+  const auto mixed =
+      test::run_command(bench() + " decode --sensor-model pandar64 --capture x.pcap 2>&1");
+  CHECK(mixed.exit_code == 64);
+  CHECK(test::run_command(bench() + " decode --sensor-model velodyne 2>&1").exit_code == 64);
+}
+
 namespace {
 std::string md_text(const std::filesystem::path& report_dir) {
   std::stringstream md;
