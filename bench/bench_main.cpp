@@ -1,6 +1,7 @@
 // pandarcap-bench: the benchmark harness. One subcommand per thing measured; each prints a short
 // table, or one JSON object with --json. Performance figures in docs/performance.md come from here,
 // never from timed unit tests.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -10,10 +11,13 @@
 
 #include "bench/decode_bench.hpp"
 #include "bench/ring_bench.hpp"
+#include "bench/send_command.hpp"
 #include "bench/storage_bench.hpp"
+#include "bench/traffic_options.hpp"
 #include "bench/write_bench.hpp"
 #include "bench/zero_loss.hpp"
 #include "bench/zero_loss_usage.hpp"
+#include "core/sensors/sensor_model_id.hpp"
 #include "daemon/cli_args.hpp"
 
 namespace {
@@ -23,7 +27,8 @@ constexpr std::string_view kUsage = R"(Usage: pandarcap-bench SUBCOMMAND [OPTION
 Subcommands:
   decode    packet decoding per core: the scalar reference and every SIMD target this machine
             runs (sse4, avx2, avx512, ...), on a capture or the simulated sensor looped in
-            memory: packets/s, points/s and the ratio to scalar.
+            memory: packets/s, points/s and the ratio to scalar; with --sensor-model, the
+            whole stream decoder of each model: packets/s and channel measurements/s.
   zero-loss the highest packet rate the real pandarcapd takes with zero loss (RFC 2544 style
             search), against a bare recvmmsg receiver and a recvfrom receiver searched the same
             way in the same run; the daemon's CPU, latency, RSS and allocations at one sensor's
@@ -37,9 +42,10 @@ Subcommands:
   ring      SPSC packet ring (batches 1, 8, 32) and typed queue against a mutex + condition
             variable queue measured in the same run: items/s, round-trip latency, and the CPU
             an idle consumer uses at the sensor's packet rate.
-  send      the harness's traffic generator on its own: Pandar40P packets over UDP at a paced
-            rate (sendmmsg), to 127.0.0.1 unless told otherwise, e.g. to drive a daemon or a
-            vendor driver by hand; reports the rate actually achieved.
+  send      the harness's traffic generator on its own: a sensor's packets (any supported model,
+            --sensor-model) over UDP at a paced rate (sendmmsg), to 127.0.0.1 unless told
+            otherwise, e.g. to drive a daemon or a vendor driver by hand; reports the rate
+            actually achieved.
 
 Run 'pandarcap-bench SUBCOMMAND --help' for its options.
 )";
@@ -75,11 +81,19 @@ Options:
   --rounds N           interleaved rounds; figures are medians (default 5)
   --passes N           no timing: decode the stream N times per target and report the work done
                        (for instruction counts; see bench/callgrind-decode)
+  --sensor-model M     instead, the per-model rows: model M's whole stream decoder (validation,
+                       packet time, outlier rule, decode with points, frames) on one second of
+                       its simulated sensor in dual return at 600 RPM (repeatable; "all": every
+                       model, in any case). The Pandar40P's at every --target, the others' scalar:
+                       they have no SIMD kernels
   -h, --help           this text
 
 JSON keys: input, one object per target that ran ("scalar", "sse4", "avx2", "avx512", ...) with
 packets_per_s, points_per_s, ns_per_packet, channel_measurements_per_s, vs_scalar; targets_ran,
-best_target, best_vs_scalar, auto_target, goals, method.
+best_target, best_vs_scalar, auto_target, goals, method. With --sensor-model: input, models (one
+object per row: sensor_model, target, packets_per_s, channel_measurements_per_s,
+ns_per_measurement, ns_per_measurement_vs_pandar40p_scalar, points_per_s, sensor_fraction_of_core,
+accepted, rejected, outliers, frames_complete, frames_dropped, points_dropped, ...), method.
 Exit status: 0, 2 if the capture cannot be used, 64 for a usage error (or a target this CPU
 cannot run).
 )";
@@ -106,72 +120,10 @@ void print_report(const nlohmann::ordered_json& report, bool json, Print&& print
   }
 }
 
-// The traffic options of `zero-loss` and `send` (parse_traffic_option), in both usage texts.
-constexpr std::string_view kTrafficOptions =
-    R"(  --capture FILE         send this capture's packets (default: the simulated sensor)
-  --rpm N                the simulated sensor's spin rate: 600 or 1200 (default 600)
-  --return-mode MODE     the simulated sensor's return mode: dual (3600 packets/s), or single
-                         (= strongest) or last (1800 packets/s) (default dual)
-  --burst-factor X       bursts at X times the rate ...
-  --burst-ms M           ... lasting M ms ...
-  --burst-every S        ... every S seconds (default 1)
-  --foreign-fraction F   also send F x the valid packets from 127.0.0.2 (a daemon drops them as
-                         foreign when its config sets sensor_ip); 127.x.x.x destinations only
-  --malformed-fraction F also send F x the valid packets as random-length random bytes
-  --duplicate-fraction F also send a copy of F x the valid packets, right after them (a switch
-                         loop; a daemon counts duplicate_packets)
-  --glitch-fraction F    give F x the valid packets a tail time minutes off (an isolated clock
-                         glitch; a daemon counts outlier_packets)
-  --clock-start T        the first packet's sensor time, Unix seconds (default: now). Every
-                         packet carries its own time from there: the stream's clock runs
-)";
-
-// The traffic options `zero-loss` and `send` share. Returns false when `arg` is not one of them.
-bool parse_traffic_option(pandarcap::CliArgs& args, std::string_view arg,
-                          pandarcap::bench::GeneratorOptions& traffic,
-                          pandarcap::SyntheticSensorConfig& sensor, std::string& capture) {
-  if (arg == "--capture") {
-    capture = std::string(args.value(arg));
-  } else if (arg == "--rpm") {
-    sensor.rpm = static_cast<int>(args.integer(arg, 600, 1200));
-    if (sensor.rpm != 600 && sensor.rpm != 1200) args.usage_error("--rpm is 600 or 1200");
-  } else if (arg == "--return-mode") {
-    const std::string_view name = args.value(arg);
-    // "single" is what people call the sensor's default single-return setting: strongest.
-    const auto mode = name == "single" ? pandarcap::ReturnMode::kStrongest
-                                       : pandarcap::return_mode_from_string(name);
-    if (!mode) {
-      args.usage_error(fmt::format(
-          "--return-mode is dual, single (= strongest), strongest or last, got '{}'", name));
-    }
-    sensor.return_mode = *mode;
-  } else if (arg == "--burst-factor") {
-    traffic.burst_factor = args.number(arg, 1, 1000);
-  } else if (arg == "--burst-ms") {
-    traffic.burst_ms = args.number(arg, 0, 60'000);
-  } else if (arg == "--burst-every") {
-    traffic.burst_every_s = args.number(arg, 0.001, 3600);
-  } else if (arg == "--foreign-fraction") {
-    traffic.foreign_fraction = args.number(arg, 0, 10);
-  } else if (arg == "--malformed-fraction") {
-    traffic.malformed_fraction = args.number(arg, 0, 10);
-  } else if (arg == "--duplicate-fraction") {
-    traffic.duplicate_fraction = args.number(arg, 0, 1);
-  } else if (arg == "--glitch-fraction") {
-    traffic.glitch_fraction = args.number(arg, 0, 1);
-  } else if (arg == "--clock-start") {
-    // 2000-01-01 .. 2099: what the tail's date can carry.
-    traffic.clock_start_unix_ns =
-        static_cast<std::int64_t>(args.number(arg, 946'684'800, 4'102'444'799) * 1e9);
-  } else {
-    return false;
-  }
-  return true;
-}
-
 int run_zero_loss(int argc, char** argv) {
-  const std::string usage = fmt::format("{}{}{}", pandarcap::bench::kZeroLossUsageHead,
-                                        kTrafficOptions, pandarcap::bench::kZeroLossUsageTail);
+  const std::string usage =
+      fmt::format("{}{}{}", pandarcap::bench::kZeroLossUsageHead, pandarcap::bench::kTrafficOptions,
+                  pandarcap::bench::kZeroLossUsageTail);
   pandarcap::CliArgs args(argc, argv, usage);
   pandarcap::bench::ZeroLossOptions options;
   bool json = false;
@@ -198,7 +150,8 @@ int run_zero_loss(int argc, char** argv) {
       options.daemon = std::string(args.value(arg));
     } else if (arg == "--config") {
       options.daemon_config = std::string(args.value(arg));
-    } else if (parse_traffic_option(args, arg, options.traffic, options.sensor, options.capture)) {
+    } else if (pandarcap::bench::parse_traffic_option(args, arg, options.traffic, options.sensor,
+                                                      options.capture)) {
     } else if (arg == "--work-dir") {
       options.work_dir = std::string(args.value(arg));
     } else if (arg == "--daemon-only") {
@@ -224,6 +177,11 @@ int run_zero_loss(int argc, char** argv) {
     }
   }
   if (options.max_rate < options.min_rate) args.usage_error("--max-rate is below --min-rate");
+  // The daemon it measures is configured for a Pandar40P.
+  if (const auto problem =
+          pandarcap::bench::sensor_problem(pandarcap::SensorModelId::kPandar40P, options.sensor)) {
+    args.usage_error(*problem);
+  }
   if (options.receiver_command.empty() != (options.receiver_port == 0)) {
     args.usage_error("--receiver-command and --receiver-port go together");
   }
@@ -355,9 +313,29 @@ int run_decode(int argc, char** argv) {
       options.rounds = static_cast<int>(args.integer(arg, 1, 1000));
     } else if (arg == "--passes") {
       options.passes = static_cast<int>(args.integer(arg, 1, 1'000'000));
+    } else if (arg == "--sensor-model") {
+      const std::string_view name = args.value(arg);
+      const auto model = pandarcap::parse_sensor_model(name);
+      if (name == "all" || name == "ALL") {
+        options.models.assign(pandarcap::kSensorModelIds.begin(), pandarcap::kSensorModelIds.end());
+      } else if (!model) {
+        args.usage_error(fmt::format(
+            "--sensor-model is Pandar40P, Pandar64, PandarXT32, PandarXT16, PandarQT128 (in any "
+            "case) or all, got '{}'",
+            name));
+      } else if (std::find(options.models.begin(), options.models.end(), *model) ==
+                 options.models.end()) {
+        options.models.push_back(*model);
+      }
     } else {
       args.unknown_option(arg);
     }
+  }
+  if (!options.models.empty() &&
+      (!options.capture.empty() || !options.calibration.empty() || options.passes)) {
+    args.usage_error(
+        "--sensor-model decodes each model's simulated sensor with its nominal table, timed: "
+        "--capture, --calibration and --passes go with the Pandar40P's target rows");
   }
   const auto report =
       run_reporting_errors("decode", [&] { return pandarcap::bench::run_decode_bench(options); });
@@ -399,105 +377,6 @@ int run_ring(int argc, char** argv) {
   return report["order_errors"].get<std::uint64_t>() == 0 ? 0 : 1;
 }
 
-constexpr std::string_view kSendUsageHead = R"(Usage: pandarcap-bench send [OPTIONS]
-
-Sends Pandar40P packets over UDP with sendmmsg, paced in batches against CLOCK_MONOTONIC, and
-reports the rate actually achieved. The destination is 127.0.0.1 unless --destination names
-another address; nothing is ever sent anywhere else.
-
-Options:
-  --json                 print one JSON object instead of a line of text
-  --destination IP       IPv4 address to send to (default 127.0.0.1)
-  --port N               UDP port (default 2368, the sensor's)
-  --rate PPS             offered rate of valid packets (default 3600: one dual-return sensor)
-  --seconds S            how long to send (default 10)
-  --batch N              datagrams per sendmmsg call (default 32)
-  --no-sequence          plain 1262-byte packets (default: 1266 bytes with a 4-byte UDP
-                         sequence 0, 1, 2, ... written by the generator, so loss is exact)
-  --first-sequence N     the first packet's sequence (default 0)
-)";
-constexpr std::string_view kSendUsageTail = R"(  -h, --help             this text
-
-JSON keys: destination, port, traffic, packet_bytes, offered_pps, achieved_pps, seconds, sent,
-first_sequence, last_sequence, foreign_sent, malformed_sent, duplicates_sent, glitches_sent,
-send_errors,
-cpu_fraction_of_one_core.
-Exit status: 0, 1 if the socket could not be used or a send failed (other than a full buffer,
-which is waited out), 64 for a usage error.
-)";
-
-int run_send(int argc, char** argv) {
-  const std::string usage = fmt::format("{}{}{}", kSendUsageHead, kTrafficOptions, kSendUsageTail);
-  pandarcap::CliArgs args(argc, argv, usage);
-  pandarcap::bench::GeneratorOptions options;
-  pandarcap::SyntheticSensorConfig sensor;
-  std::string capture;
-  bool json = false;
-  while (args.more()) {
-    const std::string_view arg = args.next();
-    if (arg == "--json") {
-      json = true;
-    } else if (arg == "--destination") {
-      options.destination_ip = std::string(args.value(arg));
-    } else if (arg == "--port") {
-      options.port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
-    } else if (arg == "--rate") {
-      options.rate_pps = args.number(arg, 1, 1e8);
-    } else if (arg == "--seconds") {
-      options.seconds = args.number(arg, 0.01, 86'400);
-    } else if (arg == "--batch") {
-      options.batch = static_cast<int>(args.integer(arg, 1, 1024));
-    } else if (arg == "--no-sequence") {
-      options.udp_sequence = false;
-    } else if (arg == "--first-sequence") {
-      options.first_sequence = static_cast<std::uint64_t>(args.integer(arg, 0, 0xFFFF'FFFF));
-    } else if (parse_traffic_option(args, arg, options, sensor, capture)) {
-    } else {
-      args.unknown_option(arg);
-    }
-  }
-  // Checked before sending, so that a request the generator would refuse is a usage error.
-  if (const auto problem = pandarcap::bench::generator_options_problem(options)) {
-    args.usage_error(*problem);
-  }
-  const auto report = run_reporting_errors("send", [&] {
-    const auto source = capture.empty() ? pandarcap::bench::TrafficSource::synthetic(sensor)
-                                        : pandarcap::bench::TrafficSource::from_capture(capture);
-    const pandarcap::bench::GeneratorResult r = pandarcap::bench::run_generator(source, options);
-    return nlohmann::ordered_json{
-        {"destination", options.destination_ip},
-        {"port", options.port},
-        {"traffic", source.description},
-        {"packet_bytes",
-         options.udp_sequence ? pandarcap::kPacketWithSequenceBytes : pandarcap::kPacketBytes},
-        {"offered_pps", options.rate_pps},
-        {"achieved_pps", r.achieved_pps},
-        {"seconds", r.seconds},
-        {"sent", r.sent},
-        {"first_sequence", options.first_sequence},
-        {"last_sequence", r.sent > 0 ? nlohmann::ordered_json(options.first_sequence + r.sent - 1)
-                                     : nlohmann::ordered_json(nullptr)},
-        {"foreign_sent", r.foreign_sent},
-        {"malformed_sent", r.malformed_sent},
-        {"duplicates_sent", r.duplicates_sent},
-        {"glitches_sent", r.glitches_sent},
-        {"send_errors", r.send_errors},
-        {"cpu_fraction_of_one_core", r.seconds > 0 ? r.cpu_seconds / r.seconds : 0.0}};
-  });
-  if (!report) return 1;
-  print_report(*report, json, [](const nlohmann::ordered_json& r) {
-    fmt::print(
-        "sent {} packets ({} B, {}) to {}:{} in {:.2f} s: {:.1f} packets/s achieved of {:.1f} "
-        "offered; {} foreign, {} malformed, {} send errors; generator CPU {:.1f} % of one core\n",
-        r["sent"].get<std::uint64_t>(), r["packet_bytes"].get<std::size_t>(),
-        r["traffic"].get<std::string>(), r["destination"].get<std::string>(), r["port"].get<int>(),
-        r["seconds"].get<double>(), r["achieved_pps"].get<double>(), r["offered_pps"].get<double>(),
-        r["foreign_sent"].get<std::uint64_t>(), r["malformed_sent"].get<std::uint64_t>(),
-        r["send_errors"].get<std::uint64_t>(), 100 * r["cpu_fraction_of_one_core"].get<double>());
-  });
-  return (*report)["send_errors"].get<std::uint64_t>() == 0 ? 0 : 1;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -519,7 +398,7 @@ int main(int argc, char** argv) {
   }
   if (subcommand == "send") {
     argv[1] = send_name;
-    return run_send(argc - 1, argv + 1);
+    return pandarcap::bench::run_send(argc - 1, argv + 1);
   }
   if (subcommand == "write") {
     argv[1] = write_name;

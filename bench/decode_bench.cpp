@@ -113,6 +113,7 @@ double median(std::vector<double> values) {
 }  // namespace
 
 nlohmann::ordered_json run_decode_bench(const DecodeBenchOptions& options) {
+  if (!options.models.empty()) return run_model_decode_bench(options);
   const Stream stream = load_stream(options);
   const Calibration calibration =
       options.calibration.empty() ? Calibration::nominal() : load_calibration(options.calibration);
@@ -190,6 +191,10 @@ nlohmann::ordered_json run_decode_bench(const DecodeBenchOptions& options) {
 }
 
 void print_decode_report(const nlohmann::ordered_json& report) {
+  if (report.contains("models")) {
+    print_model_decode_report(report);
+    return;
+  }
   std::printf("input: %s (%zu packets, %s)\n", report["input"]["source"].get<std::string>().c_str(),
               report["input"]["packets"].get<std::size_t>(),
               report["input"]["return_mode"].get<std::string>().c_str());

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/decode/decoder_target.hpp"
+#include "core/sensors/sensor_model_id.hpp"
 
 namespace pandarcap::bench {
 
@@ -26,11 +27,18 @@ struct DecodeBenchOptions {
   // Fixed-work mode for instruction counting (callgrind): decode the stream this many times with
   // each target and report only what was done, no timing.
   std::optional<int> passes;
+  // Not empty: the per-model rows instead (model_decode_bench.cpp): each model's whole stream
+  // decoder on one second of its simulated sensor, the 40P's at every target, the others' scalar.
+  std::vector<SensorModelId> models;
 };
 
 // Runs the benchmark and returns the report. Throws std::runtime_error for an unusable capture.
 nlohmann::ordered_json run_decode_bench(const DecodeBenchOptions& options);
 
 void print_decode_report(const nlohmann::ordered_json& report);
+
+// The per-model rows (options.models), and their table.
+nlohmann::ordered_json run_model_decode_bench(const DecodeBenchOptions& options);
+void print_model_decode_report(const nlohmann::ordered_json& report);
 
 }  // namespace pandarcap::bench

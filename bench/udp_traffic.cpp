@@ -1,6 +1,7 @@
 #include "bench/udp_traffic.hpp"
 
 #include <arpa/inet.h>
+#include <fmt/format.h>
 #include <linux/sock_diag.h>
 #include <netinet/in.h>
 #include <sys/prctl.h>
@@ -13,14 +14,22 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <concepts>
 #include <cstring>
 #include <optional>
 #include <random>
+#include <span>
 #include <stdexcept>
+#include <type_traits>
 
 #include "core/decode/packet_time.hpp"
 #include "core/ipv4.hpp"
+#include "core/sensors/crc32_mpeg2.hpp"
+#include "core/sensors/model_access.hpp"
+#include "core/sensors/sensor_model.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "core/sensors/timing.hpp"
+#include "core/sim/model_sensor.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
@@ -36,24 +45,29 @@ int udp_socket() {
   return fd;
 }
 
-// The tail's time fields: the µs timestamp at tail offset 10 (packet 1250) to the UTC date-time's
-// last byte at tail offset 21 (packet 1261), return mode and factory bytes between them.
-constexpr std::size_t kTimeTailOffset = kBodyBytes + 10;
-constexpr std::size_t kTimeTailBytes = kPacketBytes - kTimeTailOffset;  // 12
+void store_u32_le(std::uint8_t* p, std::uint32_t value) noexcept {
+  for (int b = 0; b < 4; ++b)
+    p[b] = static_cast<std::uint8_t>(value >> (8 * b));
+}
 
-// `out` := the body's bytes 1250-1261 with the time `unix_ns` written in (µs within the second,
-// UTC date-time).
-void write_time_tail(const std::vector<std::uint8_t>& body, std::int64_t unix_ns,
-                     std::array<std::uint8_t, kTimeTailBytes>& out) {
-  std::memcpy(out.data(), body.data() + kTimeTailOffset, kTimeTailBytes);
+// `out` := the body's run of tail bytes (`tail`) with the time `unix_ns` written in (µs within the
+// second, UTC date-time), and the sequence and the CRC where the model has them there.
+void write_tail(const TailFields& tail, const std::vector<std::uint8_t>& body, std::int64_t unix_ns,
+                std::uint32_t sequence, std::array<std::uint8_t, TailFields::kMaxBytes>& out) {
+  std::memcpy(out.data(), body.data() + tail.offset, tail.bytes);
   const std::int64_t seconds = unix_ns / 1'000'000'000;
   const auto micros = static_cast<std::uint32_t>((unix_ns % 1'000'000'000) / 1000);
-  for (int b = 0; b < 4; ++b)
-    out[static_cast<std::size_t>(b)] = static_cast<std::uint8_t>(micros >> (8 * b));
+  store_u32_le(out.data() + tail.micros_at, micros);
   const TailDateTime utc = tail_datetime_from_unix(seconds);
-  const std::uint8_t fields[6] = {utc.year_since_2000, utc.month, utc.day, utc.hour,
-                                  utc.minute,          utc.second};
-  std::memcpy(out.data() + 6, fields, sizeof fields);
+  // The 2000-based year as the model's year byte (the XT's and the QT128's count from 1900).
+  const auto year = static_cast<std::uint8_t>(utc.year_since_2000 + 2000 - tail.year_base);
+  const std::uint8_t fields[6] = {year, utc.month, utc.day, utc.hour, utc.minute, utc.second};
+  std::memcpy(out.data() + tail.date_at, fields, sizeof fields);
+  if (tail.sequence_at) store_u32_le(out.data() + *tail.sequence_at, sequence);
+  if (tail.crc_at) {
+    store_u32_le(out.data() + *tail.crc_at,
+                 crc32_mpeg2(std::span<const std::uint8_t>(out.data(), *tail.crc_at)));
+  }
 }
 
 // Whether the options ask for bursts at all.
@@ -112,9 +126,114 @@ TrafficSource TrafficSource::synthetic(const SyntheticSensorConfig& sensor_confi
     }
   }
   source.loop_ns = static_cast<std::int64_t>(count) * period;
+  source.packets_per_second = pandarcap::packets_per_second(config.return_mode);
   source.description = "simulated Pandar40P, " + std::string(to_string(config.return_mode)) +
                        " return, " + std::to_string(config.rpm) + " RPM";
   return source;
+}
+
+namespace {
+
+// Where `Model`'s generator-written tail bytes are in a packet `p` of it (TailFields).
+template <class Model>
+TailFields tail_fields(std::span<const std::uint8_t> p) {
+  TailFields t;
+  if constexpr (std::same_as<Model, PandarQT128>) {
+    // The tail, the sequence when flagged, the CRC over both (the sensor writes no signature).
+    const PandarQT128::Layout l = PandarQT128::layout(p);
+    t.offset = l.tail_offset;
+    t.bytes = l.tail_crc_offset + PandarQT128::kCrcBytes - l.tail_offset;
+    t.micros_at = PandarQT128::kTimestampInTail;
+    t.date_at = PandarQT128::kDateTimeInTail;
+    t.year_base = 1900;
+    if (l.sequence_offset) t.sequence_at = *l.sequence_offset - l.tail_offset;
+    t.crc_at = l.tail_crc_offset - l.tail_offset;
+  } else if constexpr (std::same_as<Model, PandarXT32> || std::same_as<Model, PandarXT16>) {
+    // Date, µs, factory, sequence: the datagram's last 15 bytes.
+    t.offset = Model::kDateTimeOffset;
+    t.bytes = Model::kSequenceOffset + 4 - Model::kDateTimeOffset;
+    t.micros_at = Model::kTimestampOffset - Model::kDateTimeOffset;
+    t.date_at = 0;
+    t.year_base = 1900;
+    t.sequence_at = Model::kSequenceOffset - Model::kDateTimeOffset;
+  } else {
+    // The 40P's tail (the Pandar64 has it too): µs, return mode, factory, date; the sequence after.
+    t.offset = Model::kTimestampOffset;
+    t.bytes = Model::kDateTimeOffset + 6 - Model::kTimestampOffset;
+    t.micros_at = 0;
+    t.date_at = Model::kDateTimeOffset - Model::kTimestampOffset;
+    t.year_base = 2000;
+  }
+  return t;
+}
+
+template <class Model>
+TrafficSource model_source(int rpm, ReturnMode mode, bool udp_sequence) {
+  TrafficSource source;
+  source.model = Model::kId;
+  ModelSensorConfig config;
+  config.rpm = rpm;
+  config.return_mode = mode;
+  // The Pandar64's sequence is appended by the generator, as the 40P's; the QT128's is in its tail.
+  config.udp_sequence = std::same_as<Model, PandarQT128> && udp_sequence;
+  ModelSensor<Model> sensor(config);
+  const int returns = returns_per_firing(mode);
+  const std::int64_t period = Model::packet_period_ns(returns);
+  const auto count = static_cast<std::size_t>(std::llround(Model::packets_per_second(returns)));
+  std::array<std::uint8_t, Model::kMaxDatagramBytes> buffer{};
+  for (std::size_t i = 0; i < count; ++i) {
+    const std::size_t size = sensor.next(buffer);
+    source.bodies.emplace_back(buffer.begin(), buffer.begin() + static_cast<long>(size));
+    source.offsets_ns.push_back(static_cast<std::int64_t>(i) * period);
+  }
+  // The loop joins where the azimuth does, as synthetic()'s: the drift of a second's packets
+  // over a whole number of turns is taken back over the loop, a share a packet.
+  const std::size_t size = sensor.next(buffer);
+  const int next_azimuth = Model::azimuth_cdeg(std::span(buffer).first(size), 0);
+  const int first_azimuth = Model::azimuth_cdeg(source.bodies.front(), 0);
+  const int drift_cdeg = ((next_azimuth - first_azimuth) % 36000 + 54000) % 36000 - 18000;
+  for (std::size_t i = 0; i < count; ++i) {
+    const auto back = static_cast<int>(std::lround(
+        static_cast<double>(drift_cdeg) * static_cast<double>(i) / static_cast<double>(count)));
+    if (back == 0) continue;
+    std::vector<std::uint8_t>& body = source.bodies[i];
+    for (int b = 0; b < Model::kBlocks; ++b) {
+      std::uint8_t* field = body.data() + block_azimuth_offset<Model>(body, b);
+      const int azimuth = ((load_u16_le(field) - back) % 36000 + 36000) % 36000;
+      field[0] = static_cast<std::uint8_t>(azimuth);
+      field[1] = static_cast<std::uint8_t>(azimuth >> 8);
+    }
+    // The blocks' CRC covers the azimuths (the tail's is the generator's, per packet).
+    if constexpr (std::same_as<Model, PandarQT128>) PandarQT128::write_crcs(body);
+  }
+  source.tail = tail_fields<Model>(source.bodies.front());
+  if (source.tail.offset + source.tail.bytes != source.bodies.front().size()) {
+    throw std::logic_error("the generator's tail run does not end the simulated packet");
+  }
+  source.loop_ns = static_cast<std::int64_t>(count) * period;
+  source.packets_per_second = Model::packets_per_second(returns);
+  source.description = fmt::format("simulated {}, {} return, {} RPM", display_name(Model::kId),
+                                   to_string(mode), rpm);
+  return source;
+}
+
+}  // namespace
+
+TrafficSource TrafficSource::synthetic_model(SensorModelId model, int rpm, ReturnMode mode,
+                                             bool udp_sequence) {
+  if (model == SensorModelId::kPandar40P) {
+    SyntheticSensorConfig config;
+    config.rpm = rpm;
+    config.return_mode = mode;
+    return synthetic(config);
+  }
+  return with_model(model, [&]<class M>(std::type_identity<M>) {
+    if constexpr (std::same_as<M, Pandar40P>) {
+      return TrafficSource{};  // handled above
+    } else {
+      return model_source<M>(rpm, mode, udp_sequence);
+    }
+  });
 }
 
 TrafficSource TrafficSource::from_capture(const std::string& path) {
@@ -171,9 +290,13 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
   std::vector<mmsghdr> messages(static_cast<std::size_t>(batch));
   std::vector<std::array<iovec, 3>> iovecs(static_cast<std::size_t>(batch));
   std::vector<std::uint32_t> sequences(static_cast<std::size_t>(batch));
-  // Each packet's tail from its µs timestamp to the end of its UTC date-time (bytes 1250-1261),
-  // written per packet: the clock that runs. The body's bytes around it go out as they are.
-  std::vector<std::array<std::uint8_t, kTimeTailBytes>> times(static_cast<std::size_t>(batch));
+  // Each packet's run of tail bytes (the 40P's: its µs timestamp to the end of its UTC date-time,
+  // bytes 1250-1261), written per packet: the clock that runs. The body's bytes before it go out
+  // as they are.
+  const TailFields& tail = source.tail;
+  const bool append_sequence = o.udp_sequence && !tail.sequence_at;
+  std::vector<std::array<std::uint8_t, TailFields::kMaxBytes>> times(
+      static_cast<std::size_t>(batch));
   const std::int64_t clock_start =
       o.clock_start_unix_ns != 0 ? o.clock_start_unix_ns : realtime_ns();
   std::mt19937 rng(1);
@@ -228,16 +351,16 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
         packet_time += (rng() % 2 == 0 ? -1 : 1) * minutes * 60'000'000'000LL;
         ++result.glitches_sent;
       }
-      write_time_tail(body, packet_time, times[i]);
       sequences[i] = static_cast<std::uint32_t>(k);  // little-endian on the wire, as the sensor
-      iovecs[i][0] = {const_cast<std::uint8_t*>(body.data()), kTimeTailOffset};
-      iovecs[i][1] = {times[i].data(), kTimeTailBytes};
+      write_tail(tail, body, packet_time, sequences[i], times[i]);
+      iovecs[i][0] = {const_cast<std::uint8_t*>(body.data()), tail.offset};
+      iovecs[i][1] = {times[i].data(), tail.bytes};
       iovecs[i][2] = {&sequences[i], sizeof(std::uint32_t)};
       messages[i] = {};
       messages[i].msg_hdr.msg_name = const_cast<sockaddr_in*>(&destination);
       messages[i].msg_hdr.msg_namelen = sizeof destination;
       messages[i].msg_hdr.msg_iov = iovecs[i].data();
-      messages[i].msg_hdr.msg_iovlen = o.udp_sequence ? 3 : 2;
+      messages[i].msg_hdr.msg_iovlen = append_sequence ? 3 : 2;
     }
     const int sent = ::sendmmsg(fd, messages.data(), n, 0);
     if (sent < 0) {

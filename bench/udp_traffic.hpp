@@ -1,10 +1,12 @@
-// Loopback traffic for the benchmark harness: a paced Pandar40P packet generator (sendmmsg) and the
-// two reference receivers the daemon is compared with (recvmmsg into a buffer, and recvfrom one
-// packet per call, the vendor SDKs' way).
+// Loopback traffic for the benchmark harness: a paced packet generator (sendmmsg) of any supported
+// sensor model, and the two reference receivers the daemon is compared with (recvmmsg into a
+// buffer, and recvfrom one packet per call, the vendor SDKs' way).
 //
 // By default every generated packet is a 1266-byte Pandar40P packet whose 4-byte UDP sequence the
 // generator writes itself (0, 1, 2, ...), so a receiver's loss is exact: sent - received, and a
-// daemon counts any gap. Without it the packets are the sensor's plain 1262 bytes.
+// daemon counts any gap. Without it the packets are the sensor's plain 1262 bytes. The other
+// models' packets (TrafficSource::synthetic_model) carry the sequence the same way: appended to
+// the Pandar64's 1194 bytes, inside the XT's and the QT128's tails.
 #pragma once
 
 #include <atomic>
@@ -15,19 +17,45 @@
 #include <vector>
 
 #include "core/sensors/packet.hpp"
+#include "core/sensors/sensor_model_id.hpp"
 #include "core/sim/synthetic_sensor.hpp"
 
 namespace pandarcap::bench {
 
-// Packet bodies to send (the 1262 bytes before the sequence), cycled in order, and when each is
-// due in the sensor's time: body k at offsets_ns[k] from the first, the cycle repeating every
-// loop_ns. The generator writes every packet's tail time from these (a clock that runs), so the
-// cycle is one continuous rotation whose packet times keep rising.
+// The bytes of a packet the generator writes itself, per packet: a run of the tail from `offset`
+// to the body's end holding the µs timestamp and the UTC date (and, for the XT and the QT128, the
+// UDP sequence; for the QT128 the tail's CRC, which covers them). The bytes around the fields are
+// the body's. The Pandar40P's: bytes 1250-1261, µs then return mode, factory, date.
+struct TailFields {
+  static constexpr std::size_t kMaxBytes = 40;
+  std::size_t offset = kBodyBytes + 10;    // in the packet
+  std::size_t bytes = 12;                  // offset + bytes = the body's size
+  std::size_t micros_at = 0;               // u32 µs within the second, in the run
+  std::size_t date_at = 6;                 // year, month, day, hour, minute, second
+  int year_base = 2000;                    // what the year byte counts from
+  std::optional<std::size_t> sequence_at;  // u32 in the run; none: appended (40P, Pandar64)
+  std::optional<std::size_t> crc_at;       // u32 CRC-32/MPEG-2 of the run's bytes before it
+};
+
+// Packet bodies to send (the 40P's and the Pandar64's: the bytes before the sequence; the others':
+// the whole datagram), cycled in order, and when each is due in the sensor's time: body k at
+// offsets_ns[k] from the first, the cycle repeating every loop_ns. The generator writes every
+// packet's tail time from these (a clock that runs), so the cycle is one continuous rotation whose
+// packet times keep rising.
 struct TrafficSource {
   std::vector<std::vector<std::uint8_t>> bodies;
   std::vector<std::int64_t> offsets_ns;
   std::int64_t loop_ns = 0;
   std::string description;
+  SensorModelId model = SensorModelId::kPandar40P;
+  TailFields tail;
+  // The sensor's own packet rate (0: not known, a capture's).
+  double packets_per_second = 0;
+
+  // A datagram's size as sent: the body, and the appended sequence when asked for.
+  std::size_t datagram_bytes(bool udp_sequence) const noexcept {
+    return tail.offset + tail.bytes + (udp_sequence && !tail.sequence_at ? 4 : 0);
+  }
 
   // One second of the simulated sensor (`sensor.rpm`, `sensor.return_mode`): 3600 packets in
   // dual return, 1800 in single, whatever the RPM (the firing rate is fixed; the azimuth step
@@ -38,6 +66,13 @@ struct TrafficSource {
   // (loop_ns) keeps the times exact, but the azimuths fall that much behind the clock at each
   // join. Its sequence settings are ignored: the generator writes them.
   static TrafficSource synthetic(const SyntheticSensorConfig& sensor);
+  // One second of a simulated `model` (AnyModelSensor) at `rpm` in `mode`, its loop joined the
+  // same way: Model::packets_per_second packets (the Pandar40P: synthetic() above, byte for byte).
+  // `udp_sequence` decides the QT128's layout (its sequence flag); the XT always carries one and
+  // the 40P's and the Pandar64's are appended by the generator when its options ask. Throws
+  // std::invalid_argument for a speed or mode the model does not have.
+  static TrafficSource synthetic_model(SensorModelId model, int rpm, ReturnMode mode,
+                                       bool udp_sequence);
   // Every valid Pandar40P packet of a pcap/pcapng file (its own sequence, if any, is replaced),
   // at its tail time's offset from the first's (its record time where the tail's is not valid).
   // Throws std::runtime_error when the file has none.
@@ -53,7 +88,9 @@ struct GeneratorOptions {
   // The first packet's UDP sequence (and place in the source's bodies): a second run that
   // continues a first one's stream starts at the first one's `sent`.
   std::uint64_t first_sequence = 0;
-  bool udp_sequence = true;  // false: 1262-byte packets, loss only from the receiver's count
+  // false: 1262-byte packets, loss only from the receiver's count. The 40P's and the Pandar64's
+  // (the XT's and the QT128's sequence is the source's: TailFields::sequence_at).
+  bool udp_sequence = true;
   // The sensor time of the first packet (Unix ns); 0: the host's clock when sending starts. Every
   // packet's tail carries its own time from there (TrafficSource's offsets), so the stream's
   // clock runs and agrees with the host's.

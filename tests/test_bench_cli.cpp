@@ -7,15 +7,21 @@
 
 #include <algorithm>
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 #include "bench/child_process.hpp"
+#include "core/decode/any_stream_decoder.hpp"
 #include "core/decode/decoder_target.hpp"
+#include "core/frames/frame_collector.hpp"
 #include "core/sensors/packet.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;
@@ -112,6 +118,48 @@ TEST_CASE("pandarcap-bench decode --json: every supported target, ratios from on
     CHECK(bad.exit_code == 64);
     CHECK(bad.out.find("decoder 'neon'") != std::string::npos);
   }
+}
+
+TEST_CASE("pandarcap-bench decode --sensor-model all: a stream-decoder row per model, one run",
+          "[bench][cli]") {
+  const auto result = test::run_command(bench() +
+                                        " decode --json --sensor-model all --target scalar"
+                                        " --seconds 0.005 --rounds 1 2>&1");
+  INFO(result.out);
+  REQUIRE(result.exit_code == 0);
+  const json report = json::parse(result.out);
+  const json& rows = report["models"];
+  REQUIRE(rows.size() == kSensorModelIds.size());  // the 40P at the one target asked for
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const json& row = rows[i];
+    const SensorModelId model = kSensorModelIds[i];
+    INFO(lower_case_name(model));
+    CHECK(row["sensor_model"] == std::string(lower_case_name(model)));
+    CHECK(row["target"] == "scalar");
+    with_model(model, [&]<class M>(std::type_identity<M>) {
+      // One second of the model's own stream in dual return, every packet through its decoder.
+      CHECK(row["packets"] == std::llround(M::packets_per_second(2)));
+      CHECK(row["slots_per_packet"] == M::kBlocks * M::kChannels);
+    });
+    CHECK(row["accepted"] == row["packets"]);
+    CHECK(row["rejected"] == 0);
+    CHECK(row["outliers"] == 0);
+    CHECK(row["points_per_pass"].get<std::uint64_t>() > 0);
+    CHECK(row["frames_complete"].get<std::uint64_t>() >= 8);  // ten turns, the first and last cut
+    CHECK(row["frames_dropped"] == 0);
+    CHECK(row["points_dropped"] == 0);
+    const double pps = row["packets_per_s"];
+    CHECK(row["channel_measurements_per_s"].get<double>() ==
+          Approx(pps * row["slots_per_packet"].get<double>()));
+    CHECK(row["ns_per_measurement"].get<double>() ==
+          Approx(1e9 / row["channel_measurements_per_s"].get<double>()));
+  }
+  CHECK(rows[0]["ns_per_measurement_vs_pandar40p_scalar"] == 1.0);
+  // The per-model rows decode the simulated sensors: a capture is the 40P's target rows' input.
+  const auto mixed =
+      test::run_command(bench() + " decode --sensor-model pandar64 --capture x.pcap 2>&1");
+  CHECK(mixed.exit_code == 64);
+  CHECK(test::run_command(bench() + " decode --sensor-model velodyne 2>&1").exit_code == 64);
 }
 
 namespace {
@@ -549,4 +597,99 @@ TEST_CASE(
   if (tcpdump > 0) CHECK(c["daemon_vs_tcpdump_cpu"].get<double>() == Approx(daemon / tcpdump));
   CHECK(report["goals"].contains("cpu_recording_at_most_tcpdump_w"));
   CHECK_THAT(md_text(dir / "report"), Catch::Contains("Recording against `tcpdump -w`"));
+}
+
+TEST_CASE("pandarcap-bench send --sensor-model: every model at its own rate, one rotation",
+          "[bench][cli]") {
+  LoopbackSink sink;
+  struct Case {
+    std::string name;  // as a user types it: the case does not matter
+    SensorModelId model;
+    std::string options;
+  };
+  SECTION("each model's packets, checked one by one and through its stream decoder") {
+    // Each run starts 200 packets before its one-second loop joins, so every run crosses the join;
+    // 1200 RPM, so that 0.15 s holds whole revolutions.
+    for (const Case& c : {Case{"pandar40p", SensorModelId::kPandar40P, ""},
+                          Case{"PANDAR64", SensorModelId::kPandar64, ""},
+                          Case{"PandarXT32", SensorModelId::kPandarXT32, ""},
+                          Case{"pandarxt16", SensorModelId::kPandarXT16, " --return-mode first"},
+                          Case{"PandarQT128", SensorModelId::kPandarQT128, ""},
+                          Case{"pandarqt128", SensorModelId::kPandarQT128, " --no-sequence"}}) {
+      INFO(c.name << c.options);
+      with_model(c.model, [&]<class M>(std::type_identity<M>) {
+        const bool single = c.options.find("--return-mode first") != std::string::npos;
+        const ReturnMode mode = single ? ReturnMode::kFirst : ReturnMode::kDual;
+        const int returns = returns_per_firing(mode);
+        const double rate = M::packets_per_second(returns);
+        const auto first = static_cast<std::uint64_t>(std::llround(rate)) - 200;
+        const int rpm = M::kSupportedRpms.back();
+        const std::string seconds = rpm >= 1200 ? "0.15" : "0.25";
+        const auto result = test::run_command(
+            bench() + " send --json --seconds " + seconds + " --rpm " + std::to_string(rpm) +
+            " --sensor-model " + c.name + c.options + " --first-sequence " + std::to_string(first) +
+            " --port " + std::to_string(sink.port()) + " 2>&1");
+        INFO(result.out);
+        REQUIRE(result.exit_code == 0);
+        const json report = json::parse(result.out);
+        CHECK(report["sensor_model"] == std::string(lower_case_name(c.model)));
+        CHECK(report["offered_pps"].get<double>() == Approx(rate));  // the model's own rate
+        const auto sent = report["sent"].get<std::uint64_t>();
+        CHECK(sent > 200);  // across the join
+
+        const auto datagrams = sink.take_all();
+        REQUIRE(datagrams.size() == sent);
+        std::uint64_t complete = 0;
+        FrameCollector frames(
+            3,
+            static_cast<std::size_t>(M::packets_per_revolution(returns, rpm) * 1.2) *
+                M::kMaxPointsPerPacket,
+            [&](const Frame& frame) { complete += frame.info.partial ? 0 : 1; });
+        AnyStreamDecoder decoder(c.model, Calibration::nominal(c.model), {}, frames);
+        std::int64_t previous_time = 0;
+        for (std::size_t i = 0; i < datagrams.size(); ++i) {
+          INFO("packet " << i);
+          const std::span<const std::uint8_t> p(datagrams[i]);
+          REQUIRE(p.size() == report["packet_bytes"].get<std::size_t>());
+          REQUIRE(M::validate(p) == RejectReason::kNone);
+          CHECK(M::return_mode(p) == mode);
+          CHECK(M::motor_rpm(p) == Approx(rpm).margin(5));
+          if (c.options == " --no-sequence") {
+            CHECK_FALSE(M::sequence(p));
+          } else {
+            CHECK(M::sequence(p) == std::optional<std::uint32_t>(first + i));
+          }
+          REQUIRE(decoder.process(p) == RejectReason::kNone);
+          // The clock runs: one packet period from the one before (to the tail's µs), the join
+          // included.
+          const std::int64_t t = decoder.stats().last_t0_ns;
+          if (i > 0) CHECK(std::abs(t - previous_time - M::packet_period_ns(returns)) <= 1000);
+          previous_time = t;
+        }
+        decoder.flush();
+        const StreamStats& stats = decoder.stats();
+        CHECK(stats.accepted == sent);
+        CHECK(stats.outliers == 0);
+        CHECK(stats.stream_changes == 0);
+        CHECK(stats.azimuth_gaps == 0);
+        CHECK(stats.backward_timestamps + stats.timestamp_jumps + stats.static_timestamps == 0);
+        CHECK(decoder.sequence().lost == 0);
+        CHECK(decoder.frames().discontinuities == 0);
+        CHECK(complete >= 1);
+      });
+    }
+  }
+  SECTION("a speed, mode or option the model does not have is a usage error") {
+    for (const std::string& options : {std::string(" --sensor-model pandar64 --return-mode first"),
+                                       std::string(" --sensor-model PandarXT32 --rpm 300"),
+                                       std::string(" --sensor-model pandarxt16 --no-sequence"),
+                                       std::string(" --sensor-model hdl32")}) {
+      INFO(options);
+      const auto result = test::run_command(bench() + " send" + options + " --seconds 0.1 --port " +
+                                            std::to_string(sink.port()) + " 2>&1");
+      CHECK(result.exit_code == 64);
+      CHECK_THAT(result.out, Catch::Contains("Try 'pandarcap-bench send --help'"));
+    }
+    CHECK(sink.take_all().empty());
+  }
 }
