@@ -134,39 +134,6 @@ TrafficSource TrafficSource::synthetic(const SyntheticSensorConfig& sensor_confi
 
 namespace {
 
-// Where `Model`'s generator-written tail bytes are in a packet `p` of it (TailFields).
-template <class Model>
-TailFields tail_fields(std::span<const std::uint8_t> p) {
-  TailFields t;
-  if constexpr (std::same_as<Model, PandarQT128>) {
-    // The tail, the sequence when flagged, the CRC over both (the sensor writes no signature).
-    const PandarQT128::Layout l = PandarQT128::layout(p);
-    t.offset = l.tail_offset;
-    t.bytes = l.tail_crc_offset + PandarQT128::kCrcBytes - l.tail_offset;
-    t.micros_at = PandarQT128::kTimestampInTail;
-    t.date_at = PandarQT128::kDateTimeInTail;
-    t.year_base = 1900;
-    if (l.sequence_offset) t.sequence_at = *l.sequence_offset - l.tail_offset;
-    t.crc_at = l.tail_crc_offset - l.tail_offset;
-  } else if constexpr (std::same_as<Model, PandarXT32> || std::same_as<Model, PandarXT16>) {
-    // Date, µs, factory, sequence: the datagram's last 15 bytes.
-    t.offset = Model::kDateTimeOffset;
-    t.bytes = Model::kSequenceOffset + 4 - Model::kDateTimeOffset;
-    t.micros_at = Model::kTimestampOffset - Model::kDateTimeOffset;
-    t.date_at = 0;
-    t.year_base = 1900;
-    t.sequence_at = Model::kSequenceOffset - Model::kDateTimeOffset;
-  } else {
-    // The 40P's tail (the Pandar64 has it too): µs, return mode, factory, date; the sequence after.
-    t.offset = Model::kTimestampOffset;
-    t.bytes = Model::kDateTimeOffset + 6 - Model::kTimestampOffset;
-    t.micros_at = 0;
-    t.date_at = Model::kDateTimeOffset - Model::kTimestampOffset;
-    t.year_base = 2000;
-  }
-  return t;
-}
-
 template <class Model>
 TrafficSource model_source(int rpm, ReturnMode mode, bool udp_sequence) {
   TrafficSource source;
@@ -175,7 +142,7 @@ TrafficSource model_source(int rpm, ReturnMode mode, bool udp_sequence) {
   config.rpm = rpm;
   config.return_mode = mode;
   // The Pandar64's sequence is appended by the generator, as the 40P's; the QT128's is in its tail.
-  config.udp_sequence = std::same_as<Model, PandarQT128> && udp_sequence;
+  config.udp_sequence = kSequenceFlagged<Model> && udp_sequence;
   ModelSensor<Model> sensor(config);
   const int returns = returns_per_firing(mode);
   const std::int64_t period = Model::packet_period_ns(returns);
@@ -204,9 +171,9 @@ TrafficSource model_source(int rpm, ReturnMode mode, bool udp_sequence) {
       field[1] = static_cast<std::uint8_t>(azimuth >> 8);
     }
     // The blocks' CRC covers the azimuths (the tail's is the generator's, per packet).
-    if constexpr (std::same_as<Model, PandarQT128>) PandarQT128::write_crcs(body);
+    write_checksums<Model>(body);
   }
-  source.tail = tail_fields<Model>(source.bodies.front());
+  source.tail = time_run<Model>(source.bodies.front());
   if (source.tail.offset + source.tail.bytes != source.bodies.front().size()) {
     throw std::logic_error("the generator's tail run does not end the simulated packet");
   }

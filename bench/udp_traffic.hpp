@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/sensors/model_access.hpp"
 #include "core/sensors/packet.hpp"
 #include "core/sensors/sensor_model_id.hpp"
 #include "core/sim/synthetic_sensor.hpp"
@@ -26,16 +27,8 @@ namespace pandarcap::bench {
 // to the body's end holding the µs timestamp and the UTC date (and, for the XT and the QT128, the
 // UDP sequence; for the QT128 the tail's CRC, which covers them). The bytes around the fields are
 // the body's. The Pandar40P's: bytes 1250-1261, µs then return mode, factory, date.
-struct TailFields {
-  static constexpr std::size_t kMaxBytes = 40;
-  std::size_t offset = kBodyBytes + 10;    // in the packet
-  std::size_t bytes = 12;                  // offset + bytes = the body's size
-  std::size_t micros_at = 0;               // u32 µs within the second, in the run
-  std::size_t date_at = 6;                 // year, month, day, hour, minute, second
-  int year_base = 2000;                    // what the year byte counts from
-  std::optional<std::size_t> sequence_at;  // u32 in the run; none: appended (40P, Pandar64)
-  std::optional<std::size_t> crc_at;       // u32 CRC-32/MPEG-2 of the run's bytes before it
-};
+// Where the generator writes each packet's time (core/sensors/model_access.hpp).
+using TailFields = TimeRun;
 
 // Packet bodies to send (the 40P's and the Pandar64's: the bytes before the sequence; the others':
 // the whole datagram), cycled in order, and when each is due in the sensor's time: body k at
@@ -48,7 +41,7 @@ struct TrafficSource {
   std::int64_t loop_ns = 0;
   std::string description;
   SensorModelId model = SensorModelId::kPandar40P;
-  TailFields tail;
+  TailFields tail = time_run<Pandar40P>({});  // the 40P's (its tail sits at fixed offsets)
   // The sensor's own packet rate (0: not known, a capture's).
   double packets_per_second = 0;
 
