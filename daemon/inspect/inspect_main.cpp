@@ -202,7 +202,9 @@ std::string_view format_name(CaptureFormat format) {
 
 struct ChosenModel {
   SensorModelId model = SensorModelId::kPandar40P;
-  std::string_view source;  // "sensor-model", "packets", "default" (no packet names one)
+  // "sensor-model", "packets", "file" (no packet names one; an MCAP file's sensor_model does),
+  // "default" (nothing names one)
+  std::string_view source;
 };
 
 // --sensor-model, else the model the recording's first packets name (recording_model(), as the
@@ -223,6 +225,13 @@ ChosenModel choose_model(const Options& options) {
         "{}: its packets are a Hesai {}, which pandarcap does not decode (it decodes the "
         "Pandar40P, Pandar64, PandarXT32, PandarXT16 and PandarQT128)",
         options.file, found->detected.unsupported_name));
+  }
+  if (found->from_file) return {found->detected.model, "file"};
+  if (found->named && *found->named != found->detected.model) {
+    std::fprintf(stderr, "pandarcap-inspect: %s names %s, its packets are a %s: read as a %s\n",
+                 options.file.c_str(), std::string(display_name(*found->named)).c_str(),
+                 std::string(display_name(found->detected.model)).c_str(),
+                 std::string(display_name(found->detected.model)).c_str());
   }
   return {found->detected.model, "packets"};
 }
@@ -399,7 +408,8 @@ int run(const Options& options) {
     fmt::print("  model {} ({})\n", display_name(model),
                chosen.source == "packets"        ? "named by its packets"
                : chosen.source == "sensor-model" ? "--sensor-model"
-                                                 : "no packet names one");
+               : chosen.source == "file"         ? "no packet names one; the file's sensor_model"
+                                                 : "nothing names one");
     fmt::print("  packets {}  accepted {}  rejected {}", s.packets, s.accepted, s.rejected());
     for (auto& [name, count] : rejects.items()) {
       if (count.get<std::uint64_t>() > 0) fmt::print("  {} {}", name, count.get<std::uint64_t>());
