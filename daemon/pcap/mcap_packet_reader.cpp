@@ -247,7 +247,10 @@ McapPacketReader::Handled McapPacketReader::handle(std::uint8_t op,
         const std::string_view key = metadata.string();
         const std::string_view value = metadata.string();
         if (metadata.failed() || key != "sensor_model") continue;
-        if (const auto model = parse_sensor_model(value)) named_models_.emplace_back(id, *model);
+        // A handful of sensors at most: a file of endless Channel records grows nothing.
+        const auto model = parse_sensor_model(value);
+        if (model && named_models_.size() < kMaxNamedChannels)
+          named_models_.emplace_back(id, *model);
       }
       return Handled::kNone;
     }

@@ -107,6 +107,7 @@ class McapPacketReader {
   bool in_chunk_ = false;
   std::bitset<65536> packet_schemas_, packet_channels_;
   std::optional<std::uint16_t> channel_;  // the packet channel being read
+  static constexpr std::size_t kMaxNamedChannels = 64;
   std::vector<std::pair<std::uint16_t, SensorModelId>> named_models_;  // channel, sensor_model
   std::string error_;
   std::string first_damage_;
