@@ -133,6 +133,7 @@ WriterOptions writer_options(const DaemonConfig& config, std::optional<SensorMod
   wo.mcap_file.health_topic = o.mcap_health_topic;
   wo.mcap_file.packets_topic = o.mcap_packets_topic;
   wo.mcap_file.frame_id = o.mcap_frame_id;
+  if (model) wo.mcap_file.sensor_model = display_name(*model);
   wo.prometheus = config.health.prometheus;
   wo.jsonl = config.health.jsonl;
   wo.jsonl_rotate_bytes = config.health.jsonl_rotate_bytes;

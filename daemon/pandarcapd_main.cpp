@@ -285,7 +285,8 @@ int run(const CommandLine& command_line) {
   std::unique_ptr<SimulatedPtcServer> simulated_ptc;  // outlives every thread that asks it
   std::optional<PtcClientOptions> ptc;
   choose_sensor_model(config, options.source);
-  const SensorAtStart sensor = learn_sensor(config, options.source, simulated_ptc, ptc);
+  SensorAtStart sensor = learn_sensor(config, options.source, simulated_ptc, ptc);
+  sensor.model = options.source.model;  // for sensor.json
   stop_if_requested("asking the sensor");
   const Calibration& calibration = sensor.calibration;
   if (options.print_calibration) {

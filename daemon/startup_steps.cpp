@@ -341,7 +341,17 @@ void choose_sensor_model(const DaemonConfig& config, RunSource& source) {
                     source.replay_path, found->detected.unsupported_name)};
   }
   source.model = found->detected.model;
+  if (found->from_file) {
+    spdlog::info("sensor model: {} (no packet of the first names one: the file's sensor_model)",
+                 display_name(*source.model));
+    return;
+  }
   spdlog::info("sensor model: {} (from the recording's packets)", display_name(*source.model));
+  if (found->named && *found->named != *source.model) {
+    spdlog::warn("sensor model: {} names {}, its packets are a {}: the packets are decoded as a {}",
+                 source.replay_path, display_name(*found->named), display_name(*source.model),
+                 display_name(*source.model));
+  }
 }
 
 SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,

@@ -54,6 +54,9 @@ TEST_CASE("inspect --json on the real dual capture", "[cli][real]") {
   CHECK(first.at("factory") == 0x42);
   CHECK(first.at("utc").get<std::string>().rfind("2017-09-06T", 0) == 0);
   CHECK(first.at("sequence").is_null());
+  CHECK(first.at("status_id").is_number());
+  CHECK(s.at("model") == "Pandar40P");
+  CHECK(s.at("model_source") == "packets");
 
   // The destination-port filter: nothing in this capture goes to 2369.
   const json other = inspect_json("--port 2369 " + quoted(*capture));
@@ -69,6 +72,102 @@ TEST_CASE("inspect --json on the real single 1266-byte packet", "[cli][real]") {
   CHECK(s.at("return_mode") == "last");
   CHECK(s.at("sequence_present") == true);
   CHECK(s.at("rpm_min") == 599);
+}
+
+TEST_CASE("inspect on each model's real capture: the model named, every packet, counts that add up",
+          "[cli][real][sensors]") {
+  struct Case {
+    const char* capture;
+    const char* calibration;
+    const char* model;
+    std::uint64_t packets;
+    std::uint64_t points_per_packet;  // blocks x channels: each a point or a filtered return
+  };
+  const Case cases[] = {
+      {"pandar64_nebula_dual_1198B.pcap", "nebula_Pandar64_calibration.csv", "Pandar64", 2400,
+       6 * 64},
+      {"pandarxt32_nebula_dual_1080B.pcap", "nebula_PandarXT32_calibration.csv", "PandarXT32", 2000,
+       8 * 32},
+      {"pandarqt128_nebula_laststrongest_1127B.pcap", "nebula_PandarQT128_calibration.csv",
+       "PandarQT128", 1800, 2 * 128},
+  };
+  for (const Case& c : cases) {
+    CAPTURE(c.capture);
+    const auto capture = test::real_capture(c.capture);
+    const auto calibration = test::real_capture(c.calibration);
+    if (!capture || !calibration) continue;
+    const json j = inspect_json("--calibration " + quoted(*calibration) + " " + quoted(*capture));
+    const json& s = j.at("summary");
+    CHECK(s.at("model") == c.model);
+    CHECK(s.at("model_source") == "packets");
+    CHECK(s.at("calibration_source") == "file");
+    CHECK(s.at("capture_status") == "end");
+    CHECK(s.at("packets") == c.packets);
+    CHECK(s.at("accepted") == c.packets);
+    CHECK(s.at("rejected") == 0);
+    CHECK(s.at("sequence_present") == true);
+    CHECK(s.at("sequence_gaps") == 0);
+    // Every return of every accepted packet is a point or counted by why it is not.
+    std::uint64_t filtered = 0;
+    for (const json& n : s.at("filtered"))
+      filtered += n.get<std::uint64_t>();
+    CHECK(s.at("points").get<std::uint64_t>() + filtered == c.packets * c.points_per_packet);
+    // The frames hold every point; complete and partial ones are all listed.
+    std::uint64_t frame_points = 0;
+    for (const json& f : j.at("frames"))
+      frame_points += f.at("points").get<std::uint64_t>();
+    CHECK(frame_points == s.at("points"));
+    CHECK(j.at("frames").size() ==
+          s.at("frames_complete").get<std::size_t>() + s.at("frames_partial").get<std::size_t>());
+    CHECK(s.at("points_per_complete_frame").size() == s.at("frames_complete").get<std::size_t>());
+    // One line per packet, each with its model's fields.
+    REQUIRE(j.at("packets").size() == c.packets);
+    std::uint64_t ok = 0;
+    for (const json& p : j.at("packets"))
+      ok += p.at("status") == "ok" ? 1 : 0;
+    CHECK(ok == c.packets);
+    const json& first = j.at("packets").at(0);
+    CHECK(first.at("sequence").is_number());
+    CHECK(first.at("rpm").get<int>() >= 590);
+    CHECK(first.at("rpm").get<int>() <= 610);
+    CHECK(first.at("utc").get<std::string>().rfind("20", 0) == 0);
+    CHECK_FALSE(first.contains("status_id"));  // the 40P's tail only
+    CHECK(first.contains("mode_flag") == (std::string(c.model) == "PandarQT128"));
+    if (std::string(c.model) == "PandarQT128") {
+      // The capture's mode flag alternates every packet; its functional safety is fine (0-2).
+      CHECK(first.at("mode_flag") != j.at("packets").at(1).at("mode_flag"));
+      CHECK(first.at("functional_safety_state").get<int>() <= 2);
+    }
+
+    // The text: the model named, and a frame drawn as a PNG.
+    test::ScratchDir dir("inspect-model");
+    const auto text =
+        test::run_command(quoted(test::binary("pandarcap-inspect")) + " --summary --png " +
+                          quoted(dir / "frame.png") + " " + quoted(*capture) + " 2>&1");
+    INFO(text.out);
+    CHECK(text.exit_code == 0);
+    CHECK(text.out.find(std::string("model ") + c.model + " (named by its packets)") !=
+          std::string::npos);
+    CHECK(text.out.find("the nominal " + std::string(c.model) + " table is used") !=
+          std::string::npos);
+    std::ifstream png(dir / "frame.png", std::ios::binary);
+    char signature[8] = {};
+    png.read(signature, sizeof signature);
+    CHECK(std::string(signature + 1, 3) == "PNG");
+    CHECK(std::filesystem::file_size(dir / "frame.png") > 1000);
+  }
+
+  // --sensor-model names another: every packet is that model's wrong_model, nothing decoded.
+  const auto xt32 = test::real_capture("pandarxt32_nebula_dual_1080B.pcap");
+  if (!xt32) return;
+  const json s = inspect_json("--summary --sensor-model PANDAR64 " + quoted(*xt32)).at("summary");
+  CHECK(s.at("model") == "Pandar64");
+  CHECK(s.at("model_source") == "sensor-model");
+  CHECK(s.at("accepted") == 0);
+  CHECK(s.at("rejects").at("wrong_model") == 2000);
+  CHECK(test::run_command(quoted(test::binary("pandarcap-inspect")) +
+                          " --sensor-model pandar20 x.pcap 2>/dev/null")
+            .exit_code == 64);
 }
 
 TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",

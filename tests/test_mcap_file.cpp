@@ -15,6 +15,7 @@
 #include "core/mcap/mcap_parse.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
+#include "daemon/pcap/recording_model.hpp"
 #include "support/mcap_reader.hpp"
 #include "support/test_support.hpp"
 
@@ -56,6 +57,7 @@ McapFileOptions small_options(mcap::ChunkCompression compression = mcap::ChunkCo
   o.library = "pandarcap test";
   o.metadata = {{"version", "test"}};
   o.calibration_csv = "Channel,Elevation,Azimuth\n1,15,0\n";
+  o.sensor_model = "Pandar64";   // the packets channel's metadata (its packets name no model)
   o.wait_for_free_chunk = true;  // the files below are whole; the tests of the pool say otherwise
   return o;
 }
@@ -116,6 +118,10 @@ TEST_CASE("an MCAP file is read whole by the MCAP project's reader, messages dec
   CHECK(f["attachments"][0]["name"] == "calibration.csv");
   CHECK(f["attachments"][0]["text"] == options.calibration_csv);
   CHECK(f["metadata"][0]["entries"]["version"] == "test");
+  REQUIRE(f["channels"].size() == 3);
+  CHECK(f["channels"][2]["topic"] == "/pandar/packets");
+  CHECK(f["channels"][2]["metadata"] == nlohmann::json{{"sensor_model", "Pandar64"}});
+  CHECK(f["channels"][0]["metadata"] == nlohmann::json::object());
   const auto& points = f["topics"]["/pandar/points"];
   CHECK(points["schema"] == "sensor_msgs/msg/PointCloud2");
   REQUIRE(points["count"] == 6);
@@ -193,6 +199,30 @@ TEST_CASE("a file cut anywhere is finished into one the reader accepts, keeping 
     INFO(read.error);
     REQUIRE(read.file);
     CHECK((*read.file)["statistics"]["message_count"] == messages);
+    // The summary recovery wrote repeats the channels' metadata.
+    CHECK((*read.file)["channels"][2]["metadata"] == nlohmann::json{{"sensor_model", "Pandar64"}});
+  }
+}
+
+TEST_CASE("an MCAP's packets channel names its model: the replay's word when no packet names one",
+          "[mcap][sensors][threads]") {
+  test::ScratchDir dir("mcap-named-model");
+  McapFileOptions options = small_options();
+  // The packets write_file writes start EE 00..04 and are 1262 bytes: no model's.
+  write_file(dir / "named.mcap", options, 1);
+  const auto named = recording_model((dir / "named.mcap").string(), std::nullopt);
+  REQUIRE(named);
+  CHECK(named->from_file);
+  CHECK(named->detected.kind == DetectionKind::kKnown);
+  CHECK(named->detected.model == SensorModelId::kPandar64);
+  CHECK(named->named == SensorModelId::kPandar64);
+  CHECK(named->records == 15);  // every packet read first
+  // No name (a live "auto" wrote it), or one pandarcap does not know: nothing names a model.
+  for (const char* name : {"", "PandarAT128"}) {
+    options.sensor_model = name;
+    const fs::path path = dir / (std::string("other-") + name + ".mcap");
+    write_file(path, options, 1);
+    CHECK_FALSE(recording_model(path.string(), std::nullopt));
   }
 }
 

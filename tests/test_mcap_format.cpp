@@ -53,13 +53,24 @@ TEST_CASE("MCAP records have opcode, uint64 length and the specification's field
   CHECK(schema->data == "int32 x\n");
 
   out.clear();
-  write_channel(w, ChannelInfo{3, 7, "/pandar/points", "cdr"});
+  write_channel(w, ChannelInfo{3, 7, "/pandar/points", "cdr", {}});
   const auto channel = parse_channel(record_at(out)->content);
   REQUIRE(channel);
   CHECK(channel->id == 3);
   CHECK(channel->schema_id == 7);
   CHECK(channel->topic == "/pandar/points");
   CHECK(channel->message_encoding == "cdr");
+  CHECK(channel->metadata.empty());
+
+  // A channel's metadata map (the packets channel's sensor_model), kept entry for entry.
+  out.clear();
+  write_channel(
+      w, ChannelInfo{3, 3, "/pandar/packets", "cdr", {{"sensor_model", "PandarXT32"}, {"k", ""}}});
+  const auto packets = parse_channel(record_at(out)->content);
+  REQUIRE(packets);
+  REQUIRE(packets->metadata.size() == 2);
+  CHECK(packets->metadata[0] == std::pair<std::string, std::string>("sensor_model", "PandarXT32"));
+  CHECK(packets->metadata[1] == std::pair<std::string, std::string>("k", ""));
 
   out.clear();
   const std::string csv = "Channel,Elevation,Azimuth\n1,15,-1\n";
@@ -174,7 +185,7 @@ TEST_CASE("MCAP parsers refuse every truncation of a record", "[mcap]") {
   std::vector<std::uint8_t> out;
   ByteWriter w(out);
   write_schema(w, SchemaInfo{1, "n", "ros2msg", "int8 a\n"});
-  write_channel(w, ChannelInfo{1, 1, "/t", "cdr"});
+  write_channel(w, ChannelInfo{1, 1, "/t", "cdr", {{"sensor_model", "Pandar64"}}});
   write_attachment(w, 1, 2, "c.csv", "text/csv", bytes_of("abc"));
   const std::vector<std::uint8_t> payload(100, 0x55);
   write_chunk(w, 1, 2, payload, "", payload);
@@ -304,7 +315,7 @@ TEST_CASE("MCAP tail: summary offsets point at their groups, footer CRC covers t
           "[mcap]") {
   Summary s;
   s.schemas.push_back({1, "a", "ros2msg", "int8 x\n"});
-  s.channels.push_back({1, 1, "/a", "cdr"});
+  s.channels.push_back({1, 1, "/a", "cdr", {}});
   ChunkInfo chunk;
   chunk.chunk_start_offset = 100;
   chunk.chunk_length = 50;

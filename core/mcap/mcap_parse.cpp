@@ -31,8 +31,16 @@ std::optional<ChannelInfo> parse_channel(std::span<const std::uint8_t> content) 
   c.schema_id = r.u16();
   c.topic = r.string();
   c.message_encoding = r.string();
-  r.bytes(r.u32());  // metadata map
-  if (r.failed() || r.remaining() != 0 || c.id == 0 || c.id > kMaxChannels) return std::nullopt;
+  // The metadata map: kept (a recovered file's summary repeats it), each entry whole.
+  ByteReader map(r.bytes(r.u32()));
+  while (!map.failed() && map.remaining() > 0) {
+    const std::string_view key = map.string();
+    const std::string_view value = map.string();
+    if (!map.failed()) c.metadata.emplace_back(key, value);
+  }
+  if (r.failed() || map.failed() || r.remaining() != 0 || c.id == 0 || c.id > kMaxChannels) {
+    return std::nullopt;
+  }
   return c;
 }
 

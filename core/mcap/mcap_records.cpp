@@ -102,7 +102,12 @@ void write_channel(ByteWriter& w, const ChannelInfo& channel) {
   w.u16(channel.schema_id);
   w.string(channel.topic);
   w.string(channel.message_encoding);
-  w.u32(0);  // metadata: an empty map
+  const std::size_t map = w.begin_u32_length();
+  for (const auto& [key, value] : channel.metadata) {
+    w.string(key);
+    w.string(value);
+  }
+  w.end_u32_length(map);
   w.end_record(r);
 }
 

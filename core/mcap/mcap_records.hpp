@@ -22,6 +22,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace pandarcap::mcap {
@@ -123,6 +124,8 @@ struct SchemaInfo {
 struct ChannelInfo {
   std::uint16_t id = 0, schema_id = 0;
   std::string topic, message_encoding;
+  // The channel's metadata map (pandarcap's packets channel: sensor_model, docs/mcap.md).
+  std::vector<std::pair<std::string, std::string>> metadata;
 };
 // One chunk as the summary's ChunkIndex records it.
 struct ChunkInfo {

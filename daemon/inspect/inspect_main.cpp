@@ -1,5 +1,6 @@
-// pandarcap-inspect: per-packet field dump and summary of a Pandar40P capture (pcap / pcapng,
-// either compressed with zstd, or the PandarPacket messages of an MCAP file).
+// pandarcap-inspect: per-packet field dump and summary of a capture of any supported Hesai model
+// (pcap / pcapng, either compressed with zstd, or the PandarPacket messages of an MCAP file). The
+// model is the recording's (its first packets name it, as a replay's do) or --sensor-model's.
 //
 // Exit status: 0 the capture was read whole, 1 it is not (damaged, cut short, or records with
 // damaged headers: what was read is still summarised), 2 the capture or the calibration file
@@ -8,27 +9,32 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "config/command_line.hpp"
 #include "config/config_loader.hpp"
+#include "core/decode/any_stream_decoder.hpp"
 #include "core/decode/calibration.hpp"
-#include "core/decode/stream_decoder.hpp"
 #include "core/frames/frame_collector.hpp"
 #include "core/frames/topdown_render.hpp"
 #include "core/sensors/packet.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "daemon/cli_args.hpp"
+#include "daemon/inspect/packet_fields.hpp"
 #include "daemon/inspect/png_file.hpp"
 #include "daemon/io/calibration_file.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/recording_calibration.hpp"
+#include "daemon/pcap/recording_model.hpp"
 
 namespace {
 
@@ -37,17 +43,27 @@ using nlohmann::json;
 
 constexpr std::string_view kUsage = R"(Usage: pandarcap-inspect [options] FILE
 
-Dumps the fields of every Pandar40P packet in a capture, then a summary (packets, rejects by
-reason, frames, points per frame, RPM range, sequence gaps). FILE: pcap or pcapng, either
-compressed with zstd (.pcap.zst), or MCAP (its pandar_msgs/msg/PandarPacket messages, recorded
-with output.mcap_packets = true); the kind is told by the file's first bytes.
+Dumps the fields of every packet in a capture of a Hesai Pandar40P, Pandar64, PandarXT32,
+PandarXT16 or PandarQT128, then a summary (model, packets, rejects by reason, frames, points per
+frame, RPM range, sequence gaps). FILE: pcap or pcapng, either compressed with zstd (.pcap.zst),
+or MCAP (its pandar_msgs/msg/PandarPacket messages, recorded with output.mcap_packets = true);
+the kind is told by the file's first bytes. The model is named by the recording's first packets
+(as pandarcapd --replay names it), or by --sensor-model.
+
+Per packet: the first and last block's azimuth, motor speed, µs, return mode, factory byte, date
+and time, UDP sequence ("-" when absent); the Pandar40P's tail status (sid, svalue), the
+PandarQT128's mode flag and functional-safety state (fs); HIGH-TEMP when the flag is set.
 
 Options:
   --json                 one JSON object: {"packets": [...], "frames": [...], "summary": {...}}
+                         (the summary's "model": the model's name, e.g. "PandarXT32")
   --summary              print only the summary (no per-packet lines)
-  --calibration FILE     angle-correction CSV (default: the recording's own, its
+  --sensor-model NAME    the model to decode as: auto (default: the recording's packets name it),
+                         pandar40p, pandar64, pandarxt32, pandarxt16, pandarqt128 (any case);
+                         another model's packets are then rejected as wrong_model
+  --calibration FILE     angle-correction CSV for the model (default: the recording's own, its
                          NAME.calibration.csv sidecar or an MCAP file's attachment, else the
-                         nominal Pandar40P table)
+                         model's nominal table)
   --port N               only UDP datagrams to destination port N (default: any port; an
                          MCAP file's packets have no ports: not applied)
   --cut-angle DEG        frame cut angle in degrees (default 0)
@@ -76,6 +92,7 @@ struct Options {
   bool json_output = false;
   bool summary_only = false;
   std::optional<std::string> calibration;
+  std::optional<SensorModelId> model;  // --sensor-model; none: "auto"
   std::optional<std::uint16_t> port;
   StreamDecoderConfig decode;
   std::optional<std::string> png;
@@ -84,7 +101,8 @@ struct Options {
 
 // The options pandarcapd shares, which set the same configuration keys there: their types and
 // ranges are the configuration's (config/command_line.hpp), so both decode a capture alike.
-constexpr std::array<std::string_view, 6> kDecodeOptions{"--calibration",
+constexpr std::array<std::string_view, 7> kDecodeOptions{"--sensor-model",
+                                                         "--calibration",
                                                          "--cut-angle",
                                                          "--min-range",
                                                          "--max-range",
@@ -140,60 +158,8 @@ Options parse_options(int argc, char** argv) {
   }
   options.decode = stream_decoder_config(config);
   if (!config.sensor.calibration_file.empty()) options.calibration = config.sensor.calibration_file;
+  options.model = parse_sensor_model(config.sensor.model);  // checked: a model's name or "auto"
   return options;
-}
-
-std::string format_utc(const TailDateTime& utc) {
-  return fmt::format("{:04}-{:02}-{:02}T{:02}:{:02}:{:02}Z", 2000 + utc.year_since_2000, utc.month,
-                     utc.day, utc.hour, utc.minute, utc.second);
-}
-
-json packet_json(std::uint64_t index, const CaptureRecord& record, RejectReason reason,
-                 bool has_endpoints) {
-  json j;
-  j["index"] = index;
-  j["record_time_ns"] = record.timestamp_ns;
-  // An MCAP file's packets have no addresses.
-  j["source"] = has_endpoints ? json(to_string(record.source)) : json(nullptr);
-  j["destination"] = has_endpoints ? json(to_string(record.destination)) : json(nullptr);
-  j["size"] = record.payload.size();
-  if (record.snapped) j["original_size"] = record.udp_payload_length;  // the file holds a part
-  j["status"] = reason == RejectReason::kNone ? "ok" : std::string(to_string(reason));
-  // Fields are shown for accepted packets only: a rejected payload's bytes mean nothing.
-  if (reason != RejectReason::kNone) return j;
-  const PacketView packet = PacketView::assume_valid(record.payload);
-  const Tail tail = packet.tail();
-  j["markers_ok"] = true;
-  j["azimuth_first_cdeg"] = packet.azimuth_cdeg(0);
-  j["azimuth_last_cdeg"] = packet.azimuth_cdeg(kBlocks - 1);
-  j["rpm"] = tail.motor_rpm;
-  j["timestamp_us"] = tail.timestamp_us;
-  j["return_mode"] = to_string(packet.return_mode());
-  j["factory"] = tail.factory;
-  j["utc"] = format_utc(tail.utc);
-  j["sequence"] = tail.sequence ? json(*tail.sequence) : json(nullptr);
-  j["status_id"] = tail.status_id;
-  j["status_value"] = tail.status_value;
-  j["high_temperature"] = tail.high_temperature;
-  return j;
-}
-
-std::string packet_line(const json& p) {
-  if (p["status"] != "ok") {
-    return fmt::format("{:>6} {:>5} REJECTED {}", p["index"].get<std::uint64_t>(),
-                       p["size"].get<std::size_t>(), p["status"].get<std::string>());
-  }
-  const std::string sequence = p["sequence"].is_null()
-                                   ? std::string("-")
-                                   : std::to_string(p["sequence"].get<std::uint32_t>());
-  return fmt::format(
-      "{:>6} {:>5} {:>7.2f} {:>7.2f} {:>5} {:>8} {:>9} 0x{:02x} {} {:>10} {:>3} {:>5}{}",
-      p["index"].get<std::uint64_t>(), p["size"].get<std::size_t>(),
-      p["azimuth_first_cdeg"].get<int>() / 100.0, p["azimuth_last_cdeg"].get<int>() / 100.0,
-      p["rpm"].get<int>(), p["timestamp_us"].get<std::uint32_t>(),
-      p["return_mode"].get<std::string>(), p["factory"].get<int>(), p["utc"].get<std::string>(),
-      sequence, p["status_id"].get<int>(), p["status_value"].get<int>(),
-      p["high_temperature"].get<bool>() ? " HIGH-TEMP" : "");
 }
 
 json frame_json(const FrameInfo& info) {
@@ -234,24 +200,73 @@ std::string_view format_name(CaptureFormat format) {
   return "pcap";
 }
 
+struct ChosenModel {
+  SensorModelId model = SensorModelId::kPandar40P;
+  // "sensor-model", "packets", "file" (no packet names one; an MCAP file's sensor_model does),
+  // "default" (nothing names one)
+  std::string_view source;
+};
+
+// --sensor-model, else the model the recording's first packets name (recording_model(), as the
+// replay's "auto" does), else the Pandar40P, said on stderr. An unsupported Hesai model is an
+// error (exit 2): its packets would only be rejected.
+ChosenModel choose_model(const Options& options) {
+  if (options.model) return {*options.model, "sensor-model"};
+  const std::optional<RecordingModel> found = recording_model(options.file, options.port);
+  if (!found) {
+    std::fprintf(stderr,
+                 "pandarcap-inspect: no packet of %s names a model pandarcap knows: read as the "
+                 "Pandar40P (give --sensor-model NAME)\n",
+                 options.file.c_str());
+    return {SensorModelId::kPandar40P, "default"};
+  }
+  if (found->detected.kind == DetectionKind::kUnsupported) {
+    throw std::runtime_error(fmt::format(
+        "{}: its packets are a Hesai {}, which pandarcap does not decode (it decodes the "
+        "Pandar40P, Pandar64, PandarXT32, PandarXT16 and PandarQT128)",
+        options.file, found->detected.unsupported_name));
+  }
+  if (found->from_file) return {found->detected.model, "file"};
+  if (found->named && *found->named != found->detected.model) {
+    std::fprintf(stderr, "pandarcap-inspect: %s names %s, its packets are a %s: read as a %s\n",
+                 options.file.c_str(), std::string(display_name(*found->named)).c_str(),
+                 std::string(display_name(found->detected.model)).c_str(),
+                 std::string(display_name(found->detected.model)).c_str());
+  }
+  return {found->detected.model, "packets"};
+}
+
+// A frame arena large enough for a revolution of `model` at its slowest speed in dual return,
+// with 5 % to spare (the daemon's arena_points rule), and never less than the 40P's default.
+std::size_t frame_capacity_points(SensorModelId model) {
+  return with_model(model, []<class M>(std::type_identity<M>) {
+    const int slowest = *std::min_element(M::kSupportedRpms.begin(), M::kSupportedRpms.end());
+    const double need =
+        std::ceil(M::packets_per_revolution(2, slowest) * M::kMaxPointsPerPacket * 1.05);
+    return std::max(kDefaultFrameCapacityPoints, static_cast<std::size_t>(need));
+  });
+}
+
 int run(const Options& options) {
+  const ChosenModel chosen = choose_model(options);
+  const SensorModelId model = chosen.model;
   // --calibration, else the recording's own (its sidecar, an MCAP file's attachment), else the
-  // nominal table: as the replay takes it.
-  Calibration calibration = Calibration::nominal();
+  // model's nominal table: as the replay takes it.
+  Calibration calibration = Calibration::nominal(model);
   std::string calibration_source = "nominal";
   if (options.calibration) {
-    calibration = load_calibration(*options.calibration);
+    calibration = load_calibration(*options.calibration, model);
     calibration_source = "file";
   } else {
     std::string looked_for;
-    if (std::optional<Calibration> own = recording_calibration(options.file, looked_for)) {
+    if (std::optional<Calibration> own = recording_calibration(options.file, looked_for, model)) {
       calibration = std::move(*own);
       calibration_source = "recording";
     } else {
       std::fprintf(stderr,
                    "pandarcap-inspect: the recording carries no calibration (looked for %s): the "
-                   "nominal table is used; give the sensor's with --calibration FILE\n",
-                   looked_for.c_str());
+                   "nominal %s table is used; give the sensor's with --calibration FILE\n",
+                   looked_for.c_str(), std::string(display_name(model)).c_str());
     }
   }
   CaptureReader reader(options.file, CaptureReader::Options{options.port});
@@ -268,7 +283,7 @@ int run(const Options& options) {
   // The frame --png draws: the largest complete one, else the largest.
   std::vector<Point> picture;
   bool picture_complete = false;
-  FrameCollector collector(3, kDefaultFrameCapacityPoints, [&](const Frame& frame) {
+  FrameCollector collector(3, frame_capacity_points(model), [&](const Frame& frame) {
     frames.push_back(frame_json(frame.info));
     const bool complete = !frame.info.partial;
     if (options.png && ((complete && !picture_complete) ||
@@ -279,13 +294,11 @@ int run(const Options& options) {
     if (!frame.info.partial) points_per_complete_frame.push_back(frame.info.points);
     packets_per_frame.push_back(frame.info.packets);
   });
-  StreamDecoder decoder(calibration, options.decode, collector);
+  AnyStreamDecoder decoder(model, calibration, options.decode, collector);
 
   const bool per_packet = !options.summary_only;
   if (per_packet && !options.json_output) {
-    fmt::print("{:>6} {:>5} {:>7} {:>7} {:>5} {:>8} {:>9} {:>4} {:20} {:>10} {:>3} {:>5}\n", "#",
-               "size", "az0", "az9", "rpm", "us", "mode", "fac", "utc", "sequence", "sid",
-               "svalue");
+    fmt::print("{}\n", packet_heading(model));
   }
   json packets = json::array();
   CaptureRecord record;
@@ -299,11 +312,11 @@ int run(const Options& options) {
     const RejectReason reason =
         decoder.process(record.snapped ? std::span<const std::uint8_t>() : record.payload);
     if (per_packet) {
-      json p = packet_json(index, record, reason, reader.has_endpoints());
+      json p = packet_json(model, index, record, reason, reader.has_endpoints());
       if (options.json_output) {
         packets.push_back(std::move(p));
       } else {
-        fmt::print("{}\n", packet_line(p));
+        fmt::print("{}\n", packet_line(model, p));
       }
     }
     ++index;
@@ -327,6 +340,8 @@ int run(const Options& options) {
       {"capture_status", status_name(status)},
       {"capture_error", reader.error()},
       {"capture_format", format_name(reader.format())},
+      {"model", display_name(model)},
+      {"model_source", chosen.source},
       {"calibration", calibration.source},
       {"calibration_source", calibration_source},
       {"packets", s.packets},
@@ -390,6 +405,11 @@ int run(const Options& options) {
   } else {
     fmt::print("\nsummary of {} ({}){}\n", options.file, status_name(status),
                reader.error().empty() ? "" : ": " + reader.error());
+    fmt::print("  model {} ({})\n", display_name(model),
+               chosen.source == "packets"        ? "named by its packets"
+               : chosen.source == "sensor-model" ? "--sensor-model"
+               : chosen.source == "file"         ? "no packet names one; the file's sensor_model"
+                                                 : "nothing names one");
     fmt::print("  packets {}  accepted {}  rejected {}", s.packets, s.accepted, s.rejected());
     for (auto& [name, count] : rejects.items()) {
       if (count.get<std::uint64_t>() > 0) fmt::print("  {} {}", name, count.get<std::uint64_t>());

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <utility>
 
 #include "core/frames/pcd.hpp"
 #include "core/mcap/ros2_messages.hpp"
@@ -54,12 +55,15 @@ McapFile::McapFile(const McapFileOptions& options)
   summary_.schemas.push_back(
       {1, std::string(mcap::kPointCloud2Name), "ros2msg", std::string(mcap::kPointCloud2Schema)});
   summary_.schemas.push_back({2, "pandarcap.Health", "jsonschema", std::string(kHealthSchema)});
-  summary_.channels.push_back({kPointsChannel, 1, options.points_topic, "cdr"});
-  summary_.channels.push_back({kHealthChannel, 2, options.health_topic, "json"});
+  summary_.channels.push_back({kPointsChannel, 1, options.points_topic, "cdr", {}});
+  summary_.channels.push_back({kHealthChannel, 2, options.health_topic, "json", {}});
   if (options.packets) {
     summary_.schemas.push_back({3, std::string(mcap::kPandarPacketName), "ros2msg",
                                 std::string(mcap::kPandarPacketSchema)});
-    summary_.channels.push_back({kPacketsChannel, 3, options.packets_topic, "cdr"});
+    mcap::ChannelInfo packets{kPacketsChannel, 3, options.packets_topic, "cdr", {}};
+    if (!options.sensor_model.empty())
+      packets.metadata.emplace_back("sensor_model", options.sensor_model);
+    summary_.channels.push_back(std::move(packets));
   }
 }
 

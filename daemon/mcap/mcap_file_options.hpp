@@ -37,6 +37,10 @@ struct McapFileOptions {
   // under); "" = no such record.
   std::string device_name;
   std::string calibration_csv;  // attached to every file as calibration.csv
+  // The sensor model's display name ("PandarXT32") when known at start (a fixed sensor.model, a
+  // replay's packets, --simulate): the packets channel's metadata sensor_model. "" (a live
+  // "auto", whose packets choose it later): no such entry; the packets say (docs/mcap.md).
+  std::string sensor_model;
 };
 
 }  // namespace pandarcap

@@ -47,6 +47,8 @@ void McapRecorder::prepare() {
   o.metadata = {{"version", options_.version},
                 {"sensor_name", options_.sensor_name},
                 {"decoder", options_.decoder},
+                // The model known at start ("" for a live "auto": the packets name it).
+                {"sensor_model", options_.mcap_file.sensor_model},
                 {"calibration_source", options_.sensor_identity.calibration_source},
                 {"sensor_serial", options_.sensor_identity.serial},
                 {"sensor_firmware", options_.sensor_identity.firmware},

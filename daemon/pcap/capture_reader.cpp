@@ -310,6 +310,11 @@ std::uint64_t CaptureReader::bytes_read() const noexcept {
   return at < 0 ? 0 : static_cast<std::uint64_t>(at);
 }
 
+std::optional<SensorModelId> CaptureReader::named_model() const noexcept {
+  if (!mcap_) return std::nullopt;
+  return mcap_->named_model();
+}
+
 const std::string& CaptureReader::first_damage() const noexcept {
   return mcap_ ? mcap_->first_damage() : first_damage_;
 }

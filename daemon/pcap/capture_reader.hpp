@@ -36,6 +36,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/sensors/sensor_model_id.hpp"
 #include "daemon/pcap/endpoint.hpp"
 
 struct pcap;  // libpcap's handle, kept out of this header
@@ -116,6 +117,9 @@ class CaptureReader {
   CaptureFormat format() const noexcept { return format_; }
   // Whether records carry their source and destination (not MCAP's).
   bool has_endpoints() const noexcept { return format_ != CaptureFormat::kMcap; }
+  // The model the file itself names (an MCAP packets channel's sensor_model metadata, once read:
+  // McapPacketReader::named_model); none for pcap, which names none.
+  std::optional<SensorModelId> named_model() const noexcept;
 
  private:
   CaptureStatus finish(int pcap_status);  // records the final status of a failed pcap_next_ex

@@ -137,6 +137,13 @@ McapPacketReader::~McapPacketReader() {
   ::close(fd_);
 }
 
+std::optional<SensorModelId> McapPacketReader::named_model() const noexcept {
+  for (const auto& [channel, model] : named_models_) {
+    if (!channel_ || *channel_ == channel) return model;
+  }
+  return std::nullopt;
+}
+
 CaptureStatus McapPacketReader::fail(CaptureStatus status, const std::string& what) {
   error_ = path_ + ": " + what;
   return status;
@@ -228,12 +235,23 @@ McapPacketReader::Handled McapPacketReader::handle(std::uint8_t op,
       const std::uint16_t schema = r.u16();
       r.string();  // topic
       const std::string_view encoding = r.string();
-      r.bytes(r.u32());  // metadata
+      mcap::ByteReader metadata(r.bytes(r.u32()));
       if (r.failed() || r.remaining() != 0) {
         fail(CaptureStatus::kError, "the channel" + at_offset(offset) + " does not parse");
         return Handled::kFailed;
       }
       packet_channels_[id] = packet_schemas_[schema] && encoding == "cdr";
+      // The model its writer names (pandarcapd's sensor_model): a hint, the packets decide. A
+      // damaged map or a name pandarcap does not know is no hint.
+      while (packet_channels_[id] && !metadata.failed() && metadata.remaining() > 0) {
+        const std::string_view key = metadata.string();
+        const std::string_view value = metadata.string();
+        if (metadata.failed() || key != "sensor_model") continue;
+        // A handful of sensors at most: a file of endless Channel records grows nothing.
+        const auto model = parse_sensor_model(value);
+        if (model && named_models_.size() < kMaxNamedChannels)
+          named_models_.emplace_back(id, *model);
+      }
       return Handled::kNone;
     }
     case mcap::Op::kMessage: {

@@ -40,8 +40,10 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "core/sensors/sensor_model_id.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
 namespace pandarcap {
@@ -69,6 +71,10 @@ class McapPacketReader {
   std::uint64_t offset() const noexcept { return offset_; }  // of the next top-level record
   // The first damage skipped over ("" while none), with the file's name.
   const std::string& first_damage() const noexcept { return first_damage_; }
+  // The sensor model the packets channel's metadata names (sensor_model: pandarcapd's files),
+  // once its Channel record has been read: the channel being read, else the first that names
+  // one. A hint for a reader whose packets name none; the packets are authoritative.
+  std::optional<SensorModelId> named_model() const noexcept;
 
  private:
   enum class Handled { kNone, kRecord, kFailed };
@@ -101,6 +107,8 @@ class McapPacketReader {
   bool in_chunk_ = false;
   std::bitset<65536> packet_schemas_, packet_channels_;
   std::optional<std::uint16_t> channel_;  // the packet channel being read
+  static constexpr std::size_t kMaxNamedChannels = 64;
+  std::vector<std::pair<std::uint16_t, SensorModelId>> named_models_;  // channel, sensor_model
   std::string error_;
   std::string first_damage_;
   bool has_footer_ = false;           // the file ends with a footer and the closing magic

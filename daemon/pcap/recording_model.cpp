@@ -20,15 +20,22 @@ std::optional<RecordingModel> recording_model(const std::string& path,
     const DetectedModel d = detect_model(record.payload);
     if (d.kind == DetectionKind::kKnown) {
       found.detected = d;
+      found.named = reader.named_model();
       return found;
     }
     const DetectedModel named = identify_model(record.payload);
     if (named.kind == DetectionKind::kUnsupported) {
       found.detected = named;
+      found.named = reader.named_model();
       return found;
     }
   }
-  return std::nullopt;
+  found.named = reader.named_model();
+  if (!found.named) return std::nullopt;
+  found.detected.kind = DetectionKind::kKnown;
+  found.detected.model = *found.named;
+  found.from_file = true;
+  return found;
 }
 
 }  // namespace pandarcap

@@ -8,17 +8,26 @@
 #include <string>
 
 #include "core/sensors/model_detection.hpp"
+#include "core/sensors/sensor_model_id.hpp"
 
 namespace pandarcap {
 
 struct RecordingModel {
-  DetectedModel detected;     // kKnown or kUnsupported: the first packet that named a model
+  // kKnown or kUnsupported: the first packet that named a model; or, when no packet read names
+  // one, kKnown with the model the file names (from_file).
+  DetectedModel detected;
   std::uint64_t records = 0;  // datagrams read to find it
+  // The model the file itself names (an MCAP file pandarcapd wrote: its packets channel's
+  // sensor_model), whether or not the packets agree: the packets are authoritative, a caller
+  // says when the two differ.
+  std::optional<SensorModelId> named;
+  bool from_file = false;  // detected is the file's word: no packet read named a model
 };
 
 // Reads up to `max_datagrams` UDP datagrams of `path` (to `port` when given). None when no
-// datagram names a model (not a Hesai recording, or an empty one: the replay says what it
-// holds). Throws CaptureError when the file cannot be read as a capture.
+// datagram names a model and the file names none either (not a Hesai recording, or an empty
+// one: the replay says what it holds). Throws CaptureError when the file cannot be read as a
+// capture.
 std::optional<RecordingModel> recording_model(const std::string& path,
                                               std::optional<std::uint16_t> port,
                                               std::uint64_t max_datagrams = 20'000);

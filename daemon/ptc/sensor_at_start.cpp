@@ -26,6 +26,7 @@ std::string SensorAtStart::to_json(const std::string& device_name,
   nlohmann::ordered_json j;
   j["device_name"] = device_name;
   j["config_hash"] = config_hash;
+  j["model"] = model ? nlohmann::ordered_json(display_name(*model)) : nlohmann::ordered_json();
   j["calibration_source"] = calibration_source;
   j["calibration"] = calibration.source;
   j["ptc_endpoint"] =

@@ -38,11 +38,15 @@ struct SensorAtStart {
   std::optional<ptc::SensorInventory> inventory;
   std::optional<ptc::SensorSettings> settings;
   std::uint64_t ptc_requests = 0, ptc_errors = 0;
+  // The sensor's model when known at start (a fixed sensor.model, a replay's packets, the
+  // simulated sensor's: RunSource::model); none for a live "auto", whose packets name it later.
+  std::optional<SensorModelId> model;
 
   // One line for the log: "from sensor (serial PCSIM40P00000001, firmware sim-fw-1.0) at
   // 127.0.0.1:41234", "from file /etc/pandarcap/front.csv", "nominal Pandar40P table".
   std::string describe() const;
-  // The neighbour file of recordings (raw/sensor.json): source, identity, configuration.
+  // The neighbour file of recordings (raw/sensor.json): model (its display name, null when not
+  // known at start), source, identity, configuration.
   // `device_name` and `config_hash` (daemon_options.hpp) say which machine and configuration
   // made the recordings beside it.
   std::string to_json(const std::string& device_name, const std::string& config_hash) const;

@@ -186,7 +186,12 @@ async function main() {
                   message_end_time: stats.messageEndTime.toString() },
     chunk_compression: [...new Set(reader.chunkIndexes.map((c) => c.compression))],
     schemas: [...reader.schemasById.values()].map((s) => ({ id: s.id, name: s.name, encoding: s.encoding })),
-    channels: [...reader.channelsById.values()].map((c) => ({ id: c.id, topic: c.topic, message_encoding: c.messageEncoding })),
+    channels: [...reader.channelsById.values()].map((c) => ({
+      id: c.id,
+      topic: c.topic,
+      message_encoding: c.messageEncoding,
+      metadata: Object.fromEntries(c.metadata),
+    })),
     attachments,
     metadata,
     topics,
