@@ -37,7 +37,8 @@ void model_fields(json& j, std::span<const std::uint8_t> p) {
     j["status_id"] = tail.status_id;
     j["status_value"] = tail.status_value;
   }
-  if constexpr (std::is_same_v<M, PandarQT128>) {
+  // A model with a firing-sequence flag and a functional-safety block (the QT128) says them.
+  if constexpr (requires { M::mode_flag(p), M::functional_safety_state(p); }) {
     j["mode_flag"] = M::mode_flag(p);
     j["functional_safety_state"] = optional_json(M::functional_safety_state(p));
     j["functional_safety_counter"] = optional_json(M::functional_safety_counter(p));
