@@ -39,7 +39,9 @@ DecodeWorker::DecodeWorker(const Calibration& calibration, const DecodeWorkerOpt
 
 void DecodeWorker::choose_model(SensorModelId model) {
   const bool own = calibration_.channel_count == channel_count(model);
+  const StreamStats before = decoder_.stats();
   decoder_.choose(model, own ? calibration_ : Calibration::nominal(model), options_.decoder, *this);
+  decoder_.visit([&](auto& d) { d.count_before(before); });
 }
 
 template <class Decoder>

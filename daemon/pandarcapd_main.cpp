@@ -311,9 +311,17 @@ int run(const CommandLine& command_line) {
   WriterOptions wo = writer_options(config, options.source.model);
   wo.decoder = std::string(to_string(decoder));
   wo.calibration_csv = calibration.to_csv();
+  wo.calibration_model = calibration.model();
+  if (options.source.detect_model) {
+    // The packets may name another model: each one's table is ready (the given one for its
+    // model, the nominal one for the others), as the decoder's is (DecodeWorker::choose_model).
+    for (const SensorModelId id : kSensorModelIds) {
+      wo.calibration_by_model[static_cast<std::size_t>(id)] =
+          id == calibration.model() ? wo.calibration_csv : Calibration::nominal(id).to_csv();
+    }
+  }
   // A nominal table is the model's own whatever the packets say (the decoder takes that model's).
-  wo.calibration_channels =
-      sensor.calibration_source == "nominal" ? 0 : calibration.channel_count;
+  wo.calibration_channels = sensor.calibration_source == "nominal" ? 0 : calibration.channel_count;
   wo.inventory_lasers = sensor.inventory ? sensor.inventory->lines : 0;
   wo.sensor_identity = SensorIdentity{sensor.inventory ? sensor.inventory->serial : "",
                                       sensor.inventory ? sensor.inventory->sensor_firmware : "",

@@ -12,7 +12,8 @@ inline constexpr std::string_view kPandarcapdUsage =
        pandarcapd --simulate [options]       live path fed by a built-in simulated sensor
        pandarcapd --replay FILE [options]    process a recording (pcap, pcap.zst, MCAP)
 
-Captures a Hesai Pandar40P: receives its UDP packets, decodes them into frames, and writes
+Captures a Hesai Pandar40P, Pandar64, PandarXT32, PandarXT16 or PandarQT128 (the model from its
+packets, or --sensor-model): receives its UDP packets, decodes them into frames, and writes
 OUTPUT-DIR/frames/*.pcd, OUTPUT-DIR/raw/*.pcap (+ calibration.csv), with --mcap
 OUTPUT-DIR/mcap/*.mcap (Foxglove, ros2 bag) and, every second,
 OUTPUT-DIR/health/pandarcap.prom and health.jsonl. SIGTERM/SIGINT stop it cleanly, SIGHUP
@@ -45,7 +46,7 @@ Sources:
 
 Overrides (same names as the configuration keys):
   --output-dir DIR       output.directory (default pandarcap-output)
-  --calibration FILE     sensor.calibration_file (default: the nominal Pandar40P table; with
+  --calibration FILE     sensor.calibration_file (default: the model's nominal table; with
                          --replay, the recording's own first: NAME.calibration.csv beside a
                          pcap, the attachment of an MCAP file)
   --calibration-source S sensor.calibration_source: auto (default: the sensor over PTC if it

@@ -293,7 +293,32 @@ void check_simulated(const RunSource& source) {
 
 }  // namespace
 
+namespace {
+
+void choose_model(const DaemonConfig& config, RunSource& source);
+
+}  // namespace
+
 void choose_sensor_model(const DaemonConfig& config, RunSource& source) {
+  choose_model(config, source);
+  // The firing-time correction is the 40P's alone (its tuned decoders apply it).
+  if (!config.sensor.firing_time_correction) return;
+  if (source.model && *source.model != SensorModelId::kPandar40P) {
+    throw StartupError{kExitConfig,
+                       fmt::format("sensor.firing_time_correction applies to the Pandar40P only, "
+                                   "not to a {}: turn it off",
+                                   display_name(*source.model))};
+  }
+  if (!source.model) {
+    spdlog::warn(
+        "sensor.firing_time_correction: applied only if the packets are a Pandar40P's (the "
+        "other models' points are placed without it)");
+  }
+}
+
+namespace {
+
+void choose_model(const DaemonConfig& config, RunSource& source) {
   if (config.sensor.model != "auto") {
     source.model = parse_sensor_model(config.sensor.model);  // checked with the configuration
     spdlog::info("sensor model: {} (sensor.model)", display_name(*source.model));
@@ -328,14 +353,17 @@ void choose_sensor_model(const DaemonConfig& config, RunSource& source) {
     return;  // the replay's own open says what is wrong with the file
   }
   if (!found) {
-    spdlog::warn("sensor model: no packet of {} names a model pandarcap knows: read as {}",
-                 source.replay_path, display_name(SensorModelId::kPandar40P));
-    source.model = SensorModelId::kPandar40P;
+    // The packets choose, as live: the first of a known model, wherever it is in the file.
+    spdlog::warn(
+        "sensor model: none of the first packets of {} names a model pandarcap knows: "
+        "the first that does will",
+        source.replay_path);
+    source.detect_model = true;
     return;
   }
   if (found->detected.kind == DetectionKind::kUnsupported) {
     throw StartupError{
-        kExitConfig,
+        kExitNoInput,
         fmt::format("{}: its packets are a Hesai {}, which pandarcap does not decode (it decodes "
                     "the Pandar40P, Pandar64, PandarXT32, PandarXT16 and PandarQT128)",
                     source.replay_path, found->detected.unsupported_name)};
@@ -353,6 +381,8 @@ void choose_sensor_model(const DaemonConfig& config, RunSource& source) {
                  display_name(*source.model));
   }
 }
+
+}  // namespace
 
 SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
                            std::unique_ptr<SimulatedPtcServer>& simulated_ptc,

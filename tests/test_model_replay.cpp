@@ -17,6 +17,7 @@
 #include "bench/child_process.hpp"
 #include "core/ipv4.hpp"
 #include "core/sensors/sensor_model_id.hpp"
+#include "daemon/pcap/pcap_writer.hpp"
 #include "support/mcap_reader.hpp"
 #include "support/test_support.hpp"
 
@@ -101,7 +102,7 @@ TEST_CASE("a fixed sensor.model counts another model's packets as wrong_model, d
   const nlohmann::json health = last_health_record(dir.path());
   REQUIRE(health.is_object());
   CHECK(health.value("sensor", "") == "pandar64");
-  CHECK(health.at("counters").at("rejects").value("wrong_model", 0) == 2000);
+  CHECK(health.at("counters").at("rejects").value("wrong_model", std::uint64_t{0}) == 2000);
   CHECK(health_counter(health, "packets_accepted") == 0);
   CHECK(files_ending(dir / "frames", ".pcd").empty());
 }
@@ -214,10 +215,12 @@ TEST_CASE("live with sensor.model auto: the first packets name the model, and it
     const char* calibration;  // "" : none (the nominal table of the model the packets name)
     const char* sensor;
     int packets_per_second;
-    const char* said;  // in a degraded record's reason; "" : none is degraded
+    const char* said;           // in a degraded record's reason; "" : none is degraded
+    int unsupported_first = 0;  // AT128 headers sent before the stream: counted across the switch
   };
   const LiveCase cases[] = {
-      {"pandarxt32_nebula_dual_1080B.pcap", "", "pandarxt32", 5000, ""},
+      // 30 AT128 headers first: counted (unsupported_model) across the switch, and said.
+      {"pandarxt32_nebula_dual_1080B.pcap", "", "pandarxt32", 5000, "packets rejected", 30},
       {"pandar64_nebula_dual_1198B.pcap", "nebula_Pandar64_calibration.csv", "pandar64", 6000, ""},
       // A table of another model than the packets: the packets' model is decoded, with its
       // nominal table, and the health says so.
@@ -257,6 +260,12 @@ TEST_CASE("live with sensor.model auto: the first packets name the model, and it
     const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
     REQUIRE(fd >= 0);
     const sockaddr_in to = ipv4_endpoint("127.0.0.1", port, "daemon");
+    std::vector<std::uint8_t> at128(1118, 0x33);
+    at128[0] = 0xEE, at128[1] = 0xFF, at128[2] = 4, at128[3] = 1;
+    for (int i = 0; i < c.unsupported_first; ++i) {
+      ::sendto(fd, at128.data(), at128.size(), 0, reinterpret_cast<const sockaddr*>(&to),
+               sizeof to);
+    }
     const auto start = std::chrono::steady_clock::now();
     const std::size_t step = static_cast<std::size_t>(c.packets_per_second / 100);
     for (std::size_t k = 0; k < payloads.size(); ++k) {
@@ -271,8 +280,17 @@ TEST_CASE("live with sensor.model auto: the first packets name the model, and it
     REQUIRE(h.is_object());
     const std::uint64_t overruns = check_ring_overruns(h);
     CHECK(h.value("sensor", "") == c.sensor);
-    CHECK(health_counter(h, "packets_rejected") == 0);
-    CHECK(health_counter(h, "packets_accepted") + overruns == payloads.size());
+    const auto unsupported = static_cast<std::uint64_t>(c.unsupported_first);
+    CHECK(health_counter(h, "packets_rejected") + overruns >= unsupported);
+    CHECK(health_counter(h, "packets_rejected") <= unsupported);
+    CHECK(h.at("counters").at("rejects").value("unsupported_model", std::uint64_t{0}) ==
+          health_counter(h, "packets_rejected"));
+    CHECK(health_counter(h, "packets_accepted") + health_counter(h, "packets_rejected") +
+              overruns ==
+          payloads.size() + unsupported);
+    CHECK(health_counter(h, "datagrams_received") ==
+          health_counter(h, "packets_accepted") + health_counter(h, "packets_rejected") +
+              health_counter(h, "duplicate_packets") + overruns);
     CHECK(health_counter(h, "kernel_drops") == 0);
     if (overruns == 0) CHECK(health_counter(h, "frames_complete") >= 2);
     bool said = false, degraded = false;
@@ -284,5 +302,50 @@ TEST_CASE("live with sensor.model auto: the first packets name the model, and it
     CHECK(degraded == (*c.said != 0));
     CHECK(said == (*c.said != 0));
     CHECK(daemon.log().find("sensor model: auto") != std::string::npos);
+  }
+}
+
+TEST_CASE("a replay's model is its packets', whatever look-alikes or junk come first",
+          "[sensors][replay][threads]") {
+  const auto capture = real_capture("pandar64_nebula_dual_1198B.pcap");
+  const auto csv = real_capture("nebula_Pandar64_calibration.csv");
+  if (!capture || !csv) return;
+  const auto payloads = capture_payloads(*capture);
+  const Endpoint sensor{0xC0A801C9, 2368}, host{0xC0A8010A, 2368};
+  // Before the Pandar64's packets: one datagram whose first bytes look like an OT128's header,
+  // one AT128 header; or more junk than the start looks through (25 000 datagrams).
+  std::vector<std::uint8_t> ot128(16, 0), at128(1118, 0x33);
+  ot128[0] = 0xEE, ot128[1] = 0xFF, ot128[2] = 1, ot128[3] = 4;
+  at128[0] = 0xEE, at128[1] = 0xFF, at128[2] = 4, at128[3] = 1;
+  const std::vector<std::uint8_t> junk(100, 0x5A);
+  struct Case {
+    const char* name;
+    std::vector<std::vector<std::uint8_t>> before;
+  };
+  const Case cases[] = {{"look-alikes", {ot128, at128}},
+                        {"25000 junk", std::vector<std::vector<std::uint8_t>>(25'000, junk)}};
+  for (const Case& c : cases) {
+    CAPTURE(c.name);
+    ScratchDir dir("model-replay-junk");
+    {
+      PcapWriter pcap((dir / "in.pcap").string());
+      std::int64_t t = 1'593'086'530'000'000'000;
+      for (const auto& p : c.before)
+        pcap.write(p, t += 1000, sensor, host);
+      for (const auto& p : payloads)
+        pcap.write(p, t += 166'000, sensor, host);
+    }
+    const CommandResult run =
+        run_command(pandarcapd_command() + " --replay " + quoted(dir / "in.pcap") +
+                    " --top-speed " + "--calibration " + quoted(*csv) +
+                    " --max-clock-offset 0 --output-dir " + quoted(dir / "out") + " 2>&1");
+    INFO(run.out);
+    REQUIRE(run.exit_code == 0);
+    const nlohmann::json h = last_health_record(dir / "out");
+    CHECK(h.value("sensor", "") == "pandar64");
+    CHECK(health_counter(h, "packets_accepted") == payloads.size());
+    CHECK(health_counter(h, "packets_rejected") == c.before.size());
+    CHECK(health_counter(h, "datagrams_received") == payloads.size() + c.before.size());
+    CHECK(health_counter(h, "frames_complete") >= 2);
   }
 }

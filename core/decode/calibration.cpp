@@ -116,10 +116,12 @@ std::size_t data_rows(std::string_view text) {
 
 }  // namespace
 
-Calibration Calibration::parse(std::string_view text, const std::string& source_name,
-                               SensorModelId model) {
-  const int expected = pandarcap::channel_count(model);
-  const std::string_view model_name = display_name(model);
+namespace {
+
+// The table's rows, each checked where it stands (ids 1..expected); with `require_count`, exactly
+// `expected` of them.
+Calibration parse_table(std::string_view text, const std::string& source_name, int expected,
+                        std::string_view model_name, bool require_count) {
   Calibration calibration;
   calibration.channel_count = expected;
   calibration.source = source_name;
@@ -173,7 +175,7 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
   });
 
   const auto found = static_cast<int>(seen.count());
-  if (found != expected) {
+  if (require_count && found != expected) {
     std::string missing;
     for (int c = 0; c < expected; ++c) {
       if (!seen[c]) missing += fmt::format("{}{}", missing.empty() ? "" : ",", c + 1);
@@ -185,6 +187,13 @@ Calibration Calibration::parse(std::string_view text, const std::string& source_
   return calibration;
 }
 
+}  // namespace
+
+Calibration Calibration::parse(std::string_view text, const std::string& source_name,
+                               SensorModelId model) {
+  return parse_table(text, source_name, pandarcap::channel_count(model), display_name(model), true);
+}
+
 Calibration Calibration::parse_any(std::string_view text, const std::string& source_name) {
   const std::size_t rows = data_rows(text);
   for (SensorModelId id : kSensorModelIds) {
@@ -192,7 +201,13 @@ Calibration Calibration::parse_any(std::string_view text, const std::string& sou
       return parse(text, source_name, id);
     }
   }
-  return parse(text, source_name, SensorModelId::kPandar40P);
+  // A line that is wrong where it stands is said first, at its line and column.
+  parse_table(text, source_name, kMaxChannels, "a supported model", false);
+  const std::size_t last_line = for_each_line(text, [](std::size_t, std::string_view) {});
+  fail(source_name, last_line + 1, 1,
+       fmt::format("{} channel rows: a table of a supported model has 16 (PandarXT16), 32 "
+                   "(PandarXT32), 40 (Pandar40P), 64 (Pandar64) or 128 (PandarQT128)",
+                   rows));
 }
 
 SensorModelId Calibration::model() const noexcept {

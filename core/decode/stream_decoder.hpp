@@ -182,6 +182,14 @@ class BasicStreamDecoder {
   RejectReason process(std::span<const std::uint8_t> payload);
   // End of stream: the held run is placed, open frames are finished as partial.
   void flush();
+  // Adds what another model's decoder counted before this one took its place (a live "auto"
+  // switching at the first packet of its model: nothing was accepted yet), so the counts go on.
+  void count_before(const StreamStats& before) noexcept {
+    stats_.packets += before.packets;
+    for (std::size_t r = 0; r < kRejectReasonCount; ++r)
+      stats_.rejects[r] += before.rejects[r];
+    stats_.duplicates += before.duplicates;
+  }
 
   const StreamStats& stats() const noexcept { return stats_; }
   const SequenceStats& sequence() const noexcept { return sequence_.stats(); }

@@ -84,7 +84,7 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(sequence_lost, "sequence_lost_packets",                                                        \
     "Packets missing from the UDP sequence (late arrivals forgiven)")                              \
   X(points_missing, "points_missing",                                                              \
-    "Channel slots of lost packets (400 a packet): the UDP sequence's lost packets when the "      \
+    "Channel slots of lost packets (the model's blocks x channels a packet: 400 on a Pandar40P): the UDP sequence's lost packets when the "      \
     "packets carry one, else the azimuth frames lacked (never from the time)")                     \
   X(sequence_duplicates, "sequence_duplicate_packets",                                             \
     "Packets whose UDP sequence number had already arrived")                                       \

@@ -15,6 +15,7 @@
 
 #include "core/health/health_format.hpp"
 #include "core/health/health_policy.hpp"
+#include "core/sensors/sensor_models.hpp"
 #include "core/units.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
@@ -179,7 +180,11 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   }
   c.reversed_packets = s.reversed;
   c.stream_changes = s.stream_changes;
-  c.points_missing = packets_missing(s, decode.sequence, decode.frames) * kBlocks * kChannels;
+  // Channel slots of the model decoded (a 40P's 400 a packet, a Pandar64's 384, an XT32's 256).
+  const std::uint64_t slots = with_model(decode.model, []<class M>(std::type_identity<M>) {
+    return static_cast<std::uint64_t>(M::kBlocks * M::kChannels);
+  });
+  c.points_missing = packets_missing(s, decode.sequence, decode.frames) * slots;
 
   HealthGauges& g = h.gauges;
   g.uptime_seconds = static_cast<double>(now - start_monotonic_ns_) / 1e9;

@@ -55,6 +55,18 @@ Writer::Writer(const WriterOptions& options, WriterQueue& from_decoder, ArenaQue
 
 Writer::~Writer() = default;
 
+void Writer::follow_model() {
+  // A live "auto" whose packets named another model than the table it started with: that
+  // model's table is the one its decoder uses, and the one the recordings must carry (their
+  // sidecars, raw/calibration.csv). Once, when the decoder switches.
+  const auto at = static_cast<std::size_t>(decode_.model);
+  if (decode_.model == options_.calibration_model || options_.calibration_by_model[at].empty())
+    return;
+  options_.calibration_model = decode_.model;
+  options_.calibration_csv = options_.calibration_by_model[at];
+  if (options_.pcap) pcap_.save_calibration(options_.calibration_csv);
+}
+
 void Writer::prepare() {
   const std::int64_t start = monotonic_ns();
   decode_.monotonic_ns = start;
@@ -294,9 +306,11 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
           break;
         case WriterMessage::Kind::kSnapshot:
           decode_ = message->snapshot;
+          follow_model();
           break;
         case WriterMessage::Kind::kEnd:
           decode_ = message->snapshot;
+          follow_model();
           ended = true;
           break;
       }

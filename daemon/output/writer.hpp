@@ -106,6 +106,8 @@ class Writer final : private FinishReceiver {
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
 
   WriterOptions options_;
+  // options_.calibration_csv follows the decoder's model (a live "auto").
+  void follow_model();
   WriterQueue& from_decoder_;
   ArenaQueue& arenas_back_;
   RawQueue& raw_back_;

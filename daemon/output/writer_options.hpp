@@ -2,6 +2,7 @@
 // by its parts: frame output, pcap recording, health publishing. Plain data.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -9,6 +10,7 @@
 
 #include "core/frames/pcd.hpp"
 #include "core/health/health.hpp"
+#include "core/sensors/sensor_model_id.hpp"
 #include "daemon/mcap/mcap_file_options.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
@@ -74,6 +76,10 @@ struct WriterOptions {
   std::string expected_return_mode = "any";
   int expected_rpm = 600;
   std::string calibration_csv;
+  // A live "auto": the table each model's decoder would use (indexed by SensorModelId), which
+  // replaces calibration_csv when the packets name that model. Empty otherwise.
+  std::array<std::string, kSensorModelIds.size()> calibration_by_model;
+  SensorModelId calibration_model = SensorModelId::kPandar40P;  // calibration_csv's
   // The sensor's identity and the calibration's source (pandarcap_sensor_info), and the
   // neighbour file raw/sensor.json saved beside the recordings (daemon/ptc/sensor_at_start.hpp).
   SensorIdentity sensor_identity;

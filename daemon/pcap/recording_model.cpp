@@ -12,11 +12,14 @@ std::optional<RecordingModel> recording_model(const std::string& path,
   CaptureReader reader(path, options);
   CaptureRecord record;
   RecordingModel found;
+  // An unsupported model's header (identify_model: by its first bytes alone) is remembered, not
+  // taken at once: one look-alike datagram must not stand for a recording of a model pandarcap
+  // decodes. It names the recording only when no packet of a known model follows in the window.
+  std::optional<DetectedModel> unsupported;
   while (found.records < max_datagrams && reader.next(record) == CaptureStatus::kRecord) {
     ++found.records;
     if (record.snapped) continue;
-    // A known model only where its own check passes (detect_model); an unsupported one by its
-    // header alone (identify_model): it is named, never decoded.
+    // A known model only where its own check passes (detect_model).
     const DetectedModel d = detect_model(record.payload);
     if (d.kind == DetectionKind::kKnown) {
       found.detected = d;
@@ -24,13 +27,13 @@ std::optional<RecordingModel> recording_model(const std::string& path,
       return found;
     }
     const DetectedModel named = identify_model(record.payload);
-    if (named.kind == DetectionKind::kUnsupported) {
-      found.detected = named;
-      found.named = reader.named_model();
-      return found;
-    }
+    if (named.kind == DetectionKind::kUnsupported && !unsupported) unsupported = named;
   }
   found.named = reader.named_model();
+  if (unsupported && !found.named) {
+    found.detected = *unsupported;
+    return found;
+  }
   if (!found.named) return std::nullopt;
   found.detected.kind = DetectionKind::kKnown;
   found.detected.model = *found.named;

@@ -24,10 +24,11 @@ struct RecordingModel {
   bool from_file = false;  // detected is the file's word: no packet read named a model
 };
 
-// Reads up to `max_datagrams` UDP datagrams of `path` (to `port` when given). None when no
-// datagram names a model and the file names none either (not a Hesai recording, or an empty
-// one: the replay says what it holds). Throws CaptureError when the file cannot be read as a
-// capture.
+// Reads up to `max_datagrams` UDP datagrams of `path` (to `port` when given) for the first packet
+// of a known model; else the file's own word (MCAP); else the first unsupported model's header
+// seen (one look-alike datagram does not name a recording whose packets are a known model's).
+// None when nothing names a model: the replay then lets its packets choose, as live does.
+// Throws CaptureError when the file cannot be read as a capture.
 std::optional<RecordingModel> recording_model(const std::string& path,
                                               std::optional<std::uint16_t> port,
                                               std::uint64_t max_datagrams = 20'000);
