@@ -10,6 +10,30 @@
 
 namespace pandarcap {
 
+SyntheticSensorConfig synthetic_sensor_config(const ModelSensorConfig& config) {
+  SyntheticSensorConfig sc;
+  sc.rpm = config.rpm;
+  sc.return_mode = config.return_mode;
+  sc.udp_sequence = config.udp_sequence;
+  sc.first_sequence = config.first_sequence;
+  sc.start_unix_ns = config.start_unix_ns;
+  sc.start_azimuth_deg = config.start_azimuth_deg;
+  sc.seed = config.seed;
+  return sc;
+}
+
+ModelSensorConfig model_sensor_config(const SyntheticSensorConfig& config) {
+  ModelSensorConfig m;
+  m.rpm = config.rpm;
+  m.return_mode = config.return_mode;
+  m.udp_sequence = config.udp_sequence;
+  m.first_sequence = config.first_sequence;
+  m.start_unix_ns = config.start_unix_ns;
+  m.start_azimuth_deg = config.start_azimuth_deg;
+  m.seed = config.seed;
+  return m;
+}
+
 namespace {
 
 using Variant = std::variant<SyntheticSensor, ModelSensor<Pandar64>, ModelSensor<PandarXT32>,
@@ -24,15 +48,7 @@ Variant make_sensor(SensorModelId model, const ModelSensorConfig& config,
         throw std::invalid_argument(fmt::format("a Pandar40P calibration has {} channels, not {}",
                                                 M::kChannels, table.channel_count));
       }
-      SyntheticSensorConfig sc;
-      sc.rpm = config.rpm;
-      sc.return_mode = config.return_mode;
-      sc.udp_sequence = config.udp_sequence;
-      sc.first_sequence = config.first_sequence;
-      sc.start_unix_ns = config.start_unix_ns;
-      sc.start_azimuth_deg = config.start_azimuth_deg;
-      sc.seed = config.seed;
-      return Variant(std::in_place_type<SyntheticSensor>, sc, table);
+      return Variant(std::in_place_type<SyntheticSensor>, synthetic_sensor_config(config), table);
     } else {
       return Variant(std::in_place_type<ModelSensor<M>>, config, table);
     }

@@ -17,6 +17,11 @@
 
 namespace pandarcap {
 
+// The same settings in the other simulator's terms (the 40P's SyntheticSensor and the others'
+// ModelSensor take the same fields).
+SyntheticSensorConfig synthetic_sensor_config(const ModelSensorConfig& config);
+ModelSensorConfig model_sensor_config(const SyntheticSensorConfig& config);
+
 class AnyModelSensor {
  public:
   // `calibration`: the table the rays use (default: the model's nominal one). Throws

@@ -24,27 +24,11 @@ constexpr std::size_t kMaxBurst = 64;
 
 }  // namespace
 
-namespace {
-
-ModelSensorConfig model_config(const SyntheticSensorConfig& c) {
-  ModelSensorConfig m;
-  m.rpm = c.rpm;
-  m.return_mode = c.return_mode;
-  m.udp_sequence = c.udp_sequence;
-  m.first_sequence = c.first_sequence;
-  m.start_unix_ns = c.start_unix_ns;
-  m.start_azimuth_deg = c.start_azimuth_deg;
-  m.seed = c.seed;
-  return m;
-}
-
-}  // namespace
-
 SimulatedSender::SimulatedSender(SensorModelId model, const SyntheticSensorConfig& config,
                                  const std::string& source_ip, const std::string& destination_ip,
                                  std::uint16_t destination_port)
     // Rendered with the simulated unit's own table, the one its PTC serves.
-    : sensor_(model, model_config(config), simulated_unit_calibration(model)) {
+    : sensor_(model, model_sensor_config(config), simulated_unit_calibration(model)) {
   const sockaddr_in source = ipv4_endpoint(source_ip, 0, "simulator source");
   const sockaddr_in destination =
       ipv4_endpoint(destination_ip, destination_port, "simulator destination");
