@@ -332,17 +332,14 @@ void choose_model(const DaemonConfig& config, RunSource& source) {
     case RunSource::Kind::kSimulated:
       source.model = source.simulated_model;
       spdlog::info("sensor model: {} (the simulated sensor)", display_name(*source.model));
-      break;
+      check_simulated(source);
+      return;
     case RunSource::Kind::kLive:
       source.detect_model = true;
       spdlog::info("sensor model: auto (the first packets name it)");
       return;
     case RunSource::Kind::kReplay:
       break;
-  }
-  if (source.kind == RunSource::Kind::kSimulated) {
-    check_simulated(source);
-    return;
   }
   std::optional<RecordingModel> found;
   try {
