@@ -30,6 +30,8 @@ inline constexpr std::array kKeyOptions{
     KeyOption{"--status-interval", "sensor.status_interval_seconds"},
     KeyOption{"--host-ip", "sensor.host_ip"},
     KeyOption{"--port", "sensor.data_port"},
+    KeyOption{"--receiver", "input.receiver"},
+    KeyOption{"--interface", "sensor.interface"},
     KeyOption{"--sensor-ip", "sensor.sensor_ip"},
     KeyOption{"--cut-angle", "sensor.cut_angle"},
     KeyOption{"--frame", "sensor.frame"},

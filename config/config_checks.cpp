@@ -31,6 +31,13 @@ void check_between_keys(
                   "\"file\" needs sensor.calibration_file (the CSV to decode with)");
     }
   });
+  each("input.receiver", [&] {
+    if (c.input.receiver == "packet_ring" && s.interface.empty()) {
+      report.fail("input.receiver",
+                  "\"packet_ring\" needs sensor.interface (--interface IFACE: the network "
+                  "interface the sensor's packets arrive on; lo for a sensor on this host)");
+    }
+  });
   each("sensor.status_interval_seconds", [&] {
     if (s.status_interval_seconds > 0 && s.status_interval_seconds < 0.1) {
       report.fail(

@@ -34,6 +34,7 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("sensor", "host_ip", s.host_ip, &ipv4);
   v("sensor", "multicast_ip", s.multicast_ip, &multicast_or_empty);
   v("sensor", "multicast_interface_ip", s.multicast_interface_ip, &ipv4_or_empty);
+  v("sensor", "interface", s.interface, &interface_or_empty);
   v("sensor", "data_port", s.data_port, IntRange{1, 65535});
   v("sensor", "udp_socket_receive_buffer_size_bytes", s.udp_socket_receive_buffer_size_bytes,
     IntRange{0, std::numeric_limits<std::int32_t>::max()});
@@ -53,6 +54,8 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("sensor", "ptc_timeout_ms", s.ptc_timeout_ms, IntRange{100, 60'000});
   v("sensor", "status_interval_seconds", s.status_interval_seconds,
     RealRange{0.0, false, 3600.0, false});
+
+  v("input", "receiver", c.input.receiver, &receiver);
 
   v("ring", "slots", c.ring.slots, IntRange{64, 1 << 20});
   v("ring", "receive_batch", c.ring.receive_batch, IntRange{1, 1024});

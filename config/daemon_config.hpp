@@ -15,7 +15,10 @@ struct SensorSection {
   std::string host_ip = "0.0.0.0";     // local address the UDP socket binds to
   std::string multicast_ip;            // group to join; "" = unicast/broadcast
   std::string multicast_interface_ip;  // local interface address for the join; "" = any
-  std::uint16_t data_port = 2368;      // 1..65535
+  // The network interface input.receiver = "packet_ring" reads (required there; the socket
+  // receiver ignores it).
+  std::string interface;
+  std::uint16_t data_port = 2368;                                 // 1..65535
   std::uint64_t udp_socket_receive_buffer_size_bytes = 8u << 20;  // requested SO_RCVBUF
   // The sensor model: "auto" (from the packets: core/sensors/model_detection.hpp) or one of
   // "Pandar40P", "Pandar64", "PandarXT32", "PandarXT16", "PandarQT128" (any case).
@@ -37,6 +40,13 @@ struct SensorSection {
   // The axes points are written in (PCD, MCAP): "hesai" (the sensor's: y at azimuth 0, x at 90°,
   // z up) or "ros" (REP 103: x forward, y left, z up).
   std::string frame = "hesai";
+};
+
+// How datagrams are taken from the kernel (daemon/source/): "socket", a UDP socket read with
+// recvmmsg (no privilege), or "packet_ring", an AF_PACKET TPACKET_V3 ring on sensor.interface
+// that the kernel fills and this host reads without a system call per batch (CAP_NET_RAW).
+struct InputSection {
+  std::string receiver = "socket";
 };
 
 struct RingSection {
@@ -161,6 +171,7 @@ struct DaemonConfig {
   // run stops the daemon at start-up (exit 78); it never falls back silently.
   std::string decoder = "auto";
   SensorSection sensor;
+  InputSection input;
   RingSection ring;
   ArenaSection arenas;
   OutputSection output;

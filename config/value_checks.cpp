@@ -3,6 +3,8 @@
 #include <arpa/inet.h>
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <initializer_list>
 
@@ -87,6 +89,24 @@ std::optional<std::string> sensor_model(const std::string& s) {
       "\"{}\" is not a sensor model: \"auto\", \"Pandar40P\", \"Pandar64\", \"PandarXT32\", "
       "\"PandarXT16\" or \"PandarQT128\" (any case)",
       s);
+}
+
+std::optional<std::string> receiver(const std::string& s) {
+  return one_of(s, {"socket", "packet_ring"});
+}
+
+// A network interface's name as the kernel takes it (dev_valid_name): 1..15 bytes, not "." or
+// "..", no '/', ':' or white space.
+std::optional<std::string> interface_or_empty(const std::string& s) {
+  if (s.empty()) return std::nullopt;
+  const bool bad_char = std::any_of(s.begin(), s.end(), [](char c) {
+    return c == '/' || c == ':' || std::isspace(static_cast<unsigned char>(c)) || c == '\0';
+  });
+  if (s.size() > 15 || s == "." || s == ".." || bad_char) {
+    return fmt::format(
+        "\"{}\" is not a network interface name (1 to 15 characters, no '/', ':' or spaces)", s);
+  }
+  return std::nullopt;
 }
 
 std::optional<std::string> return_mode(const std::string& s) {

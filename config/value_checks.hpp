@@ -40,6 +40,8 @@ std::optional<std::string> multicast_or_empty(const std::string& s);
 std::optional<std::string> prom_file_or_empty(const std::string& s);
 std::optional<std::string> return_mode(const std::string& s);
 std::optional<std::string> sensor_model(const std::string& s);
+std::optional<std::string> receiver(const std::string& s);
+std::optional<std::string> interface_or_empty(const std::string& s);
 std::optional<std::string> label_or_empty(const std::string& s);
 std::optional<std::string> calibration_source(const std::string& s);
 std::optional<std::string> pcd_fields(const std::string& s);

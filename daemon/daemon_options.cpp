@@ -203,6 +203,8 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   ro.sensor_ip = config.sensor.sensor_ip;
   ro.batch = config.ring.receive_batch;
   ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
+  ro.packet_ring = config.input.receiver == "packet_ring";
+  ro.interface = config.sensor.interface;
   return ro;
 }
 

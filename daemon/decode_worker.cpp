@@ -149,6 +149,8 @@ void DecodeWorker::record_raw(const PacketSlot& slot) {
   packet.length =
       static_cast<std::uint16_t>(std::min<std::size_t>(slot.length, sizeof packet.payload));
   std::memcpy(packet.payload, slot.payload, packet.length);
+  packet.wire_header_length = slot.wire_header_length;
+  std::memcpy(packet.wire_header, slot.wire_header, slot.wire_header_length);
   // The recording must not claim bytes it does not hold: a cut datagram keeps its real length.
   packet.original_length = slot.truncated
                                ? std::max<std::uint32_t>(slot.original_length, packet.length + 1u)

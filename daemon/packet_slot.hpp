@@ -45,6 +45,10 @@ inline Endpoint to_endpoint(const SlotAddress& address) noexcept {
 // (spec §1: 1262 bytes, or 1266 with the UDP sequence; core/sensors/sensor_models.hpp).
 inline constexpr std::size_t kMaxAcceptedDatagram = kLargestDatagramBytes;
 
+// Room for a frame's headers: Ethernet (14), two VLAN tags (8), IPv4 with options (up to 60) and
+// UDP (8) = 90. A frame with more is recorded with synthesised headers instead.
+inline constexpr std::size_t kWireHeaderCapacity = 96;
+
 struct alignas(ringbuf::kCacheLine) PacketSlot {
   // Room for the largest accepted datagram, rounded up so the slot is whole cache lines.
   static constexpr std::size_t kPayloadCapacity = 1280;
@@ -64,6 +68,12 @@ struct alignas(ringbuf::kCacheLine) PacketSlot {
   std::int64_t receive_time_ns;
   // Sender, as recvmmsg wrote it (IPv4), or a replayed record's (IPv4 or IPv6).
   SlotAddress source;
+  // The frame's own headers as the wire carried them (Ethernet, the VLAN tag put back, IPv4,
+  // UDP), for the recording: kept by the packet_ring receiver, which sees whole frames, so its
+  // pcap holds what `tcpdump -w` would. 0 bytes from the socket receiver and a replay: their
+  // recordings synthesise the headers (daemon/pcap/pcap_writer.hpp).
+  std::uint8_t wire_header_length;
+  std::uint8_t wire_header[kWireHeaderCapacity];
   // Where the datagram was sent: the address in its IP header (IP_PKTINFO: a unicast, broadcast
   // or multicast address) and the port the socket is bound to; a replay's record's own. The
   // recording writes it as the packet's destination, as the wire carried it.

@@ -58,6 +58,10 @@ Overrides (same names as the configuration keys):
   --host-ip IP           sensor.host_ip (default 0.0.0.0)
   --port N               sensor.data_port (default 2368); with --replay: only datagrams to N
                          (not for MCAP: its packets carry no addresses)
+  --receiver R           input.receiver: socket (default: a UDP socket read with recvmmsg, no
+                         privilege) or packet_ring (an AF_PACKET TPACKET_V3 ring on --interface,
+                         as tcpdump reads: less CPU, needs CAP_NET_RAW; docs/deploy.md)
+  --interface IFACE      sensor.interface: the network interface packet_ring reads (e.g. eth1)
   --sensor-ip IP         sensor.sensor_ip: drop (and count) datagrams from other sources;
                          without it, the first address to send a packet is the sensor's (not
                          for a replayed MCAP: its packets carry no addresses)

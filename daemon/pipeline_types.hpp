@@ -65,9 +65,11 @@ struct FrameArena {
 struct RawPacket {
   std::int64_t receive_time_ns = 0;
   SlotAddress source{};
-  SlotAddress destination{};          // as the wire carried it (PacketSlot::destination)
-  std::uint16_t length = 0;           // bytes in payload (a truncated datagram keeps what fit)
-  std::uint32_t original_length = 0;  // bytes the datagram had (more than length: it was cut)
+  SlotAddress destination{};            // as the wire carried it (PacketSlot::destination)
+  std::uint16_t length = 0;             // bytes in payload (a truncated datagram keeps what fit)
+  std::uint32_t original_length = 0;    // bytes the datagram had (more than length: it was cut)
+  std::uint8_t wire_header_length = 0;  // PacketSlot::wire_header: 0 = synthesise the headers
+  std::uint8_t wire_header[kWireHeaderCapacity];
   std::uint8_t payload[PacketSlot::kPayloadCapacity];
 };
 

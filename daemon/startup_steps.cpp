@@ -434,6 +434,10 @@ std::unique_ptr<PacketSource> open_source(const DaemonConfig& config, const RunS
     return PacketSource::live(receiver_options(config, source));
   } catch (const CaptureError& error) {
     throw StartupError{kExitNoInput, error.what()};
+  } catch (const MissingCapability& error) {
+    throw StartupError{kExitNoPermission, error.what()};
+  } catch (const NoSuchInterface& error) {
+    throw StartupError{kExitConfig, error.what()};
   } catch (const std::exception& error) {
     throw StartupError{1, error.what()};
   }

@@ -242,9 +242,12 @@ void PcapRecorder::write(const RawBatch& batch) {
   // The batch as the file would take it: a record header and synthesised headers per packet.
   std::uint64_t batch_bytes = 0;
   for (std::size_t i = 0; i < batch.size; ++i)
-    batch_bytes += batch.packets[i].length + (batch.packets[i].source.v4.sin_family == AF_INET6
-                                                  ? kPcapRecordOverheadBytesIpv6
-                                                  : kPcapRecordOverheadBytes);
+    batch_bytes +=
+        batch.packets[i].length +
+        (batch.packets[i].wire_header_length > 0
+             ? kPcapRecordHeaderBytes + batch.packets[i].wire_header_length
+         : batch.packets[i].source.v4.sin_family == AF_INET6 ? kPcapRecordOverheadBytesIpv6
+                                                             : kPcapRecordOverheadBytes);
   if (batch.size > 0 && !space_.allows(volume_, batch_bytes, refusal_)) {
     packets_not_written_ += batch.size;
     accounting_.write_failed(refusal_, batch_bytes);
@@ -264,9 +267,14 @@ void PcapRecorder::write(const RawBatch& batch) {
         close();
       }
       if (!pcap_) open(packet.receive_time_ns);
-      pcap_->write(std::span<const std::uint8_t>(packet.payload, packet.length),
-                   packet.original_length, packet.receive_time_ns, to_endpoint(packet.source),
-                   to_endpoint(packet.destination));
+      const std::span<const std::uint8_t> payload(packet.payload, packet.length);
+      if (packet.wire_header_length > 0) {
+        pcap_->write_frame({packet.wire_header, packet.wire_header_length}, payload,
+                           packet.original_length, packet.receive_time_ns);
+      } else {
+        pcap_->write(payload, packet.original_length, packet.receive_time_ns,
+                     to_endpoint(packet.source), to_endpoint(packet.destination));
+      }
       ++packets_written_;
     } catch (const std::invalid_argument& error) {
       // This packet cannot be recorded (a time outside what pcap can hold); the file is fine.

@@ -6,7 +6,11 @@ namespace pandarcap {
 
 std::unique_ptr<PacketSource> PacketSource::live(const UdpReceiverOptions& options) {
   std::unique_ptr<PacketSource> source(new PacketSource);
-  source->receiver_ = std::make_unique<UdpReceiver>(options);
+  if (options.packet_ring) {
+    source->ring_receiver_ = std::make_unique<PacketRingReceiver>(options);
+  } else {
+    source->receiver_ = std::make_unique<UdpReceiver>(options);
+  }
   return source;
 }
 
@@ -14,7 +18,8 @@ std::unique_ptr<PacketSource> PacketSource::simulated(const UdpReceiverOptions& 
                                                       SensorModelId model,
                                                       const SyntheticSensorConfig& sensor) {
   std::unique_ptr<PacketSource> source = live(options);
-  const std::uint16_t port = source->receiver_->bound_port();
+  const std::uint16_t port =
+      source->receiver_ ? source->receiver_->bound_port() : source->ring_receiver_->bound_port();
   source->simulator_ =
       std::make_unique<SimulatedSender>(model, sensor, "127.0.0.1", "127.0.0.1", port);
   spdlog::info("simulated sensor: {}, {} RPM, {} return{}, sending to 127.0.0.1:{}",
@@ -33,6 +38,8 @@ void PacketSource::run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveC
                        std::atomic<std::uint64_t>& heartbeat, std::atomic<bool>& done) {
   if (replay_) {
     replay_result_ = replay_->run(ring, stop, counters, heartbeat);
+  } else if (ring_receiver_) {
+    ring_receiver_->run(ring, stop, counters, heartbeat);
   } else {
     receiver_->run(ring, stop, counters, heartbeat);
   }

@@ -1,5 +1,6 @@
-// Where the daemon's packets come from, opened before READY: the live socket, the socket the
-// built-in simulated sensor sends to, or a capture file replayed.
+// Where the daemon's packets come from, opened before READY: the live socket (or the packet
+// ring, input.receiver), the socket the built-in simulated sensor sends to, or a capture file
+// replayed.
 //
 // Opening is where a source fails (a port in use, a missing file): before any thread starts, so
 // the start can report it with an exit status. run() is the source thread's body. Which source a
@@ -14,6 +15,7 @@
 #include "core/sim/synthetic_sensor.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pipeline_types.hpp"
+#include "daemon/source/packet_ring_receiver.hpp"
 #include "daemon/source/replay_source.hpp"
 #include "daemon/source/simulated_sender.hpp"
 #include "daemon/source/udp_receiver.hpp"
@@ -52,6 +54,7 @@ class PacketSource {
   PacketSource() = default;
 
   std::unique_ptr<UdpReceiver> receiver_;
+  std::unique_ptr<PacketRingReceiver> ring_receiver_;  // instead of receiver_ (packet_ring)
   std::unique_ptr<ReplaySource> replay_;
   std::unique_ptr<SimulatedSender> simulator_;
   ReplayResult replay_result_;

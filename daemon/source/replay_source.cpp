@@ -180,6 +180,7 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
     slot.receive_time_ns = record.timestamp_ns;
     slot.source = to_slot_address(record.source);
     slot.destination = to_slot_address(record.destination);
+    slot.wire_header_length = 0;
     if (pending == slots.size()) publish();
   }
   publish();

@@ -247,6 +247,7 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
     truncated += slot.truncated;
     slot.receive_time_ns = fallback_time;
     slot.destination.v4 = bound_;
+    slot.wire_header_length = 0;
     for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;
          c = CMSG_NXTHDR(const_cast<msghdr*>(&message.msg_hdr), c)) {
       // The length is the kernel's to set, but it is checked before the copy all the same.

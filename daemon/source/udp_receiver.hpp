@@ -50,6 +50,10 @@ struct UdpReceiverOptions {
   std::string sensor_ip;  // "" = the first source that sends a packet (core/decode/source_lock.hpp)
   std::size_t batch = 64;
   std::int64_t latency_budget_ns = 0;  // 0: wake per datagram; see above
+  // input.receiver = "packet_ring": an AF_PACKET ring on `interface` instead of this socket
+  // (daemon/source/packet_ring_receiver.hpp), with the same options otherwise.
+  bool packet_ring = false;
+  std::string interface;
 };
 
 class UdpReceiver {

@@ -1,0 +1,111 @@
+// The receive thread's AF_PACKET receiver (input.receiver = "packet_ring"): the kernel writes
+// every frame that passes a BPF filter into a TPACKET_V3 ring of blocks mapped into this
+// process, and hands over a whole block at a time; the thread reads the blocks in place, with no
+// system call per packet or per batch (only a poll() when no block is ready). tcpdump reads the
+// same way, which is why it records for less than any recvmmsg loop.
+//
+// The socket and filter: SOCK_RAW on sensor.interface, with a classic BPF program for UDP to the
+// data port compiled by libpcap (pcap_compile; "udp dst port N"). It is attached before the
+// socket is bound, so no other frame ever enters the ring. sensor_ip is judged after the filter,
+// as the socket receiver judges it (core/decode/source_lock.hpp): a second sensor on the port is
+// still seen, counted and named, not filtered out unseen. Frames this host sent (loopback's
+// second copy) or that were meant for another host (a promiscuous interface) are skipped, as the
+// kernel's UDP socket would never have received them.
+//
+// The ring: udp_socket_receive_buffer_size_bytes of 128 KiB blocks (at least 8). The kernel
+// hands a block over when it is full or when its retire timer runs out: the timer is the latency
+// budget (latency.budget_ms; 1 ms at least, the kernel's unit), so a packet waits in the ring
+// no longer than the budget, as in the socket receiver.
+//
+// Each packet keeps its kernel timestamp (tp_sec/tp_nsec, nanoseconds) and its headers as the
+// wire carried them, the VLAN tag put back from tp_vlan_tci (with its TPID), so the pcap holds
+// the frame byte for byte as `tcpdump -w` writes it (PacketSlot::wire_header).
+//
+// Copy, not zero copy: each datagram is copied from the block into a PacketRing slot, so the
+// block goes back to the kernel at once and the decoder, the accounting and the replay path are
+// the socket receiver's. A copy of 1.3 kB is a few hundred nanoseconds: what the ring saves is
+// the system calls and wake-ups, not the copy (docs/performance.md measures both receivers).
+//
+// Drops: PACKET_STATISTICS (tp_drops, the frames the kernel had no free block for) is read once a
+// second and at the end; reading resets it, so it is added up into kernel_drops. A full
+// PacketRing drops the rest of the block, counted as ring overruns, as the socket receiver does.
+//
+// No reply from this host: without a UDP socket on the data port the kernel answers every
+// datagram with ICMP port-unreachable (a flood towards the sensor). A UDP socket is bound to
+// host_ip:data_port with a BPF program that drops everything, so it costs nothing; it also joins
+// multicast_ip when one is set, so the interface takes the group's frames.
+//
+// Privilege: AF_PACKET needs CAP_NET_RAW. Without it the error names the capability and the
+// systemd drop-in that grants it (systemd/packet-ring.conf; docs/deploy.md).
+#pragma once
+
+#include <linux/if_packet.h>
+
+#include <atomic>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+
+#include "core/decode/source_lock.hpp"
+#include "daemon/io/unique_fd.hpp"
+#include "daemon/packet_slot.hpp"
+#include "daemon/pipeline_types.hpp"
+#include "daemon/source/udp_receiver.hpp"
+
+namespace pandarcap {
+
+// The start-up errors a caller tells apart (exit 77 and 78): no CAP_NET_RAW, and an interface
+// this host does not have.
+struct MissingCapability : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+struct NoSuchInterface : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+class PacketRingReceiver {
+ public:
+  static constexpr std::uint32_t kBlockBytes = 128 * 1024;
+  static constexpr std::uint32_t kMinBlocks = 8;
+  static constexpr std::uint32_t kFrameBytes = 2048;  // the kernel's bookkeeping unit
+
+  // Opens the guard socket, the packet socket and its ring on options.interface. Throws
+  // std::runtime_error naming the step (and the capability, when it is missing).
+  explicit PacketRingReceiver(const UdpReceiverOptions& options);
+  ~PacketRingReceiver();
+  PacketRingReceiver(const PacketRingReceiver&) = delete;
+  PacketRingReceiver& operator=(const PacketRingReceiver&) = delete;
+
+  // The data port filtered for (the guard socket's: port 0 asks the kernel for a free one).
+  std::uint16_t bound_port() const noexcept { return port_; }
+  std::uint64_t ring_bytes() const noexcept { return std::uint64_t{block_bytes_} * block_count_; }
+
+  // Receives until `stop` is set (checked at least every 100 ms).
+  void run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+           std::atomic<std::uint64_t>& heartbeat);
+
+ private:
+  struct Frame;  // one packet's fields as read from the block
+  void open_guard(const UdpReceiverOptions& options);
+  void open_ring(const UdpReceiverOptions& options);
+  // The block the kernel handed over (TP_STATUS_USER), or null.
+  tpacket_block_desc* ready_block() noexcept;
+  // Copies a block's datagrams into the ring and gives the block back to the kernel.
+  void take_block(tpacket_block_desc& block, PacketRing& ring, ReceiveCounters& counters);
+  // Adds the kernel's drops since the last read to kernel_drops.
+  void read_statistics(ReceiveCounters& counters) noexcept;
+
+  io::UniqueFd guard_;  // the drop-all UDP socket on the data port
+  io::UniqueFd fd_;     // the packet socket
+  void* map_ = nullptr;
+  std::uint32_t block_bytes_ = kBlockBytes;
+  std::uint32_t block_count_ = 0;
+  std::uint32_t next_block_ = 0;
+  std::uint32_t retire_ms_ = 1;
+  std::uint16_t port_ = 0;
+  std::uint64_t kernel_drops_ = 0;
+  std::uint64_t queue_freezes_ = 0;
+  SourceLock sources_{std::nullopt};
+};
+
+}  // namespace pandarcap

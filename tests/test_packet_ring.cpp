@@ -1,0 +1,444 @@
+// input.receiver = "packet_ring" (daemon/source/packet_ring_receiver.hpp), where users meet it:
+// the real pandarcapd reading the near end of a veth pair that the test makes (as root; CI runs
+// as root), fed from a network namespace at the far end as a sensor on a cable would feed a NIC.
+// What the far end sends: the simulated sensor's stream, VLAN-tagged frames, a second host's
+// valid packets, another port's datagrams; and a burst into a stopped daemon that the ring cannot
+// hold. tcpdump -w on the same interface is the independent witness of what the wire carried.
+#include <arpa/inet.h>
+#include <linux/if_packet.h>
+#include <net/ethernet.h>
+#include <net/if.h>
+#include <netinet/ip.h>
+#include <netinet/ip_icmp.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "bench/child_process.hpp"
+#include "bench/udp_traffic.hpp"
+#include "daemon/io/unique_fd.hpp"
+#include "support/test_support.hpp"
+#include "support/veth_pair.hpp"
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using pandarcap::harness::ChildProcess;
+using pandarcap::harness::wait_until;
+
+namespace pandarcap {
+namespace {
+
+bool can_make_links() {
+  if (::geteuid() == 0) return true;
+  // CI runs as root: there a test that cannot run is a failure, not a skip.
+  if (std::getenv("CI") != nullptr) FAIL("the packet_ring tests need root (CAP_NET_ADMIN)");
+  WARN("not root: the packet_ring tests need CAP_NET_ADMIN for the veth pair: not run");
+  return false;
+}
+
+// One pcap record: its header's time and lengths, and its bytes.
+struct Record {
+  std::uint32_t seconds, microseconds, original;
+  std::string bytes;
+  bool operator<(const Record& o) const {
+    return std::tie(seconds, microseconds, original, bytes) <
+           std::tie(o.seconds, o.microseconds, o.original, o.bytes);
+  }
+  bool operator==(const Record& o) const = default;
+};
+
+std::vector<Record> pcap_records(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  const std::string data((std::istreambuf_iterator<char>(in)), {});
+  std::vector<Record> out;
+  REQUIRE(data.size() >= 24);
+  std::uint32_t magic = 0;
+  std::memcpy(&magic, data.data(), 4);
+  REQUIRE(magic == 0xA1B2C3D4u);  // native order, microseconds: what both write
+  for (std::size_t at = 24; at + 16 <= data.size();) {
+    std::uint32_t h[4];
+    std::memcpy(h, data.data() + at, 16);
+    REQUIRE(at + 16 + h[2] <= data.size());
+    out.push_back({h[0], h[1], h[3], data.substr(at + 16, h[2])});
+    at += 16 + h[2];
+  }
+  return out;
+}
+
+std::size_t count_records(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  std::size_t count = 0;
+  char header[24];
+  if (!in.read(header, 24)) return 0;
+  while (in.read(header, 16)) {
+    std::uint32_t captured = 0;
+    std::memcpy(&captured, header + 8, 4);
+    if (!in.seekg(captured, std::ios::cur)) break;
+    ++count;
+  }
+  return count;
+}
+
+std::uint16_t checksum(const std::uint8_t* p, std::size_t n) {
+  std::uint32_t sum = 0;
+  for (std::size_t i = 0; i + 1 < n; i += 2)
+    sum += static_cast<std::uint32_t>(p[i] << 8 | p[i + 1]);
+  if (n % 2) sum += static_cast<std::uint32_t>(p[n - 1] << 8);
+  while (sum >> 16)
+    sum = (sum & 0xFFFF) + (sum >> 16);
+  return static_cast<std::uint16_t>(~sum);
+}
+
+std::vector<std::uint8_t> parse_mac(const std::string& text) {
+  std::vector<std::uint8_t> mac;
+  for (std::size_t i = 0; i + 1 < text.size(); i += 3)
+    mac.push_back(static_cast<std::uint8_t>(std::stoul(text.substr(i, 2), nullptr, 16)));
+  return mac;
+}
+
+// A VLAN-tagged Ethernet frame carrying `payload` in UDP from `source` to `destination`:port.
+std::vector<std::uint8_t> tagged_frame(const test::VethPair& veth, std::uint16_t port,
+                                       std::uint16_t tci, const std::vector<std::uint8_t>& payload,
+                                       std::uint16_t ip_id) {
+  std::vector<std::uint8_t> f = parse_mac(veth.near_mac());
+  const auto src = parse_mac(veth.far_mac());
+  f.insert(f.end(), src.begin(), src.end());
+  const auto be16 = [&](std::uint16_t v) {
+    f.push_back(static_cast<std::uint8_t>(v >> 8));
+    f.push_back(static_cast<std::uint8_t>(v));
+  };
+  be16(0x8100);
+  be16(tci);
+  be16(0x0800);
+  const std::size_t ip = f.size();
+  const auto udp_length = static_cast<std::uint16_t>(8 + payload.size());
+  be16(0x4500);
+  be16(static_cast<std::uint16_t>(20 + udp_length));
+  be16(ip_id);
+  be16(0x4000);
+  be16(0x4011);
+  be16(0);
+  in_addr a{};
+  inet_pton(AF_INET, veth.far_ip().c_str(), &a);
+  f.insert(f.end(), reinterpret_cast<std::uint8_t*>(&a), reinterpret_cast<std::uint8_t*>(&a) + 4);
+  inet_pton(AF_INET, veth.near_ip().c_str(), &a);
+  f.insert(f.end(), reinterpret_cast<std::uint8_t*>(&a), reinterpret_cast<std::uint8_t*>(&a) + 4);
+  const std::uint16_t sum = checksum(f.data() + ip, 20);
+  f[ip + 10] = static_cast<std::uint8_t>(sum >> 8);
+  f[ip + 11] = static_cast<std::uint8_t>(sum);
+  be16(2368);
+  be16(port);
+  be16(udp_length);
+  be16(0);
+  f.insert(f.end(), payload.begin(), payload.end());
+  return f;
+}
+
+// A valid Pandar40P datagram (the simulated sensor's first packet) with UDP sequence `sequence`.
+std::vector<std::uint8_t> sensor_datagram(std::uint32_t sequence) {
+  const auto source = bench::TrafficSource::synthetic(SyntheticSensorConfig{});
+  std::vector<std::uint8_t> d = source.bodies.front();
+  for (int i = 0; i < 4; ++i)
+    d.push_back(static_cast<std::uint8_t>(sequence >> (8 * i)));
+  return d;
+}
+
+// Sends `datagrams` from `from_ip` (a far-end address) to `to_ip`:`port` over UDP.
+void send_udp(const std::string& from_ip, const std::string& to_ip, std::uint16_t port,
+              const std::vector<std::vector<std::uint8_t>>& datagrams) {
+  io::UniqueFd fd(::socket(AF_INET, SOCK_DGRAM, 0));
+  REQUIRE(fd);
+  sockaddr_in local{};
+  local.sin_family = AF_INET;
+  inet_pton(AF_INET, from_ip.c_str(), &local.sin_addr);
+  REQUIRE(::bind(fd.get(), reinterpret_cast<sockaddr*>(&local), sizeof local) == 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(port);
+  inet_pton(AF_INET, to_ip.c_str(), &to.sin_addr);
+  for (const auto& d : datagrams) {
+    REQUIRE(::sendto(fd.get(), d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&to),
+                     sizeof to) == static_cast<ssize_t>(d.size()));
+  }
+}
+
+// ICMP port-unreachable messages reaching the far end about datagrams to `port`.
+class IcmpWatch {
+ public:
+  IcmpWatch() : fd_(::socket(AF_INET, SOCK_RAW | SOCK_NONBLOCK, IPPROTO_ICMP)) { REQUIRE(fd_); }
+  // Reads what has arrived; returns the count so far for `port`.
+  int unreachable(std::uint16_t port) {
+    std::uint8_t buffer[2048];
+    for (;;) {
+      const ssize_t n = ::recv(fd_.get(), buffer, sizeof buffer, 0);
+      if (n <= 0) break;
+      const std::size_t ihl = std::size_t{buffer[0] & 0x0Fu} * 4;
+      // ICMP type 3 code 3, then the offending IPv4 header and the first 8 bytes of its UDP.
+      if (static_cast<std::size_t>(n) < ihl + 8 + 20 + 8) continue;
+      const std::uint8_t* icmp = buffer + ihl;
+      if (icmp[0] != ICMP_DEST_UNREACH || icmp[1] != ICMP_PORT_UNREACH) continue;
+      const std::uint8_t* inner = icmp + 8;
+      const std::uint8_t* udp = inner + std::size_t{inner[0] & 0x0Fu} * 4;
+      ++counts_[static_cast<std::uint16_t>(udp[2] << 8 | udp[3])];
+    }
+    return counts_[port];
+  }
+
+ private:
+  io::UniqueFd fd_;
+  std::map<std::uint16_t, int> counts_;
+};
+
+struct RingDaemon {
+  RingDaemon(const test::ScratchDir& dir, const test::VethPair& veth, std::uint16_t port,
+             const std::string& extra_toml = "")
+      : out(dir / "out") {
+    const fs::path config = dir / "daemon.toml";
+    std::ofstream(config) << "[sensor]\nsensor_ip = \"" << veth.far_ip() << "\"\n" << extra_toml;
+    process.emplace(
+        test::binary("pandarcapd"),
+        std::vector<std::string>{"--allow-root", "-c", config.string(), "--receiver", "packet_ring",
+                                 "--interface", veth.near(), "--port", std::to_string(port),
+                                 "--output-dir", out.string(), "--max-clock-offset", "0"},
+        dir / "daemon.log");
+    const bool ready =
+        wait_until([&] { return process->log().find("ready:") != std::string::npos; }, 20s);
+    INFO(process->log());
+    REQUIRE(ready);
+  }
+  // Waits until `total` datagrams are received or dropped by the kernel, stops the daemon, and
+  // returns its final health record.
+  nlohmann::json stop_after(std::uint64_t total) {
+    wait_until(
+        [&] {
+          const auto records = test::health_records(out);
+          return !records.empty() && test::health_counter(records.back(), "datagrams_received") +
+                                             test::health_counter(records.back(), "kernel_drops") >=
+                                         total;
+        },
+        20s);
+    process->signal(SIGTERM);
+    REQUIRE(process->wait_exit(30s) == 0);
+    return test::last_health_record(out);
+  }
+  fs::path out;
+  std::optional<ChildProcess> process;
+};
+
+}  // namespace
+
+TEST_CASE("packet_ring on a veth pair: filter, VLAN tag, second host, tcpdump's bytes, no ICMP",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("pr");
+  REQUIRE(veth.ok());
+  test::ScratchDir dir("packet-ring");
+  const std::uint16_t port = harness::free_udp_port();
+
+  // Negative control: with nothing on the port, the near end answers with ICMP.
+  {
+    test::FarNamespace far(veth.ns());
+    IcmpWatch icmp;
+    send_udp(veth.far_ip(), veth.near_ip(), port, {sensor_datagram(0)});
+    REQUIRE(wait_until([&] { return icmp.unreachable(port) == 1; }, 5s));
+  }
+
+  ChildProcess tcpdump("/usr/bin/tcpdump",
+                       {"-i", veth.near(), "-n", "-U", "-B", "32768", "-w",
+                        (dir / "tcpdump.pcap").string(), "udp dst port " + std::to_string(port)},
+                       dir / "tcpdump.log");
+  REQUIRE(wait_until([&] { return tcpdump.log().find("listening on") != std::string::npos; }, 10s));
+  RingDaemon daemon(dir, veth, port);
+
+  constexpr int kTagged = 20, kSecondHost = 15, kOtherPort = 10;
+  bench::GeneratorResult sent;
+  int unreachable = -1;
+  {
+    test::FarNamespace far(veth.ns());
+    IcmpWatch icmp;
+    bench::GeneratorOptions traffic;
+    traffic.destination_ip = veth.near_ip();
+    traffic.port = port;
+    traffic.rate_pps = 3600;
+    traffic.seconds = 0.5;
+    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    REQUIRE(sent.send_errors == 0);
+
+    // VLAN 7, priority 3, through a packet socket (the tag in the frame, as a switch trunk sends).
+    io::UniqueFd raw(::socket(AF_PACKET, SOCK_RAW, 0));
+    REQUIRE(raw);
+    sockaddr_ll link{};
+    link.sll_family = AF_PACKET;
+    link.sll_ifindex = static_cast<int>(::if_nametoindex(veth.far().c_str()));
+    REQUIRE(::bind(raw.get(), reinterpret_cast<sockaddr*>(&link), sizeof link) == 0);
+    for (int i = 0; i < kTagged; ++i) {
+      const auto frame = tagged_frame(veth, port, 0x6007,
+                                      sensor_datagram(static_cast<std::uint32_t>(sent.sent + i)),
+                                      static_cast<std::uint16_t>(i));
+      REQUIRE(::send(raw.get(), frame.data(), frame.size(), 0) ==
+              static_cast<ssize_t>(frame.size()));
+    }
+    // A second host's valid packets (another sensor on the port), and another port's traffic.
+    send_udp(veth.second_far_ip(), veth.near_ip(), port,
+             std::vector<std::vector<std::uint8_t>>(kSecondHost, sensor_datagram(0)));
+    send_udp(veth.far_ip(), veth.near_ip(), static_cast<std::uint16_t>(port + 1),
+             std::vector<std::vector<std::uint8_t>>(kOtherPort, sensor_datagram(0)));
+    // The other port has no socket: its ICMP answers arrive, after any about `port` would have.
+    const auto other = static_cast<std::uint16_t>(port + 1);
+    REQUIRE(wait_until([&] { return icmp.unreachable(other) >= 1; }, 5s));
+    unreachable = icmp.unreachable(port);
+  }
+  const std::uint64_t from_sensor = sent.sent + kTagged;
+  const nlohmann::json h = daemon.stop_after(from_sensor + kSecondHost);
+  INFO(daemon.process->log());
+  // tcpdump writes each packet as it takes it (-U): stopped once its file holds them all.
+  wait_until([&] { return count_records(dir / "tcpdump.pcap") >= from_sensor + kSecondHost; }, 10s);
+  tcpdump.signal(SIGINT);
+  REQUIRE(tcpdump.wait_exit(10s).has_value());
+
+  CHECK(unreachable == 0);
+  const auto c = [&](const char* name) { return test::health_counter(h, name); };
+  CHECK(c("datagrams_received") == from_sensor + kSecondHost);
+  CHECK(c("foreign_datagrams") == kSecondHost);
+  CHECK(c("other_sensor_packets") == kSecondHost);
+  CHECK(c("kernel_drops") == 0);
+  CHECK(c("ring_overruns") == 0);
+  CHECK(c("pcap_packets_written") == from_sensor);
+  CHECK(c("packets_accepted") >= sent.sent);
+
+  // The recording holds each of the sensor's frames exactly as tcpdump -w does: the same bytes
+  // (the VLAN tag put back), the same time and length.
+  const auto pcaps = test::files_ending(daemon.out / "raw", ".pcap");
+  REQUIRE(pcaps.size() == 1);
+  const std::vector<Record> ours = pcap_records(pcaps[0]);
+  const std::vector<Record> theirs = pcap_records(dir / "tcpdump.pcap");
+  CHECK(ours.size() == from_sensor);
+  INFO(tcpdump.log());
+  CHECK(theirs.size() == from_sensor + kSecondHost);
+  std::multiset<Record> witness(theirs.begin(), theirs.end());
+  std::size_t identical = 0, tagged = 0;
+  for (const Record& r : ours) {
+    if (const auto at = witness.find(r); at != witness.end()) {
+      ++identical;
+      witness.erase(at);
+    }
+    tagged += r.bytes.size() > 16 && r.bytes.substr(12, 4) == std::string("\x81\x00\x60\x07", 4);
+  }
+  CHECK(identical == ours.size());
+  CHECK(tagged == kTagged);
+}
+
+}  // namespace pandarcap
+
+namespace pandarcap {
+
+TEST_CASE("packet_ring: a burst the ring cannot hold is counted as kernel drops, exactly",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("pb");
+  REQUIRE(veth.ok());
+  test::ScratchDir dir("packet-ring-burst");
+  const std::uint16_t port = harness::free_udp_port();
+  // The smallest ring: 8 blocks of 128 KiB, about 750 of these frames.
+  RingDaemon daemon(dir, veth, port, "udp_socket_receive_buffer_size_bytes = 1048576\n");
+  // The receive thread stopped (the whole daemon, SIGSTOP), the kernel fills the ring and then
+  // has nowhere to put the rest of a 4000-packet burst.
+  daemon.process->signal(SIGSTOP);
+  bench::GeneratorResult sent;
+  {
+    test::FarNamespace far(veth.ns());
+    bench::GeneratorOptions traffic;
+    traffic.destination_ip = veth.near_ip();
+    traffic.port = port;
+    traffic.rate_pps = 40'000;
+    traffic.seconds = 0.1;
+    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    REQUIRE(sent.send_errors == 0);
+  }
+  daemon.process->signal(SIGCONT);
+  const nlohmann::json h = daemon.stop_after(sent.sent);
+  INFO(daemon.process->log());
+  const auto c = [&](const char* name) { return test::health_counter(h, name); };
+  REQUIRE(sent.sent >= 3000);
+  CHECK(c("kernel_drops") > 0);
+  CHECK(c("kernel_drops") < sent.sent);
+  // Every packet is either received or counted as dropped by the kernel: nothing unaccounted.
+  CHECK(c("datagrams_received") + c("kernel_drops") == sent.sent);
+  CHECK(c("pcap_packets_written") == c("datagrams_received"));
+  CHECK(h.at("state") != "ok");
+}
+
+TEST_CASE("packet_ring: refused with the reason, before any thread: privilege, interface, config",
+          "[packet_ring][daemon][config]") {
+  test::ScratchDir dir("packet-ring-refused");
+  fs::permissions(dir.path(), fs::perms::all);
+  const std::string daemon = test::quoted(test::binary("pandarcapd"));
+  const std::string out = test::quoted(dir / "out");
+  const auto run = [&](const std::string& prefix, const std::string& args) {
+    return test::run_command(prefix + daemon + " " + args + " --output-dir " + out + " 2>&1");
+  };
+
+  // No CAP_NET_RAW (nobody, as root drops to it): 77, naming the capability and the drop-in.
+  if (::geteuid() == 0) {
+    const auto r = run("setpriv --reuid=65534 --regid=65534 --clear-groups --inh-caps=-all ",
+                       "--receiver packet_ring --interface lo --duration 1 --port " +
+                           std::to_string(harness::free_udp_port()));
+    INFO(r.out);
+    CHECK(r.exit_code == 77);
+    CHECK(r.out.find("CAP_NET_RAW") != std::string::npos);
+    CHECK(r.out.find("packet-ring.conf") != std::string::npos);
+  }
+  // An interface this host does not have: 78, named.
+  const auto missing =
+      run("", "--allow-root --receiver packet_ring --interface nosuch0 --duration 1");
+  INFO(missing.out);
+  if (::geteuid() == 0) {
+    CHECK(missing.exit_code == 78);
+    CHECK(missing.out.find("\"nosuch0\"") != std::string::npos);
+  }
+  // Configuration: no interface, a bad name, an unknown receiver.
+  for (const auto& [args, says] : std::vector<std::pair<std::string, std::string>>{
+           {"--receiver packet_ring", "needs sensor.interface"},
+           {"--receiver packet_ring --interface 'eth 0'", "not a network interface name"},
+           {"--receiver packet_ring --interface abcdefghijklmnop", "not a network interface name"},
+           {"--receiver ring", "\"ring\" is not one of socket, packet_ring"}}) {
+    const auto r = run("", "--allow-root --check-config " + args);
+    INFO(args << ": " << r.out);
+    CHECK((r.exit_code == 78 || r.exit_code == 64));
+    CHECK(r.out.find(says) != std::string::npos);
+  }
+}
+
+TEST_CASE("packet_ring on loopback: the simulated sensor, each datagram once",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  test::ScratchDir dir("packet-ring-lo");
+  const auto r = test::run_command(
+      test::quoted(test::binary("pandarcapd")) +
+      " --allow-root --simulate --receiver packet_ring --interface lo --duration 2 --output-dir " +
+      test::quoted(dir / "out") + " 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  const nlohmann::json h = test::last_health_record(dir / "out");
+  const auto c = [&](const char* name) { return test::health_counter(h, name); };
+  CHECK(c("datagrams_received") > 3000);
+  // Loopback shows each datagram twice (sent, received): taken once.
+  CHECK(c("duplicate_packets") == 0);
+  CHECK(c("sequence_duplicate_packets") == 0);
+  CHECK(c("kernel_drops") == 0);
+  CHECK(c("pcap_packets_written") == c("datagrams_received"));
+  CHECK(r.out.find("TPACKET_V3 ring") != std::string::npos);
+}
+
+}  // namespace pandarcap
