@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The service files as systemd itself reads them:
 #   1. systemd-analyze verify of an instance of every unit (syntax, directives, binaries);
-#   2. systemd-analyze security --offline: the exposure score must be <= 1.5 ("OK");
+#   2. systemd-analyze security --offline: the exposure score must be <= 1.5 ("OK"), and <= 2.0
+#      for the daemon's unit with the packet ring's drop-in (CAP_NET_RAW);
 #   3. the sysctl drop-in allows at least the receive buffer the default config requests;
 #   4. the sysusers entry creates the user the unit runs as, and the tmpfiles entries apply;
 #   5. the daemon's unit binds UDP ports only: no TCP listening port (the live view's) unless a
@@ -53,6 +54,25 @@ for template in "$unit_dir"/*@.service; do
     fail "systemd-analyze verify $name with the upload's drop-in: $out"
   fi
   echo "socket binds $name: UDP only; drop-ins allowing tcp:8765 and setting --upload verify clean"
+
+  # The packet_ring receiver's drop-in (CAP_NET_RAW, AF_PACKET): verifies clean, and the unit
+  # with it stays at most 2.0 exposed.
+  cp "$source_dir/systemd/pandarcapd-packet-ring.conf" "$instance.d/packet-ring.conf"
+  if ! out=$(systemd-analyze verify --man=no "$instance" 2>&1) || [ -n "$out" ]; then
+    fail "systemd-analyze verify $name with the packet ring's drop-in: $out"
+  fi
+  ring="$work/packet-ring"
+  mkdir -p "$ring/$name.d"
+  cp "$template" "$ring/"
+  cp "$source_dir/systemd/pandarcapd-packet-ring.conf" "$ring/$name.d/packet-ring.conf"
+  report=$(cd "$ring" && systemd-analyze security --offline=true --no-pager "$name" 2>&1)
+  ring_score=$(sed -n 's/.*Overall exposure level for .*: \([0-9.]*\) .*/\1/p' <<<"$report")
+  [ -n "$ring_score" ] || fail "no exposure score for $name with the packet ring's drop-in: $report"
+  grep -q 'AmbientCapabilities=.*receives ambient' <<<"$report" ||
+    fail "the packet ring's drop-in was not read: $report"
+  awk -v s="$ring_score" 'BEGIN { exit !(s <= 2.0) }' ||
+    fail "$name with the packet ring's drop-in: exposure $ring_score > 2.0: $report"
+  echo "security $name with the packet ring's drop-in (CAP_NET_RAW): exposure $ring_score"
 done
 
 # The upload's timer, with its service beside it (verify checks that the unit it starts exists).

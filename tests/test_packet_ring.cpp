@@ -420,13 +420,19 @@ TEST_CASE("packet_ring: refused with the reason, before any thread: privilege, i
   }
 }
 
-TEST_CASE("packet_ring on loopback: the simulated sensor, each datagram once",
-          "[packet_ring][daemon][threads]") {
+TEST_CASE(
+    "packet_ring on loopback, with CAP_NET_RAW alone: the simulated sensor, each datagram once",
+    "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
   test::ScratchDir dir("packet-ring-lo");
+  fs::permissions(dir.path(), fs::perms::all);
+  // An ordinary user (nobody) given only CAP_NET_RAW, as the systemd drop-in does
+  // (AmbientCapabilities=CAP_NET_RAW).
   const auto r = test::run_command(
+      "setpriv --reuid=65534 --regid=65534 --clear-groups --inh-caps=-all,+net_raw "
+      "--ambient-caps=-all,+net_raw " +
       test::quoted(test::binary("pandarcapd")) +
-      " --allow-root --simulate --receiver packet_ring --interface lo --duration 2 --output-dir " +
+      " --simulate --receiver packet_ring --interface lo --duration 2 --output-dir " +
       test::quoted(dir / "out") + " 2>&1");
   INFO(r.out);
   REQUIRE(r.exit_code == 0);

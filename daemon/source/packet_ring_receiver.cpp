@@ -45,10 +45,11 @@ void store_be16(std::uint8_t* p, std::uint16_t v) noexcept {
   if (error == EPERM || error == EACCES) {
     throw MissingCapability(fmt::format(
         "{}: {}: input.receiver = \"packet_ring\" needs the CAP_NET_RAW capability. Run as root, "
-        "or under systemd with the drop-in systemd/packet-ring.conf installed as "
-        "/etc/systemd/system/pandarcapd.service.d/packet-ring.conf "
-        "(AmbientCapabilities=CAP_NET_RAW, CapabilityBoundingSet=CAP_NET_RAW; docs/deploy.md), "
-        "or use input.receiver = \"socket\", which needs no privilege",
+        "or under systemd with the drop-in /usr/share/pandarcap/examples/"
+        "pandarcapd-packet-ring.conf (systemd/ in the source) installed as "
+        "/etc/systemd/system/pandarcapd@NAME.service.d/packet-ring.conf "
+        "(AmbientCapabilities=CAP_NET_RAW; docs/deploy.md), or use input.receiver = \"socket\", "
+        "which needs no privilege",
         what, std::strerror(error)));
   }
   io::throw_error(error, what);
