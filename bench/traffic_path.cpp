@@ -1,6 +1,7 @@
 #include "bench/traffic_path.hpp"
 
 #include <fmt/format.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <cstdio>
@@ -78,6 +79,13 @@ VethPair::VethPair(StopOnSignal& stop) {
   // Stopped by a signal, the harness removes them as it would at the end.
   stop.run_on_signal(link_del_);
   stop.run_on_signal(namespace_del_);
+  // A signal waits until the pair is whole (or removed after a failure): the handler removes
+  // what the steps made, and cannot know what a step still running would make after it.
+  sigset_t both, old;
+  ::sigemptyset(&both);
+  ::sigaddset(&both, SIGINT);
+  ::sigaddset(&both, SIGTERM);
+  ::pthread_sigmask(SIG_BLOCK, &both, &old);
   try {
     ip(program, "netns add " + namespace_);
     ip(program, fmt::format("link add {} address {} type veth peer name {} address {}", near_,
@@ -94,8 +102,10 @@ VethPair::VethPair(StopOnSignal& stop) {
        fmt::format("neigh replace {} lladdr {} dev {} nud permanent", far_ip_, mac(1), near_));
   } catch (...) {
     remove();
+    ::pthread_sigmask(SIG_SETMASK, &old, nullptr);
     throw;
   }
+  ::pthread_sigmask(SIG_SETMASK, &old, nullptr);
 }
 
 VethPair::~VethPair() {

@@ -681,25 +681,38 @@ TEST_CASE("pandarcap-bench zero-loss --veth: sent from a namespace of its own, n
   CHECK_FALSE(interface_exists(near));
   CHECK_FALSE(namespace_exists(space.substr(std::string("/run/netns/").size())));
 
-  // Stopped by SIGTERM mid-run: still nothing left behind, and it ends by that signal.
+  // Stopped by SIGTERM mid-trial: the daemon it runs stopped too, nothing left behind, and it ends
+  // by that signal.
   harness::ChildProcess bench_run(test::binary("pandarcap-bench"),
                                   {"zero-loss", "--veth", "--json", "--sensor-rate-only",
                                    "--daemon-only", "--trial-seconds", "30"},
                                   dir / "stopped.log");
-  const std::string name = "pandarcap-bench-" + std::to_string(bench_run.pid());
-  REQUIRE(harness::wait_until([&] { return std::filesystem::exists("/run/netns/" + name); },
-                              std::chrono::seconds(20)));
+  const std::string pid = std::to_string(bench_run.pid());
+  int daemon = 0;
+  REQUIRE(harness::wait_until(
+      [&] {
+        std::istringstream children(
+            harness::read_file("/proc/" + pid + "/task/" + pid + "/children"));
+        for (int child = 0; children >> child;) {
+          if (harness::read_file("/proc/" + std::to_string(child) + "/comm") == "pandarcapd\n") {
+            daemon = child;
+          }
+        }
+        return daemon != 0;
+      },
+      std::chrono::seconds(20)));
   bench_run.signal(SIGTERM);
   const auto status = bench_run.wait_exit(std::chrono::seconds(20));
   CHECK(status == -SIGTERM);
-  CHECK_FALSE(namespace_exists(name));
-  CHECK_FALSE(interface_exists("pcb" + std::to_string(bench_run.pid()) + "n"));
+  CHECK_FALSE(std::filesystem::exists("/proc/" + std::to_string(daemon)));
+  CHECK_FALSE(namespace_exists("pandarcap-bench-" + pid));
+  CHECK_FALSE(interface_exists("pcb" + pid + "n"));
 }
 
 // The packet_ring receiver needs a pandarcapd that has it (--receiver): hidden until then; run
-// with `pandarcap_tests "[packet_ring]"`.
+// with `pandarcap_tests "[compare_receivers]"`.
 TEST_CASE("pandarcap-bench zero-loss --compare-receivers: socket and packet_ring in one run",
-          "[bench][cli][threads][.packet_ring]") {
+          "[bench][cli][threads][.compare_receivers]") {
   REQUIRE(::geteuid() == 0);
   for (const std::string path : {"", " --veth"}) {
     INFO("path:" << path);
