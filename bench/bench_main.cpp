@@ -144,6 +144,9 @@ void check_zero_loss_path(pandarcap::CliArgs& args, const pandarcap::bench::Zero
         "--interface needs --destination IP: the address the generator sends to, whose packets "
         "arrive on that interface");
   }
+  if (o.traffic.foreign_fraction > 0 && (o.veth || !o.interface.empty())) {
+    args.usage_error("--foreign-fraction sends from 127.0.0.2: loopback only");
+  }
   if (!o.destination.empty() && o.interface.empty()) {
     args.usage_error("--destination goes with --interface (loopback and --veth set their own)");
   }

@@ -41,19 +41,20 @@ void ip(const std::string& program, const std::string& args) {
 
 std::string TrafficPath::delivery_note() const {
   if (kind == "veth") {
-    return "veth: the sender's transmit puts each packet on the receiving end's backlog "
-           "(netif_rx) and the kernel delivers it (IP, UDP, the socket's queue or the packet "
-           "ring) in a softirq that runs on the sending CPU as the send returns, so it is charged "
-           "to the generator's thread, as on loopback; the receivers pay only for reading.";
+    return "veth: the sender's transmit puts each datagram on the near end's backlog (netif_rx) "
+           "and the kernel delivers it (IP, UDP, the socket's queue or the packet ring) in a "
+           "NET_RX softirq on the sending CPU as the send returns (measured: one per datagram, "
+           "on the sender's CPU), so it is charged to the generator's thread, as on loopback; "
+           "the receivers pay only for reading.";
   }
   if (kind == "interface") {
     return "a real interface: the kernel's delivery work runs in the NIC's receive softirq (NAPI) "
            "on the CPU its interrupt lands on, charged to whatever runs there or to ksoftirqd, "
            "not to the generator.";
   }
-  return "loopback: the kernel's delivery work (softirq: IP, UDP, the socket's queue) runs in "
-         "the sender's context, so it is charged to the generator's thread; the receivers pay "
-         "only for reading.";
+  return "loopback: the kernel's delivery work (a NET_RX softirq per datagram: IP, UDP, the "
+         "socket's queue) runs on the sending CPU as the send returns, so it is charged to the "
+         "generator's thread; the receivers pay only for reading.";
 }
 
 VethPair::VethPair(StopOnSignal& stop) {

@@ -47,7 +47,8 @@ Options:
                          threads) and peak RSS are reported, and, if it prints a line
                          'received N' (N datagrams; the last such line counts, e.g. on SIGTERM),
                          its loss
-  --receiver-port N      the UDP port CMD listens on (127.0.0.1; required with the command)
+  --receiver-port N      the UDP port CMD listens on (127.0.0.1; with --veth the near end's
+                         address, settings.destination, or 0.0.0.0; required with the command)
   --receiver KIND        the daemon's receiver in every trial: socket (recvmmsg, its default)
                          or packet_ring (AF_PACKET TPACKET_V3 on the interface the packets
                          arrive on: lo, the veth's near end, or --interface; as root)

@@ -616,6 +616,7 @@ TEST_CASE("pandarcap-bench zero-loss: the receiver and path options, refused whe
   refused("--interface eth0 --receiver packet_ring", "--interface needs --destination IP");
   refused("--interface eth0 --compare-receivers", "--interface needs --destination IP");
   refused("--destination 10.0.0.1", "--destination goes with --interface");
+  refused("--veth --foreign-fraction 0.1", "loopback only");
   refused("--interface eth0 --receiver packet_ring --destination 10.0.0", "an IPv4 address");
   // --veth makes interfaces and a namespace: as anyone but root, a usage error before anything.
   if (::geteuid() == 0) {
