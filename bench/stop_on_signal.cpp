@@ -7,6 +7,7 @@
 
 #include <array>
 #include <atomic>
+#include <cerrno>
 #include <memory>
 
 namespace pandarcap::bench {
@@ -51,6 +52,7 @@ void stop_children() {
 }
 
 void on_signal(int signal_number) {
+  const int saved_errno = errno;  // the interrupted code's, until the signal ends the process
   stop_children();
   const int commands = g_command_count.load();
   for (int i = 0; i < commands; ++i)
@@ -59,6 +61,7 @@ void on_signal(int signal_number) {
   default_action.sa_handler = SIG_DFL;
   ::sigaction(signal_number, &default_action, nullptr);
   ::raise(signal_number);  // delivered when the handler returns: the process ends by it
+  errno = saved_errno;
 }
 
 }  // namespace
