@@ -8,7 +8,7 @@
 #include <array>
 #include <atomic>
 #include <cerrno>
-#include <memory>
+#include <stdexcept>
 
 namespace pandarcap::bench {
 
@@ -17,14 +17,9 @@ namespace {
 constexpr int kSlots = 16;
 std::array<std::atomic<int>, kSlots> g_children{};
 std::atomic<bool> g_active{false};
-
-// The commands, owned here so that the handler reads them without allocating.
-struct Command {
-  std::vector<std::string> args;
-  std::vector<char*> argv;
-};
-std::vector<std::unique_ptr<Command>> g_commands;
-std::atomic<int> g_command_count{0};
+// The guard: its pid and the pipe's write end (0 and -1: none, or it has been told).
+std::atomic<int> g_guard_pid{0};
+std::atomic<int> g_guard_pipe{-1};
 
 void stop_children() {
   for (auto& slot : g_children) {
@@ -51,12 +46,23 @@ void stop_children() {
   }
 }
 
+// Tells the guard `what` ('r' run, 'q' quit) and waits for it to end. Async-signal-safe.
+void tell_guard(char what) noexcept {
+  const int pipe = g_guard_pipe.exchange(-1);
+  const int pid = g_guard_pid.exchange(0);
+  if (pipe < 0 || pid <= 0) return;
+  while (::write(pipe, &what, 1) < 0 && errno == EINTR) {
+  }
+  ::close(pipe);
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+}
+
 void on_signal(int signal_number) {
   const int saved_errno = errno;  // the interrupted code's, until the signal ends the process
   stop_children();
-  const int commands = g_command_count.load();
-  for (int i = 0; i < commands; ++i)
-    spawn_and_wait(g_commands[static_cast<std::size_t>(i)]->argv.data());
+  tell_guard('r');
   struct sigaction default_action {};
   default_action.sa_handler = SIG_DFL;
   ::sigaction(signal_number, &default_action, nullptr);
@@ -66,7 +72,11 @@ void on_signal(int signal_number) {
 
 }  // namespace
 
-void spawn_and_wait(char* const* argv) {
+void spawn_and_wait(const std::vector<std::string>& args) {
+  std::vector<char*> argv;
+  for (const std::string& a : args)
+    argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
   const pid_t pid = ::fork();
   if (pid == 0) {
     const int null = ::open("/dev/null", O_WRONLY);
@@ -74,12 +84,13 @@ void spawn_and_wait(char* const* argv) {
       ::dup2(null, 1);
       ::dup2(null, 2);
     }
-    ::execv(argv[0], argv);
+    ::execv(argv[0], argv.data());
     ::_exit(127);
   }
   if (pid > 0) {
     int status = 0;
-    ::waitpid(pid, &status, 0);
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
   }
 }
 
@@ -99,26 +110,41 @@ StopOnSignal::~StopOnSignal() {
   ::sigaction(SIGINT, &old_int_, nullptr);
   ::sigaction(SIGTERM, &old_term_, nullptr);
   g_active.store(false);
-  g_command_count.store(0);
-  g_commands.clear();
+  tell_guard('q');
 }
 
-void StopOnSignal::run_on_signal(std::vector<std::string> argv) {
-  auto command = std::make_unique<Command>();
-  command->args = std::move(argv);
-  for (std::string& a : command->args)
-    command->argv.push_back(a.data());
-  command->argv.push_back(nullptr);
-  // The signals wait while the table grows (a vector that moves its elements is not to be read
-  // from a handler meanwhile).
-  sigset_t both, old;
-  ::sigemptyset(&both);
-  ::sigaddset(&both, SIGINT);
-  ::sigaddset(&both, SIGTERM);
-  ::pthread_sigmask(SIG_BLOCK, &both, &old);
-  g_commands.push_back(std::move(command));
-  g_command_count.store(static_cast<int>(g_commands.size()));
-  ::pthread_sigmask(SIG_SETMASK, &old, nullptr);
+void StopOnSignal::guard(std::vector<std::vector<std::string>> commands) {
+  int ends[2];
+  if (::pipe2(ends, O_CLOEXEC) != 0) throw std::runtime_error("cannot make the guard's pipe");
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(ends[0]);
+    ::close(ends[1]);
+    throw std::runtime_error("cannot fork the guard process");
+  }
+  if (pid == 0) {
+    // The guard: outlives a terminal's SIGINT to the group, waits for its word or the harness's
+    // end.
+    ::signal(SIGINT, SIG_IGN);
+    ::signal(SIGTERM, SIG_IGN);
+    ::close(ends[1]);
+    char what = 0;
+    ssize_t n = 0;
+    while ((n = ::read(ends[0], &what, 1)) < 0 && errno == EINTR) {
+    }
+    if (n <= 0 || what == 'r') {
+      for (const auto& command : commands)
+        spawn_and_wait(command);
+    }
+    ::_exit(0);
+  }
+  ::close(ends[0]);
+  g_guard_pipe.store(ends[1]);
+  g_guard_pid.store(pid);
+}
+
+void StopOnSignal::run_guarded_now() noexcept {
+  tell_guard('r');
 }
 
 StopOnSignal::Child::Child(int pid) {

@@ -1,12 +1,15 @@
 // What a zero-loss run leaves behind when SIGINT or SIGTERM stops it: nothing. While a
 // StopOnSignal lives, those signals stop the children the harness registered (the daemon, tcpdump,
-// another receiver: SIGTERM, then SIGKILL after 5 s), run the commands it was given (the veth
+// another receiver: SIGTERM, then SIGKILL after 5 s), have the guard run its commands (the veth
 // pair's removal), and then take their usual course: the harness ends by the signal. Without it a
 // daemon would outlive the harness that started it, and a veth pair and a namespace would stay.
 //
-// The handler may only use async-signal-safe calls (kill, waitpid, nanosleep, fork, execv,
-// sigaction, raise), so children are kept in a fixed table of atomics and commands as prepared
-// argument vectors. One StopOnSignal at a time.
+// The commands run in a guard process forked when they are given, not in the handler: a handler
+// may only make async-signal-safe calls, and a fork from one is not safe in every runtime (under
+// TSan the child's first allocation is reported and it never runs the command). The guard waits
+// on a pipe only the harness writes: 'r' runs the commands, 'q' ends it without, and the pipe's
+// end (the harness died without a word: SIGKILL, a crash) runs them too. It ignores SIGINT and
+// SIGTERM, which a terminal sends to the whole process group.
 #pragma once
 
 #include <signal.h>
@@ -19,13 +22,15 @@ namespace pandarcap::bench {
 class StopOnSignal {
  public:
   StopOnSignal();
-  ~StopOnSignal();
+  ~StopOnSignal();  // ends the guard without running its commands
   StopOnSignal(const StopOnSignal&) = delete;
   StopOnSignal& operator=(const StopOnSignal&) = delete;
 
-  // `argv[0]` is the program's path; run (and waited for) by the handler, in the order given,
-  // after the children have stopped. Output goes to /dev/null.
-  void run_on_signal(std::vector<std::string> argv);
+  // Starts the guard with these commands (each argv[0] the program's path; output to /dev/null),
+  // run in order. Once per StopOnSignal. Throws std::runtime_error when it cannot fork.
+  void guard(std::vector<std::vector<std::string>> commands);
+  // Has the guard run its commands now and waits for it (a no-op once it has).
+  void run_guarded_now() noexcept;
 
   // A child of the harness's, stopped by the handler while this lives (a no-op with no
   // StopOnSignal alive).
@@ -46,7 +51,6 @@ class StopOnSignal {
 };
 
 // Runs `argv` (argv[0] the program's path) with its output to /dev/null and waits for it.
-// Async-signal-safe, given prepared arguments.
-void spawn_and_wait(char* const* argv);
+void spawn_and_wait(const std::vector<std::string>& args);
 
 }  // namespace pandarcap::bench

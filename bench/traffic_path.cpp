@@ -75,11 +75,9 @@ VethPair::VethPair(StopOnSignal& stop) {
   };
   const std::string program = ip_program();
 
-  link_del_ = {program, "link", "del", near_};
-  namespace_del_ = {program, "netns", "del", namespace_};
-  // Stopped by a signal, the harness removes them as it would at the end.
-  stop.run_on_signal(link_del_);
-  stop.run_on_signal(namespace_del_);
+  // Removed at the end, after a failure, and when a signal stops the harness, by the guard.
+  stop.guard({{program, "link", "del", near_}, {program, "netns", "del", namespace_}});
+  stop_ = &stop;
   // A signal waits until the pair is whole (or removed after a failure): the handler removes
   // what the steps made, and cannot know what a step still running would make after it.
   sigset_t both, old;
@@ -115,13 +113,7 @@ VethPair::~VethPair() {
 
 void VethPair::remove() noexcept {
   // Deleting one end deletes both; the namespace goes with its name once no socket holds it.
-  for (std::vector<std::string>* args : {&link_del_, &namespace_del_}) {
-    std::vector<char*> argv;
-    for (std::string& a : *args)
-      argv.push_back(a.data());
-    argv.push_back(nullptr);
-    spawn_and_wait(argv.data());
-  }
+  stop_->run_guarded_now();
 }
 
 TrafficPath VethPair::path() const {

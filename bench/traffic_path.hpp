@@ -46,7 +46,7 @@ class VethPair {
  private:
   void remove() noexcept;
   std::string near_, far_, namespace_, near_ip_, far_ip_;
-  std::vector<std::string> link_del_, namespace_del_;  // `ip link del NEAR`, `ip netns del NS`
+  StopOnSignal* stop_ = nullptr;  // its guard removes them
 };
 
 }  // namespace pandarcap::bench
