@@ -4,11 +4,11 @@
 #include <signal.h>
 #include <unistd.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <stdexcept>
 #include <vector>
 
+#include "bench/child_process.hpp"
 #include "bench/stop_on_signal.hpp"
 
 namespace pandarcap::bench {
@@ -26,15 +26,10 @@ std::string ip_program() {
 
 // `ip ARGS...`; throws with its output when it fails.
 void ip(const std::string& program, const std::string& args) {
-  const std::string command = program + " " + args + " 2>&1";
-  std::string out;
-  FILE* p = ::popen(command.c_str(), "r");
-  if (p == nullptr) throw std::runtime_error("cannot run " + command);
-  char buffer[256];
-  while (std::fgets(buffer, sizeof buffer, p) != nullptr)
-    out += buffer;
-  const int status = ::pclose(p);
-  if (status != 0) throw std::runtime_error(fmt::format("'ip {}' failed: {}", args, out));
+  const harness::ShellResult result = harness::run_shell(program + " " + args + " 2>&1");
+  if (result.status != 0) {
+    throw std::runtime_error(fmt::format("'ip {}' failed: {}", args, result.out));
+  }
 }
 
 }  // namespace

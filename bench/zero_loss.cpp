@@ -28,14 +28,7 @@ using nlohmann::ordered_json;
 using harness::read_file;
 
 std::string command_output(const std::string& command) {
-  std::string out;
-  if (FILE* p = ::popen(command.c_str(), "r")) {
-    char buffer[256];
-    while (std::fgets(buffer, sizeof buffer, p) != nullptr)
-      out += buffer;
-    ::pclose(p);
-  }
-  return trim(out);
+  return trim(harness::run_shell(command).out);
 }
 
 ordered_json environment(const ZeroLossOptions& o, const fs::path& daemon) {

@@ -228,15 +228,8 @@ class SoftirqMeter {
 
 // Whether `daemon --help` lists --receiver.
 bool has_receiver_option(const fs::path& daemon) {
-  const std::string command = "'" + daemon.string() + "' --help 2>/dev/null";
-  std::string out;
-  if (FILE* p = ::popen(command.c_str(), "r")) {
-    char buffer[512];
-    while (std::fgets(buffer, sizeof buffer, p) != nullptr)
-      out += buffer;
-    ::pclose(p);
-  }
-  return out.find("--receiver") != std::string::npos;
+  return harness::run_shell("'" + daemon.string() + "' --help 2>/dev/null")
+             .out.find("--receiver") != std::string::npos;
 }
 
 fs::path default_daemon() {
