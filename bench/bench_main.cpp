@@ -1,6 +1,8 @@
 // pandarcap-bench: the benchmark harness. One subcommand per thing measured; each prints a short
 // table, or one JSON object with --json. Performance figures in docs/performance.md come from here,
 // never from timed unit tests.
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -17,6 +19,7 @@
 #include "bench/write_bench.hpp"
 #include "bench/zero_loss.hpp"
 #include "bench/zero_loss_usage.hpp"
+#include "core/ipv4.hpp"
 #include "core/sensors/sensor_model_id.hpp"
 #include "daemon/cli_args.hpp"
 
@@ -120,6 +123,38 @@ void print_report(const nlohmann::ordered_json& report, bool json, Print&& print
   }
 }
 
+// The path options together: --veth makes its own interface; --interface is a real one, for the
+// packet_ring receiver (the socket receiver takes whatever reaches its address), fed by the
+// generator sending to --destination.
+void check_zero_loss_path(pandarcap::CliArgs& args, const pandarcap::bench::ZeroLossOptions& o) {
+  const bool ring = o.receiver == "packet_ring" || o.compare_receivers;
+  if (o.veth && !o.interface.empty()) {
+    args.usage_error("--veth makes its own interface: it does not go with --interface");
+  }
+  if (o.veth && ::geteuid() != 0) {
+    args.usage_error("--veth makes a veth pair and a network namespace: run it as root");
+  }
+  if (!o.interface.empty() && !ring) {
+    args.usage_error(
+        "--interface names the packet_ring receiver's interface: give --receiver packet_ring "
+        "(or --compare-receivers)");
+  }
+  if (!o.interface.empty() && o.destination.empty()) {
+    args.usage_error(
+        "--interface needs --destination IP: the address the generator sends to, whose packets "
+        "arrive on that interface");
+  }
+  if (o.traffic.foreign_fraction > 0 && (o.veth || !o.interface.empty())) {
+    args.usage_error("--foreign-fraction sends from 127.0.0.2: loopback only");
+  }
+  if (!o.destination.empty() && o.interface.empty()) {
+    args.usage_error("--destination goes with --interface (loopback and --veth set their own)");
+  }
+  if (!o.destination.empty() && !pandarcap::parse_ipv4_host_order(o.destination)) {
+    args.usage_error(fmt::format("--destination is an IPv4 address, got '{}'", o.destination));
+  }
+}
+
 int run_zero_loss(int argc, char** argv) {
   const std::string usage =
       fmt::format("{}{}{}", pandarcap::bench::kZeroLossUsageHead, pandarcap::bench::kTrafficOptions,
@@ -172,11 +207,26 @@ int run_zero_loss(int argc, char** argv) {
       options.receiver_port = static_cast<std::uint16_t>(args.integer(arg, 1, 65535));
     } else if (arg == "--from-report") {
       from_report = std::string(args.value(arg));
+    } else if (arg == "--receiver") {
+      options.receiver = std::string(args.value(arg));
+      if (options.receiver != "socket" && options.receiver != "packet_ring") {
+        args.usage_error(
+            fmt::format("--receiver is socket or packet_ring, got '{}'", options.receiver));
+      }
+    } else if (arg == "--compare-receivers") {
+      options.compare_receivers = true;
+    } else if (arg == "--veth") {
+      options.veth = true;
+    } else if (arg == "--interface") {
+      options.interface = std::string(args.value(arg));
+    } else if (arg == "--destination") {
+      options.destination = std::string(args.value(arg));
     } else {
       args.unknown_option(arg);
     }
   }
   if (options.max_rate < options.min_rate) args.usage_error("--max-rate is below --min-rate");
+  check_zero_loss_path(args, options);
   // The daemon it measures is configured for a Pandar40P.
   if (const auto problem =
           pandarcap::bench::sensor_problem(pandarcap::SensorModelId::kPandar40P, options.sensor)) {

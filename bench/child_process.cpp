@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -137,6 +138,17 @@ bool wait_until(const std::function<bool()>& condition, std::chrono::millisecond
     if (std::chrono::steady_clock::now() >= deadline) return false;
     std::this_thread::sleep_for(std::chrono::milliseconds(5));  // polling period, not a sync
   }
+}
+
+ShellResult run_shell(const std::string& command) {
+  ShellResult result;
+  FILE* p = ::popen(command.c_str(), "r");
+  if (p == nullptr) return result;
+  char buffer[512];
+  while (std::fgets(buffer, sizeof buffer, p) != nullptr)
+    result.out += buffer;
+  result.status = ::pclose(p);
+  return result;
 }
 
 std::uint16_t free_udp_port() {

@@ -38,6 +38,14 @@ class ChildProcess {
   std::filesystem::path log_path_;
 };
 
+// What a /bin/sh command printed on its standard output, and how it ended (pclose's status: 0
+// when it exited 0; -1 when it could not be run).
+struct ShellResult {
+  int status = -1;
+  std::string out;
+};
+ShellResult run_shell(const std::string& command);
+
 // The whole file as text ("" when it cannot be read): logs, /proc files.
 std::string read_file(const std::filesystem::path& path);
 

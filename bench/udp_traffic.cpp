@@ -1,9 +1,11 @@
 #include "bench/udp_traffic.hpp"
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <fmt/format.h>
 #include <linux/sock_diag.h>
 #include <netinet/in.h>
+#include <sched.h>
 #include <sys/prctl.h>
 #include <sys/socket.h>
 #include <time.h>
@@ -15,6 +17,7 @@
 #include <chrono>
 #include <cmath>
 #include <concepts>
+#include <cstdlib>
 #include <cstring>
 #include <optional>
 #include <random>
@@ -42,6 +45,38 @@ namespace {
 int udp_socket() {
   const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
   if (fd < 0) io::throw_errno("socket");
+  return fd;
+}
+
+// A UDP socket made in the network namespace `path` names (/run/netns/NAME; "" = this thread's).
+// A socket stays in the namespace it was made in, so only the making needs the switch: this
+// thread enters the namespace, makes it and goes back at once (setns is per thread; the rest of
+// the process never leaves its own).
+int udp_socket_in(const std::string& path) {
+  if (path.empty()) return udp_socket();
+  const int own = ::open("/proc/thread-self/ns/net", O_RDONLY | O_CLOEXEC);
+  if (own < 0) io::throw_errno("open /proc/thread-self/ns/net");
+  const int target = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (target < 0) {
+    ::close(own);
+    io::throw_errno("open " + path);
+  }
+  if (::setns(target, CLONE_NEWNET) != 0) {
+    const int error = errno;
+    ::close(target);
+    ::close(own);
+    errno = error;
+    io::throw_errno("setns " + path);
+  }
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  const int error = errno;
+  // Back home before anything else can happen on this thread; failing that, nothing this thread
+  // did afterwards would be where it is meant to be.
+  if (::setns(own, CLONE_NEWNET) != 0) std::abort();
+  ::close(target);
+  ::close(own);
+  errno = error;
+  if (fd < 0) io::throw_errno("socket in " + path);
   return fd;
 }
 
@@ -242,7 +277,7 @@ std::optional<std::string> generator_options_problem(const GeneratorOptions& o) 
 GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& o) {
   if (const auto problem = generator_options_problem(o)) throw std::runtime_error(*problem);
   const sockaddr_in destination = ipv4_endpoint(o.destination_ip, o.port, "destination");
-  const int fd = udp_socket();
+  const int fd = udp_socket_in(o.network_namespace);
   int foreign_fd = -1;
   if (o.foreign_fraction > 0) {
     foreign_fd = udp_socket();
@@ -374,7 +409,8 @@ GeneratorResult run_generator(const TrafficSource& source, const GeneratorOption
   return result;
 }
 
-ReferenceReceiver::ReferenceReceiver(Kind kind, std::uint64_t receive_buffer_bytes)
+ReferenceReceiver::ReferenceReceiver(Kind kind, std::uint64_t receive_buffer_bytes,
+                                     const std::string& bind_ip)
     : kind_(kind), fd_(udp_socket()) {
   const int requested = static_cast<int>(std::min<std::uint64_t>(receive_buffer_bytes, 1u << 30));
   // As the daemon does: force past rmem_max when privileged, else take what the kernel allows.
@@ -385,7 +421,7 @@ ReferenceReceiver::ReferenceReceiver(Kind kind, std::uint64_t receive_buffer_byt
   ::getsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &granted_, &length);
   const timeval timeout{0, 100'000};  // wake up to see the stop flag
   ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
-  sockaddr_in address = ipv4_endpoint("127.0.0.1", 0, "listener");
+  sockaddr_in address = ipv4_endpoint(bind_ip, 0, "listener");
   if (::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
     ::close(fd_);
     io::throw_errno("bind");

@@ -74,6 +74,9 @@ struct TrafficSource {
 
 struct GeneratorOptions {
   std::string destination_ip = "127.0.0.1";  // never anything the user did not give
+  // The network namespace the sending sockets are made in (/run/netns/NAME; "" = this process's):
+  // zero-loss --veth sends from the far end's namespace.
+  std::string network_namespace;
   std::uint16_t port = 2368;
   double rate_pps = 3600;
   double seconds = 10;
@@ -125,11 +128,13 @@ std::optional<std::string> generator_options_problem(const GeneratorOptions& opt
 // std::runtime_error with generator_options_problem(), or when the socket cannot be set up.
 GeneratorResult run_generator(const TrafficSource& source, const GeneratorOptions& options);
 
-// A reference receiver on 127.0.0.1: a thread that receives and counts, nothing else.
+// A reference receiver on `bind_ip` (127.0.0.1; with zero-loss --veth the near end's address): a
+// thread that receives and counts, nothing else.
 class ReferenceReceiver {
  public:
   enum class Kind { kRecvmmsg, kRecvfrom };
-  ReferenceReceiver(Kind kind, std::uint64_t receive_buffer_bytes);
+  ReferenceReceiver(Kind kind, std::uint64_t receive_buffer_bytes,
+                    const std::string& bind_ip = "127.0.0.1");
   ~ReferenceReceiver();
   ReferenceReceiver(const ReferenceReceiver&) = delete;
   ReferenceReceiver& operator=(const ReferenceReceiver&) = delete;

@@ -7,10 +7,13 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 #include <thread>
 
 #include "bench/child_process.hpp"
+#include "bench/stop_on_signal.hpp"
+#include "bench/traffic_path.hpp"
 #include "bench/udp_traffic.hpp"
 #include "bench/zero_loss_search.hpp"
 #include "bench/zero_loss_trials.hpp"
@@ -25,14 +28,7 @@ using nlohmann::ordered_json;
 using harness::read_file;
 
 std::string command_output(const std::string& command) {
-  std::string out;
-  if (FILE* p = ::popen(command.c_str(), "r")) {
-    char buffer[256];
-    while (std::fgets(buffer, sizeof buffer, p) != nullptr)
-      out += buffer;
-    ::pclose(p);
-  }
-  return trim(out);
+  return trim(harness::run_shell(command).out);
 }
 
 ordered_json environment(const ZeroLossOptions& o, const fs::path& daemon) {
@@ -113,7 +109,7 @@ ordered_json mcap_comparison(const ordered_json& off, const ordered_json& on, do
 
 // The daemon against tcpdump -w recording the same packets beside it, round by round, and over
 // all rounds (CPU summed: a 100 Hz tick is coarse against 1 % of a core).
-ordered_json tcpdump_comparison(const ordered_json& trials) {
+ordered_json tcpdump_comparison(const ordered_json& trials, const std::string& interface) {
   ordered_json rounds = ordered_json::array();
   double daemon_sum = 0, tcpdump_sum = 0;
   for (const ordered_json& t : trials) {
@@ -135,14 +131,34 @@ ordered_json tcpdump_comparison(const ordered_json& trials) {
                       {"tcpdump_dropped_by_kernel", d["dropped_by_kernel"]}});
   }
   const double n = std::max<double>(1.0, static_cast<double>(trials.size()));
-  return {{"command", "tcpdump -i lo -n -Z root -w FILE udp dst port PORT, beside the daemon"},
+  return {{"command",
+           "tcpdump -i " + interface + " -n -Z root -w FILE udp dst port PORT, beside the daemon"},
+          {"receiver", trials.empty() ? ordered_json() : trials[0]["receiver"]},
           {"daemon_cpu_fraction_of_one_core", daemon_sum / n},
           {"tcpdump_cpu_fraction_of_one_core", tcpdump_sum / n},
           {"daemon_vs_tcpdump_cpu", tcpdump_sum > 0 ? daemon_sum / tcpdump_sum : 0.0},
           {"rounds", rounds}};
 }
 
+// The path the options ask for, and the veth pair it runs over when they ask for one.
+TrafficPath traffic_path(const ZeroLossOptions& o, std::optional<VethPair>& veth,
+                         StopOnSignal& stop) {
+  if (o.veth) return veth.emplace(stop).path();
+  TrafficPath path;
+  if (!o.interface.empty()) {
+    path.kind = "interface";
+    path.interface = o.interface;
+    path.receive_ip = "0.0.0.0";  // whatever address of this machine the packets were sent to
+    path.destination_ip = o.destination;
+  }
+  return path;
+}
+
 }  // namespace
+
+std::string other_receiver(const std::string& receiver) {
+  return receiver == "socket" ? "packet_ring" : "socket";
+}
 
 ordered_json run_zero_loss(const ZeroLossOptions& o) {
   const TrafficSource source = o.capture.empty() ? TrafficSource::synthetic(o.sensor)
@@ -152,7 +168,13 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
       temporary ? fs::temp_directory_path() / fmt::format("pandarcap-bench-{}", ::getpid())
                 : fs::path(o.work_dir);
   fs::create_directories(work);
-  ZeroLossTrials harness(o, source, work);
+  // A signal stops the daemon a trial runs and removes the veth pair; both are also stopped and
+  // removed when a trial throws.
+  StopOnSignal stop;
+  std::optional<VethPair> veth;
+  const TrafficPath path = traffic_path(o, veth, stop);
+  ZeroLossTrials harness(o, source, work, path);
+  const std::string other_kind = other_receiver(o.receiver);
 
   ordered_json report;
   ordered_json trials = {{"daemon", ordered_json::array()},
@@ -178,6 +200,12 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   ordered_json at_sensor_0 = at_sensor.value("budget_ms", ordered_json()) == ordered_json(0)
                                  ? at_sensor
                                  : harness.daemon_trial(o.sensor_rate, sensor_seconds, 0u);
+  // The daemon's other receiver, right after the first under the same conditions.
+  ordered_json at_sensor_other;
+  if (o.compare_receivers) {
+    at_sensor_other =
+        harness.daemon_trial(o.sensor_rate, sensor_seconds, std::nullopt, {}, false, other_kind);
+  }
   ordered_json other = ordered_json();
   if (!o.receiver_command.empty()) {
     other = harness.other_receiver_trial(o.sensor_rate, sensor_seconds);
@@ -187,16 +215,26 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
 
   // MCAP on, right after the trial with it off, under the same conditions.
   const std::vector<std::string> mcap_on{"--mcap", "--mcap-packets"};
-  ordered_json at_sensor_mcap;
+  ordered_json at_sensor_mcap, at_sensor_mcap_other;
   if (o.compare_mcap) {
     at_sensor_mcap = harness.daemon_trial(o.sensor_rate, sensor_seconds, std::nullopt, mcap_on);
+    if (o.compare_receivers) {
+      at_sensor_mcap_other = harness.daemon_trial(o.sensor_rate, sensor_seconds, std::nullopt,
+                                                  mcap_on, false, other_kind);
+    }
   }
 
-  // tcpdump -w beside the daemon, recording the same packets in the same seconds.
+  // tcpdump -w beside the daemon, recording the same packets in the same seconds; with both
+  // receivers, their rounds alternate.
   ordered_json beside_tcpdump = ordered_json::array();
+  ordered_json beside_tcpdump_other = ordered_json::array();
   for (int round = 0; round < o.tcpdump_rounds; ++round) {
     beside_tcpdump.push_back(
         harness.daemon_trial(o.sensor_rate, sensor_seconds, std::nullopt, {}, true));
+    if (o.compare_receivers) {
+      beside_tcpdump_other.push_back(
+          harness.daemon_trial(o.sensor_rate, sensor_seconds, std::nullopt, {}, true, other_kind));
+    }
   }
 
   SearchResult daemon_zero, daemon_within, daemon_zero_budget_0, daemon_zero_mcap;
@@ -255,6 +293,7 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
     const double cpu = t["cpu_fraction_of_one_core"].get<double>();
     const ordered_json stages = t.value("loss_by_stage", ordered_json::object());
     return ordered_json{
+        {"receiver", t["receiver"]},
         {"budget_ms", t["budget_ms"]},
         {"offered_pps", o.sensor_rate},
         {"achieved_pps", t["achieved_pps"]},
@@ -267,6 +306,8 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
         {"cpu_us_per_packet", ratio(cpu * sensor_seconds * 1e6, t["sent"].get<std::uint64_t>())},
         {"cpu_by_thread", t["cpu_by_thread"]},
         {"daemon_vs_bare_cpu", bare_cpu > 0 ? cpu / bare_cpu : 0.0},
+        {"generator_cpu_fraction_of_one_core", t["generator_cpu_fraction_of_one_core"]},
+        {"kernel", t["kernel"]},
         {"wakeups_per_second", t["wakeups_per_second"]},
         {"frame_latency_p50_ms", frame.is_object() ? frame.value("p50_ms", 0.0) : 0.0},
         {"frame_latency_p99_ms", frame.is_object() ? frame.value("p99_ms", 0.0) : 0.0},
@@ -285,16 +326,28 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   };
   ordered_json sensor = sensor_summary(at_sensor);
   sensor["bare_recvmmsg_cpu_fraction_of_one_core"] = bare_cpu;
+  sensor["bare_recvmmsg_generator_cpu_fraction_of_one_core"] =
+      bare_at_sensor.value("generator_cpu_fraction_of_one_core", 0.0);
   sensor["budget_0"] = sensor_summary(at_sensor_0);
   if (!other.is_null()) sensor["other_receiver"] = other;
   if (o.compare_mcap) sensor["mcap_on"] = sensor_summary(at_sensor_mcap);
+  if (o.compare_receivers) {
+    sensor[other_kind] = sensor_summary(at_sensor_other);
+    if (o.compare_mcap) sensor[other_kind]["mcap_on"] = sensor_summary(at_sensor_mcap_other);
+  }
   report["at_sensor_rate"] = sensor;
   if (o.compare_mcap) {
     report["mcap_comparison"] =
         mcap_comparison(at_sensor, at_sensor_mcap, sensor_seconds, daemon_zero.pps,
                         daemon_zero_mcap.pps, !o.sensor_rate_only);
   }
-  if (o.tcpdump_rounds > 0) report["tcpdump_comparison"] = tcpdump_comparison(beside_tcpdump);
+  if (o.tcpdump_rounds > 0) {
+    report["tcpdump_comparison"] = tcpdump_comparison(beside_tcpdump, path.interface);
+    if (o.compare_receivers) {
+      report["tcpdump_comparison"][other_kind] =
+          tcpdump_comparison(beside_tcpdump_other, path.interface);
+    }
+  }
   const auto& s = report["at_sensor_rate"];
   const double budget = s["budget_ms"].is_number() ? s["budget_ms"].get<double>() : 0.0;
   report["goals"] = {
@@ -321,6 +374,13 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
     report["goals"]["cpu_recording_at_most_tcpdump_w"] =
         report["tcpdump_comparison"]["daemon_vs_tcpdump_cpu"].get<double>() <= 1.0;
   }
+  if (o.compare_receivers) {
+    report["goals"]["zero_loss_at_sensor_rate_" + other_kind] = at_sensor_other["zero_loss"];
+    if (o.tcpdump_rounds > 0) {
+      report["goals"]["cpu_recording_at_most_tcpdump_w_" + other_kind] =
+          report["tcpdump_comparison"][other_kind]["daemon_vs_tcpdump_cpu"].get<double>() <= 1.0;
+    }
+  }
   if (o.compare_mcap) {
     const ordered_json& m = report["mcap_comparison"];
     report["goals"]["mcap_zero_loss_at_sensor_rate"] = at_sensor_mcap["zero_loss"].get<bool>();
@@ -340,6 +400,14 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   report["environment"] = env;
   report["settings"] = {
       {"traffic", source.description},
+      {"receiver", o.receiver},
+      {"compared_receiver", o.compare_receivers ? ordered_json(other_kind) : ordered_json()},
+      {"path", path.kind},
+      {"interface", path.interface},
+      {"destination", path.destination_ip},
+      {"sender_namespace",
+       path.sender_namespace.empty() ? ordered_json() : ordered_json(path.sender_namespace)},
+      {"kernel_delivery", path.delivery_note()},
       {"latency_budget_ms",
        o.latency_budget_ms ? ordered_json(*o.latency_budget_ms) : ordered_json("daemon default")},
       {"sensor_rate_only", o.sensor_rate_only},
@@ -354,7 +422,15 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
        "loss at every stage"}};
   trials["at_sensor_rate"] = {at_sensor, at_sensor_0};
   if (o.compare_mcap) trials["at_sensor_rate"].push_back(at_sensor_mcap);
-  if (o.tcpdump_rounds > 0) trials["beside_tcpdump"] = beside_tcpdump;
+  if (o.compare_receivers) {
+    trials["at_sensor_rate"].push_back(at_sensor_other);
+    if (o.compare_mcap) trials["at_sensor_rate"].push_back(at_sensor_mcap_other);
+  }
+  if (o.tcpdump_rounds > 0) {
+    trials["beside_tcpdump"] = beside_tcpdump;
+    for (const ordered_json& t : beside_tcpdump_other)
+      trials["beside_tcpdump"].push_back(t);
+  }
   report["trials"] = trials;
   if (temporary) {
     std::error_code ec;

@@ -58,10 +58,24 @@ struct ZeroLossOptions {
   // "received N" (the last one counts), its loss is reported too.
   std::string receiver_command;
   std::uint16_t receiver_port = 0;
+  // The daemon's receiver in every trial: "socket" (recvmmsg, the daemon's default) or
+  // "packet_ring" (AF_PACKET TPACKET_V3 on `interface`, as root). With compare_receivers, the
+  // sensor-rate trial (and its MCAP and tcpdump companions) runs with the other one too.
+  std::string receiver = "socket";
+  bool compare_receivers = false;
+  // The path the packets take (bench/traffic_path.hpp): loopback by default; with `veth`, a veth
+  // pair and a namespace the harness makes (root only); with `interface` alone, a real interface
+  // the generator's packets to `destination` arrive on.
+  bool veth = false;
+  std::string interface;
+  std::string destination;
   // Bursts and extra (foreign, malformed) traffic for every trial; destination, port, rate and
   // length are set per trial.
   GeneratorOptions traffic;
 };
+
+// The other receiver of the daemon's two ("socket" <-> "packet_ring").
+std::string other_receiver(const std::string& receiver);
 
 // Runs the whole measurement and returns the report. Throws std::runtime_error when the daemon
 // cannot be started.

@@ -173,16 +173,15 @@ std::string count(const ordered_json& t, const char* key) {
   return t.contains(key) ? t.at(key).dump() : std::string("-");
 }
 
-// The daemon against tcpdump -w recording the same packets beside it ("" without it).
-std::string tcpdump_section(const ordered_json& r) {
-  if (!r.contains("tcpdump_comparison")) return {};
-  const auto& c = r.at("tcpdump_comparison");
+// The daemon against tcpdump -w recording the same packets beside it, with one receiver.
+std::string tcpdump_table(const ordered_json& r, const ordered_json& c, const std::string& goal) {
   std::string md = fmt::format(
       "Recording against `tcpdump -w` beside it (the same packets, the same seconds; config: "
-      "{}):\n\n| round | pandarcapd CPU (% of a core) | tcpdump CPU | ratio | pcap bytes "
+      "{}{}):\n\n| round | pandarcapd CPU (% of a core) | tcpdump CPU | ratio | pcap bytes "
       "(pandarcapd, tcpdump) | lost, not recorded (pandarcapd) | dropped (tcpdump) |\n"
       "|---:|---:|---:|---:|---:|---:|---:|\n",
-      r.at("environment").at("daemon_config").get<std::string>());
+      r.at("environment").at("daemon_config").get<std::string>(),
+      c.contains("receiver") ? "; receiver: " + c.at("receiver").get<std::string>() : "");
   int round = 0;
   for (const auto& t : c.at("rounds")) {
     md += fmt::format("| {} | {:.2f} | {:.2f} | {:.2f}x | {}, {} | {}, {} | {} |\n", ++round,
@@ -198,8 +197,36 @@ std::string tcpdump_section(const ordered_json& r) {
       "<= 1: {}).\n\n",
       100 * c.at("daemon_cpu_fraction_of_one_core").get<double>(),
       100 * c.at("tcpdump_cpu_fraction_of_one_core").get<double>(),
-      c.at("daemon_vs_tcpdump_cpu").get<double>(),
-      yes_no(r.at("goals").at("cpu_recording_at_most_tcpdump_w")));
+      c.at("daemon_vs_tcpdump_cpu").get<double>(), yes_no(r.at("goals").at(goal)));
+  return md;
+}
+
+// ... with the receiver chosen, and the other one's when both were measured ("" without it).
+std::string tcpdump_section(const ordered_json& r) {
+  if (!r.contains("tcpdump_comparison")) return {};
+  const auto& c = r.at("tcpdump_comparison");
+  std::string md = tcpdump_table(r, c, "cpu_recording_at_most_tcpdump_w");
+  for (const char* other : {"socket", "packet_ring"}) {
+    if (c.contains(other)) {
+      md += tcpdump_table(r, c.at(other), std::string("cpu_recording_at_most_tcpdump_w_") + other);
+    }
+  }
+  return md;
+}
+
+// Which path the packets took, the daemon's receiver, and where the kernel's delivery work was
+// charged ("" in a report from before the paths).
+std::string path_line(const ordered_json& r) {
+  const auto& settings = r.at("settings");
+  if (!settings.contains("path")) return {};
+  std::string md = fmt::format("Path: **{}** (packets arrive on {}); the daemon's receiver: **{}**",
+                               settings.at("path").get<std::string>(),
+                               settings.at("interface").get<std::string>(),
+                               settings.at("receiver").get<std::string>());
+  if (settings.at("compared_receiver").is_string()) {
+    md += fmt::format(", and {} beside it", settings.at("compared_receiver").get<std::string>());
+  }
+  md += ". " + settings.at("kernel_delivery").get<std::string>() + "\n\n";
   return md;
 }
 
@@ -248,6 +275,7 @@ std::string zero_loss_markdown(const ordered_json& r) {
                     r.at("settings").at("trial_seconds").get<double>(),
                     rate(r.at("settings").at("min_rate").get<double>()),
                     rate(r.at("settings").at("max_rate").get<double>()));
+  md += path_line(r);
   if (r.at("settings").value("sensor_rate_only", false)) {
     md += "No rate search in this run (`--sensor-rate-only`).\n\n";
   } else {
@@ -292,35 +320,38 @@ std::string zero_loss_markdown(const ordered_json& r) {
       "(receive, decode, writer) | frame latency p99 | receive→decoded p99 | lost | frames "
       "dropped | pcap not recorded |\n"
       "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
-  for (const ordered_json* t : {&s, &s.at("budget_0")}) {
-    const auto& w = (*t).at("wakeups_per_second");
+  // One daemon trial's row.
+  const auto row = [&](const std::string& label, const ordered_json& t) {
+    const auto& w = t.at("wakeups_per_second");
     md += fmt::format(
-        "| pandarcapd | {} ms | {:.2f} | {:.2f} | {:.2f}x | {:.0f}, {:.0f}, {:.0f} | {:.1f} ms | "
-        "{:.2f} ms | {} | {} | {} |\n",
-        (*t).at("budget_ms").dump(), 100 * (*t).at("cpu_fraction_of_one_core").get<double>(),
-        (*t).at("cpu_us_per_packet").get<double>(), (*t).at("daemon_vs_bare_cpu").get<double>(),
+        "| {} | {} ms | {:.2f} | {:.2f} | {:.2f}x | "
+        "{:.0f}, {:.0f}, {:.0f} | {:.1f} ms | {:.2f} ms | {} | {} | {} |\n",
+        label, t.at("budget_ms").dump(), 100 * t.at("cpu_fraction_of_one_core").get<double>(),
+        t.at("cpu_us_per_packet").get<double>(), t.at("daemon_vs_bare_cpu").get<double>(),
         w.value("receive", 0.0), w.value("decode", 0.0), w.value("writer", 0.0),
-        (*t).at("frame_latency_p99_ms").get<double>(),
-        (*t).at("latency_p99_us").get<double>() / 1e3, (*t).at("lost").dump(),
-        count(*t, "frames_dropped"), count(*t, "pcap_not_recorded"));
-  }
+        t.at("frame_latency_p99_ms").get<double>(), t.at("latency_p99_us").get<double>() / 1e3,
+        t.at("lost").dump(), count(t, "frames_dropped"), count(t, "pcap_not_recorded"));
+  };
+  const std::string daemon_label =
+      s.contains("receiver")
+          ? fmt::format("pandarcapd ({} receiver)", s.at("receiver").get<std::string>())
+          : std::string("pandarcapd");
+  row(daemon_label, s);
+  row(daemon_label, s.at("budget_0"));
   if (bare > 0) {
     md += fmt::format(
         "| bare recvmmsg loop (wakes per datagram, does nothing else) | - | {:.2f} | "
         "- | 1x | - | - | - | - | - | - |\n",
         100 * bare);
   }
-  if (s.contains("mcap_on")) {
-    const auto& t = s.at("mcap_on");
-    const auto& w = t.at("wakeups_per_second");
-    md += fmt::format(
-        "| pandarcapd, MCAP on (frames and packets) | {} ms | {:.2f} | {:.2f} | {:.2f}x | "
-        "{:.0f}, {:.0f}, {:.0f} | {:.1f} ms | {:.2f} ms | {} | {} | {} |\n",
-        t.at("budget_ms").dump(), 100 * t.at("cpu_fraction_of_one_core").get<double>(),
-        t.at("cpu_us_per_packet").get<double>(), t.at("daemon_vs_bare_cpu").get<double>(),
-        w.value("receive", 0.0), w.value("decode", 0.0), w.value("writer", 0.0),
-        t.at("frame_latency_p99_ms").get<double>(), t.at("latency_p99_us").get<double>() / 1e3,
-        t.at("lost").dump(), count(t, "frames_dropped"), count(t, "pcap_not_recorded"));
+  if (s.contains("mcap_on")) row("pandarcapd, MCAP on (frames and packets)", s.at("mcap_on"));
+  for (const char* other : {"socket", "packet_ring"}) {
+    if (!s.contains(other)) continue;
+    const auto& t = s.at(other);
+    row(fmt::format("pandarcapd ({} receiver)", other), t);
+    if (t.contains("mcap_on")) {
+      row(fmt::format("pandarcapd ({} receiver), MCAP on", other), t.at("mcap_on"));
+    }
   }
   if (s.contains("other_receiver")) {
     const auto& o = s.at("other_receiver");
@@ -333,6 +364,20 @@ std::string zero_loss_markdown(const ordered_json& r) {
         o.at("lost").dump());
   }
   md += "\n";
+  if (s.contains("generator_cpu_fraction_of_one_core")) {
+    // The kernel's delivery work is charged to the sender on loopback and veth (path_line()).
+    const auto& k = s.at("kernel");
+    const double beside_bare = s.value("bare_recvmmsg_generator_cpu_fraction_of_one_core", 0.0);
+    md += fmt::format(
+        "The generator (sending, and on loopback or veth the kernel's delivery) used {:.2f} % of "
+        "a core beside the daemon{}; meanwhile the machine's softirq time was {:.2f} % and "
+        "ksoftirqd's {:.2f} % of a core.\n\n",
+        100 * s.at("generator_cpu_fraction_of_one_core").get<double>(),
+        beside_bare > 0 ? fmt::format(", {:.2f} % beside the bare loop", 100 * beside_bare)
+                        : std::string(),
+        100 * k.at("machine_softirq_cpu_fraction_of_one_core").get<double>(),
+        100 * k.at("ksoftirqd_cpu_fraction_of_one_core").get<double>());
+  }
   if (r.contains("mcap_comparison")) {
     const auto& m = r.at("mcap_comparison");
     md += fmt::format(

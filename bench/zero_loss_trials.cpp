@@ -11,8 +11,10 @@
 #include <map>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
 #include "bench/child_process.hpp"
+#include "bench/stop_on_signal.hpp"
 
 namespace pandarcap::bench {
 
@@ -131,14 +133,15 @@ std::optional<std::uint64_t> tcpdump_count(const std::string& log, const std::st
 // measured over the same traffic, stopped before it.
 class TcpdumpBeside {
  public:
-  TcpdumpBeside(const fs::path& dir, std::uint16_t port)
+  TcpdumpBeside(const fs::path& dir, std::uint16_t port, const std::string& interface)
       : file_(dir / "tcpdump.pcap"),
         // -Z root: as root it would switch to the tcpdump user before opening the file, which
         // could not write in the harness's directory.
         process_(fs::exists("/usr/bin/tcpdump") ? "/usr/bin/tcpdump" : "/usr/sbin/tcpdump",
-                 {"-i", "lo", "-n", "-Z", "root", "-w", file_.string(), "udp", "dst", "port",
+                 {"-i", interface, "-n", "-Z", "root", "-w", file_.string(), "udp", "dst", "port",
                   std::to_string(port)},
-                 dir / "tcpdump.log") {
+                 dir / "tcpdump.log"),
+        stop_(process_.pid()) {
     if (!harness::wait_until(
             [&] { return process_.log().find("listening on") != std::string::npos; }, 15s)) {
       throw std::runtime_error("tcpdump did not start listening:\n" + process_.log());
@@ -169,7 +172,65 @@ class TcpdumpBeside {
  private:
   fs::path file_;
   harness::ChildProcess process_;
+  StopOnSignal::Child stop_;
 };
+
+// Where the kernel's receive work is charged, beside the threads measured: the softirq time of
+// the whole machine (/proc/stat, every CPU; ticks sampled, so it includes the other users of the
+// machine) and the CPU of the ksoftirqd threads (softirq work deferred out of whatever task was
+// running). This kernel has no IRQ time accounting (CONFIG_IRQ_TIME_ACCOUNTING unset), so
+// softirq work done on the way out of a task's system call is part of that task's own CPU time.
+class SoftirqMeter {
+ public:
+  SoftirqMeter() : ksoftirqd_(ksoftirqd_pids()), start_(read()) {}
+  ordered_json finish(double seconds) const {
+    const Reading end = read();
+    const double tick = static_cast<double>(::sysconf(_SC_CLK_TCK));
+    return {{"machine_softirq_cpu_fraction_of_one_core",
+             static_cast<double>(end.softirq - start_.softirq) / tick / seconds},
+            {"ksoftirqd_cpu_fraction_of_one_core",
+             static_cast<double>(end.ksoftirqd - start_.ksoftirqd) / tick / seconds}};
+  }
+
+ private:
+  struct Reading {
+    std::uint64_t softirq = 0, ksoftirqd = 0;
+  };
+  static std::vector<int> ksoftirqd_pids() {
+    std::vector<int> pids;
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator("/proc", ec)) {
+      const std::string name = entry.path().filename().string();
+      if (name.empty() || name[0] < '1' || name[0] > '9') continue;
+      if (read_file(entry.path() / "comm").rfind("ksoftirqd/", 0) == 0)
+        pids.push_back(std::stoi(name));
+    }
+    return pids;
+  }
+  Reading read() const {
+    Reading r;
+    // "cpu  user nice system idle iowait irq softirq ..."
+    std::istringstream stat(read_file("/proc/stat"));
+    std::string cpu;
+    std::uint64_t field = 0;
+    stat >> cpu;
+    for (int i = 0; i < 7 && (stat >> field); ++i)
+      r.softirq = field;
+    for (const int pid : ksoftirqd_) {
+      for (const auto& [name, ticks] : harness::thread_cpu_ticks(pid))
+        r.ksoftirqd += ticks;
+    }
+    return r;
+  }
+  std::vector<int> ksoftirqd_;
+  Reading start_;
+};
+
+// Whether `daemon --help` lists --receiver.
+bool has_receiver_option(const fs::path& daemon) {
+  return harness::run_shell("'" + daemon.string() + "' --help 2>/dev/null")
+             .out.find("--receiver") != std::string::npos;
+}
 
 fs::path default_daemon() {
   std::error_code ec;
@@ -180,16 +241,36 @@ fs::path default_daemon() {
 }  // namespace
 
 ZeroLossTrials::ZeroLossTrials(const ZeroLossOptions& options, const TrafficSource& source,
-                               fs::path work)
+                               fs::path work, TrafficPath path)
     : o_(options),
       source_(source),
       work_(std::move(work)),
-      daemon_(options.daemon.empty() ? default_daemon() : fs::path(options.daemon)) {}
+      path_(std::move(path)),
+      daemon_(options.daemon.empty() ? default_daemon() : fs::path(options.daemon)),
+      daemon_has_receiver_option_(has_receiver_option(daemon_)) {
+  if (!daemon_has_receiver_option_ && (o_.receiver != "socket" || o_.compare_receivers)) {
+    throw std::runtime_error(fmt::format(
+        "{} has no --receiver option (a pandarcapd from before the packet_ring receiver): it "
+        "cannot be measured with the packet_ring receiver",
+        daemon_.string()));
+  }
+}
+
+GeneratorOptions ZeroLossTrials::traffic(std::uint16_t port, double rate, double seconds) const {
+  GeneratorOptions g = o_.traffic;
+  g.destination_ip = path_.destination_ip;
+  g.network_namespace = path_.sender_namespace;
+  g.port = port;
+  g.rate_pps = rate;
+  g.seconds = seconds;
+  return g;
+}
 
 ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
                                           std::optional<std::uint32_t> budget_ms,
                                           const std::vector<std::string>& extra_args,
-                                          bool beside_tcpdump) {
+                                          bool beside_tcpdump, const std::string& receiver_choice) {
+  const std::string receiver = receiver_choice.empty() ? o_.receiver : receiver_choice;
   const fs::path dir = work_ / fmt::format("daemon_{:03d}", trials_++);
   fs::create_directories(dir);
   const fs::path out = dir / "out";
@@ -203,13 +284,22 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
     args.emplace_back("--latency-budget-ms");
     args.push_back(std::to_string(*budget_ms));
   }
-  for (const std::string& a :
-       {std::string("--host-ip"), std::string("127.0.0.1"), std::string("--port"),
-        std::to_string(port), std::string("--output-dir"), out.string()}) {
+  // An older daemon receives with its socket only, and has no option to say so.
+  if (daemon_has_receiver_option_) {
+    args.emplace_back("--receiver");
+    args.push_back(receiver);
+    if (receiver == "packet_ring") {
+      args.emplace_back("--interface");
+      args.push_back(path_.interface);
+    }
+  }
+  for (const std::string& a : {std::string("--host-ip"), path_.receive_ip, std::string("--port"),
+                               std::to_string(port), std::string("--output-dir"), out.string()}) {
     args.push_back(a);
   }
   args.insert(args.end(), extra_args.begin(), extra_args.end());
   harness::ChildProcess process(daemon_, args, dir / "daemon.log");
+  const StopOnSignal::Child stopped_on_signal(process.pid());
   if (!harness::wait_until([&] { return process.log().find("ready:") != std::string::npos; },
                            15s)) {
     throw std::runtime_error("pandarcapd did not become ready:\n" + process.log());
@@ -222,15 +312,13 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
     }
   }
   std::optional<TcpdumpBeside> tcpdump;
-  if (beside_tcpdump) tcpdump.emplace(dir, port);
+  if (beside_tcpdump) tcpdump.emplace(dir, port, path_.interface);
   const auto cpu_before = harness::thread_cpu_ticks(process.pid());
   const auto tcpdump_before =
       tcpdump ? harness::thread_cpu_ticks(tcpdump->pid()) : std::map<std::string, std::uint64_t>{};
-  GeneratorOptions g = o_.traffic;
-  g.port = port;
-  g.rate_pps = rate;
-  g.seconds = seconds;
-  const GeneratorResult sent = run_generator(source_, g);
+  const SoftirqMeter softirq;
+  const GeneratorResult sent = run_generator(source_, traffic(port, rate, seconds));
+  const ordered_json kernel = softirq.finish(sent.seconds);
   const auto cpu_after = harness::thread_cpu_ticks(process.pid());
   const auto tcpdump_after =
       tcpdump ? harness::thread_cpu_ticks(tcpdump->pid()) : std::map<std::string, std::uint64_t>{};
@@ -296,6 +384,8 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
   }
   ordered_json t = {
       {"offered_pps", rate},
+      {"receiver", receiver},
+      {"interface", receiver == "packet_ring" ? ordered_json(path_.interface) : ordered_json()},
       {"budget_ms", effective_budget_ms(process.log())},
       {"achieved_pps", sent.achieved_pps},
       {"generator_cpu_fraction_of_one_core", sent.cpu_seconds / sent.seconds},
@@ -324,6 +414,7 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
                                    ? ordered_json(counter(h, "hot_path_allocations"))
                                    : ordered_json(nullptr)}};
   t.update(cpu_use(cpu_before, cpu_after, sent.seconds, sent.sent));
+  t["kernel"] = kernel;
   if (tcpdump) t["tcpdump"] = tcpdump_result;
   std::error_code ec;
   fs::remove_all(out, ec);
@@ -333,17 +424,14 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
 ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
   const fs::path log = work_ / "other_receiver.log";
   harness::ChildProcess process("/bin/sh", {"-c", "exec " + o_.receiver_command}, log);
+  const StopOnSignal::Child stopped_on_signal(process.pid());
   if (!harness::wait_until([&] { return udp_port_queued_bytes(o_.receiver_port).has_value(); },
                            15s)) {
     throw std::runtime_error(fmt::format("'{}' did not bind UDP port {} within 15 s:\n{}",
                                          o_.receiver_command, o_.receiver_port, process.log()));
   }
   const auto cpu_before = harness::thread_cpu_ticks(process.pid());
-  GeneratorOptions g = o_.traffic;
-  g.port = o_.receiver_port;
-  g.rate_pps = rate;
-  g.seconds = seconds;
-  const GeneratorResult sent = run_generator(source_, g);
+  const GeneratorResult sent = run_generator(source_, traffic(o_.receiver_port, rate, seconds));
   const auto cpu_after = harness::thread_cpu_ticks(process.pid());
   const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
   // Datagrams still queued in its socket are not lost, only not read yet: the receiver is given
@@ -374,12 +462,10 @@ ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
 
 ordered_json ZeroLossTrials::reference_trial(ReferenceReceiver::Kind kind, double rate,
                                              double seconds) {
-  ReferenceReceiver receiver(kind, o_.receive_buffer_bytes);
-  GeneratorOptions g = o_.traffic;
-  g.port = receiver.port();
-  g.rate_pps = rate;
-  g.seconds = seconds;
-  const GeneratorResult sent = run_generator(source_, g);
+  ReferenceReceiver receiver(kind, o_.receive_buffer_bytes, path_.receive_ip);
+  const SoftirqMeter softirq;
+  const GeneratorResult sent = run_generator(source_, traffic(receiver.port(), rate, seconds));
+  const ordered_json kernel = softirq.finish(sent.seconds);
   receiver.drain_and_stop(200);
   const std::uint64_t received = std::min(receiver.received(), sent.sent);
   const std::uint64_t lost = sent.sent - received;
@@ -395,7 +481,8 @@ ordered_json ZeroLossTrials::reference_trial(ReferenceReceiver::Kind kind, doubl
           {"kernel_drops", receiver.kernel_drops()},
           {"receive_buffer_granted", receiver.receive_buffer_granted()},
           {"cpu_us_per_packet", ratio(receiver.cpu_seconds() * 1e6, received)},
-          {"cpu_fraction_of_one_core", receiver.cpu_seconds() / sent.seconds}};
+          {"cpu_fraction_of_one_core", receiver.cpu_seconds() / sent.seconds},
+          {"kernel", kernel}};
 }
 
 }  // namespace pandarcap::bench

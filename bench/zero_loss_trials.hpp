@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/traffic_path.hpp"
 #include "bench/udp_traffic.hpp"
 #include "bench/zero_loss.hpp"
 
@@ -26,9 +27,11 @@ std::string trim(std::string s);
 
 class ZeroLossTrials {
  public:
-  // `work`: where each daemon trial's outputs and log go (removed after the trial).
+  // `work`: where each daemon trial's outputs and log go (removed after the trial). `path`: where
+  // the generator sends, where the receivers listen. Throws std::runtime_error when the options
+  // ask for the packet_ring receiver and the daemon has no --receiver option.
   ZeroLossTrials(const ZeroLossOptions& options, const TrafficSource& source,
-                 std::filesystem::path work);
+                 std::filesystem::path work, TrafficPath path);
 
   // The pandarcapd the trials start.
   const std::filesystem::path& daemon() const { return daemon_; }
@@ -36,13 +39,15 @@ class ZeroLossTrials {
   std::string daemon_socket_buffer;
 
   // One trial of the real daemon at `rate`; its outputs are removed afterwards (a fast trial
-  // writes gigabytes of pcap). With `beside_tcpdump`, `tcpdump -i lo -w FILE udp dst port P`
+  // writes gigabytes of pcap). With `beside_tcpdump`, `tcpdump -i IFACE -w FILE udp dst port P`
   // records the same packets in the same seconds (key "tcpdump": its CPU, what it captured and
-  // dropped, its file's bytes), for the comparison of what recording costs.
+  // dropped, its file's bytes), for the comparison of what recording costs. `receiver`: the
+  // daemon's ("" = the options'), with --interface the path's when it is packet_ring.
   nlohmann::ordered_json daemon_trial(double rate, double seconds,
                                       std::optional<std::uint32_t> budget_ms = std::nullopt,
                                       const std::vector<std::string>& extra_args = {},
-                                      bool beside_tcpdump = false);
+                                      bool beside_tcpdump = false,
+                                      const std::string& receiver = "");
 
   // Any receiver the user names, under the same traffic: its CPU (all threads), peak RSS and,
   // when it prints "received N", its loss.
@@ -52,10 +57,17 @@ class ZeroLossTrials {
   nlohmann::ordered_json reference_trial(ReferenceReceiver::Kind kind, double rate, double seconds);
 
  private:
+  // The generator's options for one trial: the user's traffic, sent along the path.
+  GeneratorOptions traffic(std::uint16_t port, double rate, double seconds) const;
+
   const ZeroLossOptions& o_;
   const TrafficSource& source_;
   std::filesystem::path work_;
+  TrafficPath path_;
   std::filesystem::path daemon_;
+  // Whether the daemon has --receiver (a pandarcapd from before the packet_ring receiver has
+  // not, and receives with its socket only).
+  bool daemon_has_receiver_option_ = false;
   int trials_ = 0;
 };
 

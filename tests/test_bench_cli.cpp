@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <catch2/catch.hpp>
+#include <chrono>
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -597,6 +599,142 @@ TEST_CASE(
   if (tcpdump > 0) CHECK(c["daemon_vs_tcpdump_cpu"].get<double>() == Approx(daemon / tcpdump));
   CHECK(report["goals"].contains("cpu_recording_at_most_tcpdump_w"));
   CHECK_THAT(md_text(dir / "report"), Catch::Contains("Recording against `tcpdump -w`"));
+}
+
+TEST_CASE("pandarcap-bench zero-loss: the receiver and path options, refused when they clash",
+          "[bench][cli]") {
+  const auto refused = [](const std::string& options, const std::string& why) {
+    const auto result = test::run_command(bench() + " zero-loss " + options + " 2>&1");
+    INFO(options << ": " << result.out);
+    CHECK(result.exit_code == 64);
+    CHECK_THAT(result.out, Catch::Contains(why));
+  };
+  refused("--receiver bogus", "--receiver is socket or packet_ring, got 'bogus'");
+  refused("--receiver", "--receiver");
+  refused("--veth --interface eth0 --receiver packet_ring", "does not go with --interface");
+  refused("--interface eth0", "give --receiver packet_ring");
+  refused("--interface eth0 --receiver packet_ring", "--interface needs --destination IP");
+  refused("--interface eth0 --compare-receivers", "--interface needs --destination IP");
+  refused("--destination 10.0.0.1", "--destination goes with --interface");
+  refused("--veth --foreign-fraction 0.1", "loopback only");
+  refused("--interface eth0 --receiver packet_ring --destination 10.0.0", "an IPv4 address");
+  // --veth makes interfaces and a namespace: as anyone but root, a usage error before anything.
+  if (::geteuid() == 0) {
+    const auto result = test::run_command("setpriv --reuid=65534 --regid=65534 --clear-groups -- " +
+                                          bench() + " zero-loss --veth 2>&1");
+    INFO(result.out);
+    CHECK(result.exit_code == 64);
+    CHECK_THAT(result.out, Catch::Contains("--veth") && Catch::Contains("run it as root"));
+  }
+  const auto help = test::run_command(bench() + " zero-loss --help");
+  CHECK(help.exit_code == 0);
+  for (const char* text : {"--receiver KIND", "--compare-receivers", "--veth", "--interface IFACE",
+                           "path (loopback, veth or interface)", "generator_cpu_fraction"}) {
+    CHECK_THAT(help.out, Catch::Contains(text));
+  }
+}
+
+namespace {
+
+// Whether `ip link show NAME` finds the interface, and `ip netns list` the namespace.
+bool interface_exists(const std::string& name) {
+  return test::run_command("ip link show '" + name + "' >/dev/null 2>&1").exit_code == 0;
+}
+bool namespace_exists(const std::string& name) {
+  return test::run_command("ip netns list").out.find(name) != std::string::npos;
+}
+
+}  // namespace
+
+TEST_CASE("pandarcap-bench zero-loss --veth: sent from a namespace of its own, nothing left behind",
+          "[bench][cli][threads]") {
+  if (::geteuid() != 0) {
+    WARN("--veth needs root: skipped");
+    return;
+  }
+  // Budget 0: the sensor-rate trial is also the budget-0 one, so one daemon trial in all.
+  test::ScratchDir dir("zero-loss-veth");
+  const auto result = test::run_command(
+      bench() + " zero-loss --veth --json --sensor-rate-only --daemon-only --trial-seconds 1" +
+      " --latency-budget-ms 0 --sensor-rate 1800 --report-dir '" + (dir / "report").string() +
+      "' 2>&1");
+  INFO(result.out);
+  REQUIRE(result.exit_code == 0);
+  const json report = json::parse(result.out);
+  const json& settings = report["settings"];
+  CHECK(settings["path"] == "veth");
+  CHECK(settings["receiver"] == "socket");
+  const std::string near = settings["interface"];
+  const std::string space = settings["sender_namespace"];
+  CHECK(near.rfind("pcb", 0) == 0);
+  CHECK(space.rfind("/run/netns/pandarcap-bench-", 0) == 0);
+  CHECK(settings["destination"].get<std::string>().rfind("10.231.", 0) == 0);
+  // The daemon, bound to the near end's address, took every packet the far namespace sent.
+  const json& s = report["at_sensor_rate"];
+  CHECK(s["receiver"] == "socket");
+  CHECK(s["lost"] == 0);
+  CHECK(s["zero_loss"] == true);
+  CHECK(report["trials"]["at_sensor_rate"][0]["sent"].get<std::uint64_t>() > 1000);
+  CHECK(s["generator_cpu_fraction_of_one_core"].get<double>() > 0);
+  CHECK(s["kernel"]["machine_softirq_cpu_fraction_of_one_core"].get<double>() >= 0);
+  CHECK_THAT(md_text(dir / "report"), Catch::Contains("Path: **veth**"));
+  // Both ends and the namespace are gone after the run.
+  CHECK_FALSE(interface_exists(near));
+  CHECK_FALSE(namespace_exists(space.substr(std::string("/run/netns/").size())));
+
+  // Stopped by SIGTERM mid-trial: the daemon it runs stopped too, nothing left behind, and it ends
+  // by that signal.
+  harness::ChildProcess bench_run(test::binary("pandarcap-bench"),
+                                  {"zero-loss", "--veth", "--json", "--sensor-rate-only",
+                                   "--daemon-only", "--trial-seconds", "30"},
+                                  dir / "stopped.log");
+  const std::string pid = std::to_string(bench_run.pid());
+  int daemon = 0;
+  REQUIRE(harness::wait_until(
+      [&] {
+        std::istringstream children(
+            harness::read_file("/proc/" + pid + "/task/" + pid + "/children"));
+        for (int child = 0; children >> child;) {
+          if (harness::read_file("/proc/" + std::to_string(child) + "/comm") == "pandarcapd\n") {
+            daemon = child;
+          }
+        }
+        return daemon != 0;
+      },
+      std::chrono::seconds(20)));
+  bench_run.signal(SIGTERM);
+  const auto status = bench_run.wait_exit(std::chrono::seconds(20));
+  CHECK(status == -SIGTERM);
+  CHECK_FALSE(std::filesystem::exists("/proc/" + std::to_string(daemon)));
+  CHECK_FALSE(namespace_exists("pandarcap-bench-" + pid));
+  CHECK_FALSE(interface_exists("pcb" + pid + "n"));
+}
+
+// The packet_ring receiver needs a pandarcapd that has it (--receiver): hidden until then; run
+// with `pandarcap_tests "[compare_receivers]"`.
+TEST_CASE("pandarcap-bench zero-loss --compare-receivers: socket and packet_ring in one run",
+          "[bench][cli][threads][.compare_receivers]") {
+  REQUIRE(::geteuid() == 0);
+  for (const std::string path : {"", " --veth"}) {
+    INFO("path:" << path);
+    const auto result = test::run_command(
+        bench() + " zero-loss --json --sensor-rate-only --daemon-only --trial-seconds 1" +
+        " --latency-budget-ms 0 --sensor-rate 1800 --compare-receivers" + path + " 2>&1");
+    INFO(result.out);
+    REQUIRE(result.exit_code == 0);
+    const json report = json::parse(result.out);
+    const json& s = report["at_sensor_rate"];
+    CHECK(s["receiver"] == "socket");
+    CHECK(s["lost"] == 0);
+    REQUIRE(s.contains("packet_ring"));
+    CHECK(s["packet_ring"]["receiver"] == "packet_ring");
+    CHECK(s["packet_ring"]["lost"] == 0);
+    // The ring watches the interface the packets arrive on: lo, or the veth's near end.
+    const json& ring_trial = report["trials"]["at_sensor_rate"].back();
+    CHECK(ring_trial["interface"] == report["settings"]["interface"]);
+    const std::string interface = report["settings"]["interface"];
+    CHECK(interface.rfind(path.empty() ? "lo" : "pcb", 0) == 0);
+  }
 }
 
 TEST_CASE("pandarcap-bench send --sensor-model: every model at its own rate, one rotation",

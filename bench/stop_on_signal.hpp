@@ -1,0 +1,56 @@
+// What a zero-loss run leaves behind when SIGINT or SIGTERM stops it: nothing. While a
+// StopOnSignal lives, those signals stop the children the harness registered (the daemon, tcpdump,
+// another receiver: SIGTERM, then SIGKILL after 5 s), have the guard run its commands (the veth
+// pair's removal), and then take their usual course: the harness ends by the signal. Without it a
+// daemon would outlive the harness that started it, and a veth pair and a namespace would stay.
+//
+// The commands run in a guard process forked when they are given, not in the handler: a handler
+// may only make async-signal-safe calls, and a fork from one is not safe in every runtime (under
+// TSan the child's first allocation is reported and it never runs the command). The guard waits
+// on a pipe only the harness writes: 'r' runs the commands, 'q' ends it without, and the pipe's
+// end (the harness died without a word: SIGKILL, a crash) runs them too. It ignores SIGINT and
+// SIGTERM, which a terminal sends to the whole process group.
+#pragma once
+
+#include <signal.h>
+
+#include <string>
+#include <vector>
+
+namespace pandarcap::bench {
+
+class StopOnSignal {
+ public:
+  StopOnSignal();
+  ~StopOnSignal();  // ends the guard without running its commands
+  StopOnSignal(const StopOnSignal&) = delete;
+  StopOnSignal& operator=(const StopOnSignal&) = delete;
+
+  // Starts the guard with these commands (each argv[0] the program's path; output to /dev/null),
+  // run in order. Once per StopOnSignal. Throws std::runtime_error when it cannot fork.
+  void guard(std::vector<std::vector<std::string>> commands);
+  // Has the guard run its commands now and waits for it (a no-op once it has).
+  void run_guarded_now() noexcept;
+
+  // A child of the harness's, stopped by the handler while this lives (a no-op with no
+  // StopOnSignal alive).
+  class Child {
+   public:
+    explicit Child(int pid);
+    ~Child();
+    Child(const Child&) = delete;
+    Child& operator=(const Child&) = delete;
+
+   private:
+    int slot_ = -1;
+  };
+
+ private:
+  struct sigaction old_int_ {};
+  struct sigaction old_term_ {};
+};
+
+// Runs `argv` (argv[0] the program's path) with its output to /dev/null and waits for it.
+void spawn_and_wait(const std::vector<std::string>& args);
+
+}  // namespace pandarcap::bench
