@@ -233,8 +233,8 @@ void FrameAssembler::add_points(Slot& slot, std::span<const Point> points, const
   }
   if (frame.is_encoded()) {
     const std::size_t step = pcd_point_bytes(frame.format.layout);
-    encode_pcd_points(points, frame.encoded.subspan(frame.size * step, points.size() * step),
-                      frame.format, PcdFrameContext{frame.reference_ns, meta.return_mode});
+    encoder_.encode(points, frame.encoded.subspan(frame.size * step, points.size() * step),
+                    frame.format, PcdFrameContext{frame.reference_ns, meta.return_mode});
   } else {
     std::copy(points.begin(), points.end(), frame.points.begin() + frame.size);
   }

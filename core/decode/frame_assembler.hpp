@@ -42,6 +42,7 @@
 
 #include "core/decode/azimuth_coverage.hpp"
 #include "core/decode/decoder.hpp"
+#include "core/decode/pcd_simd_encoder.hpp"
 #include "core/frames/frame.hpp"
 #include "core/sensors/packet.hpp"
 
@@ -133,6 +134,7 @@ class FrameAssembler {
 
   FrameAssemblerConfig config_;
   FrameSink& sink_;
+  PcdEncoder encoder_;  // points into an encoded frame's arena: the fastest target this CPU runs
   int channel_span_cdeg_ = 0;  // how far the channels' azimuths reach past a block's, in all
   int cut_cdeg_ = 0;
   bool started_ = false;

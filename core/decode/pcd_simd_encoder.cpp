@@ -1,0 +1,336 @@
+// The PCD row kernels, compiled once per instruction set by Google Highway (foreach_target
+// re-includes this file for each target, as for the decoder), and the encoder that picks one.
+// See pcd_simd_encoder.hpp for the layout of the work and why each conversion is exact.
+#include "core/decode/pcd_simd_encoder.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numbers>
+
+#include "core/decode/simd_decoder.hpp"  // simd_target_supported
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "core/decode/pcd_simd_encoder.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
+
+// As for the decoder: no kernel for Highway's one-lane fallback; the reference is pcd.cpp.
+#if HWY_TARGET != HWY_SCALAR
+HWY_BEFORE_NAMESPACE();
+namespace pandarcap {
+namespace HWY_NAMESPACE {
+namespace {
+
+namespace hn = hwy::HWY_NAMESPACE;
+
+// One lane per point, at most 8 (a 512-bit vector), so the row buffers below are large enough
+// on scalable targets (SVE) too.
+constexpr std::size_t kMaxLanes = 8;
+using D = hn::CappedTag<std::uint64_t, kMaxLanes>;
+using DI = hn::RebindToSigned<D>;
+using DF = hn::RebindToFloat<D>;
+using DF32 = hn::Repartition<float, D>;  // two floats in each lane
+using DF32H = hn::Rebind<float, D>;      // one float per lane, half as wide
+using DU32H = hn::Rebind<std::uint32_t, D>;
+
+static_assert(sizeof(Point) == 32 && offsetof(Point, timestamp_ns) == 16 &&
+              offsetof(Point, azimuth_cdeg) == 24 && offsetof(Point, intensity) == 26 &&
+              offsetof(Point, channel) == 27 && offsetof(Point, return_type) == 28);
+
+// 2^52 as a double's bits: an integer 0 <= i < 2^52 or'ed in is exactly 2^52 + i.
+constexpr std::uint64_t kTwo52Bits = 0x4330000000000000ULL;
+constexpr double kTwo52 = 4503599627370496.0;
+// 1.5 × 2^52: a signed -2^51 <= i < 2^51 added to its bits is exactly 1.5 × 2^52 + i.
+constexpr std::int64_t kOneAndHalfTwo52Bits = 0x4338000000000000LL;
+constexpr double kOneAndHalfTwo52 = 6755399441055744.0;
+constexpr std::int64_t kTwo51 = std::int64_t{1} << 51;
+
+// Unsigned 0 <= v < 2^52 to double, exactly.
+HWY_INLINE hn::Vec<DF> to_double(hn::Vec<D> v) {
+  return hn::Sub(hn::BitCast(DF(), hn::Or(v, hn::Set(D(), kTwo52Bits))), hn::Set(DF(), kTwo52));
+}
+
+// Signed -2^51 <= v < 2^51 to double, exactly.
+HWY_INLINE hn::Vec<DF> to_double_signed(hn::Vec<DI> v) {
+  return hn::Sub(hn::BitCast(DF(), hn::Add(v, hn::Set(DI(), kOneAndHalfTwo52Bits))),
+                 hn::Set(DF(), kOneAndHalfTwo52));
+}
+
+// Doubles rounded to floats (as static_cast<float>), each float's bits in its lane's low half.
+HWY_INLINE hn::Vec<D> float_bits(hn::Vec<DF> v) {
+  return hn::PromoteTo(D(), hn::BitCast(DU32H(), hn::DemoteTo(DF32H(), v)));
+}
+
+// A byte 0..255 as a float's bits (its value exactly), in the lane's low half.
+HWY_INLINE hn::Vec<D> byte_float_bits(hn::Vec<D> byte) {
+  // 2^23 + b as a float's bits, minus 2^23; the high half is 2^23 - 2^23 = +0.
+  const auto biased = hn::BitCast(DF32(), hn::Or(byte, hn::Set(D(), 0x4B0000004B000000ULL)));
+  return hn::BitCast(D(), hn::Sub(biased, hn::Set(DF32(), 8388608.0f)));
+}
+
+// The epoch seconds of times in the call's second (pcd.cpp's epoch_seconds), as double bits;
+// false if a lane is outside that second.
+HWY_INLINE bool epoch_seconds(hn::Vec<D> time, const PcdEncodeConstants& c, hn::Vec<D>& bits) {
+  const DI di;
+  const auto ns = hn::Sub(hn::BitCast(di, time), hn::Set(di, c.second_ns));
+  const auto inside = hn::And(hn::Gt(ns, hn::Set(di, -1)), hn::Lt(ns, hn::Set(di, 1'000'000'000)));
+  if (!hn::AllTrue(di, inside)) return false;
+  const auto fraction = to_double(hn::BitCast(D(), ns));
+#if defined(__FP_FAST_FMA)
+  // The reference is fused here (see pcd.cpp): one rounding.
+  const auto seconds = hn::MulAdd(fraction, hn::Set(DF(), 1e-9), hn::Set(DF(), c.second_s));
+#else
+  // Two roundings, as the reference's: the product goes through an integer or with a run-time
+  // zero, so no target that has FMA can fuse it with the sum.
+  const auto product = hn::BitCast(
+      DF(), hn::Or(hn::BitCast(D(), hn::Mul(fraction, hn::Set(DF(), 1e-9))), hn::Set(D(), c.zero)));
+  const auto seconds = hn::Add(hn::Set(DF(), c.second_s), product);
+#endif
+  bits = hn::BitCast(D(), seconds);
+  return true;
+}
+
+// Nanoseconds since the frame's reference; false if a lane is 2^51 or more away.
+HWY_INLINE bool since_reference(hn::Vec<D> time, const PcdEncodeConstants& c, hn::Vec<DI>& since) {
+  const DI di;
+  since = hn::Sub(hn::BitCast(di, time), hn::Set(di, c.reference_ns));
+  const auto near =
+      hn::And(hn::Gt(since, hn::Set(di, -kTwo51 - 1)), hn::Lt(since, hn::Set(di, kTwo51)));
+  return hn::AllTrue(di, near);
+}
+
+// One vector of points (Lanes(D()) of them at `src`) into 32-byte rows (four words each) at
+// `rows`. False, with nothing written, when one of them must go to the reference.
+template <PcdLayout Layout, bool Ros>
+HWY_INLINE bool encode_vector(const std::uint8_t* src, std::uint64_t* rows,
+                              const PcdEncodeConstants& c) {
+  const D d;
+  const DI di;
+  hn::Vec<D> xy, zd, time, meta;
+  hn::LoadInterleaved4(d, reinterpret_cast<const std::uint64_t*>(src), xy, zd, time, meta);
+  const auto low_half = hn::Set(d, 0xFFFFFFFFULL);
+  const auto byte = hn::Set(d, 0xFFULL);
+  // x y (ros: y, -x: the halves swapped and the new high half's sign flipped, as negation does).
+  auto w0 = xy;
+  if constexpr (Ros) {
+    w0 = hn::Xor(hn::Or(hn::ShiftLeft<32>(xy), hn::ShiftRight<32>(xy)),
+                 hn::Set(d, 0x8000000000000000ULL));
+  }
+  const auto z = hn::And(zd, low_half);
+  // meta: azimuth (bytes 0-1), intensity, channel, return type, 3 reserved.
+  const auto intensity = hn::And(hn::ShiftRight<16>(meta), byte);
+  const auto channel = hn::And(hn::ShiftRight<24>(meta), byte);
+  const auto type = hn::And(hn::ShiftRight<32>(meta), byte);
+  auto w1 = z, w2 = hn::Zero(d), w3 = hn::Zero(d);
+
+  if constexpr (Layout == PcdLayout::kPcl) {
+    // x y z | intensity F4 | ring U2 | return_type U1 | timestamp F8
+    hn::Vec<D> seconds;
+    if (!epoch_seconds(time, c, seconds)) return false;
+    w1 = hn::Or(z, hn::ShiftLeft<32>(byte_float_bits(intensity)));
+    w2 = hn::Or(hn::Or(channel, hn::ShiftLeft<16>(type)), hn::ShiftLeft<24>(seconds));
+    w3 = hn::ShiftRight<40>(seconds);
+  } else if constexpr (Layout == PcdLayout::kPandarcap) {
+    // x y z | intensity U1 | channel U1 | return_type U1 | timestamp F8: the three bytes are the
+    // point's own, in the same order.
+    hn::Vec<D> seconds;
+    if (!epoch_seconds(time, c, seconds)) return false;
+    const auto bytes = hn::And(hn::ShiftRight<16>(meta), hn::Set(d, 0xFFFFFFULL));
+    w1 = hn::Or(hn::Or(z, hn::ShiftLeft<32>(bytes)), hn::ShiftLeft<56>(seconds));
+    w2 = hn::ShiftRight<8>(seconds);
+  } else if constexpr (Layout == PcdLayout::kVelodyne) {
+    // x y z | intensity F4 | ring U2 | time F4 (s since the reference)
+    hn::Vec<DI> since;
+    if (!since_reference(time, c, since)) return false;
+    const auto seconds = float_bits(hn::Mul(to_double_signed(since), hn::Set(DF(), 1e-9)));
+    w1 = hn::Or(z, hn::ShiftLeft<32>(byte_float_bits(intensity)));
+    w2 = hn::Or(channel, hn::ShiftLeft<16>(seconds));
+  } else {
+    // x y z | intensity U1 | return_type U1 (nebula's) | channel U2 | azimuth F4 | elevation F4 |
+    // distance F4 | time_stamp U4 (ns since the reference, modulo 2^32 before it)
+    const auto since = hn::Sub(hn::BitCast(di, time), hn::Set(di, c.reference_ns));
+    const auto cap = hn::Set(di, 0xFFFFFFFFLL);
+    const auto stamp =
+        hn::And(hn::BitCast(d, hn::IfThenElse(hn::Gt(since, cap), cap, since)), low_half);
+    auto code = hn::Zero(d);
+    for (std::uint64_t t = 0; t < 4; ++t) {
+      code = hn::IfThenElse(hn::Eq(type, hn::Set(d, t)), hn::Set(d, c.nebula_codes[t]), code);
+    }
+    w1 = hn::Or(hn::Or(z, hn::ShiftLeft<32>(intensity)),
+                hn::Or(hn::ShiftLeft<40>(code), hn::ShiftLeft<48>(channel)));
+    const auto azimuth = hn::Mul(to_double(hn::And(meta, hn::Set(d, 0xFFFFULL))),
+                                 hn::Set(DF(), std::numbers::pi / 18000.0));
+    // The reference's libm calls, from the point's own x y z whatever the axes.
+    alignas(32) std::uint32_t elevation[kMaxLanes];
+    for (std::size_t i = 0; i < hn::Lanes(d); ++i) {
+      float p[3];
+      std::memcpy(p, src + 32 * i, sizeof p);
+      const float value = std::atan2(p[2], std::hypot(p[0], p[1]));
+      std::memcpy(&elevation[i], &value, sizeof value);
+    }
+    const auto elevation_bits = hn::PromoteTo(d, hn::Load(DU32H(), elevation));
+    w2 = hn::Or(float_bits(azimuth), hn::ShiftLeft<32>(elevation_bits));
+    w3 = hn::Or(hn::ShiftRight<32>(zd), hn::ShiftLeft<32>(stamp));
+  }
+  hn::StoreInterleaved4(w0, w1, w2, w3, d, rows);
+  return true;
+}
+
+template <PcdLayout Layout, bool Ros>
+HWY_NOINLINE std::size_t encode_rows(const Point* points, std::size_t n, std::uint8_t* out,
+                                     const PcdEncodeConstants& c) {
+  constexpr std::size_t kRow = Layout == PcdLayout::kPcl         ? 27
+                               : Layout == PcdLayout::kPandarcap ? 23
+                               : Layout == PcdLayout::kVelodyne  ? 22
+                                                                 : 32;
+  const std::size_t lanes = hn::Lanes(D());
+  const auto* src = reinterpret_cast<const std::uint8_t*>(points);
+  alignas(64) std::uint64_t rows[4 * kMaxLanes];
+  std::size_t i = 0;
+  for (; i + lanes <= n; i += lanes) {
+    if (!encode_vector<Layout, Ros>(src + 32 * i, rows, c)) return i;
+    std::uint8_t* dst = out + kRow * i;
+    if constexpr (kRow == 32) {
+      std::memcpy(dst, rows, 32 * lanes);
+    } else {
+      // Each row copied as 32 bytes, the next one overwriting the excess; the last row of the
+      // call exactly, so nothing is written past the points.
+      for (std::size_t j = 0; j + 1 < lanes; ++j)
+        std::memcpy(dst + kRow * j, rows + 4 * j, 32);
+      if (i + lanes < n) {
+        std::memcpy(dst + kRow * (lanes - 1), rows + 4 * (lanes - 1), 32);
+      } else {
+        std::memcpy(dst + kRow * (lanes - 1), rows + 4 * (lanes - 1), kRow);
+      }
+    }
+  }
+  if (i == n) return n;
+  // The last partial vector: its points, then copies of its last one, encoded from a copy.
+  const std::size_t left = n - i;
+  alignas(64) std::uint8_t padded[32 * kMaxLanes];
+  std::memcpy(padded, src + 32 * i, 32 * left);
+  for (std::size_t j = left; j < lanes; ++j)
+    std::memcpy(padded + 32 * j, src + 32 * (n - 1), 32);
+  if (!encode_vector<Layout, Ros>(padded, rows, c)) return i;
+  for (std::size_t j = 0; j < left; ++j)
+    std::memcpy(out + kRow * (i + j), rows + 4 * j, kRow);
+  return n;
+}
+
+template <PcdLayout Layout>
+std::size_t encode_layout(const Point* points, std::size_t n, std::uint8_t* out, Axes axes,
+                          const PcdEncodeConstants& c) {
+  return axes == Axes::kRos ? encode_rows<Layout, true>(points, n, out, c)
+                            : encode_rows<Layout, false>(points, n, out, c);
+}
+
+}  // namespace
+
+std::size_t EncodeKernel(const Point* points, std::size_t n, std::uint8_t* out, PcdFormat format,
+                         const PcdEncodeConstants& c) {
+  switch (format.layout) {
+    case PcdLayout::kPcl:
+      return encode_layout<PcdLayout::kPcl>(points, n, out, format.axes, c);
+    case PcdLayout::kPandarcap:
+      return encode_layout<PcdLayout::kPandarcap>(points, n, out, format.axes, c);
+    case PcdLayout::kVelodyne:
+      return encode_layout<PcdLayout::kVelodyne>(points, n, out, format.axes, c);
+    case PcdLayout::kAutoware:
+      return encode_layout<PcdLayout::kAutoware>(points, n, out, format.axes, c);
+  }
+  return 0;
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace pandarcap
+HWY_AFTER_NAMESPACE();
+#endif  // HWY_TARGET != HWY_SCALAR
+
+#if HWY_ONCE
+namespace pandarcap {
+namespace {
+
+struct KernelEntry {
+  DecoderTarget target;
+  PcdEncodeKernel kernel;
+};
+
+// The decoder's targets (simd_decoder.cpp), the same names and the same CPU checks.
+constexpr KernelEntry kKernels[] = {
+#if HWY_TARGETS & HWY_SSE4
+    {DecoderTarget::kSse4, &N_SSE4::EncodeKernel},
+#endif
+#if HWY_TARGETS & HWY_AVX2
+    {DecoderTarget::kAvx2, &N_AVX2::EncodeKernel},
+#endif
+#if HWY_TARGETS & HWY_AVX3
+    {DecoderTarget::kAvx512, &N_AVX3::EncodeKernel},
+#endif
+#if HWY_TARGETS & HWY_NEON
+    {DecoderTarget::kNeon, &N_NEON::EncodeKernel},
+#endif
+#if HWY_TARGETS & HWY_SVE
+    {DecoderTarget::kSve, &N_SVE::EncodeKernel},
+#endif
+#if HWY_TARGETS & HWY_SVE2
+    {DecoderTarget::kSve2, &N_SVE2::EncodeKernel},
+#endif
+};
+
+// The most points the reference takes at once when the kernel cannot (a vector's worth).
+constexpr std::size_t kReferenceRun = 8;
+
+}  // namespace
+
+PcdEncodeKernel pcd_encode_kernel(DecoderTarget target) noexcept {
+  for (const KernelEntry& entry : kKernels) {
+    if (entry.target == target) return entry.kernel;
+  }
+  return nullptr;
+}
+
+PcdEncoder::PcdEncoder() : PcdEncoder(best_decoder_target()) {}
+
+PcdEncoder::PcdEncoder(DecoderTarget target) {
+  if (target != DecoderTarget::kScalar && simd_target_supported(target)) {
+    kernel_ = pcd_encode_kernel(target);
+  }
+  target_ = kernel_ != nullptr ? target : DecoderTarget::kScalar;
+}
+
+std::size_t PcdEncoder::encode(std::span<const Point> points, std::span<std::uint8_t> out,
+                               PcdFormat format, PcdFrameContext frame) const noexcept {
+  if (kernel_ == nullptr) return encode_pcd_points(points, out, format, frame);
+  const std::size_t step = pcd_point_bytes(format.layout);
+  PcdEncodeConstants c;
+  c.reference_ns = frame.reference_ns;
+  for (std::size_t t = 0; t < 4; ++t) {
+    c.nebula_codes[t] = nebula_return_type(static_cast<ReturnType>(t), frame.return_mode);
+  }
+  const bool epoch = format.layout == PcdLayout::kPcl || format.layout == PcdLayout::kPandarcap;
+  std::size_t done = 0;
+  while (done < points.size()) {
+    const std::int64_t first = points[done].timestamp_ns;
+    std::size_t encoded = 0;
+    // The epoch layouts count from the second of the first point not yet encoded; times before
+    // 1970 (the division rounds them the other way) are the reference's.
+    if (!epoch || first >= 0) {
+      c.second_ns = first / 1'000'000'000 * 1'000'000'000;
+      c.second_s = static_cast<double>(first / 1'000'000'000);
+      encoded =
+          kernel_(points.data() + done, points.size() - done, out.data() + done * step, format, c);
+    }
+    done += encoded;
+    if (encoded == 0) {
+      const std::size_t run = std::min(kReferenceRun, points.size() - done);
+      encode_pcd_points(points.subspan(done, run), out.subspan(done * step, run * step), format,
+                        frame);
+      done += run;
+    }
+  }
+  return done * step;
+}
+
+}  // namespace pandarcap
+#endif  // HWY_ONCE
