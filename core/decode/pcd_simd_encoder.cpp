@@ -24,9 +24,10 @@ namespace {
 
 namespace hn = hwy::HWY_NAMESPACE;
 
-// One lane per point, at most 8 (a 512-bit vector), so the row buffers below are large enough
-// on scalable targets (SVE) too.
-constexpr std::size_t kMaxLanes = 8;
+// One lane per point, at most 4 (256 bits: a point's row is 256 bits, so a vector of rows is
+// regrouped from four vectors with two rounds of shuffles; AVX-512 and wide SVE run 256-bit
+// vectors). The row buffers below are sized for it.
+constexpr std::size_t kMaxLanes = 4;
 using D = hn::CappedTag<std::uint64_t, kMaxLanes>;
 using DI = hn::RebindToSigned<D>;
 using DF = hn::RebindToFloat<D>;
@@ -100,11 +101,11 @@ HWY_INLINE bool since_reference(hn::Vec<D> time, const PcdEncodeConstants& c, hn
   return hn::AllTrue(di, near);
 }
 
-// One vector of points (Lanes(D()) of them at `src`) into 32-byte rows (four words each) at
-// `rows`. False, with nothing written, when one of them must go to the reference.
+// One vector of points (Lanes(D()) of them at `src`) as their rows' four words, w0 the row's
+// bytes 0-7 and so on. False when one of them must go to the reference.
 template <PcdLayout Layout, bool Ros>
-HWY_INLINE bool encode_vector(const std::uint8_t* src, std::uint64_t* rows,
-                              const PcdEncodeConstants& c) {
+HWY_INLINE bool encode_vector(const std::uint8_t* src, const PcdEncodeConstants& c, hn::Vec<D>& w0,
+                              hn::Vec<D>& w1, hn::Vec<D>& w2, hn::Vec<D>& w3) {
   const D d;
   const DI di;
   hn::Vec<D> xy, zd, time, meta;
@@ -112,7 +113,7 @@ HWY_INLINE bool encode_vector(const std::uint8_t* src, std::uint64_t* rows,
   const auto low_half = hn::Set(d, 0xFFFFFFFFULL);
   const auto byte = hn::Set(d, 0xFFULL);
   // x y (ros: y, -x: the halves swapped and the new high half's sign flipped, as negation does).
-  auto w0 = xy;
+  w0 = xy;
   if constexpr (Ros) {
     w0 = hn::Xor(hn::Or(hn::ShiftLeft<32>(xy), hn::ShiftRight<32>(xy)),
                  hn::Set(d, 0x8000000000000000ULL));
@@ -122,7 +123,9 @@ HWY_INLINE bool encode_vector(const std::uint8_t* src, std::uint64_t* rows,
   const auto intensity = hn::And(hn::ShiftRight<16>(meta), byte);
   const auto channel = hn::And(hn::ShiftRight<24>(meta), byte);
   const auto type = hn::And(hn::ShiftRight<32>(meta), byte);
-  auto w1 = z, w2 = hn::Zero(d), w3 = hn::Zero(d);
+  w1 = z;
+  w2 = hn::Zero(d);
+  w3 = hn::Zero(d);
 
   if constexpr (Layout == PcdLayout::kPcl) {
     // x y z | intensity F4 | ring U2 | return_type U1 | timestamp F8
@@ -173,8 +176,33 @@ HWY_INLINE bool encode_vector(const std::uint8_t* src, std::uint64_t* rows,
     w2 = hn::Or(float_bits(azimuth), hn::ShiftLeft<32>(elevation_bits));
     w3 = hn::Or(hn::ShiftRight<32>(zd), hn::ShiftLeft<32>(stamp));
   }
-  hn::StoreInterleaved4(w0, w1, w2, w3, d, rows);
   return true;
+}
+
+// Stores one vector's rows, row j as 32 bytes at out + kRow × j, in order, so that each row
+// overwrites the excess of the one before it. The rows are the words transposed: interleaved in
+// pairs within each 128-bit block, then (256-bit vectors) the blocks regrouped.
+template <std::size_t kRow>
+HWY_INLINE void store_rows(hn::Vec<D> w0, hn::Vec<D> w1, hn::Vec<D> w2, hn::Vec<D> w3,
+                           std::uint8_t* out) {
+  const D d;
+  const hn::Repartition<std::uint8_t, D> d8;
+  const auto t0 = hn::InterleaveLower(d, w0, w1);  // rows 0 (and 2): bytes 0-15
+  const auto t1 = hn::InterleaveUpper(d, w0, w1);  // rows 1 (and 3): bytes 0-15
+  const auto t2 = hn::InterleaveLower(d, w2, w3);  // rows 0 (and 2): bytes 16-31
+  const auto t3 = hn::InterleaveUpper(d, w2, w3);  // rows 1 (and 3): bytes 16-31
+  if (hn::Lanes(d) == 4) {
+    hn::StoreU(hn::BitCast(d8, hn::ConcatLowerLower(d, t2, t0)), d8, out);
+    hn::StoreU(hn::BitCast(d8, hn::ConcatLowerLower(d, t3, t1)), d8, out + kRow);
+    hn::StoreU(hn::BitCast(d8, hn::ConcatUpperUpper(d, t2, t0)), d8, out + 2 * kRow);
+    hn::StoreU(hn::BitCast(d8, hn::ConcatUpperUpper(d, t3, t1)), d8, out + 3 * kRow);
+  } else {
+    // Two lanes (128-bit targets): each interleaved pair is half a row.
+    hn::StoreU(hn::BitCast(d8, t0), d8, out);
+    hn::StoreU(hn::BitCast(d8, t2), d8, out + 16);
+    hn::StoreU(hn::BitCast(d8, t1), d8, out + kRow);
+    hn::StoreU(hn::BitCast(d8, t3), d8, out + kRow + 16);
+  }
 }
 
 template <PcdLayout Layout, bool Ros>
@@ -184,37 +212,35 @@ HWY_NOINLINE std::size_t encode_rows(const Point* points, std::size_t n, std::ui
                                : Layout == PcdLayout::kPandarcap ? 23
                                : Layout == PcdLayout::kVelodyne  ? 22
                                                                  : 32;
-  const std::size_t lanes = hn::Lanes(D());
+  const D d;
+  const std::size_t lanes = hn::Lanes(d);
   const auto* src = reinterpret_cast<const std::uint8_t*>(points);
-  alignas(64) std::uint64_t rows[4 * kMaxLanes];
+  hn::Vec<D> w0, w1, w2, w3;
   std::size_t i = 0;
-  for (; i + lanes <= n; i += lanes) {
-    if (!encode_vector<Layout, Ros>(src + 32 * i, rows, c)) return i;
-    std::uint8_t* dst = out + kRow * i;
-    if constexpr (kRow == 32) {
-      std::memcpy(dst, rows, 32 * lanes);
-    } else {
-      // Each row copied as 32 bytes, the next one overwriting the excess; the last row of the
-      // call exactly, so nothing is written past the points.
-      for (std::size_t j = 0; j + 1 < lanes; ++j)
-        std::memcpy(dst + kRow * j, rows + 4 * j, 32);
-      if (i + lanes < n) {
-        std::memcpy(dst + kRow * (lanes - 1), rows + 4 * (lanes - 1), 32);
-      } else {
-        std::memcpy(dst + kRow * (lanes - 1), rows + 4 * (lanes - 1), kRow);
-      }
-    }
+  // Whole vectors straight into `out` while a point follows them: a row's excess past its 22, 23
+  // or 27 bytes lands on the next row, which is written after it.
+  for (; i + lanes < n || (kRow == 32 && i + lanes == n); i += lanes) {
+    if (!encode_vector<Layout, Ros>(src + 32 * i, c, w0, w1, w2, w3)) return i;
+    store_rows<kRow>(w0, w1, w2, w3, out + kRow * i);
   }
   if (i == n) return n;
-  // The last partial vector: its points, then copies of its last one, encoded from a copy.
-  const std::size_t left = n - i;
+  // The last 1..lanes points, with their rows copied at their exact size so that nothing is
+  // written past the points: as the last whole vector of the call when there is one (rows before
+  // `i` encoded again, to the same bytes), else from a copy padded with the last point.
+  const std::uint8_t* last = src + 32 * (n - lanes);
+  std::size_t from = n - lanes;
   alignas(64) std::uint8_t padded[32 * kMaxLanes];
-  std::memcpy(padded, src + 32 * i, 32 * left);
-  for (std::size_t j = left; j < lanes; ++j)
-    std::memcpy(padded + 32 * j, src + 32 * (n - 1), 32);
-  if (!encode_vector<Layout, Ros>(padded, rows, c)) return i;
-  for (std::size_t j = 0; j < left; ++j)
-    std::memcpy(out + kRow * (i + j), rows + 4 * j, kRow);
+  if (n < lanes) {
+    for (std::size_t j = 0; j < lanes; ++j)
+      std::memcpy(padded + 32 * j, src + 32 * std::min(j, n - 1), 32);
+    last = padded;
+    from = 0;
+  }
+  if (!encode_vector<Layout, Ros>(last, c, w0, w1, w2, w3)) return i;
+  alignas(64) std::uint8_t rows[32 * kMaxLanes];
+  store_rows<32>(w0, w1, w2, w3, rows);
+  for (std::size_t j = i - from; j < std::min(lanes, n); ++j)
+    std::memcpy(out + kRow * (from + j), rows + 32 * j, kRow);
   return n;
 }
 
@@ -305,8 +331,10 @@ std::size_t PcdEncoder::encode(std::span<const Point> points, std::span<std::uin
   const std::size_t step = pcd_point_bytes(format.layout);
   PcdEncodeConstants c;
   c.reference_ns = frame.reference_ns;
-  for (std::size_t t = 0; t < 4; ++t) {
-    c.nebula_codes[t] = nebula_return_type(static_cast<ReturnType>(t), frame.return_mode);
+  if (format.layout == PcdLayout::kAutoware) {
+    for (std::size_t t = 0; t < 4; ++t) {
+      c.nebula_codes[t] = nebula_return_type(static_cast<ReturnType>(t), frame.return_mode);
+    }
   }
   const bool epoch = format.layout == PcdLayout::kPcl || format.layout == PcdLayout::kPandarcap;
   std::size_t done = 0;
