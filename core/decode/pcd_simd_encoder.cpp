@@ -63,11 +63,41 @@ HWY_INLINE hn::Vec<D> float_bits(hn::Vec<DF> v) {
   return hn::PromoteTo(D(), hn::BitCast(DU32H(), hn::DemoteTo(DF32H(), v)));
 }
 
-// A byte 0..255 as a float's bits (its value exactly), in the lane's low half.
-HWY_INLINE hn::Vec<D> byte_float_bits(hn::Vec<D> byte) {
-  // 2^23 + b as a float's bits, minus 2^23; the high half is 2^23 - 2^23 = +0.
-  const auto biased = hn::BitCast(DF32(), hn::Or(byte, hn::Set(D(), 0x4B0000004B000000ULL)));
-  return hn::BitCast(D(), hn::Sub(biased, hn::Set(DF32(), 8388608.0f)));
+using DI32 = hn::Repartition<std::int32_t, D>;  // two int32 in each lane
+using DU32 = hn::Repartition<std::uint32_t, D>;
+using DU8 = hn::Repartition<std::uint8_t, D>;
+
+// Whether any lane is negative (its sign bit set).
+HWY_INLINE bool any_negative(hn::Vec<DI> v) {
+  return !hn::AllFalse(DI(), hn::Lt(v, hn::Zero(DI())));
+}
+
+// The 32-bit halves: odd from `odd` (the lane's bytes 4-7), even from `even` (bytes 0-3).
+HWY_INLINE hn::Vec<D> halves(hn::Vec<D> odd, hn::Vec<D> even) {
+  return hn::BitCast(D(), hn::OddEven(hn::BitCast(DU32(), odd), hn::BitCast(DU32(), even)));
+}
+
+// Bytes of each lane picked by `table` (16 indices, the same in every 128-bit block; 0x80: 0).
+HWY_INLINE hn::Vec<D> pick_bytes(hn::Vec<D> v, const std::uint8_t* table) {
+  const DU8 d8;
+  return hn::BitCast(D(), hn::TableLookupBytesOr0(hn::BitCast(d8, v), hn::LoadDup128(d8, table)));
+}
+
+constexpr std::uint8_t Z = 0x80;
+// From the point's meta word (azimuth 0-1, intensity 2, channel 3, return type 4):
+alignas(16) constexpr std::uint8_t kIntensityHigh[16] = {Z, Z, Z, Z, 2,  Z, Z, Z,
+                                                         Z, Z, Z, Z, 10, Z, Z, Z};
+alignas(16) constexpr std::uint8_t kChannelZeroType[16] = {3,  Z, 4,  Z, Z, Z, Z, Z,
+                                                           11, Z, 12, Z, Z, Z, Z, Z};
+alignas(16) constexpr std::uint8_t kChannel[16] = {3, Z, Z, Z, Z, Z, Z, Z, 11, Z, Z, Z, Z, Z, Z, Z};
+alignas(16) constexpr std::uint8_t kIntensityChannelTypeHigh[16] = {Z, Z, Z, Z, 2,  3,  4,  Z,
+                                                                    Z, Z, Z, Z, 10, 11, 12, Z};
+
+// z in the low half and the intensity as a float (exact: 0..255) in the high half.
+HWY_INLINE hn::Vec<D> z_and_float_intensity(hn::Vec<D> zd, hn::Vec<D> meta) {
+  const auto intensity = hn::ConvertTo(hn::Repartition<float, D>(),
+                                       hn::BitCast(DI32(), pick_bytes(meta, kIntensityHigh)));
+  return halves(hn::BitCast(D(), intensity), zd);
 }
 
 // The epoch seconds of times in the call's second (pcd.cpp's epoch_seconds), as double bits;
@@ -75,8 +105,8 @@ HWY_INLINE hn::Vec<D> byte_float_bits(hn::Vec<D> byte) {
 HWY_INLINE bool epoch_seconds(hn::Vec<D> time, const PcdEncodeConstants& c, hn::Vec<D>& bits) {
   const DI di;
   const auto ns = hn::Sub(hn::BitCast(di, time), hn::Set(di, c.second_ns));
-  const auto inside = hn::And(hn::Gt(ns, hn::Set(di, -1)), hn::Lt(ns, hn::Set(di, 1'000'000'000)));
-  if (!hn::AllTrue(di, inside)) return false;
+  // Negative either way when ns < 0 or ns > 999 999 999.
+  if (any_negative(hn::Or(ns, hn::Sub(hn::Set(di, 999'999'999), ns)))) return false;
   const auto fraction = to_double(hn::BitCast(D(), ns));
 #if defined(__FP_FAST_FMA)
   // The reference is fused here (see pcd.cpp): one rounding.
@@ -96,9 +126,9 @@ HWY_INLINE bool epoch_seconds(hn::Vec<D> time, const PcdEncodeConstants& c, hn::
 HWY_INLINE bool since_reference(hn::Vec<D> time, const PcdEncodeConstants& c, hn::Vec<DI>& since) {
   const DI di;
   since = hn::Sub(hn::BitCast(di, time), hn::Set(di, c.reference_ns));
-  const auto near =
-      hn::And(hn::Gt(since, hn::Set(di, -kTwo51 - 1)), hn::Lt(since, hn::Set(di, kTwo51)));
-  return hn::AllTrue(di, near);
+  // Negative either way when since < -2^51 or since >= 2^51.
+  return !any_negative(
+      hn::Or(hn::Add(since, hn::Set(di, kTwo51)), hn::Sub(hn::Set(di, kTwo51 - 1), since)));
 }
 
 // One vector of points (Lanes(D()) of them at `src`) as their rows' four words, w0 the row's
@@ -110,48 +140,44 @@ HWY_INLINE bool encode_vector(const std::uint8_t* src, const PcdEncodeConstants&
   const DI di;
   hn::Vec<D> xy, zd, time, meta;
   hn::LoadInterleaved4(d, reinterpret_cast<const std::uint64_t*>(src), xy, zd, time, meta);
-  const auto low_half = hn::Set(d, 0xFFFFFFFFULL);
-  const auto byte = hn::Set(d, 0xFFULL);
   // x y (ros: y, -x: the halves swapped and the new high half's sign flipped, as negation does).
   w0 = xy;
   if constexpr (Ros) {
     w0 = hn::Xor(hn::Or(hn::ShiftLeft<32>(xy), hn::ShiftRight<32>(xy)),
                  hn::Set(d, 0x8000000000000000ULL));
   }
-  const auto z = hn::And(zd, low_half);
-  // meta: azimuth (bytes 0-1), intensity, channel, return type, 3 reserved.
-  const auto intensity = hn::And(hn::ShiftRight<16>(meta), byte);
-  const auto channel = hn::And(hn::ShiftRight<24>(meta), byte);
-  const auto type = hn::And(hn::ShiftRight<32>(meta), byte);
-  w1 = z;
-  w2 = hn::Zero(d);
   w3 = hn::Zero(d);
 
   if constexpr (Layout == PcdLayout::kPcl) {
     // x y z | intensity F4 | ring U2 | return_type U1 | timestamp F8
     hn::Vec<D> seconds;
     if (!epoch_seconds(time, c, seconds)) return false;
-    w1 = hn::Or(z, hn::ShiftLeft<32>(byte_float_bits(intensity)));
-    w2 = hn::Or(hn::Or(channel, hn::ShiftLeft<16>(type)), hn::ShiftLeft<24>(seconds));
+    w1 = z_and_float_intensity(zd, meta);
+    w2 = hn::Or(pick_bytes(meta, kChannelZeroType), hn::ShiftLeft<24>(seconds));
     w3 = hn::ShiftRight<40>(seconds);
   } else if constexpr (Layout == PcdLayout::kPandarcap) {
     // x y z | intensity U1 | channel U1 | return_type U1 | timestamp F8: the three bytes are the
     // point's own, in the same order.
     hn::Vec<D> seconds;
     if (!epoch_seconds(time, c, seconds)) return false;
-    const auto bytes = hn::And(hn::ShiftRight<16>(meta), hn::Set(d, 0xFFFFFFULL));
-    w1 = hn::Or(hn::Or(z, hn::ShiftLeft<32>(bytes)), hn::ShiftLeft<56>(seconds));
+    w1 =
+        hn::Or(halves(pick_bytes(meta, kIntensityChannelTypeHigh), zd), hn::ShiftLeft<56>(seconds));
     w2 = hn::ShiftRight<8>(seconds);
   } else if constexpr (Layout == PcdLayout::kVelodyne) {
     // x y z | intensity F4 | ring U2 | time F4 (s since the reference)
     hn::Vec<DI> since;
     if (!since_reference(time, c, since)) return false;
     const auto seconds = float_bits(hn::Mul(to_double_signed(since), hn::Set(DF(), 1e-9)));
-    w1 = hn::Or(z, hn::ShiftLeft<32>(byte_float_bits(intensity)));
-    w2 = hn::Or(channel, hn::ShiftLeft<16>(seconds));
+    w1 = z_and_float_intensity(zd, meta);
+    w2 = hn::Or(pick_bytes(meta, kChannel), hn::ShiftLeft<16>(seconds));
   } else {
     // x y z | intensity U1 | return_type U1 (nebula's) | channel U2 | azimuth F4 | elevation F4 |
     // distance F4 | time_stamp U4 (ns since the reference, modulo 2^32 before it)
+    const auto low_half = hn::Set(d, 0xFFFFFFFFULL);
+    const auto byte = hn::Set(d, 0xFFULL);
+    const auto intensity = hn::And(hn::ShiftRight<16>(meta), byte);
+    const auto channel = hn::And(hn::ShiftRight<24>(meta), byte);
+    const auto type = hn::And(hn::ShiftRight<32>(meta), byte);
     const auto since = hn::Sub(hn::BitCast(di, time), hn::Set(di, c.reference_ns));
     const auto cap = hn::Set(di, 0xFFFFFFFFLL);
     const auto stamp =
@@ -160,7 +186,7 @@ HWY_INLINE bool encode_vector(const std::uint8_t* src, const PcdEncodeConstants&
     for (std::uint64_t t = 0; t < 4; ++t) {
       code = hn::IfThenElse(hn::Eq(type, hn::Set(d, t)), hn::Set(d, c.nebula_codes[t]), code);
     }
-    w1 = hn::Or(hn::Or(z, hn::ShiftLeft<32>(intensity)),
+    w1 = hn::Or(hn::Or(hn::And(zd, low_half), hn::ShiftLeft<32>(intensity)),
                 hn::Or(hn::ShiftLeft<40>(code), hn::ShiftLeft<48>(channel)));
     const auto azimuth = hn::Mul(to_double(hn::And(meta, hn::Set(d, 0xFFFFULL))),
                                  hn::Set(DF(), std::numbers::pi / 18000.0));
