@@ -4,6 +4,7 @@
 #include "core/decode/pcd_simd_encoder.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <numbers>
@@ -133,9 +134,11 @@ HWY_INLINE bool since_reference(hn::Vec<D> time, const PcdEncodeConstants& c, hn
 
 // One vector of points (Lanes(D()) of them at `src`) as their rows' four words, w0 the row's
 // bytes 0-7 and so on. False when one of them must go to the reference.
+// `elevation`: the autoware layout's elevations of these points (nullptr for the others).
 template <PcdLayout Layout, bool Ros>
-HWY_INLINE bool encode_vector(const std::uint8_t* src, const PcdEncodeConstants& c, hn::Vec<D>& w0,
-                              hn::Vec<D>& w1, hn::Vec<D>& w2, hn::Vec<D>& w3) {
+HWY_INLINE bool encode_vector(const std::uint8_t* src, const float* elevation,
+                              const PcdEncodeConstants& c, hn::Vec<D>& w0, hn::Vec<D>& w1,
+                              hn::Vec<D>& w2, hn::Vec<D>& w3) {
   const D d;
   const DI di;
   hn::Vec<D> xy, zd, time, meta;
@@ -190,15 +193,8 @@ HWY_INLINE bool encode_vector(const std::uint8_t* src, const PcdEncodeConstants&
                 hn::Or(hn::ShiftLeft<40>(code), hn::ShiftLeft<48>(channel)));
     const auto azimuth = hn::Mul(to_double(hn::And(meta, hn::Set(d, 0xFFFFULL))),
                                  hn::Set(DF(), std::numbers::pi / 18000.0));
-    // The reference's libm calls, from the point's own x y z whatever the axes.
-    alignas(32) std::uint32_t elevation[kMaxLanes];
-    for (std::size_t i = 0; i < hn::Lanes(d); ++i) {
-      float p[3];
-      std::memcpy(p, src + 32 * i, sizeof p);
-      const float value = std::atan2(p[2], std::hypot(p[0], p[1]));
-      std::memcpy(&elevation[i], &value, sizeof value);
-    }
-    const auto elevation_bits = hn::PromoteTo(d, hn::Load(DU32H(), elevation));
+    const auto elevation_bits =
+        hn::PromoteTo(d, hn::LoadU(DU32H(), reinterpret_cast<const std::uint32_t*>(elevation)));
     w2 = hn::Or(float_bits(azimuth), hn::ShiftLeft<32>(elevation_bits));
     w3 = hn::Or(hn::ShiftRight<32>(zd), hn::ShiftLeft<32>(stamp));
   }
@@ -246,7 +242,8 @@ HWY_NOINLINE std::size_t encode_rows(const Point* points, std::size_t n, std::ui
   // Whole vectors straight into `out` while a point follows them: a row's excess past its 22, 23
   // or 27 bytes lands on the next row, which is written after it.
   for (; i + lanes < n || (kRow == 32 && i + lanes == n); i += lanes) {
-    if (!encode_vector<Layout, Ros>(src + 32 * i, c, w0, w1, w2, w3)) return i;
+    const float* elevation = Layout == PcdLayout::kAutoware ? c.elevation + i : nullptr;
+    if (!encode_vector<Layout, Ros>(src + 32 * i, elevation, c, w0, w1, w2, w3)) return i;
     store_rows<kRow>(w0, w1, w2, w3, out + kRow * i);
   }
   if (i == n) return n;
@@ -256,13 +253,20 @@ HWY_NOINLINE std::size_t encode_rows(const Point* points, std::size_t n, std::ui
   const std::uint8_t* last = src + 32 * (n - lanes);
   std::size_t from = n - lanes;
   alignas(64) std::uint8_t padded[32 * kMaxLanes];
+  float padded_elevation[kMaxLanes] = {};
+  const float* elevation = Layout == PcdLayout::kAutoware ? c.elevation + from : nullptr;
   if (n < lanes) {
-    for (std::size_t j = 0; j < lanes; ++j)
+    for (std::size_t j = 0; j < lanes; ++j) {
       std::memcpy(padded + 32 * j, src + 32 * std::min(j, n - 1), 32);
+      if constexpr (Layout == PcdLayout::kAutoware) {
+        padded_elevation[j] = c.elevation[std::min(j, n - 1)];
+      }
+    }
     last = padded;
     from = 0;
+    elevation = padded_elevation;
   }
-  if (!encode_vector<Layout, Ros>(last, c, w0, w1, w2, w3)) return i;
+  if (!encode_vector<Layout, Ros>(last, elevation, c, w0, w1, w2, w3)) return i;
   alignas(64) std::uint8_t rows[32 * kMaxLanes];
   store_rows<32>(w0, w1, w2, w3, rows);
   for (std::size_t j = i - from; j < std::min(lanes, n); ++j)
@@ -332,6 +336,8 @@ constexpr KernelEntry kKernels[] = {
 
 // The most points the reference takes at once when the kernel cannot (a vector's worth).
 constexpr std::size_t kReferenceRun = 8;
+// Points whose autoware elevations are worked out before the kernel takes them.
+constexpr std::size_t kElevationRun = 256;
 
 }  // namespace
 
@@ -364,6 +370,23 @@ std::size_t PcdEncoder::encode(std::span<const Point> points, std::span<std::uin
   }
   const bool epoch = format.layout == PcdLayout::kPcl || format.layout == PcdLayout::kPandarcap;
   std::size_t done = 0;
+  if (format.layout == PcdLayout::kAutoware) {
+    // The elevations first, a run at a time, by the reference's libm calls (here, outside the
+    // kernels: the same calls, and no vector state to save around them), from the point's own
+    // x y z whatever the axes.
+    std::array<float, kElevationRun> elevation;
+    c.elevation = elevation.data();
+    while (done < points.size()) {
+      const std::size_t run = std::min(kElevationRun, points.size() - done);
+      for (std::size_t i = 0; i < run; ++i) {
+        const Point& p = points[done + i];
+        elevation[i] = std::atan2(p.z, std::hypot(p.x, p.y));
+      }
+      // Every time is exact here: the kernel takes all of them.
+      done += kernel_(points.data() + done, run, out.data() + done * step, format, c);
+    }
+    return done * step;
+  }
   while (done < points.size()) {
     const std::int64_t first = points[done].timestamp_ns;
     std::size_t encoded = 0;

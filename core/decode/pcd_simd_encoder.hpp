@@ -18,7 +18,8 @@
 //    AVX-512 kernel, which may fuse, does not;
 //  - integers become doubles by the exponent trick (exact below 2^51) and floats by the
 //    correctly rounded demotion the reference's casts also use;
-//  - the autoware elevation is the reference's libm call (atan2f of hypotf), per point.
+//  - the autoware elevation is the reference's libm calls (atan2f of hypotf), per point, made
+//    before the kernel runs.
 // tests/test_pcd_simd_encoder.cpp compares the bytes with the reference on every target the
 // machine runs, for every layout and axes, edge values and every count up to a few vectors.
 #pragma once
@@ -38,8 +39,9 @@ struct PcdEncodeConstants {
   std::int64_t second_ns = 0;  // the whole second of the call's first point, in ns
   double second_s = 0;         // the same in seconds
   std::int64_t reference_ns = 0;
-  std::uint8_t nebula_codes[4]{};  // nebula_return_type of each ReturnType in the frame's mode
-  std::uint64_t zero = 0;          // 0, read at run time: keeps a product unfused (see above)
+  std::uint8_t nebula_codes[4]{};    // nebula_return_type of each ReturnType in the frame's mode
+  std::uint64_t zero = 0;            // 0, read at run time: keeps a product unfused (see above)
+  const float* elevation = nullptr;  // autoware: the elevations of the points the kernel takes
 };
 
 // One target's kernel: encodes points[0..n) into out like encode_pcd_points, and returns how
