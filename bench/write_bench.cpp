@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <vector>
 
+#include "core/decode/pcd_simd_encoder.hpp"
 #include "core/decode/stream_decoder.hpp"
 #include "core/frames/frame_collector.hpp"
 #include "core/frames/pcd.hpp"
@@ -48,6 +49,44 @@ std::vector<Point> one_frame() {
     decoder.process({packet.data(), size});
   }
   return points;
+}
+
+// The frame cut's encoding into each layout (what the arena gets), the scalar reference against
+// the SIMD encoder (the target the daemon picks), in runs of 160 points (about what one packet
+// adds to a frame), the two interleaved in the same run.
+nlohmann::ordered_json simd_encoding(const std::vector<Point>& frame, int frames) {
+  constexpr std::size_t kRun = 160;
+  const PcdEncoder simd;
+  std::vector<std::uint8_t> arena(frame.size() * kMaxPcdPointBytes);
+  nlohmann::ordered_json report;
+  report["target"] = std::string(to_string(simd.target()));
+  for (const PcdLayout layout :
+       {PcdLayout::kPcl, PcdLayout::kPandarcap, PcdLayout::kVelodyne, PcdLayout::kAutoware}) {
+    const PcdFormat format{layout, Axes::kHesai};
+    const PcdFrameContext context{frame.front().timestamp_ns, ReturnMode::kDual};
+    const std::size_t step = pcd_point_bytes(layout);
+    const auto encode = [&](bool vector) {
+      for (std::size_t i = 0; i < frame.size(); i += kRun) {
+        const auto run = std::span(frame).subspan(i, std::min(kRun, frame.size() - i));
+        const auto out = std::span(arena).subspan(i * step, run.size() * step);
+        if (vector) {
+          simd.encode(run, out, format, context);
+        } else {
+          encode_pcd_points(run, out, format, context);
+        }
+      }
+    };
+    double scalar_cpu = 0, simd_cpu = 0;
+    for (int f = 0; f < frames; ++f) {
+      scalar_cpu += timed([&] { encode(false); }).second;
+      simd_cpu += timed([&] { encode(true); }).second;
+    }
+    const double points = static_cast<double>(frame.size()) * frames;
+    report[std::string(to_string(layout))] = {{"scalar_points_per_cpu_s", points / scalar_cpu},
+                                              {"simd_points_per_cpu_s", points / simd_cpu},
+                                              {"simd_speedup", scalar_cpu / simd_cpu}};
+  }
+  return report;
 }
 
 }  // namespace
@@ -128,6 +167,7 @@ nlohmann::ordered_json run_write_bench(const WriteBenchOptions& o) {
   report["pcd_cpu_us_per_frame"] = {{"binary", encode_cpu / o.frames * 1e6},
                                     {"lzf", lzf_cpu / o.frames * 1e6}};
   report["pcap_write"] = rates(o.packets, static_cast<double>(pcap_bytes), pcap_wall, pcap_cpu);
+  report["pcd_encode_simd"] = simd_encoding(frame, o.frames);
   // What one dual-return sensor needs: 10 frames/s of this size and 3600 packets/s.
   report["sensor_pcd_cpu_fraction"] =
       10.0 * static_cast<double>(frame.size()) /
@@ -153,6 +193,15 @@ void print_write_report(const nlohmann::ordered_json& report) {
   std::printf("one sensor: PCD %.2f %% of a core, pcap %.2f %% of a core\n",
               100 * report["sensor_pcd_cpu_fraction"].get<double>(),
               100 * report["sensor_pcap_cpu_fraction"].get<double>());
+  const auto& simd = report["pcd_encode_simd"];
+  std::printf("frame-cut encoding, %s against scalar (points/CPU-s):\n",
+              simd["target"].get<std::string>().c_str());
+  for (const auto& [layout, r] : simd.items()) {
+    if (layout == "target") continue;
+    std::printf("  %-10s %14.0f %14.0f  %.2fx\n", layout.c_str(),
+                r["scalar_points_per_cpu_s"].get<double>(),
+                r["simd_points_per_cpu_s"].get<double>(), r["simd_speedup"].get<double>());
+  }
 }
 
 }  // namespace pandarcap::bench

@@ -503,6 +503,13 @@ TEST_CASE("pandarcap-bench write --json: PCD and pcap rates from one run", "[ben
     CHECK(report[key]["items_per_s"].get<double>() > 0);
     CHECK(report[key]["mb_per_s"].get<double>() > 0);
   }
+  // The frame cut's encoding, scalar and SIMD, for every layout (rates only: no timing claim).
+  CHECK_FALSE(report["pcd_encode_simd"]["target"].get<std::string>().empty());
+  for (const char* layout : {"pcl", "pandarcap", "velodyne", "autoware"}) {
+    INFO(layout);
+    CHECK(report["pcd_encode_simd"][layout]["scalar_points_per_cpu_s"].get<double>() > 0);
+    CHECK(report["pcd_encode_simd"][layout]["simd_points_per_cpu_s"].get<double>() > 0);
+  }
   // LZF costs CPU on top of the encoding, and shrinks the simulated frame.
   CHECK(report["pcd_cpu_us_per_frame"]["lzf"].get<double>() >
         report["pcd_cpu_us_per_frame"]["binary"].get<double>());

@@ -101,6 +101,9 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
   const std::int64_t previous_position = position_;
   const bool continued = started_;
 
+  // Consecutive blocks bound for one frame go in with one add_points (one encoding call): the
+  // run of them so far. Flushed before anything that may close or replace a frame.
+  Run run;
   for (int b = 0; b < meta.block_count; ++b) {
     const std::uint16_t azimuth = meta.block_azimuth_cdeg[b];
     bool restarted = false;
@@ -111,6 +114,7 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
       const int step = signed_step(azimuth, previous_azimuth_);
       if (std::abs(step) > kMaxStepCdeg) {
         ++stats_.discontinuities;
+        add_run(run, points, meta);
         flush();
         start_stream(azimuth);
         restarted = true;
@@ -143,14 +147,23 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
         floor_div(position_ + config_.relative_azimuth_max_cdeg, kFullCircle);
     if (lowest == highest) {
       if (begin < end) {
-        Slot* slot = slot_for(lowest);
+        // The run goes on if this block continues it into the same frame, and all of it fits.
+        const bool continues = run.slot != nullptr && run.slot->index == lowest &&
+                               run.end == begin && fits(*run.slot, end - run.begin);
+        if (!continues) add_run(run, points, meta);
+        Slot* slot = continues ? run.slot : slot_for(lowest);
         if (slot == nullptr) {
           stats_.points_late += end - begin;
+        } else if (continues) {
+          run.end = end;
+          run.lowest_position = std::min(run.lowest_position, position_);
+          run.highest_position = std::max(run.highest_position, position_);
         } else {
-          add_points(*slot, points.subspan(begin, end - begin), meta);
+          run = Run{slot, begin, end, position_, position_};
         }
       }
     } else {
+      add_run(run, points, meta);
       for (std::size_t i = begin; i < end; ++i) {
         const Point& point = points[i];
         const std::int64_t u = position_ + signed_step(point.azimuth_cdeg, azimuth);
@@ -158,7 +171,7 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
         if (slot == nullptr) {
           ++stats_.points_late;
         } else {
-          add_points(*slot, std::span(&point, 1), meta);
+          add_points(*slot, std::span(&point, 1), meta, position_, position_);
         }
       }
     }
@@ -167,8 +180,24 @@ void FrameAssembler::add_packet(const PacketMeta& meta, std::span<const Point> p
     // arrives a little late (reordered) still finds its frame open.
     const std::int64_t done =
         floor_div(position_ + config_.relative_azimuth_min_cdeg - kCloseMarginCdeg, kFullCircle);
-    if (done > next_open_index_) close_through(done - 1, false);
+    if (done > next_open_index_) {
+      add_run(run, points, meta);
+      close_through(done - 1, false);
+    }
   }
+  add_run(run, points, meta);
+}
+
+bool FrameAssembler::fits(const Slot& slot, std::size_t points) const {
+  // A frame that is full or missing takes its points one block at a time, as they are counted.
+  return !slot.dropped && points <= slot.frame->capacity() - slot.frame->size;
+}
+
+void FrameAssembler::add_run(Run& run, std::span<const Point> points, const PacketMeta& meta) {
+  if (run.slot == nullptr) return;
+  add_points(*run.slot, points.subspan(run.begin, run.end - run.begin), meta, run.lowest_position,
+             run.highest_position);
+  run = Run{};
 }
 
 FrameAssembler::Slot* FrameAssembler::slot_for(std::int64_t frame_index) {
@@ -192,7 +221,8 @@ FrameAssembler::Slot* FrameAssembler::slot_for(std::int64_t frame_index) {
   return slot;
 }
 
-void FrameAssembler::add_points(Slot& slot, std::span<const Point> points, const PacketMeta& meta) {
+void FrameAssembler::add_points(Slot& slot, std::span<const Point> points, const PacketMeta& meta,
+                                std::int64_t lowest_position, std::int64_t highest_position) {
   if (slot.counted_packet != packet_counter_) {
     slot.counted_packet = packet_counter_;
     ++slot.packets;
@@ -221,8 +251,12 @@ void FrameAssembler::add_points(Slot& slot, std::span<const Point> points, const
     info.return_mode = meta.return_mode;
     info.time_valid = info.time_valid && meta.time_valid;
   }
-  if (info.points == 0 || position_ < slot.first_position) slot.first_position = position_;
-  if (info.points == 0 || position_ > slot.last_position) slot.last_position = position_;
+  if (info.points == 0 || lowest_position < slot.first_position) {
+    slot.first_position = lowest_position;
+  }
+  if (info.points == 0 || highest_position > slot.last_position) {
+    slot.last_position = highest_position;
+  }
   if (info.points == 0) {
     info.start_ns = info.end_ns = points.front().timestamp_ns;
     frame.reference_ns = points.front().timestamp_ns;
@@ -233,8 +267,8 @@ void FrameAssembler::add_points(Slot& slot, std::span<const Point> points, const
   }
   if (frame.is_encoded()) {
     const std::size_t step = pcd_point_bytes(frame.format.layout);
-    encode_pcd_points(points, frame.encoded.subspan(frame.size * step, points.size() * step),
-                      frame.format, PcdFrameContext{frame.reference_ns, meta.return_mode});
+    encoder_.encode(points, frame.encoded.subspan(frame.size * step, points.size() * step),
+                    frame.format, PcdFrameContext{frame.reference_ns, meta.return_mode});
   } else {
     std::copy(points.begin(), points.end(), frame.points.begin() + frame.size);
   }

@@ -42,6 +42,7 @@
 
 #include "core/decode/azimuth_coverage.hpp"
 #include "core/decode/decoder.hpp"
+#include "core/decode/pcd_simd_encoder.hpp"
 #include "core/frames/frame.hpp"
 #include "core/sensors/packet.hpp"
 
@@ -128,11 +129,25 @@ class FrameAssembler {
   Slot* slot_for(std::int64_t frame_index);
   void close_slot(Slot& slot, bool partial);
   void close_through(std::int64_t frame_index, bool partial);
-  // Points of one block that all belong to `slot`'s frame (as many as it has room for).
-  void add_points(Slot& slot, std::span<const Point> points, const PacketMeta& meta);
+  // Blocks of a packet, in order, whose points all go to one frame: points[begin, end), from
+  // blocks at these positions (U).
+  struct Run {
+    Slot* slot = nullptr;
+    std::size_t begin = 0, end = 0;
+    std::int64_t lowest_position = 0, highest_position = 0;
+  };
+  // Whether `points` more fit in `slot`'s frame (one run never straddles a full frame).
+  bool fits(const Slot& slot, std::size_t points) const;
+  // Adds the run's points, if any, and empties it.
+  void add_run(Run& run, std::span<const Point> points, const PacketMeta& meta);
+  // Points from blocks at lowest..highest_position that all belong to `slot`'s frame (as many as
+  // it has room for).
+  void add_points(Slot& slot, std::span<const Point> points, const PacketMeta& meta,
+                  std::int64_t lowest_position, std::int64_t highest_position);
 
   FrameAssemblerConfig config_;
   FrameSink& sink_;
+  PcdEncoder encoder_;  // points into an encoded frame's arena: the fastest target this CPU runs
   int channel_span_cdeg_ = 0;  // how far the channels' azimuths reach past a block's, in all
   int cut_cdeg_ = 0;
   bool started_ = false;
