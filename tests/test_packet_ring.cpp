@@ -556,4 +556,25 @@ TEST_CASE(
   CHECK(unreachable == 0);
 }
 
+TEST_CASE(
+    "packet_ring defect: multicast_ip is joined where the routing table points (the default "
+    "route's interface), not on sensor.interface",
+    "[.][packet_ring_defect][daemon][threads]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("pm");
+  REQUIRE(veth.ok());
+  test::ScratchDir dir("packet-ring-multicast");
+  const std::uint16_t port = harness::free_udp_port();
+  // The receiver knows the interface; the join (ip_mreq, imr_interface INADDR_ANY) does not use
+  // it, so a NIC with a multicast filter, or an IGMP-snooping switch, never passes the group's
+  // frames to it (the docs say "it also joins multicast_ip, so the interface takes the group's
+  // frames"). Without a route for the group the join fails and the daemon does not start.
+  RingDaemon daemon(dir, veth, port, "multicast_ip = \"239.40.1.2\"\n");
+  const auto groups = test::run_command("ip maddr show dev " + veth.near());
+  INFO(groups.out);
+  CHECK(groups.out.find("239.40.1.2") != std::string::npos);
+  daemon.process->signal(SIGTERM);
+  CHECK(daemon.process->wait_exit(30s) == 0);
+}
+
 }  // namespace pandarcap
