@@ -577,4 +577,61 @@ TEST_CASE(
   CHECK(daemon.process->wait_exit(30s) == 0);
 }
 
+TEST_CASE(
+    "packet_ring defect: a padded short frame and a UDP length the frame does not hold are "
+    "recorded unlike tcpdump -w, and the lie is counted as bytes received",
+    "[.][packet_ring_defect][daemon][threads]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("pp");
+  REQUIRE(veth.ok());
+  test::ScratchDir dir("packet-ring-padding");
+  const std::uint16_t port = harness::free_udp_port();
+  ChildProcess tcpdump("/usr/bin/tcpdump",
+                       {"-i", veth.near(), "-n", "-U", "-w", (dir / "tcpdump.pcap").string(),
+                        "udp dst port " + std::to_string(port)},
+                       dir / "tcpdump.log");
+  REQUIRE(wait_until([&] { return tcpdump.log().find("listening on") != std::string::npos; }, 10s));
+  RingDaemon daemon(dir, veth, port);
+  {
+    test::FarNamespace far(veth.ns());
+    io::UniqueFd raw(::socket(AF_PACKET, SOCK_RAW, 0));
+    REQUIRE(raw);
+    sockaddr_ll link{};
+    link.sll_family = AF_PACKET;
+    link.sll_ifindex = static_cast<int>(::if_nametoindex(veth.far().c_str()));
+    REQUIRE(::bind(raw.get(), reinterpret_cast<sockaddr*>(&link), sizeof link) == 0);
+    // A 4-byte datagram in a frame padded to Ethernet's 64 bytes (60 + the tag), as every NIC
+    // sends a short frame: tcpdump records the padding, the frame's real length.
+    std::vector<std::uint8_t> padded = tagged_frame(veth, port, 7, {1, 2, 3, 4}, 1);
+    padded.resize(64, 0);
+    // 100 bytes of payload under a UDP length of 2000 (the kernel's UDP drops it as short).
+    std::vector<std::uint8_t> lying =
+        tagged_frame(veth, port, 7, std::vector<std::uint8_t>(100, 9), 2);
+    lying[18 + 20 + 4] = 2000 >> 8;
+    lying[18 + 20 + 5] = 2000 & 0xFF;
+    for (const auto* frame : {&padded, &lying}) {
+      REQUIRE(::send(raw.get(), frame->data(), frame->size(), 0) ==
+              static_cast<ssize_t>(frame->size()));
+    }
+  }
+  const nlohmann::json h = daemon.stop_after(2);
+  wait_until([&] { return count_records(dir / "tcpdump.pcap") >= 2; }, 10s);
+  tcpdump.signal(SIGINT);
+  REQUIRE(tcpdump.wait_exit(10s).has_value());
+  // What arrived: 4 + 100 payload bytes.
+  CHECK(test::health_counter(h, "bytes_received") == 104);
+  const auto pcaps = test::files_ending(daemon.out / "raw", ".pcap");
+  REQUIRE(pcaps.size() == 1);
+  const std::vector<Record> ours = pcap_records(pcaps[0]);
+  const std::vector<Record> theirs = pcap_records(dir / "tcpdump.pcap");
+  REQUIRE(ours.size() == 2);
+  REQUIRE(theirs.size() == 2);
+  for (std::size_t i = 0; i < 2; ++i) {
+    INFO("record " << i << ": ours " << ours[i].bytes.size() << " of " << ours[i].original
+                   << " bytes, tcpdump's " << theirs[i].bytes.size() << " of "
+                   << theirs[i].original);
+    CHECK(ours[i] == theirs[i]);
+  }
+}
+
 }  // namespace pandarcap
