@@ -204,7 +204,8 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   ro.batch = config.ring.receive_batch;
   ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
   ro.packet_ring = config.input.receiver == "packet_ring";
-  ro.interface = config.sensor.interface;
+  // The simulated sensor sends over loopback, whatever interface the configuration names.
+  ro.interface = simulate ? "lo" : config.sensor.interface;
   return ro;
 }
 

@@ -148,9 +148,16 @@ void DecodeWorker::record_raw(const PacketSlot& slot) {
   packet.destination = slot.destination;
   packet.length =
       static_cast<std::uint16_t>(std::min<std::size_t>(slot.length, sizeof packet.payload));
-  std::memcpy(packet.payload, slot.payload, packet.length);
   packet.wire_header_length = slot.wire_header_length;
-  std::memcpy(packet.wire_header, slot.wire_header, slot.wire_header_length);
+  packet.wire_trailer_length = 0;
+  if (slot.wire_header_length > 0) {
+    std::memcpy(packet.wire_header, slot.wire_header, slot.wire_header_length);
+    // The frame's trailer follows the payload in the slot (the receiver keeps it in room).
+    packet.wire_trailer_length = static_cast<std::uint16_t>(
+        std::min<std::size_t>(slot.wire_trailer_length, sizeof packet.payload - packet.length));
+    packet.wire_length = slot.wire_length;
+  }
+  std::memcpy(packet.payload, slot.payload, packet.length + packet.wire_trailer_length);
   // The recording must not claim bytes it does not hold: a cut datagram keeps its real length.
   packet.original_length = slot.truncated
                                ? std::max<std::uint32_t>(slot.original_length, packet.length + 1u)

@@ -74,6 +74,11 @@ struct alignas(ringbuf::kCacheLine) PacketSlot {
   // recordings synthesise the headers (daemon/pcap/pcap_writer.hpp).
   std::uint8_t wire_header_length;
   std::uint8_t wire_header[kWireHeaderCapacity];
+  // With wire_header: the frame's bytes after the datagram, kept in `payload` after `length`
+  // (Ethernet padding of a short frame, or what a UDP length field left out), and the frame's
+  // length on the wire (the tag included), which is the record's original length.
+  std::uint16_t wire_trailer_length;
+  std::uint32_t wire_length;
   // Where the datagram was sent: the address in its IP header (IP_PKTINFO: a unicast, broadcast
   // or multicast address) and the port the socket is bound to; a replay's record's own. The
   // recording writes it as the packet's destination, as the wire carried it.

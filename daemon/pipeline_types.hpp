@@ -70,6 +70,8 @@ struct RawPacket {
   std::uint32_t original_length = 0;    // bytes the datagram had (more than length: it was cut)
   std::uint8_t wire_header_length = 0;  // PacketSlot::wire_header: 0 = synthesise the headers
   std::uint8_t wire_header[kWireHeaderCapacity];
+  std::uint16_t wire_trailer_length = 0;  // PacketSlot::wire_trailer_length
+  std::uint32_t wire_length = 0;          // PacketSlot::wire_length
   std::uint8_t payload[PacketSlot::kPayloadCapacity];
 };
 

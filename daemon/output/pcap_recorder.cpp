@@ -245,7 +245,8 @@ void PcapRecorder::write(const RawBatch& batch) {
     batch_bytes +=
         batch.packets[i].length +
         (batch.packets[i].wire_header_length > 0
-             ? kPcapRecordHeaderBytes + batch.packets[i].wire_header_length
+             ? kPcapRecordHeaderBytes + batch.packets[i].wire_header_length +
+                   batch.packets[i].wire_trailer_length
          : batch.packets[i].source.v4.sin_family == AF_INET6 ? kPcapRecordOverheadBytesIpv6
                                                              : kPcapRecordOverheadBytes);
   if (batch.size > 0 && !space_.allows(volume_, batch_bytes, refusal_)) {
@@ -269,8 +270,10 @@ void PcapRecorder::write(const RawBatch& batch) {
       if (!pcap_) open(packet.receive_time_ns);
       const std::span<const std::uint8_t> payload(packet.payload, packet.length);
       if (packet.wire_header_length > 0) {
-        pcap_->write_frame({packet.wire_header, packet.wire_header_length}, payload,
-                           packet.original_length, packet.receive_time_ns);
+        pcap_->write_frame(
+            {packet.wire_header, packet.wire_header_length},
+            {packet.payload, std::size_t{packet.length} + packet.wire_trailer_length},
+            packet.wire_length, packet.receive_time_ns);
       } else {
         pcap_->write(payload, packet.original_length, packet.receive_time_ns,
                      to_endpoint(packet.source), to_endpoint(packet.destination));

@@ -224,23 +224,23 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
 }
 
 void PcapWriter::write_frame(std::span<const std::uint8_t> wire_header,
-                             std::span<const std::uint8_t> kept, std::size_t original_payload_bytes,
+                             std::span<const std::uint8_t> rest, std::size_t wire_length,
                              std::int64_t timestamp_ns) {
   const std::int64_t seconds = timestamp_ns / kNsPerSecond;
   if (timestamp_ns < 0 || seconds > std::int64_t{UINT32_MAX}) {
     throw std::invalid_argument("timestamp " + std::to_string(timestamp_ns) +
                                 " ns is outside the pcap range (1970 to 2106)");
   }
-  const std::size_t original = std::max(original_payload_bytes, kept.size());
+  const std::size_t captured = wire_header.size() + rest.size();
   ByteWriter<kPcapRecordHeaderBytes> out;
   out.native_u32(static_cast<std::uint32_t>(seconds));
   out.native_u32(static_cast<std::uint32_t>(timestamp_ns % kNsPerSecond / kNsPerMicrosecond));
-  out.native_u32(static_cast<std::uint32_t>(wire_header.size() + kept.size()));
-  out.native_u32(static_cast<std::uint32_t>(wire_header.size() + original));
+  out.native_u32(static_cast<std::uint32_t>(captured));
+  out.native_u32(static_cast<std::uint32_t>(std::max(wire_length, captured)));
   append(out.written());
   append(wire_header);
-  append(kept);
-  bytes_ += out.written().size() + wire_header.size() + kept.size();
+  append(rest);
+  bytes_ += out.written().size() + captured;
   ++records_;
 }
 

@@ -81,12 +81,12 @@ class PcapWriter {
   // 65507), as a capture tool with a short snap length writes it.
   void write(std::span<const std::uint8_t> kept, std::size_t original_payload_bytes,
              std::int64_t timestamp_ns, Endpoint source, Endpoint destination);
-  // Appends one record of a frame whose headers the wire gave (`wire_header`: Ethernet, any
-  // VLAN tags, IP, UDP, exactly as received; the packet_ring receiver keeps them), then the
-  // `kept` payload bytes. The record's original length is the headers and
-  // `original_payload_bytes`: the bytes `tcpdump -w` writes for the same frame.
-  void write_frame(std::span<const std::uint8_t> wire_header, std::span<const std::uint8_t> kept,
-                   std::size_t original_payload_bytes, std::int64_t timestamp_ns);
+  // Appends one record of a frame as the wire gave it: `wire_header` (Ethernet, any VLAN tags,
+  // IP, UDP, exactly as received; the packet_ring receiver keeps them), then `rest`, the bytes
+  // after them that were kept (the datagram, and any padding). `wire_length` is the frame's
+  // length on the wire, the record's original length: the record `tcpdump -w` writes.
+  void write_frame(std::span<const std::uint8_t> wire_header, std::span<const std::uint8_t> rest,
+                   std::size_t wire_length, std::int64_t timestamp_ns);
   void flush();
   void close();
 

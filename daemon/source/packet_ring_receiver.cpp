@@ -14,27 +14,23 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <memory>
 #include <stdexcept>
 #include <string>
 
 #include "core/ipv4.hpp"
+#include "core/wire_frame.hpp"
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
+#include "daemon/source/udp_port_owner.hpp"
 
 namespace pandarcap {
 namespace {
 
-constexpr std::uint16_t kEthertypeIpv4 = 0x0800;
 constexpr std::uint16_t kEthertypeVlan = 0x8100;  // 802.1Q
-constexpr std::uint16_t kEthertypeQinQ = 0x88A8;  // 802.1ad
-constexpr std::size_t kEthernetBytes = 14;
-constexpr std::size_t kUdpBytes = 8;
-
-std::uint16_t load_be16(const std::uint8_t* p) noexcept {
-  return static_cast<std::uint16_t>(p[0] << 8 | p[1]);
-}
 
 void store_be16(std::uint8_t* p, std::uint16_t v) noexcept {
   p[0] = static_cast<std::uint8_t>(v >> 8);
@@ -55,7 +51,7 @@ void store_be16(std::uint8_t* p, std::uint16_t v) noexcept {
   io::throw_error(error, what);
 }
 
-// "udp dst port N" as a classic BPF program for Ethernet frames, from libpcap's compiler.
+// "ip and udp dst port N" as a classic BPF program for Ethernet frames, from libpcap's compiler.
 struct CompiledFilter {
   bpf_program program{};
   ~CompiledFilter() { pcap_freecode(&program); }
@@ -65,7 +61,7 @@ void attach_port_filter(int fd, std::uint16_t port) {
   std::unique_ptr<pcap_t, decltype(&pcap_close)> dead(pcap_open_dead(DLT_EN10MB, 262144),
                                                       &pcap_close);
   if (!dead) throw std::runtime_error("pcap_open_dead failed");
-  const std::string expression = fmt::format("udp dst port {}", port);
+  const std::string expression = fmt::format("ip and udp dst port {}", port);
   CompiledFilter filter;
   if (pcap_compile(dead.get(), &filter.program, expression.c_str(), 1, PCAP_NETMASK_UNKNOWN) != 0) {
     throw std::runtime_error(
@@ -80,6 +76,16 @@ void attach_port_filter(int fd, std::uint16_t port) {
   }
 }
 
+// Whether a socket on this host holds UDP `port` on 0.0.0.0 (/proc/net/udp).
+bool wildcard_holder(std::uint16_t port) {
+  std::ifstream in("/proc/net/udp");
+  const std::string text((std::istreambuf_iterator<char>(in)), {});
+  for (const UdpSocketEntry& entry : parse_proc_net_udp(text)) {
+    if (entry.port == port && entry.address == 0) return true;
+  }
+  return false;
+}
+
 void attach_drop_all(int fd) {
   sock_filter drop{BPF_RET | BPF_K, 0, 0, 0};
   sock_fprog program{1, &drop};
@@ -90,25 +96,24 @@ void attach_drop_all(int fd) {
 
 }  // namespace
 
-// One packet as the block holds it, parsed: what the slot and the source lock need.
-struct PacketRingReceiver::Frame {
-  const std::uint8_t* payload = nullptr;
-  std::uint32_t kept = 0;          // payload bytes in the block
-  std::uint32_t original = 0;      // the datagram's length by its UDP header
-  bool truncated = false;          // the block holds less than the datagram (or a first fragment)
-  std::uint32_t header_bytes = 0;  // Ethernet (+ tags) + IPv4 + UDP, as in the block
-  const std::uint8_t* mac = nullptr;
-  sockaddr_in source{};
-  sockaddr_in destination{};
-};
-
-PacketRingReceiver::PacketRingReceiver(const UdpReceiverOptions& options) {
+PacketRingReceiver::PacketRingReceiver(const UdpReceiverOptions& options)
+    : interface_(options.interface) {
   if (options.interface.empty()) {
     throw std::runtime_error(
         "input.receiver = \"packet_ring\" needs sensor.interface (--interface IFACE)");
   }
+  ifindex_ = ::if_nametoindex(options.interface.c_str());
+  if (ifindex_ == 0) {
+    throw NoSuchInterface(fmt::format(
+        "sensor.interface \"{}\": no such network interface here (`ip link` lists them)",
+        options.interface));
+  }
   if (!options.sensor_ip.empty()) {
     sources_ = SourceLock(ntohl(require_ipv4(options.sensor_ip, "sensor_ip").s_addr));
+  }
+  host_ip_ = ntohl(require_ipv4(options.host_ip, "host_ip").s_addr);
+  if (!options.multicast_ip.empty()) {
+    multicast_ip_ = ntohl(require_ipv4(options.multicast_ip, "multicast_ip").s_addr);
   }
   open_guard(options);
   open_ring(options);
@@ -137,18 +142,28 @@ void PacketRingReceiver::open_guard(const UdpReceiverOptions& options) {
   local.sin_port = htons(options.port);
   local.sin_addr = require_ipv4(options.host_ip, "host_ip");
   if (::bind(guard_.get(), reinterpret_cast<const sockaddr*>(&local), sizeof local) != 0) {
-    // Another socket has the port: it already keeps the kernel from answering, so none is
-    // needed; but a free port cannot be chosen then.
-    if (errno != EADDRINUSE || options.port == 0) {
-      io::throw_errno(
-          fmt::format("cannot bind UDP {}:{} (the socket that keeps the host from "
-                      "answering the sensor's datagrams with ICMP)",
-                      options.host_ip, options.port));
+    const int error = errno;
+    // Another socket has the port. If it is bound to every address (0.0.0.0), it keeps the
+    // host from answering already; bound to one address only, the others would answer with
+    // ICMP: refused, as the socket receiver refuses a port in use.
+    if (error == EADDRINUSE && options.port != 0 && wildcard_holder(options.port)) {
+      spdlog::info(
+          "UDP port {} is held on 0.0.0.0 by another socket, which keeps this host from "
+          "answering the sensor's datagrams",
+          options.port);
+      port_ = options.port;
+    } else {
+      const std::string what = fmt::format(
+          "cannot bind UDP {}:{} (the socket that keeps this host from answering the sensor's "
+          "datagrams with ICMP)",
+          options.host_ip, options.port);
+      if (error == EADDRINUSE) {
+        if (const std::string hint = port_in_use_hint(options.port); !hint.empty()) {
+          throw std::runtime_error(fmt::format("{}: {}. {}", what, std::strerror(error), hint));
+        }
+      }
+      io::throw_error(error, what);
     }
-    spdlog::info("UDP port {} is already bound by another socket: it answers for this host",
-                 options.port);
-    guard_.reset();
-    port_ = options.port;
   } else {
     sockaddr_in bound{};
     socklen_t length = sizeof bound;
@@ -157,28 +172,27 @@ void PacketRingReceiver::open_guard(const UdpReceiverOptions& options) {
     }
     port_ = ntohs(bound.sin_port);
   }
-  if (guard_ && !options.multicast_ip.empty()) {
-    ip_mreq membership{};
-    membership.imr_multiaddr = require_ipv4(options.multicast_ip, "multicast_ip");
-    membership.imr_interface.s_addr = htonl(INADDR_ANY);
+  // The group is joined on sensor.interface (or on multicast_interface_ip's), so the interface
+  // takes the group's frames; a bound socket is not needed for the membership.
+  if (!options.multicast_ip.empty()) {
+    ip_mreqn membership{};
+    membership.imr_multiaddr.s_addr = htonl(multicast_ip_);
     if (!options.multicast_interface_ip.empty()) {
-      membership.imr_interface =
+      membership.imr_address =
           require_ipv4(options.multicast_interface_ip, "multicast_interface_ip");
+    } else {
+      membership.imr_ifindex = static_cast<int>(ifindex_);
     }
     if (::setsockopt(guard_.get(), IPPROTO_IP, IP_ADD_MEMBERSHIP, &membership, sizeof membership) !=
         0) {
-      io::throw_errno("cannot join multicast group " + options.multicast_ip);
+      io::throw_errno(fmt::format("cannot join multicast group {} on {}", options.multicast_ip,
+                                  options.interface));
     }
+    spdlog::info("joined multicast group {} on {}", options.multicast_ip, options.interface);
   }
 }
 
 void PacketRingReceiver::open_ring(const UdpReceiverOptions& options) {
-  const unsigned index = ::if_nametoindex(options.interface.c_str());
-  if (index == 0) {
-    throw NoSuchInterface(fmt::format(
-        "sensor.interface \"{}\": no such network interface here (`ip link` lists them)",
-        options.interface));
-  }
   // Protocol 0: the socket takes no frame until it is bound below, after its filter and ring.
   fd_ = io::UniqueFd(::socket(AF_PACKET, SOCK_RAW | SOCK_CLOEXEC, 0));
   if (!fd_) throw_packet_socket_error(errno, "cannot create the AF_PACKET socket");
@@ -193,11 +207,14 @@ void PacketRingReceiver::open_ring(const UdpReceiverOptions& options) {
   const int on = 1;
   ::setsockopt(fd_.get(), SOL_PACKET, PACKET_IGNORE_OUTGOING, &on, sizeof on);
 
-  block_count_ = std::max<std::uint32_t>(
-      kMinBlocks, static_cast<std::uint32_t>(std::min<std::uint64_t>(
-                      options.receive_buffer_bytes / kBlockBytes, 1u << 16)));
+  block_count_ = static_cast<std::uint32_t>(std::clamp<std::uint64_t>(
+      options.receive_buffer_bytes / kBlockBytes, kMinBlocks, kMaxBlocks));
+  if (options.receive_buffer_bytes / kBlockBytes > kMaxBlocks) {
+    spdlog::warn("packet ring: {} bytes asked for, {} MiB used (the most it takes)",
+                 options.receive_buffer_bytes, std::uint64_t{kMaxBlocks} * kBlockBytes >> 20);
+  }
   const std::int64_t budget_ms = options.latency_budget_ns / 1'000'000;
-  retire_ms_ = static_cast<std::uint32_t>(std::clamp<std::int64_t>(budget_ms, 1, 1000));
+  retire_ms_ = static_cast<std::uint32_t>(std::clamp<std::int64_t>(budget_ms, 1, kMaxRetireMs));
   tpacket_req3 request{};
   request.tp_block_size = block_bytes_;
   request.tp_block_nr = block_count_;
@@ -217,7 +234,7 @@ void PacketRingReceiver::open_ring(const UdpReceiverOptions& options) {
   sockaddr_ll link{};
   link.sll_family = AF_PACKET;
   link.sll_protocol = htons(ETH_P_ALL);
-  link.sll_ifindex = static_cast<int>(index);
+  link.sll_ifindex = static_cast<int>(ifindex_);
   if (::bind(fd_.get(), reinterpret_cast<const sockaddr*>(&link), sizeof link) != 0) {
     io::throw_errno("cannot bind the packet socket to " + options.interface);
   }
@@ -236,54 +253,6 @@ tpacket_block_desc* PacketRingReceiver::ready_block() noexcept {
   const std::uint32_t status = __atomic_load_n(&block->hdr.bh1.block_status, __ATOMIC_ACQUIRE);
   return (status & TP_STATUS_USER) != 0 ? block : nullptr;
 }
-
-namespace {
-
-// Parses the frame at `mac` (Ethernet, in-band VLAN tags, IPv4, UDP). False for anything the
-// filter should not have passed (it is skipped).
-bool parse_frame(const std::uint8_t* mac, std::uint32_t captured, std::uint32_t wire_length,
-                 const std::uint8_t*& udp_payload, std::uint32_t& header_bytes, std::uint32_t& kept,
-                 std::uint32_t& original, bool& truncated, sockaddr_in& source,
-                 sockaddr_in& destination) noexcept {
-  std::size_t offset = 12;
-  if (captured < kEthernetBytes) return false;
-  std::uint16_t ethertype = load_be16(mac + offset);
-  // Tags still in the frame (the kernel takes the outer one into tp_vlan_tci).
-  for (int tags = 0; (ethertype == kEthertypeVlan || ethertype == kEthertypeQinQ) && tags < 2;
-       ++tags) {
-    offset += 4;
-    if (captured < offset + 2) return false;
-    ethertype = load_be16(mac + offset);
-  }
-  offset += 2;
-  if (ethertype != kEthertypeIpv4 || captured < offset + 20) return false;
-  const std::uint8_t* ip = mac + offset;
-  const std::size_t ihl = std::size_t{ip[0] & 0x0Fu} * 4;
-  if ((ip[0] >> 4) != 4 || ihl < 20 || ip[9] != 17 || captured < offset + ihl + kUdpBytes) {
-    return false;
-  }
-  const std::uint16_t fragment = load_be16(ip + 6);
-  if ((fragment & 0x1FFF) != 0) return false;  // not the first fragment: no UDP header
-  const std::uint8_t* udp = ip + ihl;
-  const std::uint16_t udp_length = load_be16(udp + 4);
-  header_bytes = static_cast<std::uint32_t>(offset + ihl + kUdpBytes);
-  original = udp_length >= kUdpBytes ? udp_length - static_cast<std::uint32_t>(kUdpBytes) : 0;
-  kept = std::min(original, captured - header_bytes);
-  // More fragments follow, or the block (or the wire) holds less than the UDP length says.
-  truncated = (fragment & 0x2000) != 0 || kept < original || wire_length < header_bytes + original;
-  udp_payload = udp + kUdpBytes;
-  source = {};
-  source.sin_family = AF_INET;
-  std::memcpy(&source.sin_addr.s_addr, ip + 12, 4);
-  std::memcpy(&source.sin_port, udp, 2);
-  destination = {};
-  destination.sin_family = AF_INET;
-  std::memcpy(&destination.sin_addr.s_addr, ip + 16, 4);
-  std::memcpy(&destination.sin_port, udp + 2, 2);
-  return true;
-}
-
-}  // namespace
 
 void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
                                     ReceiveCounters& counters) {
@@ -306,13 +275,10 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
     if (link->sll_pkttype == PACKET_OUTGOING || link->sll_pkttype == PACKET_OTHERHOST) continue;
     if (mac_offset + std::uint64_t{header->tp_snaplen} > block_bytes_) continue;  // never
     const std::uint8_t* mac = base + mac_offset;
-    Frame f;
-    if (!parse_frame(mac, header->tp_snaplen, header->tp_len, f.payload, f.header_bytes, f.kept,
-                     f.original, f.truncated, f.source, f.destination)) {
-      continue;
-    }
+    const std::optional<WireFrame> f = parse_wire_frame({mac, header->tp_snaplen}, header->tp_len);
+    if (!f || !for_this_host(f->destination_ip, link->sll_pkttype)) continue;
     ++datagrams;
-    bytes += f.original;
+    bytes += f->arrived_bytes;
     if (filled == slots.size()) {
       if (filled > 0) {
         ring.publish(filled);
@@ -326,18 +292,30 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
       continue;
     }
     PacketSlot& slot = slots[filled];
-    slot.length = std::min<std::uint32_t>(f.kept, sizeof slot.payload);
-    std::memcpy(slot.payload, f.payload, slot.length);
-    slot.original_length = f.original;
-    slot.truncated = f.truncated || slot.length < f.original;
+    slot.length = static_cast<std::uint32_t>(std::min(f->payload_bytes, sizeof slot.payload));
+    // The frame's trailer (padding) is kept after the datagram where the slot has room, for the
+    // recording; the decoder reads `length` bytes.
+    slot.wire_trailer_length =
+        static_cast<std::uint16_t>(std::min(f->trailer_bytes, sizeof slot.payload - slot.length));
+    const std::uint8_t* payload = mac + f->header_bytes;
+    std::memcpy(slot.payload, payload, slot.length + std::size_t{slot.wire_trailer_length});
+    slot.original_length = f->claimed_bytes;
+    slot.truncated = f->truncated || slot.length < f->claimed_bytes;
     slot.receive_time_ns =
         std::int64_t{header->tp_sec} * 1'000'000'000 + std::int64_t{header->tp_nsec};
-    slot.source.v4 = f.source;
-    slot.destination.v4 = f.destination;
+    slot.source.v4 = {};
+    slot.source.v4.sin_family = AF_INET;
+    slot.source.v4.sin_addr.s_addr = htonl(f->source_ip);
+    slot.source.v4.sin_port = htons(f->source_port);
+    slot.destination.v4 = {};
+    slot.destination.v4.sin_family = AF_INET;
+    slot.destination.v4.sin_addr.s_addr = htonl(f->destination_ip);
+    slot.destination.v4.sin_port = htons(f->destination_port);
     // The headers as they were on the wire: the tag the kernel took out goes back after the
     // MAC addresses, with its own TPID (802.1Q unless the kernel says otherwise).
     const bool tagged = (header->tp_status & TP_STATUS_VLAN_VALID) != 0;
-    const std::size_t wire_bytes = f.header_bytes + (tagged ? 4 : 0);
+    const std::size_t wire_bytes = f->header_bytes + (tagged ? 4 : 0);
+    slot.wire_length = static_cast<std::uint32_t>(header->tp_len + (tagged ? 4u : 0u));
     if (wire_bytes <= kWireHeaderCapacity) {
       std::uint8_t* out = slot.wire_header;
       std::memcpy(out, mac, 12);
@@ -350,15 +328,16 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
         store_be16(out + 14, static_cast<std::uint16_t>(header->hv1.tp_vlan_tci));
         at = 16;
       }
-      std::memcpy(out + at, mac + 12, f.header_bytes - 12);
+      std::memcpy(out + at, mac + 12, f->header_bytes - 12);
       slot.wire_header_length = static_cast<std::uint8_t>(wire_bytes);
     } else {
       slot.wire_header_length = 0;  // recorded with synthesised headers
+      slot.wire_trailer_length = 0;
     }
     truncated += slot.truncated;
     const SourceLock::Verdict verdict = sources_.judge(
-        ntohl(f.source.sin_addr.s_addr), ntohs(f.source.sin_port),
-        std::span<const std::uint8_t>(slot.payload, slot.length), slot.receive_time_ns);
+        f->source_ip, f->source_port, std::span<const std::uint8_t>(slot.payload, slot.length),
+        slot.receive_time_ns);
     if (verdict != SourceLock::Verdict::kSensor) {
       ++foreign;
       other_sensor += verdict == SourceLock::Verdict::kOtherSensor;
@@ -385,6 +364,15 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
   if (published > 0) ring.notify();
 }
 
+bool PacketRingReceiver::for_this_host(std::uint32_t destination,
+                                       unsigned char packet_type) const noexcept {
+  // What a UDP socket bound to host_ip (and joined to multicast_ip) would be given: a datagram
+  // to host_ip (any address of this host's, with 0.0.0.0), a broadcast, or the group.
+  if (packet_type == PACKET_MULTICAST) return multicast_ip_ != 0 && destination == multicast_ip_;
+  if (packet_type == PACKET_BROADCAST || destination == 0xFFFFFFFFu) return true;
+  return host_ip_ == 0 || destination == host_ip_;
+}
+
 void PacketRingReceiver::read_statistics(ReceiveCounters& counters) noexcept {
   tpacket_stats_v3 stats{};
   socklen_t length = sizeof stats;
@@ -393,6 +381,36 @@ void PacketRingReceiver::read_statistics(ReceiveCounters& counters) noexcept {
   kernel_drops_ += stats.tp_drops;
   queue_freezes_ += stats.tp_freeze_q_cnt;
   counters.kernel_drops.store(kernel_drops_, std::memory_order_relaxed);
+}
+
+void PacketRingReceiver::take_socket_error(ReceiveCounters& counters) noexcept {
+  int error = 0;
+  socklen_t length = sizeof error;
+  if (::getsockopt(fd_.get(), SOL_SOCKET, SO_ERROR, &error, &length) != 0 || error == 0) return;
+  ReceiveCounters::add(counters.receive_errors, 1);
+  if (!link_down_) {
+    spdlog::warn("packet ring: {}: {}: nothing arrives until it is up again", interface_,
+                 std::strerror(error));
+  }
+  link_down_ = true;
+  next_link_check_ns_ = 0;
+}
+
+void PacketRingReceiver::look_for_interface(std::int64_t now_ns) noexcept {
+  if (now_ns < next_link_check_ns_) return;
+  next_link_check_ns_ = now_ns + 1'000'000'000;
+  // The same interface up again delivers by itself; one removed and made again has a new
+  // index, which the socket must be bound to.
+  const unsigned index = ::if_nametoindex(interface_.c_str());
+  if (index == 0 || index == ifindex_) return;
+  sockaddr_ll link{};
+  link.sll_family = AF_PACKET;
+  link.sll_protocol = htons(ETH_P_ALL);
+  link.sll_ifindex = static_cast<int>(index);
+  if (::bind(fd_.get(), reinterpret_cast<const sockaddr*>(&link), sizeof link) == 0) {
+    ifindex_ = index;
+    spdlog::info("packet ring: {} is back (index {}): bound to it again", interface_, index);
+  }
 }
 
 void PacketRingReceiver::run(PacketRing& ring, const std::atomic<bool>& stop,
@@ -419,15 +437,23 @@ void PacketRingReceiver::run(PacketRing& ring, const std::atomic<bool>& stop,
       next_statistics_ns = now + 1'000'000'000;
     }
     if (tpacket_block_desc* block = ready_block()) {
+      if (link_down_) {
+        link_down_ = false;
+        spdlog::info("packet ring: {} delivers again", interface_);
+      }
       take_block(*block, ring, counters);
       continue;
     }
+    if (link_down_) look_for_interface(now);
     // No block ready: sleep until the kernel hands one over (full, or its timer ran out).
     pollfd pfd{fd_.get(), POLLIN | POLLERR, 0};
     const int timeout_ms = draining ? static_cast<int>(2 * retire_ms_ + 1) : 100;
     const int ready = ::poll(&pfd, 1, timeout_ms);
     ReceiveCounters::add(counters.wakeups, 1);
     if (ready < 0 && errno != EINTR) ReceiveCounters::add(counters.receive_errors, 1);
+    // The interface went down or away: the error stays set (and poll() returns at once) until
+    // it is read.
+    if (ready > 0 && (pfd.revents & POLLERR) != 0) take_socket_error(counters);
     if (ready == 0 && draining && ready_block() == nullptr) break;  // nothing more is coming
   }
   read_statistics(counters);  // the last drops, for the final health

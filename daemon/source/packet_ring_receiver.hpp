@@ -12,10 +12,20 @@
 // second copy) or that were meant for another host (a promiscuous interface) are skipped, as the
 // kernel's UDP socket would never have received them.
 //
-// The ring: udp_socket_receive_buffer_size_bytes of 128 KiB blocks (at least 8). The kernel
-// hands a block over when it is full or when its retire timer runs out: the timer is the latency
-// budget (latency.budget_ms; 1 ms at least, the kernel's unit), so a packet waits in the ring
-// no longer than the budget, as in the socket receiver.
+// The ring: udp_socket_receive_buffer_size_bytes of 128 KiB blocks (8 to 8192: 1 MiB to 1 GiB,
+// all of it locked kernel memory). The kernel hands a block over when it is full or when its
+// retire timer runs out: the timer is the latency budget (latency.budget_ms, 1 to 100 ms: the
+// kernel's unit, and a stop waits for it), so a packet waits in the ring no longer than that.
+//
+// Only what a UDP socket on host_ip would have been given is taken: IPv4 (the filter is
+// "ip and udp dst port N"), to host_ip (any address with 0.0.0.0), a broadcast, or
+// multicast_ip. The lengths are the frame's, checked against each other (core/wire_frame.hpp):
+// a datagram the frame does not hold whole (a first fragment, a UDP length past the packet) is
+// counted as truncated, and the decoder rejects it.
+//
+// The interface going down or away: the socket's error (POLLERR) is read and counted as a
+// receive error, logged with the interface's name; the thread sleeps in poll() meanwhile, and
+// binds again when an interface of that name is back.
 //
 // Each packet keeps its kernel timestamp (tp_sec/tp_nsec, nanoseconds) and its headers as the
 // wire carried them, the VLAN tag put back from tp_vlan_tci (with its TPID), so the pcap holds
@@ -36,7 +46,7 @@
 // multicast_ip when one is set, so the interface takes the group's frames.
 //
 // Privilege: AF_PACKET needs CAP_NET_RAW. Without it the error names the capability and the
-// systemd drop-in that grants it (systemd/packet-ring.conf; docs/deploy.md).
+// systemd drop-in that grants it (systemd/pandarcapd-packet-ring.conf; docs/deploy.md).
 #pragma once
 
 #include <linux/if_packet.h>
@@ -67,6 +77,8 @@ class PacketRingReceiver {
  public:
   static constexpr std::uint32_t kBlockBytes = 128 * 1024;
   static constexpr std::uint32_t kMinBlocks = 8;
+  static constexpr std::uint32_t kMaxBlocks = 8192;   // 1 GiB
+  static constexpr std::int64_t kMaxRetireMs = 100;   // a stop waits up to 3 of these
   static constexpr std::uint32_t kFrameBytes = 2048;  // the kernel's bookkeeping unit
 
   // Opens the guard socket, the packet socket and its ring on options.interface. Throws
@@ -94,6 +106,14 @@ class PacketRingReceiver {
   void take_block(tpacket_block_desc& block, PacketRing& ring, ReceiveCounters& counters);
   // Adds the kernel's drops since the last read to kernel_drops.
   void read_statistics(ReceiveCounters& counters) noexcept;
+  // Whether a UDP socket on host_ip (joined to multicast_ip) would have been given a datagram
+  // to `destination` (host order) arriving as `packet_type` (PACKET_HOST, ...).
+  bool for_this_host(std::uint32_t destination, unsigned char packet_type) const noexcept;
+  // The socket's pending error (POLLERR: the interface went down or away), read and cleared.
+  void take_socket_error(ReceiveCounters& counters) noexcept;
+  // While the interface is away: binds again once it is back (a new interface of the same
+  // name has a new index).
+  void look_for_interface(std::int64_t now_ns) noexcept;
 
   io::UniqueFd guard_;  // the drop-all UDP socket on the data port
   io::UniqueFd fd_;     // the packet socket
@@ -103,6 +123,12 @@ class PacketRingReceiver {
   std::uint32_t next_block_ = 0;
   std::uint32_t retire_ms_ = 1;
   std::uint16_t port_ = 0;
+  std::string interface_;
+  unsigned ifindex_ = 0;
+  std::uint32_t host_ip_ = 0;       // host order; 0 = any address of this host
+  std::uint32_t multicast_ip_ = 0;  // host order; 0 = none
+  bool link_down_ = false;          // an error said so; until a block arrives again
+  std::int64_t next_link_check_ns_ = 0;
   std::uint64_t kernel_drops_ = 0;
   std::uint64_t queue_freezes_ = 0;
   SourceLock sources_{std::nullopt};

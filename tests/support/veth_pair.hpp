@@ -40,23 +40,27 @@ class VethPair {
     near_ip_ = host(1);
     far_ip_ = host(2);
     second_far_ip_ = host(3);
+    ok_ = shell("ip netns add " + ns_) && make_link();
+  }
+  // The pair made again after a test removed it (the same names and addresses; new indexes).
+  bool make_link() {
     const std::string ns = " -n " + ns_ + " ";
-    ok_ = shell("ip netns add " + ns_) &&
-          shell("ip link add " + near_ + " type veth peer name " + far_ + " netns " + ns_) &&
-          shell("ip addr add " + near_ip_ + "/29 dev " + near_) &&
-          shell("ip link set " + near_ + " up") &&
-          shell("ip" + ns + "addr add " + far_ip_ + "/29 dev " + far_) &&
-          shell("ip" + ns + "addr add " + second_far_ip_ + "/29 dev " + far_) &&
-          shell("ip" + ns + "link set " + far_ + " up") && shell("ip" + ns + "link set lo up");
-    if (ok_) {
+    bool ok = shell("ip link add " + near_ + " type veth peer name " + far_ + " netns " + ns_) &&
+              shell("ip addr add " + near_ip_ + "/29 dev " + near_) &&
+              shell("ip link set " + near_ + " up") &&
+              shell("ip" + ns + "addr add " + far_ip_ + "/29 dev " + far_) &&
+              shell("ip" + ns + "addr add " + second_far_ip_ + "/29 dev " + far_) &&
+              shell("ip" + ns + "link set " + far_ + " up") && shell("ip" + ns + "link set lo up");
+    if (ok) {
       // Neighbours known up front: no first datagram waits for ARP.
-      ok_ = shell("ip" + ns + "neigh replace " + near_ip_ + " lladdr " + mac(near_, "") + " dev " +
-                  far_ + " nud permanent") &&
-            shell("ip neigh replace " + far_ip_ + " lladdr " + mac(far_, ns_) + " dev " + near_ +
-                  " nud permanent") &&
-            shell("ip neigh replace " + second_far_ip_ + " lladdr " + mac(far_, ns_) + " dev " +
-                  near_ + " nud permanent");
+      ok = shell("ip" + ns + "neigh replace " + near_ip_ + " lladdr " + mac(near_, "") + " dev " +
+                 far_ + " nud permanent") &&
+           shell("ip neigh replace " + far_ip_ + " lladdr " + mac(far_, ns_) + " dev " + near_ +
+                 " nud permanent") &&
+           shell("ip neigh replace " + second_far_ip_ + " lladdr " + mac(far_, ns_) + " dev " +
+                 near_ + " nud permanent");
     }
+    return ok;
   }
   ~VethPair() {
     shell("ip link del " + near_ + " 2>/dev/null");
