@@ -66,8 +66,11 @@ struct ChunkBuffer {
 
 class ChunkPipeline {
  public:
+  // `chunk_crc`: each chunk's CRC-32 computed (else 0, "not computed"; the compressed chunk then
+  // carries its codec's checksum: lz4's content checksum, zstd's frame checksum). An uncompressed
+  // chunk has no other check: its CRC is computed whatever `chunk_crc` says.
   ChunkPipeline(std::size_t buffers, std::size_t record_capacity, std::size_t index_entries,
-                mcap::ChunkCompression compression, int level);
+                mcap::ChunkCompression compression, int level, bool chunk_crc = true);
   ~ChunkPipeline();
   ChunkPipeline(const ChunkPipeline&) = delete;
   ChunkPipeline& operator=(const ChunkPipeline&) = delete;
@@ -94,6 +97,7 @@ class ChunkPipeline {
   void compress(ChunkBuffer& chunk) noexcept;
 
   mcap::ChunkCompression compression_;
+  bool chunk_crc_;
   std::unique_ptr<mcap::ChunkCompressor> compressor_;  // null without compression
   std::vector<std::unique_ptr<ChunkBuffer>> buffers_;
   std::vector<ChunkBuffer*> free_;  // the writer's; capacity for every buffer
