@@ -33,7 +33,7 @@ class ChunkCompressor {
   // accelerate it further), 3..12 its high-compression mode (higher levels are 12).
   // kNone: compress() is never called; bound() is 0.
   // `checksum`: the compressed data carries the codec's own checksum of what it holds (lz4: the
-  // frame's content checksum, xxh32; zstd: the frame checksum, xxh64's low 32 bits), which
+  // frame's content checksum, XXH32; zstd: the frame checksum, XXH64's low 32 bits), which
   // their decoders verify: what finds a damaged chunk whose MCAP CRC was not computed.
   ChunkCompressor(ChunkCompression compression, std::size_t max_input, int level = 1,
                   bool checksum = false);

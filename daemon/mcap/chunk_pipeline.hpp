@@ -66,9 +66,11 @@ struct ChunkBuffer {
 
 class ChunkPipeline {
  public:
-  // `chunk_crc`: each chunk's CRC-32 computed (else 0, "not computed"; the compressed chunk then
-  // carries its codec's checksum: lz4's content checksum, zstd's frame checksum). An uncompressed
-  // chunk has no other check: its CRC is computed whatever `chunk_crc` says.
+  // `chunk_crc`: each chunk's CRC-32 computed. When false, a zstd chunk's CRC is 0 ("not
+  // computed") and its frame carries zstd's checksum instead (XXH64, which the decompressor
+  // checks: about 0.17 ms per 4 MiB chunk against the CRC's 0.6 here). lz4 and uncompressed
+  // chunks keep their CRC whatever `chunk_crc` says: it is the cheapest check they can have
+  // (lz4's content checksum, XXH32 in liblz4, measured 2.2 ms per 4 MiB).
   ChunkPipeline(std::size_t buffers, std::size_t record_capacity, std::size_t index_entries,
                 mcap::ChunkCompression compression, int level, bool chunk_crc = true);
   ~ChunkPipeline();
