@@ -248,10 +248,10 @@ TEST_CASE(
     "the hot path",
     "[daemon][reliability][disk][threads]") {
   // The full-disk test below meets the daemon's own refusal (it stops short of the last block);
-  // here the kernel itself fails a write: a file-size limit (EFBIG, SIGXFSZ ignored, as a
-  // process started so inherits it) that the recording reaches ~4 s in, after the 2 s warm-up,
-  // while frames (~1 MB each) and the health files' 8 MiB reserve stay under it. The error
-  // travels as a code and its text is made in a buffer that is already there: the writer
+  // here the kernel itself fails a write: a file-size limit (EFBIG, SIGXFSZ ignored, as a process
+  // started so inherits it) that the recording (~4.6 MB/s) reaches ~3.3 s in, after the 2 s
+  // warm-up, while frames (~1 MB each) and the health files' 8 MiB reserve stay under it. The
+  // error travels as a code and its text is made in a buffer that is already there: the writer
   // allocates nothing for it. Sanitizer builds count no allocations: release only.
   if (test::kSanitizerBuild) return;
   test::ScratchDir dir("daemon-file-size-limit");
@@ -259,7 +259,7 @@ TEST_CASE(
   const auto r =
       test::run_command("sh -c 'trap \"\" XFSZ; exec prlimit --fsize=15000000 -- \"$0\" \"$@\"' " +
                         test::pandarcapd_command() + " --output-dir " + test::quoted(out) +
-                        " --simulate --duration 5.5 2>&1");
+                        " --simulate --duration 4.5 2>&1");
   INFO(r.out);
   REQUIRE(r.exit_code == 0);
   const auto lines = json_lines(out / "health" / "health.jsonl");

@@ -156,8 +156,8 @@ TEST_CASE("restarts within one second never replace a finished frame or recordin
 }
 
 TEST_CASE(
-    "retention allocates nothing once warm: a frame in, the oldest out; a recording rotated, the "
-    "oldest out",
+    "retention and rotation allocate nothing once warm: a frame in, the oldest out, a recording "
+    "rotated, the oldest out",
     "[daemon][outputs][threads]") {
   // Sanitizer builds keep their own allocator: there the daemon counts nothing.
   if (test::kSanitizerBuild) return;
