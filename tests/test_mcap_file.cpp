@@ -282,8 +282,8 @@ TEST_CASE("a damaged chunk ends what is kept: nothing after it is trusted",
 }
 
 TEST_CASE(
-    "one flipped bit in a chunk is found, with the chunk CRC or without it (the codec's "
-    "checksum), for every compression",
+    "one flipped bit in a chunk is found for every compression, mcap_chunk_crc on or off (zstd's "
+    "checksum then)",
     "[mcap][recovery][threads]") {
   const auto compression = GENERATE(mcap::ChunkCompression::kLz4, mcap::ChunkCompression::kZstd,
                                     mcap::ChunkCompression::kNone);
