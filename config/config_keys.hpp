@@ -86,6 +86,7 @@ inline void for_each_key(Config& c, Visitor&& v) {
   v("output", "mcap_compression", o.mcap_compression, &mcap_compression);
   v("output", "mcap_compression_level", o.mcap_compression_level, IntRange{-7, 19});
   v("output", "mcap_chunk_bytes", o.mcap_chunk_bytes, IntRange{64 * 1024, 256 << 20});
+  v("output", "mcap_chunk_crc", o.mcap_chunk_crc, std::monostate{});
   v("output", "mcap_rotate_bytes", o.mcap_rotate_bytes, IntRange{0, kI64});
   v("output", "mcap_rotate_seconds", o.mcap_rotate_seconds, IntRange{0, kU32});
   v("output", "mcap_max_files", o.mcap_max_files, IntRange{0, kI64});

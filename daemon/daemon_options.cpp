@@ -127,6 +127,7 @@ WriterOptions writer_options(const DaemonConfig& config, std::optional<SensorMod
                                        .value_or(mcap::ChunkCompression::kZstd);
   wo.mcap_file.compression_level = o.mcap_compression_level;
   wo.mcap_file.chunk_bytes = o.mcap_chunk_bytes;
+  wo.mcap_file.chunk_crc = o.mcap_chunk_crc;
   wo.mcap_file.max_frame_points = config.arenas.points_per_frame;
   wo.mcap_file.packets = o.mcap_packets;
   wo.mcap_file.points_topic = o.mcap_points_topic;

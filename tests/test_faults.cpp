@@ -244,6 +244,44 @@ TEST_CASE(
 }
 
 TEST_CASE(
+    "a write the kernel refuses, after the warm-up: counted and logged, and nothing allocated on "
+    "the hot path",
+    "[daemon][reliability][disk][threads]") {
+  // The full-disk test below meets the daemon's own refusal (it stops short of the last block);
+  // here the kernel itself fails a write: a file-size limit (EFBIG, SIGXFSZ ignored, as a process
+  // started so inherits it) that the recording (~4.6 MB/s) reaches ~3.3 s in, after the 2 s
+  // warm-up, while frames (~1 MB each) and the health files' 8 MiB reserve stay under it. The
+  // error travels as a code and its text is made in a buffer that is already there: the writer
+  // allocates nothing for it. Sanitizer builds count no allocations: release only.
+  if (test::kSanitizerBuild) return;
+  test::ScratchDir dir("daemon-file-size-limit");
+  const fs::path out = dir / "out";
+  const auto r =
+      test::run_command("sh -c 'trap \"\" XFSZ; exec prlimit --fsize=15000000 -- \"$0\" \"$@\"' " +
+                        test::pandarcapd_command() + " --output-dir " + test::quoted(out) +
+                        " --simulate --duration 4.5 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  const auto lines = json_lines(out / "health" / "health.jsonl");
+  REQUIRE_FALSE(lines.empty());
+  const json& h = lines.back();
+  INFO(h.dump());
+  CHECK(health_counter(h, "write_errors") >= 1);
+  CHECK(health_counter(h, "bytes_not_written") > 0);
+  CHECK(health_counter(h, "pcap_packets_not_written") > 0);
+  CHECK(r.out.find("write failed: cannot write '") != std::string::npos);
+  CHECK(r.out.find(".pcap.part': File too large") != std::string::npos);
+  // The recording cut back to its last whole record and put in place: readable to its end.
+  const auto pcaps = files_ending(out / "raw", ".pcap");
+  REQUIRE_FALSE(pcaps.empty());
+  CHECK(test::read_capture(pcaps.front()).first == CaptureStatus::kEnd);
+  for (const char* thread : {"receive", "decode", "writer"}) {
+    INFO(thread);
+    CHECK(h.at("counters").at("hot_path_allocations_by_thread").at(thread) == 0);
+  }
+}
+
+TEST_CASE(
     "disk full: capture goes on, errors and bytes not written counted, degraded with the "
     "reason - space back: writing resumes within 2 s - closed files stay readable",
     "[daemon][reliability][disk][threads]") {
@@ -312,6 +350,13 @@ TEST_CASE(
     test::check_ring_overruns(later);
     CHECK(health_counter(later, "pcap_packets_not_written") > 0);
     CHECK(later["state"] == "degraded");
+    // Refusing a write for space allocates nothing either (sanitizer builds count nothing).
+    if (!test::kSanitizerBuild) {
+      for (const char* thread : {"receive", "decode", "writer"}) {
+        INFO(thread);
+        CHECK(later.at("counters").at("hot_path_allocations_by_thread").at(thread) == 0);
+      }
+    }
   }
   // What was finished is readable: every closed pcap (cut back to whole records when its write
   // failed) passes tcpdump, every PCD is whole.

@@ -155,15 +155,20 @@ TEST_CASE("restarts within one second never replace a finished frame or recordin
   }
 }
 
-TEST_CASE("retention allocates nothing once warm: a frame in, the oldest out",
-          "[daemon][outputs][threads]") {
+TEST_CASE(
+    "retention and rotation allocate nothing once warm: a frame in, the oldest out, a recording "
+    "rotated, the oldest out",
+    "[daemon][outputs][threads]") {
   // Sanitizer builds keep their own allocator: there the daemon counts nothing.
   if (test::kSanitizerBuild) return;
   test::ScratchDir dir("outputs-retention-allocations");
   const fs::path out = dir / "out";
   const fs::path config = dir / "retention.toml";
-  // 5 frames kept of ~50 written: from the first second on, every frame in removes one.
-  std::ofstream(config) << "[output]\nframes_max_files = 5\n";
+  // 5 frames kept of ~50 written: from the first second on, every frame in removes one. The
+  // recordings (~2.3 MB/s) rotate every 256 KiB, several times a second, and 2 are kept: each
+  // rotation after the warm-up opens a file and removes the oldest with its sidecars.
+  std::ofstream(config) << "[output]\nframes_max_files = 5\npcap_max_files = 2\n"
+                           "pcap_rotate_bytes = 262144\n";
   const auto r = test::run_command(pandarcapd() + " -c " + quoted(config) + " --output-dir " +
                                    quoted(out) + " --simulate --duration 5 2>&1");
   INFO(r.out);
@@ -172,7 +177,14 @@ TEST_CASE("retention allocates nothing once warm: a frame in, the oldest out",
   INFO(h.dump());
   CHECK(health_counter(h, "frames_written") >= 30);
   CHECK(files_ending(out / "frames", ".pcd").size() == 5);
-  CHECK(h.at("counters").at("hot_path_allocations_by_thread").at("writer") == 0);
+  // Rotation and retention really happened (many files written, 2 kept): ~11 MB in 256 KiB files.
+  CHECK(health_counter(h, "pcap_bytes_written") >= 8 * 262144);
+  CHECK(files_ending(out / "raw", ".pcap").size() == 2);
+  CHECK(h.at("counters").at("write_errors") == 0);
+  for (const char* thread : {"receive", "decode", "writer"}) {
+    INFO(thread);
+    CHECK(h.at("counters").at("hot_path_allocations_by_thread").at(thread) == 0);
+  }
 }
 
 TEST_CASE("retention counts the frames and recordings of earlier runs",

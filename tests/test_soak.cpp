@@ -151,4 +151,13 @@ TEST_CASE(
   // Every second: one record a second from start to end (the final one may follow sooner).
   CHECK(records.size() + 2 >= static_cast<std::size_t>(seconds));
   test::check_record_spacing(records, 0.5);
+  // Retention and rotation at every step allocate nothing once warm, on any hot thread
+  // (sanitizer builds count nothing).
+  if (!test::kSanitizerBuild) {
+    CHECK(last.at("counters").at("hot_path_allocations") == 0);
+    for (const char* thread : {"receive", "decode", "writer"}) {
+      INFO(thread);
+      CHECK(last.at("counters").at("hot_path_allocations_by_thread").at(thread) == 0);
+    }
+  }
 }

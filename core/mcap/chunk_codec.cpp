@@ -15,12 +15,13 @@ namespace {
 // 4 MB blocks, independent, and the content size in the header (the recovery and the readers
 // check it against the Chunk record's before they decompress). With independent blocks and
 // autoFlush LZ4F compresses straight into the output: no block buffer.
-LZ4F_preferences_t lz4_preferences(int level, std::size_t content_size) noexcept {
+LZ4F_preferences_t lz4_preferences(int level, std::size_t content_size, bool checksum) noexcept {
   LZ4F_preferences_t p;
   std::memset(&p, 0, sizeof p);
   p.frameInfo.blockSizeID = LZ4F_max4MB;
   p.frameInfo.blockMode = LZ4F_blockIndependent;
   p.frameInfo.contentSize = content_size;
+  p.frameInfo.contentChecksumFlag = checksum ? LZ4F_contentChecksumEnabled : LZ4F_noContentChecksum;
   p.compressionLevel = std::min(level, 12);
   p.autoFlush = 1;
   return p;
@@ -66,8 +67,9 @@ std::optional<ChunkCompression> parse_compression_name(std::string_view name) no
   return std::nullopt;
 }
 
-ChunkCompressor::ChunkCompressor(ChunkCompression compression, std::size_t max_input, int level)
-    : compression_(compression), max_input_(max_input), level_(level) {
+ChunkCompressor::ChunkCompressor(ChunkCompression compression, std::size_t max_input, int level,
+                                 bool checksum)
+    : compression_(compression), max_input_(max_input), checksum_(checksum), level_(level) {
   if (compression == ChunkCompression::kZstd) {
     bound_ = ZSTD_compressBound(max_input);
     // Sized for inputs up to max_input at this level; the context never allocates afterwards.
@@ -76,8 +78,16 @@ ChunkCompressor::ChunkCompressor(ChunkCompression compression, std::size_t max_i
     workspace_.reset(new std::uint8_t[size]);
     context_ = ZSTD_initStaticCCtx(workspace_.get(), size);
     if (context_ == nullptr) throw std::runtime_error("zstd: cannot set up a static context");
+    auto* c = static_cast<ZSTD_CCtx*>(context_);
+    // The content size in the frame header (the readers and the recovery check it), asked for:
+    // a static context does not start from the defaults' flags.
+    if (ZSTD_isError(ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, level)) ||
+        ZSTD_isError(ZSTD_CCtx_setParameter(c, ZSTD_c_contentSizeFlag, 1)) ||
+        ZSTD_isError(ZSTD_CCtx_setParameter(c, ZSTD_c_checksumFlag, checksum ? 1 : 0))) {
+      throw std::runtime_error("zstd: cannot set the level, content size and checksum");
+    }
   } else if (compression == ChunkCompression::kLz4) {
-    const LZ4F_preferences_t prefs = lz4_preferences(level, max_input);
+    const LZ4F_preferences_t prefs = lz4_preferences(level, max_input, checksum);
     bound_ = LZ4F_compressFrameBound(max_input, &prefs);
     lz4_ = std::make_unique<Lz4>();
     if (LZ4F_isError(LZ4F_createCompressionContext(&lz4_->context, LZ4F_VERSION))) {
@@ -97,7 +107,7 @@ ChunkCompressor::~ChunkCompressor() = default;
 std::size_t ChunkCompressor::compress(std::span<const std::uint8_t> in,
                                       std::span<std::uint8_t> out) {
   if (compression_ == ChunkCompression::kLz4) {
-    const LZ4F_preferences_t prefs = lz4_preferences(level_, in.size());
+    const LZ4F_preferences_t prefs = lz4_preferences(level_, in.size(), checksum_);
     if (in.size() > max_input_ || out.size() < LZ4F_compressFrameBound(in.size(), &prefs)) {
       throw std::length_error("lz4: chunk larger than the compressor was sized for");
     }
@@ -119,8 +129,9 @@ std::size_t ChunkCompressor::compress(std::span<const std::uint8_t> in,
   if (in.size() > max_input_ || out.size() < ZSTD_compressBound(in.size())) {
     throw std::length_error("zstd: chunk larger than the compressor was sized for");
   }
-  const std::size_t n = ZSTD_compressCCtx(static_cast<ZSTD_CCtx*>(context_), out.data(), out.size(),
-                                          in.data(), in.size(), level_);
+  // compress2 applies the context's parameters (the level and the checksum flag, set once).
+  const std::size_t n = ZSTD_compress2(static_cast<ZSTD_CCtx*>(context_), out.data(), out.size(),
+                                       in.data(), in.size());
   if (ZSTD_isError(n)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(n));
   return n;
 }

@@ -32,7 +32,11 @@ class ChunkCompressor {
   // lz4: the same number as LZ4F's compressionLevel: below 3 its fast mode (negative levels
   // accelerate it further), 3..12 its high-compression mode (higher levels are 12).
   // kNone: compress() is never called; bound() is 0.
-  ChunkCompressor(ChunkCompression compression, std::size_t max_input, int level = 1);
+  // `checksum`: the compressed data carries the codec's own checksum of what it holds (lz4: the
+  // frame's content checksum, XXH32; zstd: the frame checksum, XXH64's low 32 bits), which
+  // their decoders verify: what finds a damaged chunk whose MCAP CRC was not computed.
+  ChunkCompressor(ChunkCompression compression, std::size_t max_input, int level = 1,
+                  bool checksum = false);
   ~ChunkCompressor();
   ChunkCompressor(const ChunkCompressor&) = delete;
   ChunkCompressor& operator=(const ChunkCompressor&) = delete;
@@ -50,6 +54,7 @@ class ChunkCompressor {
   void* context_ = nullptr;  // ZSTD_CCtx, inside workspace_
   std::unique_ptr<Lz4> lz4_;
   std::size_t max_input_, bound_ = 0;
+  bool checksum_ = false;
   int level_;
 };
 

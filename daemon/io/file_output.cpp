@@ -16,7 +16,7 @@ namespace pandarcap {
 
 using io::throw_errno;
 
-void OutputFile::open(std::string_view path, Mode mode) {
+io::IoError OutputFile::try_open(std::string_view path, Mode mode) {
   if (fd_ >= 0) io::file_syscalls().close(fd_);
   fd_ = -1;
   size_ = 0;
@@ -30,16 +30,17 @@ void OutputFile::open(std::string_view path, Mode mode) {
     direct_ = fd_ >= 0;
     // EINVAL: the file system has no O_DIRECT (tmpfs before Linux 6.6, some FUSE): the page
     // cache it is.
-    if (fd_ < 0 && errno != EINVAL) throw_errno("cannot open", path_);
+    if (fd_ < 0 && errno != EINVAL) return {errno, "cannot open", path_};
   }
   while (fd_ < 0) {
     fd_ = ::open(path_.c_str(), flags, 0644);
-    if (fd_ < 0 && errno != EINTR) throw_errno("cannot open", path_);
+    if (fd_ < 0 && errno != EINTR) return {errno, "cannot open", path_};
   }
   if (mode == Mode::kAppend) {
     const off_t end = ::lseek(fd_, 0, SEEK_END);
     size_ = end > 0 ? static_cast<std::uint64_t>(end) : 0;
   }
+  return {};
 }
 
 void OutputFile::sync() {
@@ -56,16 +57,17 @@ OutputFile::~OutputFile() {
   if (fd_ >= 0) io::file_syscalls().close(fd_);
 }
 
-void OutputFile::write(std::span<const std::uint8_t> bytes) {
+io::IoError OutputFile::try_write(std::span<const std::uint8_t> bytes) noexcept {
   while (!bytes.empty()) {
     const ssize_t n = io::file_syscalls().write(fd_, bytes.data(), bytes.size());
     if (n < 0) {
       if (errno == EINTR) continue;
-      throw_errno("cannot write", path_);
+      return {errno != 0 ? errno : EIO, "cannot write", path_};
     }
     bytes = bytes.subspan(static_cast<std::size_t>(n));
     size_ += static_cast<std::uint64_t>(n);
   }
+  return {};
 }
 
 bool OutputFile::at_its_path() const noexcept {
@@ -86,11 +88,14 @@ void OutputFile::truncate(std::uint64_t size) noexcept {
   }
 }
 
-void OutputFile::close() {
-  if (fd_ < 0) return;
+io::IoError OutputFile::try_close() noexcept {
+  if (fd_ < 0) return {};
   const int fd = fd_;
   fd_ = -1;
-  if (io::file_syscalls().close(fd) != 0 && errno != EINTR) throw_errno("cannot close", path_);
+  if (io::file_syscalls().close(fd) != 0 && errno != EINTR) {
+    return {errno != 0 ? errno : EIO, "cannot close", path_};
+  }
+  return {};
 }
 
 bool rename_no_replace(const char* from, const char* to) {

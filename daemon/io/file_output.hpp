@@ -18,6 +18,7 @@
 #include <string_view>
 #include <utility>
 
+#include "daemon/io/errors.hpp"
 #include "daemon/io/unique_fd.hpp"
 
 namespace pandarcap {
@@ -34,15 +35,25 @@ class OutputFile {
   ~OutputFile();
   // Opens another file with this object (closing the current one). Reusing one OutputFile keeps
   // its path buffer, so reopening allocates nothing once the buffer has grown.
-  void open(std::string_view path, Mode mode);
+  void open(std::string_view path, Mode mode) {
+    if (const io::IoError error = try_open(path, mode)) io::throw_io_error(error);
+  }
+  // The same, the failure returned instead of thrown (the writer's loop: no exception, nothing
+  // allocated). After a failure the file is closed.
+  io::IoError try_open(std::string_view path, Mode mode);
   bool is_open() const noexcept { return fd_ >= 0; }
+  // Room for a path of `bytes` made now (at start-up): the first open() allocates nothing.
+  void reserve_path(std::size_t bytes) { path_.reserve(bytes); }
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
 
-  void write(std::span<const std::uint8_t> bytes);
-  void write(std::string_view text) {
-    write(std::span(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()));
+  void write(std::span<const std::uint8_t> bytes) {
+    if (const io::IoError error = try_write(bytes)) io::throw_io_error(error);
   }
+  void write(std::string_view text) { write(as_bytes(text)); }
+  // The same, returning the failure (the bytes written before it stay written: size() says).
+  io::IoError try_write(std::span<const std::uint8_t> bytes) noexcept;
+  io::IoError try_write(std::string_view text) noexcept { return try_write(as_bytes(text)); }
   bool direct() const noexcept { return direct_; }
   // fdatasync(2): what was written is on the disk (at start-up; the writer's loop leaves this to
   // the finisher thread). Throws std::system_error.
@@ -50,7 +61,10 @@ class OutputFile {
   // Back to writes through the page cache (for a file's unaligned tail). Best effort: no throw.
   void end_direct() noexcept;
   // Closes, reporting a failed close (a deferred write error on some file systems).
-  void close();
+  void close() {
+    if (const io::IoError error = try_close()) io::throw_io_error(error);
+  }
+  io::IoError try_close() noexcept;
   // Cuts the file back to `size` bytes (after a failed write), best effort: no throw. The next
   // write continues there.
   void truncate(std::uint64_t size) noexcept;
@@ -62,6 +76,10 @@ class OutputFile {
   bool at_its_path() const noexcept;
 
  private:
+  static std::span<const std::uint8_t> as_bytes(std::string_view text) noexcept {
+    return {reinterpret_cast<const std::uint8_t*>(text.data()), text.size()};
+  }
+
   std::string path_;
   int fd_ = -1;
   std::uint64_t size_ = 0;  // for kAppend: the size at open plus what was written

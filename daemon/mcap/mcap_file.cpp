@@ -36,7 +36,8 @@ McapFile::McapFile(const McapFileOptions& options)
       max_index_entries_(options.chunk_bytes / 1024 + 64),
       pipeline_(std::max<std::size_t>(options.chunk_buffers, 1),
                 options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_,
-                max_index_entries_, options.compression, options.compression_level) {
+                max_index_entries_, options.compression, options.compression_level,
+                options.chunk_crc) {
   // out_ holds the opening records (the calibration among them), a chunk's fields and message
   // indexes (its records go to the file from its chunk buffer), or the tail.
   const std::size_t index_bytes =

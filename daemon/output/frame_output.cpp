@@ -7,7 +7,6 @@
 #include <cerrno>
 #include <iterator>
 #include <span>
-#include <system_error>
 
 #include "core/frames/pcd.hpp"
 #include "core/utc_time.hpp"
@@ -35,7 +34,10 @@ void FrameOutput::adopt_earlier_files() {
 void FrameOutput::reserve() {
   path_.reserve(4096);
   temporary_path_.reserve(4096);
+  file_.reserve_path(4096);
   pcd_header_.reserve(1024);
+  refusal_.reserve(1024);  // a refused write's reason (HealthRoom::allows) at any moment
+  retention_.reserve(dir_.native().size() + 96);  // frame_<N>_<UTC>[_partial][_dupN].pcd
   if (lzf_) compressor_.reserve(max_frame_points_, format_.layout);
 }
 
@@ -70,19 +72,23 @@ void FrameOutput::write(const FrameArena& arena) {
     accounting_.write_failed(refusal_, expected);
     return;
   }
-  try {
-    const bool try_direct = direct && direct_works_ && pad_pcd_header(pcd_header_, kDirectIoBlock);
-    open_in_directory(file_, temporary_path_,
-                      try_direct ? OutputFile::Mode::kCreateDirect : OutputFile::Mode::kCreate,
-                      dir_);
+  // Failures come back as codes, not exceptions: a full disk fails every frame, and counting
+  // one allocates nothing.
+  const bool try_direct = direct && direct_works_ && pad_pcd_header(pcd_header_, kDirectIoBlock);
+  io::IoError error = open_in_directory(
+      file_, temporary_path_,
+      try_direct ? OutputFile::Mode::kCreateDirect : OutputFile::Mode::kCreate, dir_);
+  if (!error) {
     if (file_.direct()) {
-      write_direct(rows);
+      error = write_direct(rows);
     } else {
-      file_.write(pcd_header_);
-      file_.write(data);
+      error = file_.try_write(pcd_header_);
+      if (!error) error = file_.try_write(data);
     }
-    file_.close();
-  } catch (const std::exception& error) {
+  }
+  if (!error) error = file_.try_close();
+  if (error) {
+    (void)file_.try_close();  // the error said already; its path stays readable (file_.path())
     ::unlink(temporary_path_.c_str());
     accounting_.write_failed(error, expected);
     return;
@@ -105,23 +111,24 @@ void FrameOutput::finished(const FinishJob& job) {
   if (job.failed) accounting_.write_failed(job.error_text(), job.placed ? 0 : job.bytes);
 }
 
-void FrameOutput::write_direct(std::span<const std::uint8_t> rows) {
+io::IoError FrameOutput::write_direct(std::span<const std::uint8_t> rows) {
   // The padded header is exactly one block; it is copied where O_DIRECT can take it from.
   std::copy(pcd_header_.begin(), pcd_header_.end(), header_block_.begin());
   const std::span<const std::uint8_t> header(header_block_);
   const std::size_t whole = rows.size() / kDirectIoBlock * kDirectIoBlock;
-  try {
-    file_.write(header);
-    file_.write(rows.first(whole));
-  } catch (const std::system_error& error) {
+  io::IoError error = file_.try_write(header);
+  if (!error) error = file_.try_write(rows.first(whole));
+  if (error) {
     // A file system that opens with O_DIRECT but refuses the writes: the page cache, for the
     // rest of this frame (from where it stopped) and for every frame after it.
-    if (error.code().value() != EINVAL) throw;
+    if (error.code != EINVAL) return error;
     direct_works_ = false;
   }
   file_.end_direct();
-  if (file_.size() == 0) file_.write(header);
-  file_.write(rows.subspan(file_.size() - kDirectIoBlock));  // the tail, or all that is left
+  if (file_.size() == 0) {
+    if (const io::IoError header_error = file_.try_write(header)) return header_error;
+  }
+  return file_.try_write(rows.subspan(file_.size() - kDirectIoBlock));  // the tail, or the rest
 }
 
 }  // namespace pandarcap

@@ -88,7 +88,7 @@ class FrameOutput {
   OutputFile file_;
   // O_DIRECT: the header's block (page-aligned, as the arenas are); cleared for good once a
   // file system refused a direct write.
-  void write_direct(std::span<const std::uint8_t> rows);
+  io::IoError write_direct(std::span<const std::uint8_t> rows);
   alignas(kDirectIoBlock) std::array<std::uint8_t, kDirectIoBlock> header_block_{};
   bool direct_works_ = true;
 };

@@ -39,6 +39,14 @@ McapRecorder::~McapRecorder() = default;
 
 void McapRecorder::adopt_earlier_files() {
   next_index_ = adopt_earlier_mcap_files(dir_, retention_);
+  // The lists made at their size now: the first file finished after the warm-up allocates
+  // nothing (pandarcap_<UTC>_<N>[_dupN].mcap: under 96 bytes).
+  const std::size_t path_bytes = dir_.native().size() + 96;
+  retention_.reserve(path_bytes);
+  recorded_.reserve(kRecordedFilesReserved, path_bytes);
+  final_path_.reserve(path_bytes);
+  part_path_.reserve(path_bytes);
+  refusal_.reserve(1024);  // a refused write's reason (HealthRoom::allows) at any moment
 }
 
 void McapRecorder::prepare() {
@@ -86,8 +94,9 @@ bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
   if (file_->is_open()) return true;
   final_path_.assign(dir_.native());
   // The number is taken only by a file that opens (a read-only disk does not make it climb).
-  fmt::format_to(std::back_inserter(final_path_), "/pandarcap_{}_{:04}.mcap",
-                 utc_file_stamp(static_cast<std::int64_t>(log_time), false), next_index_);
+  final_path_ += "/pandarcap_";
+  append_utc_file_stamp(final_path_, static_cast<std::int64_t>(log_time), false);
+  fmt::format_to(std::back_inserter(final_path_), "_{:04}.mcap", next_index_);
   part_path_.assign(final_path_);
   part_path_ += ".part";
   try {

@@ -3,13 +3,19 @@
 // Every part that writes files (frames, recordings, health files, the start-up clean-up) reports
 // here, so health sees one write_errors / bytes_not_written / output_name_collisions for the
 // whole writer, and one "last error" text to quote in its reason. A failed write is logged at
-// most every 10 s (a full disk fails every frame). Owned by the writer thread; not thread-safe.
+// most every 10 s (a full disk fails every frame). The last error's text is kept in a buffer of
+// fixed size (cut to fit), and a failure from the writer's loop comes as an io::IoError whose
+// text is made there: counting a failed write allocates nothing. Owned by the writer thread; not
+// thread-safe.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <exception>
 #include <string>
 #include <string_view>
+
+#include "daemon/io/errors.hpp"
 
 namespace pandarcap {
 
@@ -22,6 +28,8 @@ class OutputAccounting {
   }
   // The same with the reason in words (a write refused to keep space for health).
   void write_failed(std::string_view reason, std::uint64_t bytes);
+  // The same for a failed file operation ("cannot write 'x': No space left on device").
+  void write_failed(const io::IoError& error, std::uint64_t bytes);
   // Bytes given up without trying to write them (the rest of a batch after the disk failed).
   void not_written(std::uint64_t bytes) noexcept { bytes_not_written_ += bytes; }
 
@@ -35,13 +43,19 @@ class OutputAccounting {
   std::uint64_t write_errors() const noexcept { return write_errors_; }
   std::uint64_t bytes_not_written() const noexcept { return bytes_not_written_; }
   std::uint64_t name_collisions() const noexcept { return name_collisions_; }
-  const std::string& last_error() const noexcept { return last_error_; }
+  std::string_view last_error() const noexcept { return {last_error_.data(), last_error_size_}; }
+
+  // The longest last-error text kept: a path of a few hundred characters and errno's words.
+  static constexpr std::size_t kLastErrorCapacity = 1024;
 
  private:
+  void count_and_log(std::uint64_t bytes);
+
   std::uint64_t write_errors_ = 0, bytes_not_written_ = 0;
   std::uint64_t name_collisions_ = 0;
   std::int64_t last_error_log_ns_ = -1;
-  std::string last_error_;
+  std::array<char, kLastErrorCapacity> last_error_{};
+  std::size_t last_error_size_ = 0;
 };
 
 }  // namespace pandarcap

@@ -200,14 +200,11 @@ bool make_again_if_removed(const std::filesystem::path& directory) noexcept {
   return true;
 }
 
-void open_in_directory(OutputFile& file, std::string_view path, OutputFile::Mode mode,
-                       const std::filesystem::path& directory) {
-  try {
-    file.open(path, mode);
-  } catch (const std::system_error& error) {
-    if (error.code().value() != ENOENT || !make_again_if_removed(directory)) throw;
-    file.open(path, mode);
-  }
+io::IoError open_in_directory(OutputFile& file, std::string_view path, OutputFile::Mode mode,
+                              const std::filesystem::path& directory) {
+  const io::IoError error = file.try_open(path, mode);
+  if (error.code != ENOENT || !make_again_if_removed(directory)) return error;
+  return file.try_open(path, mode);
 }
 
 }  // namespace pandarcap

@@ -59,9 +59,10 @@ std::vector<std::string> health_fallback_report(const WriterOptions& options);
 bool make_again_if_removed(const std::filesystem::path& directory) noexcept;
 
 // Opens `file` at `path`, which is in `directory`: when the open fails because the directory
-// was removed, it is made again and the open tried once more. Throws std::system_error.
-void open_in_directory(OutputFile& file, std::string_view path, OutputFile::Mode mode,
-                       const std::filesystem::path& directory);
+// was removed, it is made again and the open tried once more. Returns the failure (the writer's
+// loop: nothing thrown, nothing allocated unless the directory must be made again).
+io::IoError open_in_directory(OutputFile& file, std::string_view path, OutputFile::Mode mode,
+                              const std::filesystem::path& directory);
 
 class OutputDirectoryBusy : public std::runtime_error {
  public:

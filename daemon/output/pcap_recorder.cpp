@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <span>
 #include <stdexcept>
@@ -39,6 +40,16 @@ PcapRecorder::~PcapRecorder() = default;
 
 void PcapRecorder::adopt_earlier_files() {
   next_index_ = adopt_earlier_recordings(dir_, retention_);
+  // The lists and names made at their size now: the first recording finished after the warm-up
+  // allocates nothing (pandarcap_<UTC>_<N>[_dupN].pcap.zst and its sidecars: under 96 bytes).
+  const std::size_t path_bytes = dir_.native().size() + 96;
+  retention_.reserve(path_bytes);
+  recorded_.reserve(kRecordedFilesReserved, path_bytes);
+  refusal_.reserve(1024);  // a refused write's reason (HealthRoom::allows) at any moment
+  for (std::string* name : {&final_path_, &part_path_, &sidecar_path_, &sidecar_temporary_})
+    name->reserve(path_bytes);
+  writer_.reserve_path(path_bytes);
+  sidecar_file_.reserve_path(path_bytes);
 }
 
 void PcapRecorder::save_calibration(std::string_view csv) {
@@ -62,30 +73,30 @@ std::uint64_t PcapRecorder::bytes_written() const noexcept {
   return bytes_closed_ + (pcap_ ? pcap_->bytes() : 0);
 }
 
-void PcapRecorder::open(std::int64_t first_packet_ns) {
+io::IoError PcapRecorder::open(std::int64_t first_packet_ns) {
   // The number is taken only by a recording that opens: a disk that refuses every open (read-only)
-  // does not make the numbers climb.
-  final_path_ =
-      (dir_ / fmt::format("pandarcap_{}_{:04}.pcap{}", utc_file_stamp(first_packet_ns, false),
-                          next_index_, compressor_ ? ".zst" : ""))
-          .native();
-  const std::filesystem::path part = final_path_ + ".part";
-  try {
-    try {
-      pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_, compressor_.get());
-    } catch (const std::system_error& error) {
-      if (error.code().value() != ENOENT || !make_again_if_removed(dir_)) throw;
-      pcap_ = std::make_unique<PcapWriter>(part.string(), record_buffer_, compressor_.get());
-    }
-  } catch (...) {
-    // Created but not even its header written (a full disk): not left behind, one per attempt.
-    std::error_code ignored;
-    std::filesystem::remove(part, ignored);
-    throw;
+  // does not make the numbers climb. The names are made in strings that keep their memory.
+  final_path_.assign(dir_.native());
+  final_path_ += "/pandarcap_";
+  append_utc_file_stamp(final_path_, first_packet_ns, false);
+  fmt::format_to(std::back_inserter(final_path_), "_{:04}.pcap{}", next_index_,
+                 compressor_ ? ".zst" : "");
+  part_path_.assign(final_path_);
+  part_path_ += ".part";
+  io::IoError error = writer_.open(part_path_, record_buffer_, compressor_.get());
+  if (error.code == ENOENT && make_again_if_removed(dir_)) {
+    error = writer_.open(part_path_, record_buffer_, compressor_.get());
   }
+  if (error) {
+    // Created but not even its header written (a full disk): not left behind, one per attempt.
+    ::unlink(part_path_.c_str());
+    return error;
+  }
+  pcap_ = &writer_;
   ++next_index_;
   directory_synced_ = false;
   opened_monotonic_ns_ = monotonic_ns();
+  return {};
 }
 
 void PcapRecorder::close() {
@@ -94,11 +105,9 @@ void PcapRecorder::close() {
     lose_open_file();
     return;
   }
-  try {
-    // close() flushes first; a failing flush leaves the file open, to be cut back to whole
-    // records by abandon().
-    pcap_->close();
-  } catch (const std::exception& error) {
+  // close() flushes first; a failing flush leaves the file open, to be cut back to whole records
+  // by abandon().
+  if (const io::IoError error = pcap_->try_close()) {
     abandon(error, 0);
     return;
   }
@@ -106,9 +115,10 @@ void PcapRecorder::close() {
 }
 
 void PcapRecorder::rotate() {
-  spdlog::info(
-      "SIGHUP: closing {} and starting new recordings",
-      pcap_ ? std::filesystem::path(final_path_).filename().string() : std::string("no open pcap"));
+  const std::string_view name =
+      std::string_view(final_path_).substr(final_path_.rfind('/') + 1);  // npos + 1: all of it
+  spdlog::info("SIGHUP: closing {} and starting new recordings",
+               pcap_ ? name : std::string_view("no open pcap"));
   close();
 }
 
@@ -118,11 +128,7 @@ void PcapRecorder::flush() {
     lose_open_file();
     return;
   }
-  try {
-    pcap_->flush();
-  } catch (const std::exception& error) {
-    abandon(error, 0);
-  }
+  if (const io::IoError error = pcap_->try_flush()) abandon(error, 0);
 }
 
 void PcapRecorder::lose_open_file() {
@@ -135,7 +141,7 @@ void PcapRecorder::lose_open_file() {
       "{} is gone (removed, or its directory replaced): its {} packets are lost; the "
       "next packets start a new recording",
       pcap_->path(), flushed + dropped.records);
-  pcap_.reset();
+  pcap_ = nullptr;
 }
 
 void PcapRecorder::verify_on_disk() {
@@ -155,7 +161,8 @@ void PcapRecorder::verify_on_disk() {
       gone.files, dir_.string(), gone.items);
 }
 
-void PcapRecorder::abandon(const std::exception& error, std::uint64_t failed_bytes) {
+template <class Error>
+void PcapRecorder::abandon(const Error& error, std::uint64_t failed_bytes) {
   // The records buffered since the last good flush never reached the file whole: they are taken
   // back from the recorded count (which no health record has reported yet: every tick flushes
   // first) and counted as not written, with the record being written when it failed.
@@ -169,19 +176,18 @@ void PcapRecorder::abandon(const std::exception& error, std::uint64_t failed_byt
 void PcapRecorder::finish_file() {
   const std::string& part = pcap_->path();
   if (pcap_->flushed_records() == 0) {
-    try {
-      std::filesystem::remove(part);  // not even one record: nothing worth keeping
-    } catch (const std::exception& error) {
-      accounting_.write_failed(error, 0);
+    // Not even one record: nothing worth keeping.
+    if (::unlink(part.c_str()) != 0 && errno != ENOENT) {
+      accounting_.write_failed(io::IoError{errno, "cannot remove", part}, 0);
     }
-    pcap_.reset();
+    pcap_ = nullptr;
     return;
   }
   bytes_closed_ += pcap_->flushed_bytes();
   write_sidecars();
   finisher_.place(FinishOwner::kRecordings, part, final_path_,
                   {.bytes = pcap_->flushed_bytes(), .items = pcap_->flushed_records()});
-  pcap_.reset();
+  pcap_ = nullptr;
 }
 
 void PcapRecorder::write_sidecars() {
@@ -200,11 +206,11 @@ void PcapRecorder::write_sidecars() {
       accounting_.write_failed(refusal_, text.size());
       continue;
     }
-    try {
-      sidecar_file_.open(sidecar_temporary_, OutputFile::Mode::kCreate);
-      sidecar_file_.write(text);
-      sidecar_file_.close();
-    } catch (const std::exception& error) {
+    io::IoError error = sidecar_file_.try_open(sidecar_temporary_, OutputFile::Mode::kCreate);
+    if (!error) error = sidecar_file_.try_write(text);
+    if (!error) error = sidecar_file_.try_close();
+    if (error) {
+      (void)sidecar_file_.try_close();
       ::unlink(sidecar_temporary_.c_str());
       accounting_.write_failed(error, text.size());
       continue;
@@ -262,28 +268,40 @@ void PcapRecorder::write(const RawBatch& batch) {
       accounting_.not_written(packet.length);
       continue;
     }
+    if (!PcapWriter::recordable(packet.length, packet.receive_time_ns)) {
+      // This packet cannot be recorded (a time outside what pcap can hold); the file is fine.
+      ++packets_not_written_;
+      const auto said = fmt::format_to_n(
+          unrecordable_.data(), unrecordable_.size(),
+          "a packet of {} bytes received at {} ns cannot be recorded in pcap (1970 to 2106)",
+          packet.length, packet.receive_time_ns);
+      accounting_.write_failed(
+          std::string_view(unrecordable_.data(), std::min(said.size, unrecordable_.size())),
+          packet.length);
+      continue;
+    }
     try {
       if (pcap_ && rotation_due(pcap_->bytes(), opened_monotonic_ns_, options_.pcap_rotate_bytes,
                                 options_.pcap_rotate_seconds)) {
         close();
       }
-      if (!pcap_) open(packet.receive_time_ns);
-      const std::span<const std::uint8_t> payload(packet.payload, packet.length);
-      if (packet.wire_header_length > 0) {
-        pcap_->write_frame(
-            {packet.wire_header, packet.wire_header_length},
-            {packet.payload, std::size_t{packet.length} + packet.wire_trailer_length},
-            packet.wire_length, packet.receive_time_ns);
-      } else {
-        pcap_->write(payload, packet.original_length, packet.receive_time_ns,
-                     to_endpoint(packet.source), to_endpoint(packet.destination));
+      io::IoError error = pcap_ ? io::IoError{} : open(packet.receive_time_ns);
+      if (!error) {
+        if (packet.wire_header_length > 0) {
+          error = pcap_->try_write_frame(
+              {packet.wire_header, packet.wire_header_length},
+              {packet.payload, std::size_t{packet.length} + packet.wire_trailer_length},
+              packet.wire_length, packet.receive_time_ns);
+        } else {
+          error = pcap_->try_write(std::span<const std::uint8_t>(packet.payload, packet.length),
+                                   packet.original_length, packet.receive_time_ns,
+                                   to_endpoint(packet.source), to_endpoint(packet.destination));
+        }
       }
-      ++packets_written_;
-    } catch (const std::invalid_argument& error) {
-      // This packet cannot be recorded (a time outside what pcap can hold); the file is fine.
-      ++packets_not_written_;
-      accounting_.write_failed(error, packet.length);
-    } catch (const std::exception& error) {
+      if (!error) {
+        ++packets_written_;
+        continue;
+      }
       // A failing file is cut back to its whole records and closed. The next batch starts a new
       // one (and fails again, counted, while the disk stays full): at most one attempt per
       // batch, not one per packet.
@@ -292,6 +310,15 @@ void PcapRecorder::write(const RawBatch& batch) {
         abandon(error, packet.length);
       } else {
         accounting_.write_failed(error, packet.length);  // the file could not even be created
+      }
+      failed = true;
+    } catch (const std::exception& error) {
+      // Not the disk (a compressor's error, none expected): counted the same way.
+      ++packets_not_written_;
+      if (pcap_) {
+        abandon(error, packet.length);
+      } else {
+        accounting_.write_failed(error, packet.length);
       }
       failed = true;
     }

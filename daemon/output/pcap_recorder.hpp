@@ -30,10 +30,12 @@
 // exit summary's "packets recorded" is what is on disk, less what retention removed on purpose.
 //
 // The calibration the recordings are decoded with is saved beside them (save_calibration).
-// Owned by the writer thread; once warm, recording a batch allocates nothing but a new file's
-// name when one is opened.
+// Owned by the writer thread; once warm, recording a batch allocates nothing, a new file
+// (rotation, SIGHUP) and a failed write included: one PcapWriter serves file after file, the
+// names are made in strings that keep their memory, and failures travel as io::IoError codes.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <exception>
 #include <filesystem>
@@ -106,11 +108,12 @@ class PcapRecorder {
   std::uint64_t bytes_written() const noexcept;
 
  private:
-  void open(std::int64_t first_packet_ns);
+  io::IoError open(std::int64_t first_packet_ns);
   // The open recording is no longer at its path: its packets are lost, the file let go.
   void lose_open_file();
   // After a failed write: cut the file back to whole records, count what was lost, close it.
-  void abandon(const std::exception& error, std::uint64_t failed_bytes);
+  template <class Error>
+  void abandon(const Error& error, std::uint64_t failed_bytes);
   void finish_file();  // rename .part (or remove it if it holds no record)
   // The sidecars of the recording about to be put in place as final_path_, written as temporary
   // files and handed to the finisher before it.
@@ -127,8 +130,10 @@ class PcapRecorder {
   std::string refusal_;
   std::vector<char> record_buffer_;                   // the open recording's buffer, allocated once
   std::unique_ptr<ZstdStreamCompressor> compressor_;  // output.pcap_compression = "zstd"
-  std::unique_ptr<PcapWriter> pcap_;
-  std::string final_path_;
+  PcapWriter writer_;                                 // reused for every recording
+  PcapWriter* pcap_ = nullptr;                        // &writer_ while a recording is open
+  std::string final_path_, part_path_;
+  std::array<char, 128> unrecordable_{};  // a packet pcap cannot hold, said
   std::string sidecar_path_, sidecar_temporary_;
   OutputFile sidecar_file_;
   bool directory_synced_ = false;  // the open recording's name is on the disk

@@ -11,6 +11,7 @@
 // thread.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -32,6 +33,15 @@ class Retention {
       : max_files_(max_files), max_bytes_(max_bytes) {}
 
   bool limited() const noexcept { return max_files_ != 0 || max_bytes_ != 0; }
+  // At start-up: the list's slots made for the files it will hold at steady state (max_files
+  // and the one added before the oldest goes; 64 with a byte limit only; at most 1024), with
+  // room for paths of `path_bytes`, so that the first file after the warm-up allocates nothing.
+  void reserve(std::size_t path_bytes) {
+    if (!limited()) return;
+    const std::uint64_t slots =
+        max_files_ != 0 ? std::min<std::uint64_t>(max_files_ + 1, 1024) : 64;
+    files_.reserve(static_cast<std::size_t>(slots), path_bytes);
+  }
   // Files listed (kept); the newest are the last added.
   std::size_t size() const noexcept { return files_.size(); }
 
@@ -71,10 +81,17 @@ class Retention {
 // messages), so that the end can count what vanished from disk with its file
 // (pcap_packets_lost, mcap_messages_lost). Retention removes the oldest first, so they leave the
 // front. At steady state nothing is allocated (file_list.hpp). Owned by the writer thread.
+// The files a RecordedFiles list has room for from the start: 256 recordings, some 30 hours at
+// the default rotation (1 GiB) of one sensor.
+inline constexpr std::size_t kRecordedFilesReserved = 256;
+
 class RecordedFiles {
  public:
   // A file just finished and put in place; then the list trimmed to what `retention` keeps.
   void add(std::string_view path, std::uint64_t items, const Retention& retention);
+  // At start-up: room for the first `files` files (paths up to `path_bytes`) made now. Without
+  // a retention limit the list grows with the run: past these, one allocation per file.
+  void reserve(std::size_t files, std::size_t path_bytes) { files_.reserve(files, path_bytes); }
 
   struct Gone {
     std::size_t files = 0;

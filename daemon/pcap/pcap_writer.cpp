@@ -93,55 +93,73 @@ std::array<std::uint8_t, kPcapGlobalHeaderBytes> pcap_global_header() noexcept {
 }
 
 PcapWriter::PcapWriter(const std::string& path, std::span<char> buffer,
-                       ZstdStreamCompressor* compressor)
-    : path_(path), compressor_(compressor), buffer_(buffer) {
+                       ZstdStreamCompressor* compressor) {
+  if (const io::IoError error = open(path, buffer, compressor)) io::throw_io_error(error);
+}
+
+io::IoError PcapWriter::open(std::string_view path, std::span<char> buffer,
+                             ZstdStreamCompressor* compressor) {
+  path_.assign(path);
+  compressor_ = compressor;
+  buffer_ = buffer;
+  buffered_ = 0;
+  ip_id_ = 0;
+  records_ = bytes_ = 0;
+  flushed_records_ = flushed_bytes_ = flushed_stream_bytes_ = 0;
+  flushed_hash_.reset();
   if (compressor_ != nullptr) compressor_->begin();
-  file_.open(path_, OutputFile::Mode::kCreate);
-  append(pcap_global_header());
+  io::IoError error = file_.try_open(path_, OutputFile::Mode::kCreate);
+  if (!error) error = append(pcap_global_header());
   bytes_ = kPcapGlobalHeaderBytes;
   // At once, so that the file is a valid (empty) capture from here on even if the process dies
   // before its first flush. One write per file.
-  flush();
+  if (!error) error = try_flush();
+  if (error) {
+    buffered_ = 0;
+    records_ = bytes_ = 0;
+    (void)file_.try_close();  // the failure is the one to report
+  }
+  return error;
 }
 
 PcapWriter::~PcapWriter() {
   // A destructor cannot report a failure; callers that need to know call close() first.
   if (!file_.is_open()) return;
   try {
-    flush_buffer();
+    (void)flush_buffer();
   } catch (const std::exception&) {
     // Reported by nobody: see above.
   }
 }
 
-void PcapWriter::append(std::span<const std::uint8_t> bytes) {
-  if (!file_.is_open()) io::throw_error(EBADF, "cannot write", path_);
+io::IoError PcapWriter::append(std::span<const std::uint8_t> bytes) {
+  if (!file_.is_open()) return not_open();
   // An empty payload (a zero-length datagram) may come with a null data(), which memcpy must not
   // get even for 0 bytes; there is nothing to append anyway.
-  if (bytes.empty()) return;
+  if (bytes.empty()) return {};
   if (buffered_ + bytes.size() > buffer_.size()) {
-    flush_buffer();
-    if (bytes.size() > buffer_.size()) {
-      emit(bytes, ZstdStreamCompressor::Step::kContinue);
-      return;
-    }
+    if (const io::IoError error = flush_buffer()) return error;
+    if (bytes.size() > buffer_.size()) return emit(bytes, ZstdStreamCompressor::Step::kContinue);
   }
   std::memcpy(buffer_.data() + buffered_, bytes.data(), bytes.size());
   buffered_ += bytes.size();
+  return {};
 }
 
-void PcapWriter::flush_buffer(ZstdStreamCompressor::Step step) {
+io::IoError PcapWriter::flush_buffer(ZstdStreamCompressor::Step step) {
   const std::size_t n = std::exchange(buffered_, 0);
-  emit(std::span(reinterpret_cast<const std::uint8_t*>(buffer_.data()), n), step);
+  return emit(std::span(reinterpret_cast<const std::uint8_t*>(buffer_.data()), n), step);
 }
 
-void PcapWriter::emit(std::span<const std::uint8_t> bytes, ZstdStreamCompressor::Step step) {
-  if (compressor_ == nullptr) {
-    file_.write(bytes);
-    return;
-  }
+io::IoError PcapWriter::emit(std::span<const std::uint8_t> bytes, ZstdStreamCompressor::Step step) {
+  if (compressor_ == nullptr) return file_.try_write(bytes);
   const std::span<const std::uint8_t> out = compressor_->compress(bytes, step);
-  if (!out.empty()) file_.write(out);
+  return out.empty() ? io::IoError{} : file_.try_write(out);
+}
+
+bool PcapWriter::recordable(std::size_t payload_bytes, std::int64_t timestamp_ns) noexcept {
+  return payload_bytes <= kMaxUdpPayloadBytes && timestamp_ns >= 0 &&
+         timestamp_ns / kNsPerSecond <= std::int64_t{UINT32_MAX};
 }
 
 void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
@@ -152,15 +170,25 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
                                 " bytes exceeds the maximum of " +
                                 std::to_string(kMaxUdpPayloadBytes));
   }
-  // A datagram longer than IPv4 can carry was not received as one: the headers say the most
-  // they can, and the record still holds only what was kept.
-  const std::size_t original =
-      std::clamp(original_payload_bytes, udp_payload.size(), kMaxUdpPayloadBytes);
   const std::int64_t seconds = timestamp_ns / kNsPerSecond;
   if (timestamp_ns < 0 || seconds > std::int64_t{UINT32_MAX}) {
     throw std::invalid_argument("timestamp " + std::to_string(timestamp_ns) +
                                 " ns is outside the pcap range (1970 to 2106)");
   }
+  if (const io::IoError error =
+          try_write(udp_payload, original_payload_bytes, timestamp_ns, source, destination)) {
+    io::throw_io_error(error);
+  }
+}
+
+io::IoError PcapWriter::try_write(std::span<const std::uint8_t> udp_payload,
+                                  std::size_t original_payload_bytes, std::int64_t timestamp_ns,
+                                  Endpoint source, Endpoint destination) {
+  // A datagram longer than IPv4 can carry was not received as one: the headers say the most
+  // they can, and the record still holds only what was kept.
+  const std::size_t original =
+      std::clamp(original_payload_bytes, udp_payload.size(), kMaxUdpPayloadBytes);
+  const std::int64_t seconds = timestamp_ns / kNsPerSecond;
   const std::int64_t microseconds = timestamp_ns % kNsPerSecond / kNsPerMicrosecond;
   const bool ipv6 = source.ipv6 || destination.ipv6;
   const std::size_t headers = ipv6 ? kHeadersBytesIpv6 : kHeadersBytes;
@@ -217,55 +245,54 @@ void PcapWriter::write(std::span<const std::uint8_t> udp_payload,
   out.be_u16(udp_length);
   out.be_u16(udp_checksum);
 
-  append(out.written());
-  append(udp_payload);
+  io::IoError error = append(out.written());
+  if (!error) error = append(udp_payload);
+  if (error) return error;
   bytes_ += out.written().size() + udp_payload.size();
   ++records_;
+  return {};
 }
 
-void PcapWriter::write_frame(std::span<const std::uint8_t> wire_header,
-                             std::span<const std::uint8_t> rest, std::size_t wire_length,
-                             std::int64_t timestamp_ns) {
-  const std::int64_t seconds = timestamp_ns / kNsPerSecond;
-  if (timestamp_ns < 0 || seconds > std::int64_t{UINT32_MAX}) {
-    throw std::invalid_argument("timestamp " + std::to_string(timestamp_ns) +
-                                " ns is outside the pcap range (1970 to 2106)");
-  }
+io::IoError PcapWriter::try_write_frame(std::span<const std::uint8_t> wire_header,
+                                        std::span<const std::uint8_t> rest, std::size_t wire_length,
+                                        std::int64_t timestamp_ns) {
   const std::size_t captured = wire_header.size() + rest.size();
   ByteWriter<kPcapRecordHeaderBytes> out;
-  out.native_u32(static_cast<std::uint32_t>(seconds));
+  out.native_u32(static_cast<std::uint32_t>(timestamp_ns / kNsPerSecond));
   out.native_u32(static_cast<std::uint32_t>(timestamp_ns % kNsPerSecond / kNsPerMicrosecond));
   out.native_u32(static_cast<std::uint32_t>(captured));
   out.native_u32(static_cast<std::uint32_t>(std::max(wire_length, captured)));
-  append(out.written());
-  append(wire_header);
-  append(rest);
+  io::IoError error = append(out.written());
+  if (!error) error = append(wire_header);
+  if (!error) error = append(rest);
+  if (error) return error;
   bytes_ += out.written().size() + captured;
   ++records_;
+  return {};
 }
 
-void PcapWriter::flush() {
-  if (!file_.is_open()) io::throw_error(EBADF, "cannot write", path_);
-  flush_buffer(ZstdStreamCompressor::Step::kFlush);
+io::IoError PcapWriter::try_flush() {
+  if (!file_.is_open()) return not_open();
+  if (const io::IoError error = flush_buffer(ZstdStreamCompressor::Step::kFlush)) return error;
   flushed_records_ = records_;
   flushed_bytes_ = bytes();
   flushed_stream_bytes_ = bytes_;
   if (compressor_ != nullptr) flushed_hash_ = compressor_->content_hash();
+  return {};
 }
 
-void PcapWriter::close() {
-  if (!file_.is_open()) return;
+io::IoError PcapWriter::try_close() {
+  if (!file_.is_open()) return {};
   // A failing flush leaves the file open, for abandon() to cut back to whole records.
   if (compressor_ != nullptr) {
-    if (!file_.is_open()) io::throw_error(EBADF, "cannot write", path_);
-    flush_buffer(ZstdStreamCompressor::Step::kEnd);
+    if (const io::IoError error = flush_buffer(ZstdStreamCompressor::Step::kEnd)) return error;
     flushed_records_ = records_;
     flushed_bytes_ = bytes();
     flushed_stream_bytes_ = bytes_;
-  } else {
-    flush();
+  } else if (const io::IoError error = try_flush()) {
+    return error;
   }
-  file_.close();
+  return file_.try_close();
 }
 
 PcapWriter::Dropped PcapWriter::abandon() noexcept {
@@ -275,21 +302,13 @@ PcapWriter::Dropped PcapWriter::abandon() noexcept {
     // What reached the file past the last good flush is a prefix of a record at best. If the
     // cut fails too, the reader stops at the cut record (kTruncated).
     file_.truncate(flushed_bytes_);
-    try {
-      // A flush ended a block: an empty last block ends the frame there, and the checksum of
-      // the stream up to it closes the frame as zstd would have.
-      if (compressor_ != nullptr && flushed_bytes_ > 0) {
-        file_.write(kZstdEmptyLastBlock);
-        file_.write(zstd_content_checksum(flushed_hash_));
-      }
-    } catch (const std::exception&) {
-      // The frame stays unfinished: readers get every flushed record, then report the cut.
-    }
-    try {
-      file_.close();
-    } catch (const std::exception&) {
-      // Nothing more can be done here: the count above already says what was lost.
-    }
+    // A flush ended a block: an empty last block ends the frame there, and the checksum of the
+    // stream up to it closes the frame as zstd would have. (If that fails, the frame stays
+    // unfinished: readers get every flushed record, then report the cut.)
+    if (compressor_ != nullptr && flushed_bytes_ > 0 && !file_.try_write(kZstdEmptyLastBlock))
+      (void)file_.try_write(zstd_content_checksum(flushed_hash_));
+    // Nothing more can be done about a failed close: the count above says what was lost.
+    (void)file_.try_close();
   }
   records_ = flushed_records_;
   bytes_ = flushed_stream_bytes_;

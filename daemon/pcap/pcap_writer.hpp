@@ -14,7 +14,9 @@
 // flushed_bytes() are the file's (compressed) bytes.
 //
 // Errors: every failing write throws std::system_error carrying errno and the file name (the
-// bytes go through daemon/io's OutputFile, so the tests' system-call seam reaches them). Nothing
+// bytes go through daemon/io's OutputFile, so the tests' system-call seam reaches them); the
+// try_ forms return the same as an io::IoError instead (the writer's loop: nothing thrown,
+// nothing allocated). One writer object serves file after file (open()), its buffers kept. Nothing
 // is buffered past flush(); close() (or the destructor, which cannot report a failure) flushes.
 // After a failure (a full disk), abandon() cuts the file back to what the last successful flush()
 // wrote, which always ends on a record boundary, so the file stays readable to its end. Not
@@ -22,11 +24,14 @@
 #pragma once
 
 #include <array>
+#include <cerrno>
 #include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string>
+#include <string_view>
 
+#include "daemon/io/errors.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/zstd_write_stream.hpp"
@@ -63,7 +68,21 @@ class PcapWriter {
   // one writer at a time: the writer begins its frame).
   explicit PcapWriter(const std::string& path, std::span<char> buffer = {},
                       ZstdStreamCompressor* compressor = nullptr);
+  PcapWriter() = default;  // no file: open() one
   ~PcapWriter();
+  // Begins the file `path` as the constructor does (the writer must hold no open file: close()
+  // or abandon() it first), returning the failure; after one no file is open. Once the writer
+  // has held a path as long, allocates nothing.
+  io::IoError open(std::string_view path, std::span<char> buffer, ZstdStreamCompressor* compressor);
+  bool is_open() const noexcept { return file_.is_open(); }
+  // Room for a path of `bytes` made now (at start-up): the first open() allocates nothing.
+  void reserve_path(std::size_t bytes) {
+    path_.reserve(bytes);
+    file_.reserve_path(bytes);
+  }
+  // Whether write() takes a datagram of `payload_bytes` received at `timestamp_ns`: false for
+  // one longer than UDP carries, or a time outside 1970..2106 (std::invalid_argument there).
+  static bool recordable(std::size_t payload_bytes, std::int64_t timestamp_ns) noexcept;
   PcapWriter(const PcapWriter&) = delete;
   PcapWriter& operator=(const PcapWriter&) = delete;
 
@@ -84,11 +103,22 @@ class PcapWriter {
   // Appends one record of a frame as the wire gave it: `wire_header` (Ethernet, any VLAN tags,
   // IP, UDP, exactly as received; the packet_ring receiver keeps them), then `rest`, the bytes
   // after them that were kept (the datagram, and any padding). `wire_length` is the frame's
-  // length on the wire, the record's original length: the record `tcpdump -w` writes.
-  void write_frame(std::span<const std::uint8_t> wire_header, std::span<const std::uint8_t> rest,
-                   std::size_t wire_length, std::int64_t timestamp_ns);
-  void flush();
-  void close();
+  // length on the wire, the record's original length: the record `tcpdump -w` writes. Takes
+  // only a recordable() time (rest.size() is at most a slot's).
+  io::IoError try_write_frame(std::span<const std::uint8_t> wire_header,
+                              std::span<const std::uint8_t> rest, std::size_t wire_length,
+                              std::int64_t timestamp_ns);
+  void flush() {
+    if (const io::IoError error = try_flush()) io::throw_io_error(error);
+  }
+  void close() {
+    if (const io::IoError error = try_close()) io::throw_io_error(error);
+  }
+  // The same, returning the failure. try_write takes only a recordable() datagram.
+  io::IoError try_write(std::span<const std::uint8_t> kept, std::size_t original_payload_bytes,
+                        std::int64_t timestamp_ns, Endpoint source, Endpoint destination);
+  io::IoError try_flush();
+  io::IoError try_close();
 
   // What abandon() dropped: the records (and their pcap bytes) written since the last good flush.
   struct Dropped {
@@ -114,15 +144,16 @@ class PcapWriter {
 
  private:
   // Appends to the buffer, or straight to the file when there is none (or `bytes` is larger).
-  void append(std::span<const std::uint8_t> bytes);
+  io::IoError append(std::span<const std::uint8_t> bytes);
   // The buffered bytes to the file; compressed, with the block or frame ended as `step` says.
-  void flush_buffer(ZstdStreamCompressor::Step step = ZstdStreamCompressor::Step::kContinue);
-  void emit(std::span<const std::uint8_t> bytes, ZstdStreamCompressor::Step step);
+  io::IoError flush_buffer(ZstdStreamCompressor::Step step = ZstdStreamCompressor::Step::kContinue);
+  io::IoError emit(std::span<const std::uint8_t> bytes, ZstdStreamCompressor::Step step);
+  io::IoError not_open() const noexcept { return {EBADF, "cannot write", path_}; }
 
   std::string path_;
   OutputFile file_;
-  ZstdStreamCompressor* compressor_;  // the caller's; null: uncompressed
-  std::span<char> buffer_;            // the caller's; bytes [0, buffered_) await the next flush()
+  ZstdStreamCompressor* compressor_ = nullptr;  // the caller's; null: uncompressed
+  std::span<char> buffer_;  // the caller's; bytes [0, buffered_) await the next flush()
   std::size_t buffered_ = 0;
   std::uint16_t ip_id_ = 0;
   std::uint64_t records_ = 0;
