@@ -131,6 +131,37 @@ std::map<std::string, std::uint64_t> thread_cpu_ticks(int pid) {
   return ticks;
 }
 
+std::map<std::string, std::uint64_t> thread_cpu_ns(int pid, bool* exact) {
+  std::map<std::string, std::uint64_t> ns;
+  bool all_exact = true;
+  std::error_code ec;
+  const auto tasks = std::filesystem::path("/proc") / std::to_string(pid) / "task";
+  for (const auto& task : std::filesystem::directory_iterator(tasks, ec)) {
+    std::istringstream schedstat(read_file(task.path() / "schedstat"));
+    std::uint64_t on_cpu = 0;
+    std::string name = read_file(task.path() / "comm");
+    while (!name.empty() && (name.back() == '\n' || name.back() == ' '))
+      name.pop_back();
+    if (schedstat >> on_cpu) {
+      ns[name] += on_cpu;
+      continue;
+    }
+    all_exact = false;
+    const std::string stat = read_file(task.path() / "stat");
+    const auto close = stat.rfind(')');
+    if (close == std::string::npos || close + 2 > stat.size()) continue;
+    std::istringstream fields(stat.substr(close + 2));
+    std::string field;
+    std::uint64_t ticks = 0;
+    for (int i = 3; i <= 15 && fields >> field; ++i) {
+      if (i == 14 || i == 15) ticks += std::stoull(field);
+    }
+    ns[name] += ticks * 1'000'000'000ULL / static_cast<std::uint64_t>(::sysconf(_SC_CLK_TCK));
+  }
+  if (exact != nullptr) *exact = all_exact;
+  return ns;
+}
+
 bool wait_until(const std::function<bool()>& condition, std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   for (;;) {

@@ -36,24 +36,25 @@ std::string trim(std::string s) {
 
 namespace {
 
-// The daemon's CPU between two thread_cpu_ticks() readings `seconds` apart, in total and per
+// The daemon's CPU between two thread_cpu_ns() readings `seconds` apart, in total and per
 // thread.
 ordered_json cpu_use(const std::map<std::string, std::uint64_t>& before,
                      const std::map<std::string, std::uint64_t>& after, double seconds,
                      std::uint64_t packets) {
-  const double tick = static_cast<double>(::sysconf(_SC_CLK_TCK));
   double total = 0;
   ordered_json per_thread;
-  for (const auto& [name, ticks] : after) {
+  for (const auto& [name, ns] : after) {
     const auto start = before.count(name) ? before.at(name) : 0;
-    const double cpu_s = static_cast<double>(ticks - start) / tick;
+    const double cpu_s = static_cast<double>(ns - start) / 1e9;
     total += cpu_s;
     per_thread[name] = {{"cpu_fraction_of_one_core", cpu_s / seconds},
                         {"cpu_us_per_packet", ratio(cpu_s * 1e6, packets)}};
   }
+  bool exact = true;
+  harness::thread_cpu_ns(::getpid(), &exact);
   return {{"cpu_fraction_of_one_core", total / seconds},
           {"cpu_by_thread", per_thread},
-          {"cpu_resolution_s", 1.0 / tick}};
+          {"cpu_resolution_s", exact ? 1e-9 : 1.0 / static_cast<double>(::sysconf(_SC_CLK_TCK))}};
 }
 
 std::optional<ordered_json> last_health(const fs::path& out) {
@@ -313,15 +314,15 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
   }
   std::optional<TcpdumpBeside> tcpdump;
   if (beside_tcpdump) tcpdump.emplace(dir, port, path_.interface);
-  const auto cpu_before = harness::thread_cpu_ticks(process.pid());
+  const auto cpu_before = harness::thread_cpu_ns(process.pid());
   const auto tcpdump_before =
-      tcpdump ? harness::thread_cpu_ticks(tcpdump->pid()) : std::map<std::string, std::uint64_t>{};
+      tcpdump ? harness::thread_cpu_ns(tcpdump->pid()) : std::map<std::string, std::uint64_t>{};
   const SoftirqMeter softirq;
   const GeneratorResult sent = run_generator(source_, traffic(port, rate, seconds));
   const ordered_json kernel = softirq.finish(sent.seconds);
-  const auto cpu_after = harness::thread_cpu_ticks(process.pid());
+  const auto cpu_after = harness::thread_cpu_ns(process.pid());
   const auto tcpdump_after =
-      tcpdump ? harness::thread_cpu_ticks(tcpdump->pid()) : std::map<std::string, std::uint64_t>{};
+      tcpdump ? harness::thread_cpu_ns(tcpdump->pid()) : std::map<std::string, std::uint64_t>{};
   const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
   // A health record written in the traffic's last half second or after it: its per-second
   // wake-up rates cover the traffic. (The latest record on disk may be older on a slow machine:
@@ -430,9 +431,9 @@ ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
     throw std::runtime_error(fmt::format("'{}' did not bind UDP port {} within 15 s:\n{}",
                                          o_.receiver_command, o_.receiver_port, process.log()));
   }
-  const auto cpu_before = harness::thread_cpu_ticks(process.pid());
+  const auto cpu_before = harness::thread_cpu_ns(process.pid());
   const GeneratorResult sent = run_generator(source_, traffic(o_.receiver_port, rate, seconds));
-  const auto cpu_after = harness::thread_cpu_ticks(process.pid());
+  const auto cpu_after = harness::thread_cpu_ns(process.pid());
   const std::uint64_t rss = harness::process_memory_bytes(process.pid(), "VmHWM");
   // Datagrams still queued in its socket are not lost, only not read yet: the receiver is given
   // up to 5 s to read them before it is asked to stop and say what it received.
