@@ -92,7 +92,7 @@ struct OutputSection {
   int mcap_compression_level = 1;        // zstd level: -7 (fastest) .. 19; 1 = zstd's fast default
                                          // (lz4: below 3 fast, 3..12 high compression)
   std::uint64_t mcap_chunk_bytes = 4u << 20;  // uncompressed messages per chunk, about
-  bool mcap_chunk_crc = false;  // every chunk's CRC-32 (off: zstd chunks use zstd's checksum)
+  bool mcap_chunk_crc = false;  // every chunk's CRC-32 (off: 0, "not computed"; zstd's checksum)
   std::uint64_t mcap_rotate_bytes = 1u << 30;  // start a new file after this many; 0 = never
   std::uint32_t mcap_rotate_seconds = 0;       // start a new file after this long; 0 = never
   std::uint64_t mcap_max_files = 0;            // retention; 0 = unlimited

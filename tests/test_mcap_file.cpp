@@ -282,8 +282,8 @@ TEST_CASE("a damaged chunk ends what is kept: nothing after it is trusted",
 }
 
 TEST_CASE(
-    "one flipped bit in a chunk is found for every compression, mcap_chunk_crc on or off (zstd's "
-    "checksum then)",
+    "one flipped bit in a chunk: found by the CRC with mcap_chunk_crc on, by zstd's checksum with "
+    "it off (the default: every chunk's CRC 0)",
     "[mcap][recovery][threads]") {
   const auto compression = GENERATE(mcap::ChunkCompression::kLz4, mcap::ChunkCompression::kZstd,
                                     mcap::ChunkCompression::kNone);
@@ -298,8 +298,7 @@ TEST_CASE(
   std::string bytes = read_all(whole);
   const std::span<const std::uint8_t> file(reinterpret_cast<const std::uint8_t*>(bytes.data()),
                                            bytes.size());
-  // The chunks' CRCs as asked: computed with the key on, and always for lz4 and uncompressed
-  // chunks (their cheapest check); 0 ("not computed") for zstd's otherwise.
+  // The chunks' CRCs as asked: computed with the key on, 0 ("not computed") with it off.
   std::vector<std::pair<std::size_t, std::size_t>> stored;  // each chunk's records: at, size
   for (std::size_t at = 8; at < file.size();) {
     const auto record = mcap::record_at(file.subspan(at));
@@ -307,8 +306,7 @@ TEST_CASE(
     if (record->op == mcap::Op::kChunk) {
       const auto chunk = mcap::parse_chunk(record->content);
       REQUIRE(chunk);
-      CHECK((chunk->uncompressed_crc != 0) ==
-            (chunk_crc || compression != mcap::ChunkCompression::kZstd));
+      CHECK((chunk->uncompressed_crc != 0) == chunk_crc);
       stored.emplace_back(static_cast<std::size_t>(chunk->records.data() - file.data()),
                           chunk->records.size());
     }
@@ -323,9 +321,13 @@ TEST_CASE(
   std::ofstream(part, std::ios::binary) << bytes;
   const McapRecovery r = finish_interrupted_mcap(part.string());
   CHECK(r.ours);
-  CHECK(r.messages > 0);         // the chunks before it are kept
-  CHECK(r.messages < messages);  // the damaged one (and what follows) is not
-  CHECK(r.kept_bytes <= at);
+  CHECK(r.messages > 0);  // the chunks before it are kept
+  // lz4 and uncompressed chunks without a CRC have no checksum: a flipped literal is not seen
+  // (docs/mcap.md says so); every other case finds it.
+  if (chunk_crc || compression == mcap::ChunkCompression::kZstd) {
+    CHECK(r.messages < messages);  // the damaged one (and what follows) is not
+    CHECK(r.kept_bytes <= at);
+  }
 }
 
 TEST_CASE("McapFile::abandon cuts back to the last whole chunk", "[mcap][recovery][threads]") {

@@ -124,8 +124,11 @@ std::vector<Chunk> mcap_chunks(const std::string& bytes) {
 
 fs::path to_mcap(const fs::path& capture, const fs::path& dir, const std::string& compression) {
   // Small chunks, so that a damaged one is a small part of the file and several follow it.
+  // zstd as by default (no chunk CRC: zstd's checksum finds a flipped bit); lz4 and none have no
+  // checksum of their own, so their chunks carry the CRC (output.mcap_chunk_crc, docs/mcap.md).
   fs::create_directories(dir);
-  std::ofstream(dir / "chunks.toml") << "[output]\nmcap_chunk_bytes = 262144\n";
+  std::ofstream(dir / "chunks.toml") << "[output]\nmcap_chunk_bytes = 262144\n"
+                                     << (compression == "zstd" ? "" : "mcap_chunk_crc = true\n");
   const auto r = test::run_command(test::pandarcapd_command() + " -c " +
                                    quoted(dir / "chunks.toml") + " --replay " + quoted(capture) +
                                    " --mcap-only --mcap-packets --mcap-compression " + compression +

@@ -35,14 +35,14 @@ ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
                              std::size_t index_entries, mcap::ChunkCompression compression,
                              int level, bool chunk_crc)
     : compression_(compression),
-      chunk_crc_(chunk_crc || compression != mcap::ChunkCompression::kZstd),
+      chunk_crc_(chunk_crc),
       // Room for every buffer and the stop marker.
       to_compress_(std::bit_ceil(buffers + 1)),
       done_(std::bit_ceil(buffers + 1)) {
   if (buffers == 0) throw std::invalid_argument("an MCAP chunk pipeline needs a buffer");
   if (compression != mcap::ChunkCompression::kNone) {
     // Without the chunk's CRC, zstd's frame checksum finds damage (XXH64: a third of CRC-32's
-    // cost). lz4 keeps the CRC: its content checksum (XXH32) costs 3.7 times as much.
+    // cost). lz4's content checksum (XXH32) would cost 3.7 times the CRC: not asked for.
     compressor_ =
         std::make_unique<mcap::ChunkCompressor>(compression, record_capacity, level, !chunk_crc_);
   }
