@@ -380,7 +380,7 @@ TEST_CASE("packet_ring: a burst the ring cannot hold is counted as kernel drops,
 }
 
 TEST_CASE("packet_ring: refused with the reason, before any thread: privilege, interface, config",
-          "[packet_ring][daemon][config]") {
+          "[packet_ring][daemon]") {
   test::ScratchDir dir("packet-ring-refused");
   fs::permissions(dir.path(), fs::perms::all);
   const std::string daemon = test::quoted(test::binary("pandarcapd"));
@@ -527,7 +527,7 @@ TEST_CASE(
 }
 
 TEST_CASE(
-    "packet_ring: the data port held by another socket: on one address, refused naming it; on "
+    "packet_ring: the data port held by another socket: on one address, refused naming it, on "
     "0.0.0.0, it answers for the host and nothing goes back",
     "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
