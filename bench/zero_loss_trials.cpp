@@ -78,6 +78,10 @@ std::uint64_t counter(const ordered_json& health, const char* name) {
 // The budget the daemon says it runs with ("latency budget 5 ms", or "latency budget 0").
 ordered_json effective_budget_ms(const std::string& log) {
   if (log.find("latency budget 0)") != std::string::npos) return 0;
+  // The packet ring's: "... handed over when full or after N ms" (its block retire timer).
+  if (const auto ring = log.find("handed over when full or after "); ring != std::string::npos) {
+    return std::strtod(log.c_str() + ring + 31, nullptr);
+  }
   const auto at = log.find("latency budget ");
   if (at == std::string::npos) return nullptr;
   return std::strtod(log.c_str() + at + 15, nullptr);

@@ -94,7 +94,7 @@ cpu_on_vs_off, written_mb_per_second_off, written_mb_per_second_on, mcap_mb_per_
 extra_cpu_us_per_extra_mb, writer_cpu_us_per_written_mb_off, zero_loss_on, peak_rss_bytes_off,
 peak_rss_bytes_on, daemon_zero_loss_pps_off, daemon_zero_loss_pps_on, zero_loss_pps_on_vs_off}
 (with --compare-mcap), tcpdump_comparison {command, receiver, daemon_cpu_fraction_of_one_core,
-tcpdump_cpu_fraction_of_one_core, daemon_vs_tcpdump_cpu, rounds, packet_ring or socket {the same,
+tcpdump_cpu_fraction_of_one_core, daemon_vs_tcpdump_cpu, rounds_counted (those whose generator reached 95 % of the rate), rounds, packet_ring or socket {the same,
 with --compare-receivers}} (with --compare-tcpdump), goals, environment, settings {receiver,
 compared_receiver, path (loopback, veth or interface), interface, destination, sender_namespace,
 kernel_delivery, ...}, trials.

@@ -293,7 +293,7 @@ int run(const CommandLine& command_line) {
     fmt::print("{}", calibration.to_csv());
     return 0;
   }
-  refuse_root_unless_allowed(options);
+  refuse_root_unless_allowed(options, config);
   log_sensor(sensor, config, options.source);
   const DecoderTarget decoder = choose_decoder(config);
 

@@ -101,7 +101,7 @@ SensorAtStart learn_sensor(const DaemonConfig& config, const RunSource& source,
 
 // Checked before any socket or output file is opened. Reading the configuration and printing
 // tables is harmless as root; parsing what arrives from the network is not.
-void refuse_root_unless_allowed(const CommandLine& options);
+void refuse_root_unless_allowed(const CommandLine& options, const DaemonConfig& config);
 
 // What the sensor said at start, and where it disagrees with what this daemon expects.
 void log_sensor(const SensorAtStart& sensor, const DaemonConfig& config, const RunSource& source);

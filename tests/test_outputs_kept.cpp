@@ -167,8 +167,12 @@ TEST_CASE(
   // 5 frames kept of ~50 written: from the first second on, every frame in removes one. The
   // recordings (~2.3 MB/s) rotate every 256 KiB, several times a second, and 2 are kept: each
   // rotation after the warm-up opens a file and removes the oldest with its sidecars.
+  // MCAP too, in 256 KiB chunks and files, 2 kept: each chunk closes a file (its size read, its
+  // name logged on SIGHUP) and retention removes one.
   std::ofstream(config) << "[output]\nframes_max_files = 5\npcap_max_files = 2\n"
-                           "pcap_rotate_bytes = 262144\n";
+                           "pcap_rotate_bytes = 262144\nmcap = true\nmcap_packets = true\n"
+                           "mcap_chunk_bytes = 262144\nmcap_rotate_bytes = 262144\n"
+                           "mcap_max_files = 2\n";
   const auto r = test::run_command(pandarcapd() + " -c " + quoted(config) + " --output-dir " +
                                    quoted(out) + " --simulate --duration 5 2>&1");
   INFO(r.out);
@@ -180,6 +184,8 @@ TEST_CASE(
   // Rotation and retention really happened (many files written, 2 kept): ~11 MB in 256 KiB files.
   CHECK(health_counter(h, "pcap_bytes_written") >= 8 * 262144);
   CHECK(files_ending(out / "raw", ".pcap").size() == 2);
+  CHECK(files_ending(out / "mcap", ".mcap").size() == 2);
+  CHECK(health_counter(h, "mcap_bytes_written") >= 4 * 262144);
   CHECK(h.at("counters").at("write_errors") == 0);
   for (const char* thread : {"receive", "decode", "writer"}) {
     INFO(thread);

@@ -208,7 +208,7 @@ struct RingDaemon {
     std::ofstream(config) << "[sensor]\nsensor_ip = \"" << veth.far_ip() << "\"\n" << extra_toml;
     process.emplace(
         test::binary("pandarcapd"),
-        std::vector<std::string>{"--allow-root", "-c", config.string(), "--receiver", "packet_ring",
+        std::vector<std::string>{"-c", config.string(), "--receiver", "packet_ring",
                                  "--interface", veth.near(), "--port", std::to_string(port),
                                  "--output-dir", out.string(), "--max-clock-offset", "0"},
         dir / "daemon.log");

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -283,7 +284,11 @@ void McapRecorder::place_finished(std::uint64_t messages) {
     ::unlink(part_path_.c_str());  // nothing worth keeping
     return;
   }
-  const std::uint64_t bytes = std::filesystem::file_size(part_path_);
+  // stat(2) on the held name: std::filesystem::file_size would build a path (allocations on the
+  // writer's loop at every rotation).
+  struct stat status {};
+  const std::uint64_t bytes =
+      ::stat(part_path_.c_str(), &status) == 0 ? static_cast<std::uint64_t>(status.st_size) : 0;
   messages_closed_ += messages;
   bytes_closed_ += bytes;
   finisher_.place(FinishOwner::kMcap, part_path_, final_path_, {.bytes = bytes, .items = messages});
@@ -313,7 +318,8 @@ void McapRecorder::finished(const FinishJob& job) {
 
 void McapRecorder::rotate() {
   if (file_ && file_->is_open()) {
-    spdlog::info("SIGHUP: closing {}", std::filesystem::path(final_path_).filename().string());
+    const std::string_view name(final_path_);
+    spdlog::info("SIGHUP: closing {}", name.substr(name.rfind('/') + 1));
   }
   close();
 }

@@ -12,7 +12,7 @@
 // second copy) or that were meant for another host (a promiscuous interface) are skipped, as the
 // kernel's UDP socket would never have received them.
 //
-// The ring: udp_socket_receive_buffer_size_bytes of 128 KiB blocks (8 to 8192: 1 MiB to 1 GiB,
+// The ring: udp_socket_receive_buffer_size_bytes of 32 KiB blocks (32 to 32768: 1 MiB to 1 GiB,
 // all of it locked kernel memory). The kernel hands a block over when it is full or when its
 // retire timer runs out: the timer is the latency budget (latency.budget_ms, 1 to 100 ms: the
 // kernel's unit, and a stop waits for it), so a packet waits in the ring no longer than that.
@@ -75,9 +75,13 @@ struct NoSuchInterface : std::runtime_error {
 
 class PacketRingReceiver {
  public:
-  static constexpr std::uint32_t kBlockBytes = 128 * 1024;
-  static constexpr std::uint32_t kMinBlocks = 8;
-  static constexpr std::uint32_t kMaxBlocks = 8192;   // 1 GiB
+  // Small blocks, many of them: a block the retire timer hands over holds what arrived in one
+  // latency budget (18 packets of one sensor in 5 ms), so the ring's depth in time is its block
+  // count times the budget (256 x 5 ms = 1.3 s for 8 MiB), as long as that is shorter than what
+  // the bytes hold; a jumbo frame (9 kB) still fits a block.
+  static constexpr std::uint32_t kBlockBytes = 32 * 1024;
+  static constexpr std::uint32_t kMinBlocks = 32;     // 1 MiB
+  static constexpr std::uint32_t kMaxBlocks = 32768;  // 1 GiB
   static constexpr std::int64_t kMaxRetireMs = 100;   // a stop waits up to 3 of these
   static constexpr std::uint32_t kFrameBytes = 2048;  // the kernel's bookkeeping unit
 
