@@ -200,6 +200,17 @@ class IcmpWatch {
   std::map<std::uint16_t, int> counts_;
 };
 
+// What each test here starts from: a veth pair, a scratch folder, a free port.
+struct Rig {
+  Rig(const std::string& link_tag, const std::string& dir_tag)
+      : veth(link_tag), dir(dir_tag), port(harness::free_udp_port()) {
+    REQUIRE(veth.ok());
+  }
+  test::VethPair veth;
+  test::ScratchDir dir;
+  std::uint16_t port;
+};
+
 struct RingDaemon {
   RingDaemon(const test::ScratchDir& dir, const test::VethPair& veth, std::uint16_t port,
              const std::string& extra_toml = "")
@@ -208,9 +219,9 @@ struct RingDaemon {
     std::ofstream(config) << "[sensor]\nsensor_ip = \"" << veth.far_ip() << "\"\n" << extra_toml;
     process.emplace(
         test::binary("pandarcapd"),
-        std::vector<std::string>{"-c", config.string(), "--receiver", "packet_ring",
-                                 "--interface", veth.near(), "--port", std::to_string(port),
-                                 "--output-dir", out.string(), "--max-clock-offset", "0"},
+        std::vector<std::string>{"-c", config.string(), "--receiver", "packet_ring", "--interface",
+                                 veth.near(), "--port", std::to_string(port), "--output-dir",
+                                 out.string(), "--max-clock-offset", "0"},
         dir / "daemon.log");
     const bool ready =
         wait_until([&] { return process->log().find("ready:") != std::string::npos; }, 20s);
@@ -241,10 +252,8 @@ struct RingDaemon {
 TEST_CASE("packet_ring on a veth pair: filter, VLAN tag, second host, tcpdump's bytes, no ICMP",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
-  test::VethPair veth("pr");
-  REQUIRE(veth.ok());
-  test::ScratchDir dir("packet-ring");
-  const std::uint16_t port = harness::free_udp_port();
+  Rig rig("pr", "packet-ring");
+  auto& [veth, dir, port] = rig;
 
   // Negative control: with nothing on the port, the near end answers with ICMP.
   {
@@ -346,11 +355,9 @@ namespace pandarcap {
 TEST_CASE("packet_ring: a burst the ring cannot hold is counted as kernel drops, exactly",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
-  test::VethPair veth("pb");
-  REQUIRE(veth.ok());
-  test::ScratchDir dir("packet-ring-burst");
-  const std::uint16_t port = harness::free_udp_port();
-  // The smallest ring: 8 blocks of 128 KiB, about 750 of these frames.
+  Rig rig("pb", "packet-ring-burst");
+  auto& [veth, dir, port] = rig;
+  // The smallest ring: 32 blocks of 32 KiB, about 700 of these frames.
   RingDaemon daemon(dir, veth, port, "udp_socket_receive_buffer_size_bytes = 1048576\n");
   // The receive thread stopped (the whole daemon, SIGSTOP), the kernel fills the ring and then
   // has nowhere to put the rest of a 4000-packet burst.
@@ -474,10 +481,8 @@ TEST_CASE(
     "receiving again",
     "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
-  test::VethPair veth("pd");
-  REQUIRE(veth.ok());
-  test::ScratchDir dir("packet-ring-down");
-  const std::uint16_t port = harness::free_udp_port();
+  Rig rig("pd", "packet-ring-down");
+  auto& [veth, dir, port] = rig;
   RingDaemon daemon(dir, veth, port);
   const std::string link = "ip link set " + veth.near() + " ";
   REQUIRE(test::run_command(link + "down").exit_code == 0);
@@ -585,14 +590,11 @@ TEST_CASE(
 TEST_CASE("packet_ring: multicast_ip is joined on sensor.interface",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
-  test::VethPair veth("pm");
-  REQUIRE(veth.ok());
-  test::ScratchDir dir("packet-ring-multicast");
-  const std::uint16_t port = harness::free_udp_port();
-  // The receiver knows the interface; the join (ip_mreq, imr_interface INADDR_ANY) does not use
-  // it, so a NIC with a multicast filter, or an IGMP-snooping switch, never passes the group's
-  // frames to it (the docs say "it also joins multicast_ip, so the interface takes the group's
-  // frames"). Without a route for the group the join fails and the daemon does not start.
+  Rig rig("pm", "packet-ring-multicast");
+  auto& [veth, dir, port] = rig;
+  // Joined where the routing table points (the default route's interface), a NIC with a
+  // multicast filter, or an IGMP-snooping switch, would never pass the group's frames to
+  // sensor.interface; without a route for the group the join would fail at start.
   RingDaemon daemon(dir, veth, port, "multicast_ip = \"239.40.1.2\"\n");
   const auto groups = test::run_command("ip maddr show dev " + veth.near());
   INFO(groups.out);
@@ -606,10 +608,8 @@ TEST_CASE(
     "tcpdump -w records them, and only the bytes that arrived are counted",
     "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
-  test::VethPair veth("pp");
-  REQUIRE(veth.ok());
-  test::ScratchDir dir("packet-ring-padding");
-  const std::uint16_t port = harness::free_udp_port();
+  Rig rig("pp", "packet-ring-padding");
+  auto& [veth, dir, port] = rig;
   ChildProcess tcpdump("/usr/bin/tcpdump",
                        {"-i", veth.near(), "-n", "-U", "-w", (dir / "tcpdump.pcap").string(),
                         "udp dst port " + std::to_string(port)},
