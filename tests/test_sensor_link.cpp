@@ -269,8 +269,13 @@ TEST_CASE("PTP not locked degrades the state, a status gone stale too", "[ptc][d
   CHECK(send_until(daemon, sent, tracking));
   const nlohmann::json tracked = test::last_health_record(daemon.out);
   CHECK(tracked["sensor_status"]["ptp_offset_seconds"] == Approx(-2.5e-6));
-  CHECK_THAT(harness::read_file(daemon.out / "health" / "pandarcap.prom"),
-             Catch::Contains("state=\"tracking\"} 1"));
+  // The .prom is put in place by the finisher thread, after the writer's JSON line.
+  CHECK(harness::wait_until(
+      [&] {
+        return harness::read_file(daemon.out / "health" / "pandarcap.prom")
+                   .find("state=\"tracking\"} 1") != std::string::npos;
+      },
+      std::chrono::seconds(5)));
 
   sensor->set_ptp_state(static_cast<std::uint8_t>(ptc::PtpState::kLocked));
   const auto locked = [](const nlohmann::json& r) {
@@ -289,7 +294,16 @@ TEST_CASE("PTP not locked degrades the state, a status gone stale too", "[ptc][d
   // A stale status's values are not reported as if fresh.
   CHECK_FALSE(last["sensor_status"].contains("ptp_state"));
   CHECK_FALSE(last["sensor_status"].contains("uptime_seconds"));
-  CHECK_THAT(harness::read_file(daemon.out / "health" / "pandarcap.prom"),
+  // The .prom of the same second is put in place by the finisher thread, after the JSON line
+  // the writer appends: waited for, not assumed.
+  const std::filesystem::path prom = daemon.out / "health" / "pandarcap.prom";
+  harness::wait_until(
+      [&] {
+        return harness::read_file(prom).find(
+                   "pandarcap_sensor_status_stale{sensor=\"pandar40p\"} 1") != std::string::npos;
+      },
+      std::chrono::seconds(5));
+  CHECK_THAT(harness::read_file(prom),
              Catch::Contains("pandarcap_sensor_status_stale{sensor=\"pandar40p\"} 1") &&
                  !Catch::Contains("pandarcap_sensor_uptime_seconds"));
   CHECK_THAT(daemon.process->log(), Catch::Contains("sensor status: PTC 127.0.0.1:"));
