@@ -42,7 +42,8 @@ std::vector<std::uint8_t> frame(const FrameSpec& s) {
   f.push_back(64);
   f.push_back(s.protocol);
   be16(0);
-  for (int b : {10, 0, 0, 2, 10, 0, 0, 1}) f.push_back(static_cast<std::uint8_t>(b));
+  for (int b : {10, 0, 0, 2, 10, 0, 0, 1})
+    f.push_back(static_cast<std::uint8_t>(b));
   f.insert(f.end(), s.options, 1);
   be16(10000);
   be16(2368);
