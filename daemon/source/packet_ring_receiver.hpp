@@ -101,7 +101,6 @@ class PacketRingReceiver {
            std::atomic<std::uint64_t>& heartbeat);
 
  private:
-  struct Frame;  // one packet's fields as read from the block
   void open_guard(const UdpReceiverOptions& options);
   void open_ring(const UdpReceiverOptions& options);
   // The block the kernel handed over (TP_STATUS_USER), or null.
