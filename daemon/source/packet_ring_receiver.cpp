@@ -14,8 +14,6 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
-#include <fstream>
-#include <iterator>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -25,6 +23,7 @@
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
+#include "daemon/io/text_file.hpp"
 #include "daemon/source/udp_port_owner.hpp"
 
 namespace pandarcap {
@@ -78,9 +77,9 @@ void attach_port_filter(int fd, std::uint16_t port) {
 
 // Whether a socket on this host holds UDP `port` on 0.0.0.0 (/proc/net/udp).
 bool wildcard_holder(std::uint16_t port) {
-  std::ifstream in("/proc/net/udp");
-  const std::string text((std::istreambuf_iterator<char>(in)), {});
-  for (const UdpSocketEntry& entry : parse_proc_net_udp(text)) {
+  // Read as udp_port_owner reads it: bounded (one line of ~130 bytes a socket).
+  const TextFile table = read_text_file("/proc/net/udp", 16u << 20);
+  for (const UdpSocketEntry& entry : parse_proc_net_udp(table.text)) {
     if (entry.port == port && entry.address == 0) return true;
   }
   return false;
