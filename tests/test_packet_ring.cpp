@@ -145,6 +145,17 @@ std::vector<std::uint8_t> tagged_frame(const test::VethPair& veth, std::uint16_t
   return f;
 }
 
+// A packet socket on the far end (the caller is in its namespace), for frames made by hand.
+io::UniqueFd frame_sender(const test::VethPair& veth) {
+  io::UniqueFd raw(::socket(AF_PACKET, SOCK_RAW, 0));
+  REQUIRE(raw);
+  sockaddr_ll link{};
+  link.sll_family = AF_PACKET;
+  link.sll_ifindex = static_cast<int>(::if_nametoindex(veth.far().c_str()));
+  REQUIRE(::bind(raw.get(), reinterpret_cast<sockaddr*>(&link), sizeof link) == 0);
+  return raw;
+}
+
 // A valid Pandar40P datagram (the simulated sensor's first packet) with UDP sequence `sequence`.
 std::vector<std::uint8_t> sensor_datagram(std::uint32_t sequence) {
   const auto source = bench::TrafficSource::synthetic(SyntheticSensorConfig{});
@@ -285,12 +296,7 @@ TEST_CASE("packet_ring on a veth pair: filter, VLAN tag, second host, tcpdump's 
     REQUIRE(sent.send_errors == 0);
 
     // VLAN 7, priority 3, through a packet socket (the tag in the frame, as a switch trunk sends).
-    io::UniqueFd raw(::socket(AF_PACKET, SOCK_RAW, 0));
-    REQUIRE(raw);
-    sockaddr_ll link{};
-    link.sll_family = AF_PACKET;
-    link.sll_ifindex = static_cast<int>(::if_nametoindex(veth.far().c_str()));
-    REQUIRE(::bind(raw.get(), reinterpret_cast<sockaddr*>(&link), sizeof link) == 0);
+    const io::UniqueFd raw = frame_sender(veth);
     for (int i = 0; i < kTagged; ++i) {
       const auto frame = tagged_frame(veth, port, 0x6007,
                                       sensor_datagram(static_cast<std::uint32_t>(sent.sent + i)),
@@ -618,12 +624,7 @@ TEST_CASE(
   RingDaemon daemon(dir, veth, port);
   {
     test::FarNamespace far(veth.ns());
-    io::UniqueFd raw(::socket(AF_PACKET, SOCK_RAW, 0));
-    REQUIRE(raw);
-    sockaddr_ll link{};
-    link.sll_family = AF_PACKET;
-    link.sll_ifindex = static_cast<int>(::if_nametoindex(veth.far().c_str()));
-    REQUIRE(::bind(raw.get(), reinterpret_cast<sockaddr*>(&link), sizeof link) == 0);
+    const io::UniqueFd raw = frame_sender(veth);
     // A 4-byte datagram in a frame padded to Ethernet's 64 bytes (60 + the tag), as every NIC
     // sends a short frame: tcpdump records the padding, the frame's real length.
     std::vector<std::uint8_t> padded = tagged_frame(veth, port, 7, {1, 2, 3, 4}, 1);
