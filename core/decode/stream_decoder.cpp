@@ -35,20 +35,27 @@ FrameAssemblerConfig assembler_config(const Decoder& decoder, double cut_angle_d
 // for 1262 bytes). Never 0, which marks an empty place in the window.
 std::uint64_t fingerprint(std::span<const std::uint8_t> payload) noexcept {
   constexpr std::uint64_t kMultiplier = 0x9E3779B97F4A7C15ULL;
-  std::uint64_t lane[4] = {payload.size(), 0x243F6A8885A308D3ULL, 0x13198A2E03707344ULL,
-                           0xA4093822299F31D0ULL};
+  // Four named lanes, not an array: an array lives on the stack, and its first vector load of
+  // four scalar stores stalls (a store-forwarding failure) on every packet.
+  std::uint64_t l0 = payload.size(), l1 = 0x243F6A8885A308D3ULL, l2 = 0x13198A2E03707344ULL,
+                l3 = 0xA4093822299F31D0ULL;
+  const auto mix = [](std::uint64_t lane, const std::uint8_t* at) noexcept {
+    std::uint64_t word;
+    std::memcpy(&word, at, 8);
+    lane = (lane ^ word) * kMultiplier;
+    return lane ^ (lane >> 29);
+  };
   std::size_t i = 0;
   for (; i + 32 <= payload.size(); i += 32) {
-    for (int k = 0; k < 4; ++k) {
-      std::uint64_t word;
-      std::memcpy(&word, payload.data() + i + 8 * k, 8);
-      lane[k] = (lane[k] ^ word) * kMultiplier;
-      lane[k] ^= lane[k] >> 29;
-    }
+    l0 = mix(l0, payload.data() + i);
+    l1 = mix(l1, payload.data() + i + 8);
+    l2 = mix(l2, payload.data() + i + 16);
+    l3 = mix(l3, payload.data() + i + 24);
   }
+  std::uint64_t* lanes[4] = {&l0, &l1, &l2, &l3};
   for (; i < payload.size(); ++i)
-    lane[i % 4] = (lane[i % 4] ^ payload[i]) * kMultiplier;
-  std::uint64_t h = lane[0] ^ (lane[1] * 3) ^ (lane[2] * 5) ^ (lane[3] * 7);
+    *lanes[i % 4] = (*lanes[i % 4] ^ payload[i]) * kMultiplier;
+  std::uint64_t h = l0 ^ (l1 * 3) ^ (l2 * 5) ^ (l3 * 7);
   h ^= h >> 31;
   return h == 0 ? 1 : h;
 }
