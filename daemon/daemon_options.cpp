@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string_view>
+#include <type_traits>
 
 #include "config/command_line.hpp"
 #include "config/config_loader.hpp"
@@ -16,6 +17,7 @@
 #include "daemon/live/live_publish.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/pcap/xxh64.hpp"
+#include "daemon/pipeline_types.hpp"
 
 namespace pandarcap {
 
@@ -204,9 +206,21 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   ro.sensor_ip = config.sensor.sensor_ip;
   ro.batch = config.ring.receive_batch;
   ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
+  // The budget is the frames' (users wait for frames). A recording alone waits for nothing
+  // sooner than the decoder's flush of its packets to the writer: waking more often than that
+  // would cost wake-ups and buy nothing. A budget of 0 (a wake per datagram) is asked for as such.
+  if (!points_decoded(config) && ro.latency_budget_ns > 0) {
+    ro.latency_budget_ns = std::max(ro.latency_budget_ns, kRecordingFlushNs);
+  }
   ro.packet_ring = config.input.receiver == "packet_ring";
   // The simulated sensor sends over loopback, whatever interface the configuration names.
   ro.interface = simulate ? "lo" : config.sensor.interface;
+  // The configured model's dual-return rate with its frames' headers; a 40P's while "auto".
+  ro.expected_bytes_per_second = with_model(
+      source.model.value_or(SensorModelId::kPandar40P), []<class M>(std::type_identity<M>) {
+        return static_cast<std::uint64_t>(M::packets_per_second(2) *
+                                          static_cast<double>(M::kMaxDatagramBytes + 42));
+      });
   return ro;
 }
 

@@ -137,6 +137,8 @@ struct DecodeLive {
 // The receive, decode and writer loops count heap allocations (see allocation_counter.hpp) from
 // this long after they start: the first frame, file and health record are behind them by then.
 inline constexpr std::int64_t kWarmUpNs = 2'000'000'000;
+// The decoder hands its packets to the writer (pcap, MCAP) at least this often.
+inline constexpr std::int64_t kRecordingFlushNs = 100'000'000;
 
 struct ReceiveCounters {
   std::atomic<std::uint64_t> datagrams{0};

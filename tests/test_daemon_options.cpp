@@ -1,6 +1,7 @@
 // The daemon's start-up in pieces: what the configuration means for each thread
 // (daemon/daemon_options.hpp), command-line keys checked as the file checks them
 // (set_config_value), and the threads stopped in the reverse of their start (PipelineThreads).
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cstdlib>
@@ -14,6 +15,7 @@
 #include "config/config_loader.hpp"
 #include "daemon/daemon_options.hpp"
 #include "daemon/pipeline.hpp"
+#include "daemon/pipeline_types.hpp"
 
 using namespace pandarcap;
 
@@ -116,6 +118,10 @@ TEST_CASE("the simulated sensor's socket is loopback on a free port unless --por
   CHECK(live.multicast_ip == "239.1.1.1");
   CHECK(live.port == 2370);
   CHECK(live.latency_budget_ns == 7'000'000);
+  // A 40P in dual return (the model "auto" starts as): what sizes the packet ring's blocks.
+  // (a firing every 55.56 µs: 3599.7 packets a second).
+  CHECK(static_cast<double>(live.expected_bytes_per_second) ==
+        Approx(3600.0 * (1266 + 42)).epsilon(0.001));
   RunSource simulated;
   simulated.kind = RunSource::Kind::kSimulated;
   UdpReceiverOptions sim = receiver_options(config, simulated);
@@ -187,4 +193,40 @@ TEST_CASE("a pipeline thread is named and placed before its start returns", "[da
   CHECK(placed.load());  // no wait here: start() itself waited for the setup
   threads.stop_all();
   threads.stop_all();  // idempotent
+}
+
+TEST_CASE("the latency budget is the frames': a recording alone wakes at its own flush period",
+          "[daemon][options]") {
+  for (const std::uint32_t budget_ms : {0u, 5u, 100u, 400u}) {
+    DaemonConfig config;
+    config.latency.budget_ms = budget_ms;
+    const std::int64_t budget_ns = std::int64_t{budget_ms} * 1'000'000;
+    INFO("budget " << budget_ms << " ms");
+    // Anything that waits for frames keeps the budget as configured.
+    CHECK(receiver_options(config, RunSource{}).latency_budget_ns == budget_ns);
+    config.output.frames = false;
+    config.output.mcap = true;
+    CHECK(receiver_options(config, RunSource{}).latency_budget_ns == budget_ns);
+    config.output.mcap = false;
+    config.live.foxglove = true;
+    CHECK(receiver_options(config, RunSource{}).latency_budget_ns == budget_ns);
+    // Nothing does: the decoder's flush of the recording (100 ms) is the shortest wait that
+    // buys anything; a longer budget stays, and 0 (a wake per datagram) is kept as asked.
+    config.live.foxglove = false;
+    CHECK(receiver_options(config, RunSource{}).latency_budget_ns ==
+          (budget_ns == 0 ? 0 : std::max(budget_ns, kRecordingFlushNs)));
+  }
+}
+
+TEST_CASE("the packet ring's expected rate follows the configured model", "[daemon][options]") {
+  DaemonConfig config;
+  RunSource source;
+  source.model = SensorModelId::kPandarQT128;
+  const std::uint64_t qt = receiver_options(config, source).expected_bytes_per_second;
+  source.model = SensorModelId::kPandar40P;
+  const std::uint64_t p40 = receiver_options(config, source).expected_bytes_per_second;
+  CHECK(static_cast<double>(p40) == Approx(3600.0 * (1266 + 42)).epsilon(0.001));
+  // The QT128 sends 9000 packets a second in dual return, each smaller than a 40P's.
+  CHECK(qt > p40);
+  CHECK(qt < 9000 * (1266 + 42));
 }

@@ -14,6 +14,8 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <bit>
 #include <catch2/catch.hpp>
 #include <cstdlib>
 #include <cstring>
@@ -28,6 +30,7 @@
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
 #include "daemon/io/unique_fd.hpp"
+#include "daemon/source/packet_ring_receiver.hpp"
 #include "support/test_support.hpp"
 #include "support/veth_pair.hpp"
 
@@ -363,7 +366,7 @@ TEST_CASE("packet_ring: a burst the ring cannot hold is counted as kernel drops,
   if (!can_make_links()) return;
   Rig rig("pb", "packet-ring-burst");
   auto& [veth, dir, port] = rig;
-  // The smallest ring: 32 blocks of 32 KiB, about 700 of these frames.
+  // The smallest ring, 1 MiB: about 700 of these frames.
   RingDaemon daemon(dir, veth, port, "udp_socket_receive_buffer_size_bytes = 1048576\n");
   // The receive thread stopped (the whole daemon, SIGSTOP), the kernel fills the ring and then
   // has nowhere to put the rest of a 4000-packet burst.
@@ -656,6 +659,42 @@ TEST_CASE(
                    << " bytes, tcpdump's " << theirs[i].bytes.size() << " of "
                    << theirs[i].original);
     CHECK(ours[i] == theirs[i]);
+  }
+}
+
+}  // namespace pandarcap
+
+namespace pandarcap {
+
+TEST_CASE("packet_ring: a block holds one retire period of the sensor, within the ring's bounds",
+          "[packet_ring]") {
+  using R = PacketRingReceiver;
+  constexpr std::uint64_t k40p = 3600 * (1266 + 42);  // a 40P in dual return, bytes a second
+  // The default budget, 5 ms: 23 kB, the smallest block.
+  CHECK(R::block_bytes_for(8u << 20, k40p, 5) == 32 * 1024);
+  // A recording alone, 100 ms: 471 kB, so the timer and not the size hands blocks over.
+  CHECK(R::block_bytes_for(8u << 20, k40p, 100) == 512 * 1024);
+  for (const std::uint64_t ring :
+       {std::uint64_t{1} << 16, std::uint64_t{1} << 20, std::uint64_t{8} << 20,
+        std::uint64_t{1} << 30, std::uint64_t{4} << 30}) {
+    for (const std::uint64_t rate : {std::uint64_t{0}, std::uint64_t{1000}, k40p,
+                                     std::uint64_t{100} << 20, std::uint64_t{10} << 30}) {
+      for (const std::uint32_t retire_ms : {1u, 5u, 37u, 100u}) {
+        INFO("ring " << ring << " B, " << rate << " B/s, " << retire_ms << " ms");
+        const std::uint64_t block = R::block_bytes_for(ring, rate, retire_ms);
+        const std::uint64_t held = std::clamp(ring, R::kMinRingBytes, R::kMaxRingBytes);
+        // A size the kernel takes (a power of two, a jumbo frame fits), and enough blocks
+        // that one being filled and one being read leave room for the rest.
+        CHECK(std::has_single_bit(block));
+        CHECK(block >= R::kMinBlockBytes);
+        CHECK(block <= R::kMaxBlockBytes);
+        CHECK(held / block >= R::kMinBlocks);
+        // One period's bytes fit a block unless a bound says otherwise.
+        if (block < R::kMaxBlockBytes && block < held / R::kMinBlocks) {
+          CHECK(block >= rate * retire_ms / 1000);
+        }
+      }
+    }
   }
 }
 

@@ -12,6 +12,7 @@
 #include <sys/socket.h>
 
 #include <algorithm>
+#include <bit>
 #include <cerrno>
 #include <cstring>
 #include <memory>
@@ -206,14 +207,16 @@ void PacketRingReceiver::open_ring(const UdpReceiverOptions& options) {
   const int on = 1;
   ::setsockopt(fd_.get(), SOL_PACKET, PACKET_IGNORE_OUTGOING, &on, sizeof on);
 
-  block_count_ = static_cast<std::uint32_t>(std::clamp<std::uint64_t>(
-      options.receive_buffer_bytes / kBlockBytes, kMinBlocks, kMaxBlocks));
-  if (options.receive_buffer_bytes / kBlockBytes > kMaxBlocks) {
-    spdlog::warn("packet ring: {} bytes asked for, {} MiB used (the most it takes)",
-                 options.receive_buffer_bytes, std::uint64_t{kMaxBlocks} * kBlockBytes >> 20);
-  }
   const std::int64_t budget_ms = options.latency_budget_ns / 1'000'000;
   retire_ms_ = static_cast<std::uint32_t>(std::clamp<std::int64_t>(budget_ms, 1, kMaxRetireMs));
+  if (options.receive_buffer_bytes > kMaxRingBytes) {
+    spdlog::warn("packet ring: {} bytes asked for, {} MiB used (the most it takes)",
+                 options.receive_buffer_bytes, kMaxRingBytes >> 20);
+  }
+  const std::uint64_t ring_bytes =
+      std::clamp(options.receive_buffer_bytes, kMinRingBytes, kMaxRingBytes);
+  block_bytes_ = block_bytes_for(ring_bytes, options.expected_bytes_per_second, retire_ms_);
+  block_count_ = static_cast<std::uint32_t>(ring_bytes / block_bytes_);
   tpacket_req3 request{};
   request.tp_block_size = block_bytes_;
   request.tp_block_nr = block_count_;
@@ -243,6 +246,17 @@ void PacketRingReceiver::open_ring(const UdpReceiverOptions& options) {
       "when full or after {} ms){}",
       port_, options.interface, block_count_, block_bytes_ / 1024, retire_ms_,
       options.sensor_ip.empty() ? std::string(" from any source") : " from " + options.sensor_ip);
+}
+
+std::uint32_t PacketRingReceiver::block_bytes_for(std::uint64_t ring_bytes,
+                                                  std::uint64_t bytes_per_second,
+                                                  std::uint32_t retire_ms) noexcept {
+  ring_bytes = std::clamp(ring_bytes, kMinRingBytes, kMaxRingBytes);
+  const std::uint64_t per_period = bytes_per_second * retire_ms / 1000;
+  const std::uint64_t largest =
+      std::min<std::uint64_t>(kMaxBlockBytes, std::bit_floor(ring_bytes / kMinBlocks));
+  return static_cast<std::uint32_t>(
+      std::clamp<std::uint64_t>(std::bit_ceil(per_period), kMinBlockBytes, largest));
 }
 
 tpacket_block_desc* PacketRingReceiver::ready_block() noexcept {

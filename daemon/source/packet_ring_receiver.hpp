@@ -75,15 +75,18 @@ struct NoSuchInterface : std::runtime_error {
 
 class PacketRingReceiver {
  public:
-  // Small blocks, many of them: a block the retire timer hands over holds what arrived in one
-  // latency budget (18 packets of one sensor in 5 ms), so the ring's depth in time is its block
-  // count times the budget (256 x 5 ms = 1.3 s for 8 MiB), as long as that is shorter than what
-  // the bytes hold; a jumbo frame (9 kB) still fits a block.
-  static constexpr std::uint32_t kBlockBytes = 32 * 1024;
-  static constexpr std::uint32_t kMinBlocks = 32;     // 1 MiB
-  static constexpr std::uint32_t kMaxBlocks = 32768;  // 1 GiB
-  static constexpr std::int64_t kMaxRetireMs = 100;   // a stop waits up to 3 of these
-  static constexpr std::uint32_t kFrameBytes = 2048;  // the kernel's bookkeeping unit
+  // Blocks sized to what the sensor sends in one retire period (18 packets of a 40P in the
+  // default 5 ms: 32 KiB; 100 ms without frames: 512 KiB). At the sensor's rate the timer, not
+  // the size, then sets the wake-ups (one per period), and the ring's depth in time is what its
+  // bytes hold at that rate (8 MiB: 1.8 s), whatever the period. A slower stream fills blocks
+  // less: its depth is the block count times the period. A jumbo frame (9 kB) fits any block.
+  static constexpr std::uint32_t kMinBlockBytes = 32 * 1024;
+  static constexpr std::uint32_t kMaxBlockBytes = 4 * 1024 * 1024;
+  static constexpr std::uint32_t kMinBlocks = 16;           // a block is the unit of loss
+  static constexpr std::uint64_t kMinRingBytes = 1u << 20;  // 1 MiB
+  static constexpr std::uint64_t kMaxRingBytes = 1u << 30;  // 1 GiB
+  static constexpr std::int64_t kMaxRetireMs = 100;         // a stop waits up to 3 of these
+  static constexpr std::uint32_t kFrameBytes = 2048;        // the kernel's bookkeeping unit
 
   // Opens the guard socket, the packet socket and its ring on options.interface. Throws
   // std::runtime_error naming the step (and the capability, when it is missing).
@@ -91,6 +94,11 @@ class PacketRingReceiver {
   ~PacketRingReceiver();
   PacketRingReceiver(const PacketRingReceiver&) = delete;
   PacketRingReceiver& operator=(const PacketRingReceiver&) = delete;
+
+  // The block size for a ring of `ring_bytes` (clamped to 1 MiB..1 GiB) whose blocks retire
+  // after `retire_ms`, for a sensor sending `bytes_per_second` (see kMinBlockBytes).
+  static std::uint32_t block_bytes_for(std::uint64_t ring_bytes, std::uint64_t bytes_per_second,
+                                       std::uint32_t retire_ms) noexcept;
 
   // The data port filtered for (the guard socket's: port 0 asks the kernel for a free one).
   std::uint16_t bound_port() const noexcept { return port_; }
@@ -121,7 +129,7 @@ class PacketRingReceiver {
   io::UniqueFd guard_;  // the drop-all UDP socket on the data port
   io::UniqueFd fd_;     // the packet socket
   void* map_ = nullptr;
-  std::uint32_t block_bytes_ = kBlockBytes;
+  std::uint32_t block_bytes_ = kMinBlockBytes;
   std::uint32_t block_count_ = 0;
   std::uint32_t next_block_ = 0;
   std::uint32_t retire_ms_ = 1;

@@ -54,6 +54,8 @@ struct UdpReceiverOptions {
   // (daemon/source/packet_ring_receiver.hpp), with the same options otherwise.
   bool packet_ring = false;
   std::string interface;
+  // What the sensor sends at most, for the packet ring's block size: a Pandar40P in dual return.
+  std::uint64_t expected_bytes_per_second = 3600 * 1266;
 };
 
 class UdpReceiver {
