@@ -21,7 +21,7 @@ constexpr std::size_t kDecodeBatch = 64;
 // The writer writes health on its own 1 s tick from the latest snapshot: one a second, out of
 // phase, left a record up to a second behind the stream (a motor stop said after 2 s). Ten a
 // second keep every record within 0.1 s of it.
-constexpr std::int64_t kSnapshotIntervalNs = 100'000'000;
+constexpr std::int64_t kSnapshotIntervalNs = kRecordingFlushNs;
 
 }  // namespace
 
@@ -165,13 +165,13 @@ void DecodeWorker::record_raw(const PacketSlot& slot) {
   if (raw_->size == raw_->capacity) flush_raw();
 }
 
-void DecodeWorker::flush_raw() {
+void DecodeWorker::flush_raw(bool notify) {
   if (raw_ == nullptr || raw_->size == 0) return;
   WriterMessage message;
   message.kind = WriterMessage::Kind::kRaw;
   message.raw = raw_;
   if (to_writer_.try_push(message)) {
-    to_writer_.notify();
+    if (notify) to_writer_.notify();
     raw_ = nullptr;
   } else {
     raw_dropped_ += raw_->size;  // cannot happen (see frame_done); counted if it does
@@ -230,7 +230,6 @@ void DecodeWorker::send_snapshot(WriterMessage::Kind kind) {
 void DecodeWorker::run(const std::atomic<bool>& producer_done,
                        std::atomic<std::uint64_t>& heartbeat, DecodeLive& live) {
   std::int64_t next_snapshot_ns = coarse_monotonic_ns();
-  std::int64_t next_raw_flush_ns = next_snapshot_ns;
   const std::int64_t warm_ns = next_snapshot_ns + kWarmUpNs;
   bool hot = false;
   for (;;) {
@@ -265,12 +264,10 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
       alloc::mark_this_thread_hot(alloc::HotThread::kDecode);
       hot = true;
     }
-    if (now >= next_raw_flush_ns) {
-      // Keep the pcap no more than ~100 ms behind, even at low packet rates.
-      flush_raw();
-      next_raw_flush_ns = now + 100'000'000;
-    }
     if (now >= next_snapshot_ns) {
+      // The packets so far (the pcap stays no more than kRecordingFlushNs behind, even at low
+      // rates) and the counters, pushed together: one wake-up of the writer for both.
+      flush_raw(/*notify=*/false);
       send_snapshot(WriterMessage::Kind::kSnapshot);
       next_snapshot_ns = now + kSnapshotIntervalNs;
     }

@@ -80,7 +80,7 @@ class DecodeWorker final : public FrameSink {
   // The fewest packets a revolution has (single return at expected_rpm), for the model decoded.
   double single_return_revolution_packets() const;
   void record_raw(const PacketSlot& slot);
-  void flush_raw();
+  void flush_raw(bool notify = true);
   DecodeSnapshot snapshot() const;
   void send_snapshot(WriterMessage::Kind kind);
 

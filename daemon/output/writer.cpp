@@ -316,8 +316,11 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       }
       from_decoder_.pop();
     } else {
+      // The decoder's snapshots wake this loop ten times a second; the cap only bounds how late
+      // a silence (no_data_timeout_seconds) is noticed if they stop. A cap of their own period
+      // would add a wake-up out of phase with each of them.
       const std::int64_t wait =
-          std::clamp<std::int64_t>(next_tick - monotonic_ns(), 0, 100'000'000);
+          std::clamp<std::int64_t>(next_tick - monotonic_ns(), 0, 250'000'000);
       from_decoder_.wait_for_data(std::chrono::nanoseconds(wait));
       ++wakeups_;
     }
