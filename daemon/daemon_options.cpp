@@ -17,6 +17,7 @@
 #include "daemon/live/live_publish.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/pcap/xxh64.hpp"
+#include "daemon/pipeline.hpp"
 #include "daemon/pipeline_types.hpp"
 
 namespace pandarcap {
@@ -30,6 +31,22 @@ PcdFormat pcd_format(const DaemonConfig& config) {
 bool points_decoded(const DaemonConfig& config) {
   // MCAP and the live view take the same frames (and packets) as the PCD files (and the pcap).
   return config.output.frames || config.output.mcap || config.live.foxglove;
+}
+
+// How long a recording alone lets packets wait before the receive thread hands them on: the
+// decoder's flush period, but no more than a quarter of what the pipeline holds at the sensor's
+// rate (the ring's slots, the raw batches between decoder and writer, all arriving at once when
+// the wait ends) and of the silence that health calls no_data, which a longer wait would fake.
+std::int64_t recording_wait_ns(const DaemonConfig& config, double packets_per_second) {
+  double seconds = static_cast<double>(kRecordingFlushNs) / 1e9;
+  seconds = std::min(seconds, config.ring.slots / packets_per_second / 4);
+  if (config.output.pcap) {  // (MCAP decodes points: never a recording alone)
+    const double raw_packets =
+        static_cast<double>(Pipeline::raw_batches(config)) * config.arenas.packets_per_frame;
+    seconds = std::min(seconds, raw_packets / packets_per_second / 4);
+  }
+  seconds = std::min(seconds, config.health.no_data_timeout_seconds / 4);
+  return static_cast<std::int64_t>(seconds * 1e9);
 }
 
 std::string device_name(const DaemonConfig& config) {
@@ -205,22 +222,25 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   ro.receive_buffer_bytes = config.sensor.udp_socket_receive_buffer_size_bytes;
   ro.sensor_ip = config.sensor.sensor_ip;
   ro.batch = config.ring.receive_batch;
+  ro.packet_ring = config.input.receiver == "packet_ring";
+  // The simulated sensor sends over loopback, whatever interface the configuration names.
+  ro.interface = simulate ? "lo" : config.sensor.interface;
+  // The configured model's dual-return rate, with its frames' headers; a 40P's while "auto".
+  const SensorModelId model = source.model.value_or(SensorModelId::kPandar40P);
+  const double packets_per_second =
+      with_model(model, []<class M>(std::type_identity<M>) { return M::packets_per_second(2); });
+  ro.expected_bytes_per_second = with_model(model, [&]<class M>(std::type_identity<M>) {
+    return static_cast<std::uint64_t>(packets_per_second *
+                                      static_cast<double>(M::kMaxDatagramBytes + 42));
+  });
   ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
   // The budget is the frames' (users wait for frames). A recording alone waits for nothing
   // sooner than the decoder's flush of its packets to the writer: waking more often than that
   // would cost wake-ups and buy nothing. A budget of 0 (a wake per datagram) is asked for as such.
   if (!points_decoded(config) && ro.latency_budget_ns > 0) {
-    ro.latency_budget_ns = std::max(ro.latency_budget_ns, kRecordingFlushNs);
+    ro.latency_budget_ns =
+        std::max(ro.latency_budget_ns, recording_wait_ns(config, packets_per_second));
   }
-  ro.packet_ring = config.input.receiver == "packet_ring";
-  // The simulated sensor sends over loopback, whatever interface the configuration names.
-  ro.interface = simulate ? "lo" : config.sensor.interface;
-  // The configured model's dual-return rate with its frames' headers; a 40P's while "auto".
-  ro.expected_bytes_per_second = with_model(
-      source.model.value_or(SensorModelId::kPandar40P), []<class M>(std::type_identity<M>) {
-        return static_cast<std::uint64_t>(M::packets_per_second(2) *
-                                          static_cast<double>(M::kMaxDatagramBytes + 42));
-      });
   return ro;
 }
 

@@ -218,6 +218,37 @@ TEST_CASE("the latency budget is the frames': a recording alone wakes at its own
   }
 }
 
+TEST_CASE("a recording alone waits no longer than a quarter of what its pipeline holds",
+          "[daemon][options]") {
+  const auto wait_ms = [](const DaemonConfig& config) {
+    return static_cast<double>(receiver_options(config, RunSource{}).latency_budget_ns) / 1e6;
+  };
+  DaemonConfig config;
+  config.output.frames = false;
+  REQUIRE(wait_ms(config) == 100);  // the defaults hold 284 ms (ring), 142 ms (raw), 250 ms
+  // Each bound alone, at a 40P's 3600 packets a second in dual return.
+  DaemonConfig ring = config;
+  ring.ring.slots = 256;  // 71 ms of packets: a quarter is 17.8 ms
+  CHECK(wait_ms(ring) == Approx(256.0 / 3599.7 / 4 * 1000).epsilon(0.01));
+  DaemonConfig raw = config;
+  raw.arenas.count = 2;
+  raw.arenas.packets_per_frame = 128;
+  CHECK(wait_ms(raw) == Approx(256.0 / 3599.7 / 4 * 1000).epsilon(0.01));
+  raw.output.pcap = false;  // health only: no raw batches to fill
+  CHECK(wait_ms(raw) == 100);
+  DaemonConfig silence = config;
+  silence.health.no_data_timeout_seconds = 0.1;
+  CHECK(wait_ms(silence) == Approx(25).epsilon(0.01));
+  // A configured budget longer than the bounds is the user's, as with frames.
+  silence.latency.budget_ms = 60;
+  CHECK(wait_ms(silence) == 60);
+  // A faster model fills the same slots sooner: a QT128 sends 9000 packets a second.
+  RunSource qt;
+  qt.model = SensorModelId::kPandarQT128;
+  CHECK(static_cast<double>(receiver_options(ring, qt).latency_budget_ns) / 1e6 ==
+        Approx(256.0 / 9000 / 4 * 1000).epsilon(0.01));
+}
+
 TEST_CASE("the packet ring's expected rate follows the configured model", "[daemon][options]") {
   DaemonConfig config;
   RunSource source;
