@@ -33,18 +33,23 @@ bool points_decoded(const DaemonConfig& config) {
   return config.output.frames || config.output.mcap || config.live.foxglove;
 }
 
+// A quarter of what the pipeline holds: the ring's slots and, when the pcap or MCAP records
+// packets, the raw batches between decoder and writer. Everything a wake takes arrives at once.
+std::size_t max_wake_datagrams(const DaemonConfig& config) {
+  std::size_t held = config.ring.slots;
+  if (config.output.pcap || (config.output.mcap && config.output.mcap_packets)) {
+    held = std::min<std::size_t>(
+        held, std::size_t{Pipeline::raw_batches(config)} * config.arenas.packets_per_frame);
+  }
+  return std::max<std::size_t>(held / 4, 1);
+}
+
 // How long a recording alone lets packets wait before the receive thread hands them on: the
-// decoder's flush period, but no more than a quarter of what the pipeline holds at the sensor's
-// rate (the ring's slots, the raw batches between decoder and writer, all arriving at once when
-// the wait ends) and of the silence that health calls no_data, which a longer wait would fake.
+// decoder's flush period, but no longer than max_wake_datagrams take to arrive at the sensor's
+// rate, nor than a quarter of the silence that health calls no_data (a longer wait fakes one).
 std::int64_t recording_wait_ns(const DaemonConfig& config, double packets_per_second) {
   double seconds = static_cast<double>(kRecordingFlushNs) / 1e9;
-  seconds = std::min(seconds, config.ring.slots / packets_per_second / 4);
-  if (config.output.pcap) {  // (MCAP decodes points: never a recording alone)
-    const double raw_packets =
-        static_cast<double>(Pipeline::raw_batches(config)) * config.arenas.packets_per_frame;
-    seconds = std::min(seconds, raw_packets / packets_per_second / 4);
-  }
+  seconds = std::min(seconds, static_cast<double>(max_wake_datagrams(config)) / packets_per_second);
   seconds = std::min(seconds, config.health.no_data_timeout_seconds / 4);
   return static_cast<std::int64_t>(seconds * 1e9);
 }
@@ -229,10 +234,12 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   const SensorModelId model = source.model.value_or(SensorModelId::kPandar40P);
   const double packets_per_second =
       with_model(model, []<class M>(std::type_identity<M>) { return M::packets_per_second(2); });
-  ro.expected_bytes_per_second = with_model(model, [&]<class M>(std::type_identity<M>) {
-    return static_cast<std::uint64_t>(packets_per_second *
-                                      static_cast<double>(M::kMaxDatagramBytes + 42));
+  ro.expected_datagram_bytes = with_model(model, []<class M>(std::type_identity<M>) {
+    return std::uint64_t{M::kMaxDatagramBytes + 42};
   });
+  ro.expected_bytes_per_second = static_cast<std::uint64_t>(
+      packets_per_second * static_cast<double>(ro.expected_datagram_bytes));
+  ro.max_wake_datagrams = max_wake_datagrams(config);
   ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
   // The budget is the frames' (users wait for frames). A recording alone waits for nothing
   // sooner than the decoder's flush of its packets to the writer: waking more often than that

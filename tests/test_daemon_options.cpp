@@ -249,6 +249,22 @@ TEST_CASE("a recording alone waits no longer than a quarter of what its pipeline
         Approx(256.0 / 9000 / 4 * 1000).epsilon(0.01));
 }
 
+TEST_CASE("a wake hands on at most a quarter of what the ring and the raw batches hold",
+          "[daemon][options]") {
+  DaemonConfig config;  // 4096 slots, 4 x 512 raw packets
+  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 2048 / 4);
+  config.output.pcap = false;  // no raw batches: the ring alone
+  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 4096 / 4);
+  config.output.mcap = true;  // MCAP's packets take raw batches too
+  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 4096 / 4);
+  config.output.mcap_packets = true;
+  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 2048 / 4);
+  config.ring.slots = 256;
+  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 256 / 4);
+  config.ring.slots = 2;
+  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 1);
+}
+
 TEST_CASE("the packet ring's expected rate follows the configured model", "[daemon][options]") {
   DaemonConfig config;
   RunSource source;

@@ -674,6 +674,9 @@ TEST_CASE("packet_ring: a block holds one retire period of the sensor, within th
   CHECK(R::block_bytes_for(8u << 20, k40p, 5) == 32 * 1024);
   // A recording alone, 100 ms: 471 kB, so the timer and not the size hands blocks over.
   CHECK(R::block_bytes_for(8u << 20, k40p, 100) == 512 * 1024);
+  // ... unless a wake should take less: the defaults' 512 datagrams, or 64 (ring.slots 256).
+  CHECK(R::block_bytes_for(8u << 20, k40p, 100, 512 * 1308) == 512 * 1024);
+  CHECK(R::block_bytes_for(8u << 20, k40p, 100, 64 * 1308) == 64 * 1024);
   for (const std::uint64_t ring :
        {std::uint64_t{1} << 16, std::uint64_t{1} << 20, std::uint64_t{8} << 20,
         std::uint64_t{1} << 30, std::uint64_t{4} << 30}) {
@@ -692,6 +695,15 @@ TEST_CASE("packet_ring: a block holds one retire period of the sensor, within th
         // One period's bytes fit a block unless a bound says otherwise.
         if (block < R::kMaxBlockBytes && block < held / R::kMinBlocks) {
           CHECK(block >= rate * retire_ms / 1000);
+        }
+        // No block holds more than one wake should take, down to the smallest block.
+        for (const std::uint64_t most : {std::uint64_t{1}, std::uint64_t{100'000},
+                                         std::uint64_t{670'000}, std::uint64_t{1} << 40}) {
+          const std::uint64_t bounded = R::block_bytes_for(ring, rate, retire_ms, most);
+          CHECK(std::has_single_bit(bounded));
+          CHECK(bounded <= block);
+          CHECK(bounded <= std::max<std::uint64_t>(most, R::kMinBlockBytes));
+          CHECK(bounded >= R::kMinBlockBytes);
         }
       }
     }

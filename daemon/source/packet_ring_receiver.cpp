@@ -215,7 +215,9 @@ void PacketRingReceiver::open_ring(const UdpReceiverOptions& options) {
   }
   const std::uint64_t ring_bytes =
       std::clamp(options.receive_buffer_bytes, kMinRingBytes, kMaxRingBytes);
-  block_bytes_ = block_bytes_for(ring_bytes, options.expected_bytes_per_second, retire_ms_);
+  // A full block is one wake's datagrams: no more than the pipeline takes at once.
+  block_bytes_ = block_bytes_for(ring_bytes, options.expected_bytes_per_second, retire_ms_,
+                                 options.max_wake_datagrams * options.expected_datagram_bytes);
   block_count_ = static_cast<std::uint32_t>(ring_bytes / block_bytes_);
   tpacket_req3 request{};
   request.tp_block_size = block_bytes_;
@@ -250,11 +252,16 @@ void PacketRingReceiver::open_ring(const UdpReceiverOptions& options) {
 
 std::uint32_t PacketRingReceiver::block_bytes_for(std::uint64_t ring_bytes,
                                                   std::uint64_t bytes_per_second,
-                                                  std::uint32_t retire_ms) noexcept {
+                                                  std::uint32_t retire_ms,
+                                                  std::uint64_t max_block_bytes) noexcept {
   ring_bytes = std::clamp(ring_bytes, kMinRingBytes, kMaxRingBytes);
   const std::uint64_t per_period = bytes_per_second * retire_ms / 1000;
-  const std::uint64_t largest =
+  std::uint64_t largest =
       std::min<std::uint64_t>(kMaxBlockBytes, std::bit_floor(ring_bytes / kMinBlocks));
+  if (max_block_bytes > 0) {
+    largest =
+        std::min(largest, std::max<std::uint64_t>(std::bit_floor(max_block_bytes), kMinBlockBytes));
+  }
   return static_cast<std::uint32_t>(
       std::clamp<std::uint64_t>(std::bit_ceil(per_period), kMinBlockBytes, largest));
 }

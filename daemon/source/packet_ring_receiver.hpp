@@ -96,9 +96,11 @@ class PacketRingReceiver {
   PacketRingReceiver& operator=(const PacketRingReceiver&) = delete;
 
   // The block size for a ring of `ring_bytes` (clamped to 1 MiB..1 GiB) whose blocks retire
-  // after `retire_ms`, for a sensor sending `bytes_per_second` (see kMinBlockBytes).
+  // after `retire_ms`, for a sensor sending `bytes_per_second` (see kMinBlockBytes), and no
+  // larger than `max_block_bytes` (0: no bound) unless that is below kMinBlockBytes.
   static std::uint32_t block_bytes_for(std::uint64_t ring_bytes, std::uint64_t bytes_per_second,
-                                       std::uint32_t retire_ms) noexcept;
+                                       std::uint32_t retire_ms,
+                                       std::uint64_t max_block_bytes = 0) noexcept;
 
   // The data port filtered for (the guard socket's: port 0 asks the kernel for a free one).
   std::uint16_t bound_port() const noexcept { return port_; }

@@ -57,6 +57,7 @@ struct UdpReceiver::Batch {
 UdpReceiver::UdpReceiver(const UdpReceiverOptions& options)
     : batch_(std::clamp<std::size_t>(options.batch, 1, kMaxBatch)),
       budget_ns_(std::max<std::int64_t>(options.latency_budget_ns, 0)),
+      max_wake_datagrams_(options.max_wake_datagrams),
       buffers_(new Batch) {
   fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
   if (fd_ < 0) io::throw_errno("cannot create the UDP socket");
@@ -372,14 +373,16 @@ void UdpReceiver::run_coalesced(PacketRing& ring, const std::atomic<bool>& stop,
       hot = true;
     }
     // How full the buffer got while this thread slept (and the kernel's drop count).
-    const double fill = read_socket_memory(counters);
+    double fill = read_socket_memory(counters);
 
     // Drain: full batches until one comes back short (the socket is empty), then one wake-up
     // of the decoder for all of it.
     std::size_t published = 0;
+    std::size_t received = 0;
     for (;;) {
       const Received r = receive_batch(ring, MSG_DONTWAIT, counters);
       published += r.published;
+      received += r.received;
       if (r.received < r.requested) break;
       if (draining && monotonic_ns() >= drain_until) break;
     }
@@ -388,7 +391,12 @@ void UdpReceiver::run_coalesced(PacketRing& ring, const std::atomic<bool>& stop,
 
     // The next sleep: as long as the budget allows, but short enough that, at the rate the
     // buffer filled during the last one, it would be at most kTargetFill full at the next wake
-    // (bursts of several times that rate still fit). Grows back at most 2x per wake.
+    // (bursts of several times that rate still fit), and that a wake takes at most
+    // max_wake_datagrams (counted as that fill). Grows back at most 2x per wake.
+    if (max_wake_datagrams_ > 0) {
+      fill = std::max(fill, kTargetFill * static_cast<double>(received) /
+                                static_cast<double>(max_wake_datagrams_));
+    }
     if (fill > kTargetFill) {
       sleep_ns = static_cast<std::int64_t>(static_cast<double>(sleep_ns) * kTargetFill / fill);
     } else {

@@ -56,6 +56,11 @@ struct UdpReceiverOptions {
   std::string interface;
   // What the sensor sends at most, for the packet ring's block size: a Pandar40P in dual return.
   std::uint64_t expected_bytes_per_second = 3600 * 1266;
+  std::uint64_t expected_datagram_bytes = 1266 + 42;  // with its Ethernet, IP and UDP headers
+  // The most datagrams one wake should hand on (0: no bound): everything a wake takes reaches
+  // the decoder, and its raw batches, at once, so a faster stream makes the sleeps shorter (the
+  // socket receiver) or the blocks smaller (the packet ring) rather than overrun them.
+  std::size_t max_wake_datagrams = 0;
 };
 
 class UdpReceiver {
@@ -101,6 +106,7 @@ class UdpReceiver {
   SourceLock sources_{std::nullopt};
   std::size_t batch_;
   std::int64_t budget_ns_ = 0;
+  std::size_t max_wake_datagrams_ = 0;
   std::unique_ptr<Batch> buffers_;
 };
 
