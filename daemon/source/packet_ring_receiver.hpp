@@ -78,8 +78,10 @@ class PacketRingReceiver {
   // Blocks sized to what the sensor sends in one retire period (18 packets of a 40P in the
   // default 5 ms: 32 KiB; 100 ms without frames: 512 KiB). At the sensor's rate the timer, not
   // the size, then sets the wake-ups (one per period), and the ring's depth in time is what its
-  // bytes hold at that rate (8 MiB: 1.8 s), whatever the period. A slower stream fills blocks
-  // less: its depth is the block count times the period. A jumbo frame (9 kB) fits any block.
+  // bytes hold at that rate, less what the timer leaves empty in each block (8 MiB: 1.3 s at
+  // 5 ms, 1.6 s at 100 ms). A slower stream fills blocks less: its depth is the block count
+  // times the period. A jumbo frame (9 kB) fits any block. Blocks are no larger than one wake
+  // should hand on (UdpReceiverOptions::max_wake_datagrams).
   static constexpr std::uint32_t kMinBlockBytes = 32 * 1024;
   static constexpr std::uint32_t kMaxBlockBytes = 4 * 1024 * 1024;
   static constexpr std::uint32_t kMinBlocks = 16;           // a block is the unit of loss
