@@ -244,7 +244,10 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   // The budget is the frames' (users wait for frames). A recording alone waits for nothing
   // sooner than the decoder's flush of its packets to the writer: waking more often than that
   // would cost wake-ups and buy nothing. A budget of 0 (a wake per datagram) is asked for as such.
-  if (!points_decoded(config) && ro.latency_budget_ns > 0) {
+  // The packet ring only: its blocks are handed over when full, so a burst wakes it; a socket
+  // cannot wake on a fill level (SO_RCVLOWAT does not apply to UDP), and a long sleep would meet
+  // a burst (ten times the rate for 100 ms) with all of it at once.
+  if (ro.packet_ring && !points_decoded(config) && ro.latency_budget_ns > 0) {
     ro.latency_budget_ns =
         std::max(ro.latency_budget_ns, recording_wait_ns(config, packets_per_second));
   }

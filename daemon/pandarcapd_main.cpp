@@ -164,7 +164,14 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
   // A replay's progress line and its end are looked at ten times a second. Live, what this
   // loop reports (state changes, a stalled writer, the watchdog) is judged in seconds: two
   // wake-ups a second are enough, and each costs the process some 30 µs on a VM.
-  const auto tick = std::chrono::milliseconds(replay != nullptr ? 100 : 500);
+  // A short WatchdogSec needs its pings (every half of it) on time: a quarter of it at most.
+  auto tick = std::chrono::duration_cast<std::chrono::nanoseconds>(
+      std::chrono::milliseconds(replay != nullptr ? 100 : 500));
+  if (watchdog) {
+    tick =
+        std::min(tick, std::max(std::chrono::duration_cast<std::chrono::nanoseconds>(*watchdog) / 4,
+                                std::chrono::nanoseconds(1'000'000)));
+  }
   auto next_watchdog = start;
   std::uint64_t seen[3] = {~0ull, ~0ull, ~0ull};
   HealthStateLog state_log;
@@ -174,7 +181,7 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
   std::uint64_t writer_beat = pipe.heartbeats.writer.load();
   auto writer_beat_at = start, next_stall_report = start;
   for (;;) {
-    auto wait = std::chrono::duration_cast<std::chrono::nanoseconds>(tick);
+    auto wait = tick;
     if (duration_s) {  // a --duration ends on time, not at the next tick
       const auto left = std::chrono::duration_cast<std::chrono::nanoseconds>(
           std::chrono::duration<double>(*duration_s) - (std::chrono::steady_clock::now() - start));

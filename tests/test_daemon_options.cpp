@@ -199,6 +199,7 @@ TEST_CASE("the latency budget is the frames': a recording alone wakes at its own
           "[daemon][options]") {
   for (const std::uint32_t budget_ms : {0u, 5u, 100u, 400u}) {
     DaemonConfig config;
+    config.input.receiver = "packet_ring";
     config.latency.budget_ms = budget_ms;
     const std::int64_t budget_ns = std::int64_t{budget_ms} * 1'000'000;
     INFO("budget " << budget_ms << " ms");
@@ -215,6 +216,9 @@ TEST_CASE("the latency budget is the frames': a recording alone wakes at its own
     config.live.foxglove = false;
     CHECK(receiver_options(config, RunSource{}).latency_budget_ns ==
           (budget_ns == 0 ? 0 : std::max(budget_ns, kRecordingFlushNs)));
+    // The socket keeps the budget: it cannot wake on a burst as a full block does.
+    config.input.receiver = "socket";
+    CHECK(receiver_options(config, RunSource{}).latency_budget_ns == budget_ns);
   }
 }
 
@@ -224,6 +228,7 @@ TEST_CASE("a recording alone waits no longer than a quarter of what its pipeline
     return static_cast<double>(receiver_options(config, RunSource{}).latency_budget_ns) / 1e6;
   };
   DaemonConfig config;
+  config.input.receiver = "packet_ring";
   config.output.frames = false;
   REQUIRE(wait_ms(config) == 100);  // the defaults hold 284 ms (ring), 142 ms (raw), 250 ms
   // Each bound alone, at a 40P's 3600 packets a second in dual return.

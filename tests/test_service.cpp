@@ -55,6 +55,16 @@ TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, res
   REQUIRE(healthy);
   CHECK(notify.first("READY=1") < notify.first("WATCHDOG=1"));
   CHECK(notify.wait_for([&] { return notify.count("STATUS=") >= 1; }, 5s));
+  {
+    // On time for a short interval: about six pings in 1.2 s. A supervisor that looked only
+    // twice a second (its idle tick) would send two or three, late for systemd's 400 ms.
+    notify.receive();
+    const std::size_t before = notify.count("WATCHDOG=1");
+    const auto window_end = std::chrono::steady_clock::now() + 1200ms;
+    while (std::chrono::steady_clock::now() < window_end)
+      notify.receive();
+    CHECK(notify.count("WATCHDOG=1") - before >= 4);
+  }
 
   SECTION("a stalled writer silences the watchdog until it recovers") {
     std::ofstream(stall_file).put('\n');
