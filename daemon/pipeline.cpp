@@ -20,12 +20,15 @@ std::size_t power_of_two_at_least(std::size_t n) {
 
 Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame)
     : ring(c.ring.slots),
+      arena_memory(c.arenas.count * FrameArena::bytes_for(points_per_frame, pcd_format(c))),
       free_arenas(power_of_two_at_least(c.arenas.count)),
       free_raw(power_of_two_at_least(raw_batches(c))),
       to_writer(power_of_two_at_least(c.arenas.count + raw_batches(c) + 16)),
       status(4) {
+  const std::size_t arena_bytes = FrameArena::bytes_for(points_per_frame, pcd_format(c));
   for (std::uint32_t i = 0; i < c.arenas.count; ++i) {
-    arenas.push_back(std::make_unique<FrameArena>(points_per_frame, pcd_format(c)));
+    arenas.push_back(std::make_unique<FrameArena>(arena_memory.data() + i * arena_bytes,
+                                                  points_per_frame, pcd_format(c)));
     free_arenas.try_push(arenas.back().get());
   }
   for (std::uint32_t i = 0; i < raw_batches(c); ++i) {

@@ -35,6 +35,7 @@ struct Pipeline {
   static std::uint32_t raw_batches(const DaemonConfig& config) { return config.arenas.count; }
 
   PacketRing ring;
+  ArenaMemory arena_memory;  // every arena's points, one after another
   std::vector<std::unique_ptr<FrameArena>> arenas;
   std::vector<std::unique_ptr<RawBatch>> raw;
   ArenaQueue free_arenas;

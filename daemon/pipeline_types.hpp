@@ -27,6 +27,7 @@
 #include "core/frames/point.hpp"
 #include "core/health/latency_histogram.hpp"
 #include "core/sensors/packet.hpp"
+#include "daemon/arena_memory.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"
@@ -34,23 +35,20 @@
 namespace pandarcap {
 
 struct FrameArena {
-  // Aligned to O_DIRECT's blocks, so the writer can hand the points to the kernel without a copy.
-  static constexpr std::size_t kAlignment = kDirectIoBlock;
-  struct AlignedDelete {
-    void operator()(std::uint8_t* p) const noexcept {
-      ::operator delete[](p, std::align_val_t{kAlignment});
-    }
-  };
-  FrameArena(std::size_t capacity_points, PcdFormat format)
-      : storage(static_cast<std::uint8_t*>(::operator new[](
-            capacity_points* pcd_point_bytes(format.layout), std::align_val_t{kAlignment}))),
-        capacity(capacity_points) {
-    frame.encoded = std::span(storage.get(), capacity * pcd_point_bytes(format.layout));
-    frame.format = format;
-    // Touched now, so no page fault waits in the decode thread's first frames.
-    std::fill(frame.encoded.begin(), frame.encoded.end(), std::uint8_t{0});
+  // The bytes an arena of `capacity_points` takes: whole O_DIRECT blocks, so that arenas laid one
+  // after another in one ArenaMemory (Pipeline) all start aligned to them, and the writer hands
+  // the points to the kernel without a copy.
+  static std::size_t bytes_for(std::size_t capacity_points, PcdFormat format) noexcept {
+    const std::size_t bytes = capacity_points * pcd_point_bytes(format.layout);
+    return (bytes + kDirectIoBlock - 1) / kDirectIoBlock * kDirectIoBlock;
   }
-  std::unique_ptr<std::uint8_t[], AlignedDelete> storage;
+  // `memory`: bytes_for() bytes, aligned to kDirectIoBlock, zero-filled (ArenaMemory's), not
+  // owned.
+  FrameArena(std::uint8_t* memory, std::size_t capacity_points, PcdFormat format)
+      : capacity(capacity_points) {
+    frame.encoded = std::span(memory, capacity * pcd_point_bytes(format.layout));
+    frame.format = format;
+  }
   std::size_t capacity;
   Frame frame;
   // Kernel receive time (CLOCK_REALTIME ns) of the packet whose arrival finished the frame: the

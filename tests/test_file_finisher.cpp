@@ -226,7 +226,8 @@ TEST_CASE("frames go past the page cache, and through it once a file system refu
   FileFinisher finisher(receiver);
   FrameOutput output(options, accounting, space, finisher);
   receiver.frames = &output;
-  FrameArena arena(2000, options.pcd_format);
+  ArenaMemory memory(FrameArena::bytes_for(2000, options.pcd_format));
+  FrameArena arena(memory.data(), 2000, options.pcd_format);
   arena.frame.size = 1500;  // 40 500 bytes: 9 whole blocks and a tail
   arena.frame.info.start_ns = 1'795'348'800'000'000'000;
   const auto rows = arena.frame.encoded.first(arena.frame.used_bytes().size());

@@ -149,8 +149,8 @@ TEST_CASE("throw_errno names what failed, and never reports errno 0 as success",
 
 TEST_CASE("OutputFile O_DIRECT: whole aligned blocks past the page cache, then the tail", "[io]") {
   test::ScratchDir dir("io-direct");
-  FrameArena memory(1000, PcdFormat{PcdLayout::kPandarcap, Axes::kHesai});  // page-aligned
-  const std::span<std::uint8_t> bytes = memory.frame.encoded.first(3 * kDirectIoBlock + 100);
+  ArenaMemory memory(4 * kDirectIoBlock);  // page-aligned
+  const std::span<std::uint8_t> bytes(memory.data(), 3 * kDirectIoBlock + 100);
   for (std::size_t i = 0; i < bytes.size(); ++i)
     bytes[i] = static_cast<std::uint8_t>(i % 251);
   OutputFile file(dir / "direct.bin", OutputFile::Mode::kCreateDirect);

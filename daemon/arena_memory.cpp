@@ -1,0 +1,33 @@
+#include "daemon/arena_memory.hpp"
+
+#include <sys/mman.h>
+
+#include <cstring>
+#include <new>
+
+namespace pandarcap {
+
+ArenaMemory::ArenaMemory(std::size_t bytes)
+    : size_((bytes + kHugePage - 1) / kHugePage * kHugePage) {
+  if (size_ == 0) size_ = kHugePage;
+  // Mapped one huge page longer, then trimmed to an aligned start: mmap aligns to 4 KiB only.
+  const std::size_t mapped = size_ + kHugePage;
+  void* const p =
+      ::mmap(nullptr, mapped, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) throw std::bad_alloc();
+  const auto start = reinterpret_cast<std::uintptr_t>(p);
+  const std::uintptr_t aligned = (start + kHugePage - 1) / kHugePage * kHugePage;
+  if (aligned > start) ::munmap(p, aligned - start);
+  const std::size_t after = start + mapped - (aligned + size_);
+  if (after > 0) ::munmap(reinterpret_cast<void*>(aligned + size_), after);
+  data_ = reinterpret_cast<std::uint8_t*>(aligned);
+  // Best effort: EINVAL where the kernel has no THP; the pages are then 4 KiB.
+  (void)::madvise(data_, size_, MADV_HUGEPAGE);
+  std::memset(data_, 0, bytes);
+}
+
+ArenaMemory::~ArenaMemory() {
+  if (data_ != nullptr) ::munmap(data_, size_);
+}
+
+}  // namespace pandarcap

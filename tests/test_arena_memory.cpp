@@ -1,0 +1,114 @@
+// daemon/arena_memory: the frame arenas' memory, aligned for O_DIRECT and offered for huge pages,
+// and the arenas the pipeline lays out in it.
+#include <catch2/catch.hpp>
+#include <cstdint>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+
+#include "config/daemon_config.hpp"
+#include "daemon/arena_memory.hpp"
+#include "daemon/daemon_options.hpp"
+#include "daemon/io/file_output.hpp"
+#include "daemon/pipeline.hpp"
+
+using namespace pandarcap;
+
+namespace {
+
+// Whether the kernel offers transparent huge pages to a region that asks (madvise) at all.
+bool thp_offered() {
+  std::ifstream in("/sys/kernel/mm/transparent_hugepage/enabled");
+  std::string modes;
+  std::getline(in, modes);
+  return modes.find("[always]") != std::string::npos ||
+         modes.find("[madvise]") != std::string::npos;
+}
+
+// The "THPeligible" line of the mapping that holds `address` (/proc/self/smaps): 1 when the
+// kernel may back it with huge pages. -1: the mapping or the line was not found.
+int thp_eligible(const void* address) {
+  const auto at = reinterpret_cast<std::uintptr_t>(address);
+  std::ifstream smaps("/proc/self/smaps");
+  std::string line;
+  bool inside = false;
+  while (std::getline(smaps, line)) {
+    std::uintptr_t start = 0, end = 0;
+    char dash = 0;
+    std::istringstream range(line);
+    if (range >> std::hex >> start >> dash >> end && dash == '-' &&
+        line.find(':') > line.find(' ')) {
+      inside = start <= at && at < end;
+      continue;
+    }
+    if (inside && line.rfind("THPeligible:", 0) == 0) return std::stoi(line.substr(12));
+  }
+  return -1;
+}
+
+}  // namespace
+
+TEST_CASE("ArenaMemory: aligned to huge pages, zero-filled, and as long as asked", "[io]") {
+  for (const std::size_t bytes :
+       {std::size_t{1}, std::size_t{4096}, ArenaMemory::kHugePage - 1, ArenaMemory::kHugePage,
+        ArenaMemory::kHugePage + 1, std::size_t{16'560'000}}) {
+    CAPTURE(bytes);
+    ArenaMemory memory(bytes);
+    REQUIRE(memory.data() != nullptr);
+    CHECK(reinterpret_cast<std::uintptr_t>(memory.data()) % ArenaMemory::kHugePage == 0);
+    CHECK(memory.size() >= bytes);
+    CHECK(memory.size() % ArenaMemory::kHugePage == 0);
+    CHECK(memory.size() < bytes + ArenaMemory::kHugePage);
+    std::size_t nonzero = 0;
+    for (std::size_t i = 0; i < bytes; ++i)
+      nonzero += memory.data()[i] != 0;
+    CHECK(nonzero == 0);
+    // Writable to its last byte (a mapping trimmed short would fault here).
+    memory.data()[memory.size() - 1] = 0xAB;
+    CHECK(memory.data()[memory.size() - 1] == 0xAB);
+  }
+}
+
+TEST_CASE("ArenaMemory: the kernel may back it with huge pages where it offers them", "[io]") {
+  ArenaMemory memory(3 * ArenaMemory::kHugePage);
+  const int eligible = thp_eligible(memory.data());
+  REQUIRE(eligible != -1);  // the mapping is there, and the kernel says
+  if (thp_offered()) {
+    CHECK(eligible == 1);
+  } else {
+    CHECK(eligible == 0);
+  }
+}
+
+TEST_CASE("Pipeline: every arena in the one mapping, aligned for O_DIRECT, none overlapping",
+          "[io]") {
+  DaemonConfig config;
+  for (const std::uint32_t count : {2u, 3u, 4u, 7u}) {
+    for (const std::uint32_t points : {1000u, 1001u, 180'000u}) {
+      CAPTURE(count, points);
+      config.arenas.count = count;
+      Pipeline pipeline(config, points);
+      REQUIRE(pipeline.arenas.size() == count);
+      const std::uint8_t* const begin = pipeline.arena_memory.data();
+      const std::uint8_t* const end = begin + pipeline.arena_memory.size();
+      std::set<const std::uint8_t*> starts;
+      const std::uint8_t* previous_end = begin;
+      for (const auto& arena : pipeline.arenas) {
+        const std::span<std::uint8_t> bytes = arena->frame.encoded;
+        CHECK(bytes.size() == points * pcd_point_bytes(pcd_format(config).layout));
+        CHECK(reinterpret_cast<std::uintptr_t>(bytes.data()) % kDirectIoBlock == 0);
+        CHECK(bytes.data() >= previous_end);  // after the one before: no overlap
+        CHECK(bytes.data() + bytes.size() <= end);
+        previous_end = bytes.data() + bytes.size();
+        starts.insert(bytes.data());
+        // Each arena's last byte is its own: written through one, read back from the others.
+        bytes.back() = static_cast<std::uint8_t>(starts.size());
+      }
+      CHECK(starts.size() == count);
+      std::uint8_t n = 0;
+      for (const auto& arena : pipeline.arenas)
+        CHECK(arena->frame.encoded.back() == ++n);
+    }
+  }
+}
