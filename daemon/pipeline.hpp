@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "config/daemon_config.hpp"
+#include "daemon/arena_memory.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/output/writer.hpp"
 #include "daemon/packet_slot.hpp"

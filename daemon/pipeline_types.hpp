@@ -27,7 +27,6 @@
 #include "core/frames/point.hpp"
 #include "core/health/latency_histogram.hpp"
 #include "core/sensors/packet.hpp"
-#include "daemon/arena_memory.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/packet_slot.hpp"
 #include "ringbuf/spsc_queue.hpp"

@@ -16,6 +16,7 @@
 #include <string_view>
 #include <vector>
 
+#include "daemon/arena_memory.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/io/syscalls.hpp"
 #include "daemon/output/file_finisher.hpp"

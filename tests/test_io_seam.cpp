@@ -14,6 +14,7 @@
 #include <system_error>
 #include <vector>
 
+#include "daemon/arena_memory.hpp"
 #include "daemon/io/errors.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/io/syscalls.hpp"
