@@ -169,39 +169,50 @@ TEST_CASE("recording only: the health counts what it can, leaves out points, the
 // 2 x 128 raw packets hold 70 ms of it; a silence is 0.1 s) must not lose packets, or say
 // no_data while the sensor sends, with frames off, whatever a recording alone waits
 // (daemon_options.cpp receiver_options; the packet ring's case is in test_packet_ring.cpp).
-// The socket receiver is run here.
+// The socket receiver is run here. A busy machine may stall a thread for 70 ms, which is not what
+// this guards against (a wait longer than those bounds fails every time): a loss or a no_data is
+// tried again, up to three times, and fails only when each attempt had one.
 TEST_CASE("recording only: a small ring, raw pool and silence timeout hold as with frames",
           "[daemon][health][threads]") {
-  test::ScratchDir dir("record-only-small");
-  const fs::path config = dir / "small.toml";
-  std::ofstream(config) << "[ring]\nslots = 256\n[arenas]\ncount = 2\npackets_per_frame = 128\n"
-                           "[health]\nno_data_timeout_seconds = 0.1\n[output]\nframes = false\n";
-  const auto r =
-      test::run_command(test::pandarcapd_command() + " -c " + quoted(config) +
-                        " --simulate --duration 1.5 --output-dir " + quoted(dir / "out") + " 2>&1");
-  INFO(r.out);
-  REQUIRE(r.exit_code == 0);
-  const json last = test::last_health_record(dir / "out");
-  INFO(last.dump());
-  REQUIRE(test::health_counter(last, "datagrams_received") > 3000);
-  test::check_ring_overruns(last);
-  check_identity(last);
-  // Every accepted packet is recorded or counted as not recorded; none is not recorded here.
-  CHECK(test::health_counter(last, "pcap_packets_written") +
-            test::health_counter(last, "packets_not_recorded") ==
-        test::health_counter(last, "datagrams_received") -
-            test::health_counter(last, "ring_overruns"));
-  if (!test::kSanitizerBuild) {  // a sanitizer's decoder may stall for 0.1 s: a true silence
-    CHECK(test::health_counter(last, "packets_not_recorded") == 0);
+  bool whole = false;
+  const int attempts = test::kSanitizerBuild ? 1 : 3;
+  for (int attempt = 0; attempt < attempts && !whole; ++attempt) {
+    CAPTURE(attempt);
+    test::ScratchDir dir("record-only-small");
+    const fs::path config = dir / "small.toml";
+    std::ofstream(config) << "[ring]\nslots = 256\n[arenas]\ncount = 2\npackets_per_frame = 128\n"
+                             "[health]\nno_data_timeout_seconds = 0.1\n[output]\nframes = false\n";
+    const auto r = test::run_command(test::pandarcapd_command() + " -c " + quoted(config) +
+                                     " --simulate --duration 1.5 --output-dir " +
+                                     quoted(dir / "out") + " 2>&1");
+    INFO(r.out);
+    REQUIRE(r.exit_code == 0);
+    const json last = test::last_health_record(dir / "out");
+    INFO(last.dump());
+    REQUIRE(test::health_counter(last, "datagrams_received") > 3000);
+    test::check_ring_overruns(last);
+    check_identity(last);
+    // Every accepted packet is recorded or counted as not recorded.
+    CHECK(test::health_counter(last, "pcap_packets_written") +
+              test::health_counter(last, "packets_not_recorded") ==
+          test::health_counter(last, "datagrams_received") -
+              test::health_counter(last, "ring_overruns"));
+    // A sanitizer's decoder may stall for 0.1 s: a true silence, and packets not recorded.
+    if (test::kSanitizerBuild) break;
+    whole = test::health_counter(last, "packets_not_recorded") == 0;
     bool flowing = false;
     for (const json& record : test::health_records(dir / "out")) {
-      INFO(record.dump());
       // Until the stop (after 1.5 s the simulated sensor goes quiet first: a true silence).
       if (record.at("gauges").at("uptime_seconds").get<double>() > 1.3) break;
-      if (flowing) CHECK(record.at("state") != "no_data");
+      if (flowing && record.at("state") == "no_data") {
+        WARN("attempt " << attempt << ": no_data while the sensor sends: " << record.dump());
+        whole = false;
+      }
       flowing = flowing || test::health_counter(record, "datagrams_received") > 0;
     }
+    if (!whole) WARN("attempt " << attempt << " lost packets or said no_data: " << last.dump());
   }
+  if (!test::kSanitizerBuild) CHECK(whole);
 }
 
 namespace {
