@@ -1,9 +1,15 @@
 #include "daemon/arena_memory.hpp"
 
+#include <fmt/format.h>
 #include <sys/mman.h>
 
+#include <cerrno>
 #include <cstring>
-#include <new>
+#include <system_error>
+
+#if defined(__SANITIZE_ADDRESS__)
+#include <sanitizer/asan_interface.h>
+#endif
 
 namespace pandarcap {
 
@@ -14,7 +20,10 @@ ArenaMemory::ArenaMemory(std::size_t bytes)
   const std::size_t mapped = size_ + kHugePage;
   void* const p =
       ::mmap(nullptr, mapped, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-  if (p == MAP_FAILED) throw std::bad_alloc();
+  if (p == MAP_FAILED) {
+    throw std::system_error(errno, std::generic_category(),
+                            fmt::format("cannot map {} bytes of memory", mapped));
+  }
   const auto start = reinterpret_cast<std::uintptr_t>(p);
   const std::uintptr_t aligned = (start + kHugePage - 1) / kHugePage * kHugePage;
   if (aligned > start) ::munmap(p, aligned - start);
@@ -26,8 +35,20 @@ ArenaMemory::ArenaMemory(std::size_t bytes)
   std::memset(data_, 0, bytes);
 }
 
+void ArenaMemory::guard([[maybe_unused]] std::uint8_t* from,
+                        [[maybe_unused]] std::size_t bytes) noexcept {
+#if defined(__SANITIZE_ADDRESS__)
+  ASAN_POISON_MEMORY_REGION(from, bytes);
+#endif
+}
+
 ArenaMemory::~ArenaMemory() {
-  if (data_ != nullptr) ::munmap(data_, size_);
+  if (data_ == nullptr) return;
+#if defined(__SANITIZE_ADDRESS__)
+  // The next mapping at these addresses starts clean.
+  ASAN_UNPOISON_MEMORY_REGION(data_, size_);
+#endif
+  ::munmap(data_, size_);
 }
 
 }  // namespace pandarcap

@@ -19,11 +19,16 @@ class ArenaMemory {
   static constexpr std::size_t kHugePage = std::size_t{2} << 20;
   // `bytes`, zero-filled and touched: no page fault waits in the decode thread later. The mapping
   // is rounded up to whole huge pages; what lies past `bytes` is never touched (with huge pages,
-  // the last one is whole: at most 2 MiB more than asked). Throws std::bad_alloc.
+  // the last one is whole: at most 2 MiB more than asked). Throws std::system_error (the
+  // mapping refused: a memory limit, ENOMEM).
   explicit ArenaMemory(std::size_t bytes);
   ~ArenaMemory();
   ArenaMemory(const ArenaMemory&) = delete;
   ArenaMemory& operator=(const ArenaMemory&) = delete;
+
+  // Marks `bytes` from `from` (inside this memory) as no arena's: an ASan build then reports any
+  // access there, as it did when each arena was an allocation of its own. Nothing elsewhere.
+  void guard(std::uint8_t* from, std::size_t bytes) noexcept;
 
   std::uint8_t* data() const noexcept { return data_; }
   std::size_t size() const noexcept { return size_; }

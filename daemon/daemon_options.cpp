@@ -129,7 +129,9 @@ WriterOptions writer_options(const DaemonConfig& config, std::optional<SensorMod
   wo.pcap_zstd = config.output.pcap_compression == "zstd";
   wo.pcap_zstd_level = config.output.pcap_compression_level;
   wo.pcd_lzf = config.output.pcd_compression == "lzf";
-  wo.max_frame_points = config.arenas.points_per_frame;
+  // As many as the arenas hold (arena_points: at least what the model's revolution needs), or a
+  // frame that fills its arena would not fit the lzf compressor or an MCAP message.
+  wo.max_frame_points = arena_points(config, model);
   wo.min_free_bytes = config.output.min_free_bytes;
   wo.min_free_percent = config.output.min_free_percent;
   wo.upload = config.output.upload;
@@ -152,7 +154,7 @@ WriterOptions writer_options(const DaemonConfig& config, std::optional<SensorMod
   wo.mcap_file.compression_level = o.mcap_compression_level;
   wo.mcap_file.chunk_bytes = o.mcap_chunk_bytes;
   wo.mcap_file.chunk_crc = o.mcap_chunk_crc;
-  wo.mcap_file.max_frame_points = config.arenas.points_per_frame;
+  wo.mcap_file.max_frame_points = wo.max_frame_points;
   wo.mcap_file.packets = o.mcap_packets;
   wo.mcap_file.points_topic = o.mcap_points_topic;
   wo.mcap_file.health_topic = o.mcap_health_topic;

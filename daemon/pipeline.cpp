@@ -1,8 +1,11 @@
 #include "daemon/pipeline.hpp"
 
+#include <fmt/format.h>
 #include <pthread.h>
 
 #include <latch>
+#include <stdexcept>
+#include <system_error>
 
 #include "daemon/daemon_options.hpp"
 
@@ -16,19 +19,45 @@ std::size_t power_of_two_at_least(std::size_t n) {
   return p;
 }
 
+// Between two arenas, and after the last: a block that is no arena's (ArenaMemory::guard), so
+// that a write past an arena's end is reported by an ASan build rather than landing in the next.
+constexpr std::size_t kArenaGuardBytes = kDirectIoBlock;
+
+std::size_t arena_stride(const DaemonConfig& c, std::uint32_t points_per_frame) {
+  return FrameArena::bytes_for(points_per_frame, pcd_format(c)) + kArenaGuardBytes;
+}
+
+// The arenas' memory, or an error that names what sizes it (a bare "cannot map" leaves the user
+// to guess which of the configuration's keys to lower).
+ArenaMemory arena_memory_for(const DaemonConfig& c, std::uint32_t points_per_frame) {
+  const PcdFormat format = pcd_format(c);
+  const std::size_t bytes = c.arenas.count * arena_stride(c, points_per_frame);
+  try {
+    return ArenaMemory(bytes);
+  } catch (const std::system_error& error) {
+    throw std::runtime_error(fmt::format(
+        "the frame arenas do not fit: {} arenas x {} points x {} bytes ({} MiB; arenas.count, "
+        "arenas.points_per_frame and output.pcd_fields size them): {}",
+        c.arenas.count, points_per_frame, pcd_point_bytes(format.layout), bytes >> 20,
+        error.what()));
+  }
+}
+
 }  // namespace
 
 Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame)
     : ring(c.ring.slots),
-      arena_memory(c.arenas.count * FrameArena::bytes_for(points_per_frame, pcd_format(c))),
+      arena_memory(arena_memory_for(c, points_per_frame)),
       free_arenas(power_of_two_at_least(c.arenas.count)),
       free_raw(power_of_two_at_least(raw_batches(c))),
       to_writer(power_of_two_at_least(c.arenas.count + raw_batches(c) + 16)),
       status(4) {
-  const std::size_t arena_bytes = FrameArena::bytes_for(points_per_frame, pcd_format(c));
+  const std::size_t stride = arena_stride(c, points_per_frame);
   for (std::uint32_t i = 0; i < c.arenas.count; ++i) {
-    arenas.push_back(std::make_unique<FrameArena>(arena_memory.data() + i * arena_bytes,
-                                                  points_per_frame, pcd_format(c)));
+    std::uint8_t* const start = arena_memory.data() + i * stride;
+    arenas.push_back(std::make_unique<FrameArena>(start, points_per_frame, pcd_format(c)));
+    const std::size_t used = arenas.back()->frame.encoded.size();
+    arena_memory.guard(start + used, stride - used);
     free_arenas.try_push(arenas.back().get());
   }
   for (std::uint32_t i = 0; i < raw_batches(c); ++i) {

@@ -85,6 +85,26 @@ TEST_CASE("the writer's options follow the configuration's directories", "[daemo
   CHECK(wo.expected_rpm == 1200);
 }
 
+// The lzf compressor and the MCAP file are sized for the frames the arenas hold: arena_points(),
+// at least a revolution of the model, whatever arenas.points_per_frame asks (found by a hostile
+// tester: with points_per_frame = 1000, every MCAP point cloud was refused as too large).
+TEST_CASE("the writer's frame capacity is the arenas', for every model and points_per_frame",
+          "[daemon][options]") {
+  DaemonConfig config;
+  for (const std::uint32_t asked : {1000u, 100'000u, 180'000u, 10'000'000u}) {
+    for (const std::optional<SensorModelId> model :
+         {std::optional<SensorModelId>{}, std::optional{SensorModelId::kPandar40P},
+          std::optional{SensorModelId::kPandarQT128}}) {
+      CAPTURE(asked, model.has_value());
+      config.arenas.points_per_frame = asked;
+      const WriterOptions wo = writer_options(config, model);
+      CHECK(wo.max_frame_points == arena_points(config, model));
+      CHECK(wo.mcap_file.max_frame_points == arena_points(config, model));
+      CHECK(wo.max_frame_points >= asked);
+    }
+  }
+}
+
 TEST_CASE("the decoder's options: a replay waits for the writer, live capture measures latency",
           "[daemon][options]") {
   DaemonConfig config;

@@ -203,6 +203,36 @@ TEST_CASE("a replay with --mcap-only converts the real capture: the same frames 
   CHECK(now_ns - end > 3600'000'000'000ull);  // recorded long before this test ran
 }
 
+// arenas.points_per_frame below a revolution: the arenas take what the model needs
+// (arena_points), and so must the MCAP messages and the lzf compressor, or every frame that fills
+// more than was asked is refused, counted as a write error.
+TEST_CASE("a small arenas.points_per_frame: every frame still reaches the MCAP and the lzf PCDs",
+          "[daemon][mcap][real][threads]") {
+  const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
+  if (!capture) return;
+  test::ScratchDir dir("mcap-small-arenas");
+  std::ofstream(dir / "small.toml") << "[arenas]\npoints_per_frame = 1000\n"
+                                       "[output]\npcd_compression = \"lzf\"\n";
+  const auto r = test::run_command(
+      test::pandarcapd_command() + " -c " + quoted(dir / "small.toml") + " --mcap --replay " +
+      quoted(*capture) + " --output-dir " + quoted(dir / "out") + " 2>&1");
+  INFO(r.out);
+  REQUIRE(r.exit_code == 0);
+  const json h = test::last_health_record(dir / "out");
+  INFO(h.dump());
+  CHECK(test::health_counter(h, "write_errors") == 0);
+  CHECK(test::health_counter(h, "mcap_messages_not_written") == 0);
+  CHECK(test::health_counter(h, "mcap_messages_not_recorded") == 0);
+  const auto pcds = test::files_ending(dir / "out" / "frames", ".pcd");
+  REQUIRE(pcds.size() >= 3);  // the capture is 1.2 s
+  const auto files = test::files_ending(dir / "out" / "mcap", ".mcap");
+  REQUIRE(files.size() == 1);
+  const json file = read_or_fail(files[0]);
+  if (file.is_null()) return;
+  // One point cloud per PCD written.
+  CHECK(file["topics"]["/pandar/points"]["messages"].size() == pcds.size());
+}
+
 TEST_CASE("a killed run's MCAP, cut anywhere, is finished at the next start for the reader",
           "[daemon][mcap][recovery][threads]") {
   test::ScratchDir dir("mcap-killed");
