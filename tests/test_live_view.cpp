@@ -340,6 +340,29 @@ TEST_CASE("Foxglove's client sees every channel live: PointCloud2 equal to the P
   CHECK(prom.find("pandarcap_live_messages_sent_total{sensor=\"pandar40p\"}") != std::string::npos);
 }
 
+// arenas.points_per_frame below a revolution: the arenas are raised to what the model needs
+// (arena_points), and every output must take what they hold. The live view's hand-over and its
+// viewers' queues are sized from arenas.points_per_frame itself (live_points_capacity): with 1000,
+// every frame is larger than its message may be, and each one is dropped for the viewer (counted
+// in live.messages_dropped, the state still ok) while the PCDs and the MCAP get them all.
+TEST_CASE("a small arenas.points_per_frame: the viewer still gets every frame, as the MCAP does",
+          "[live][daemon][mcap][threads]") {
+  if (!client_installed()) return;
+  LiveRun run("live-small-arenas", 30,
+              "[arenas]\npoints_per_frame = 1000\n[output]\nmcap = true\n");
+  const auto r = run.watch(2);
+  INFO(r.out);
+  CHECK(r.exit_code == 0);  // 2: no cloud came within the client's 20 s
+  run.daemon.signal(SIGTERM);
+  REQUIRE(run.daemon.wait_exit(20s) == 0);
+  const json h = test::last_health_record(run.dir / "out");
+  INFO(h.dump());
+  REQUIRE(h.contains("live"));
+  CHECK(h["live"]["messages_dropped"] == 0);  // a single viewer that reads: nothing to drop
+  CHECK(test::health_counter(h, "mcap_messages_not_written") == 0);
+  CHECK(test::health_counter(h, "write_errors") == 0);
+}
+
 TEST_CASE("a viewer that never reads costs the capture nothing: 10 s at 3600 packets/s",
           "[live][daemon][threads]") {
   if (!client_installed()) return;
