@@ -1,8 +1,9 @@
 // The frame arenas' memory at the edge of what the machine gives: a configuration whose arenas
 // do not fit under the process's memory limit (ulimit -v, systemd's LimitAS=) must stop the start
 // with an error that says what did not fit and which keys size it, not a bare "std::bad_alloc".
-// Real binary, a real capture, the limit set by util-linux's prlimit. Not [threads]: the daemon
-// stops before its first thread (the thread census says so), and TSan cannot run under the limit.
+// Real binary, a real capture, the limit set by util-linux's prlimit. Only the thread-stack case
+// is [threads] (the others stop before the daemon's first thread); none runs under a sanitizer,
+// whose runtime an address-space limit stops first.
 #include <catch2/catch.hpp>
 #include <fstream>
 #include <string>
@@ -37,4 +38,62 @@ TEST_CASE("arenas larger than the address-space limit: a clear error naming them
   CHECK(run.out.find("std::bad_alloc") == std::string::npos);
   CHECK(run.out.find("arenas") != std::string::npos);
   CHECK(run.out.find("points_per_frame") != std::string::npos);
+}
+
+// The arenas' neighbours, sized by other keys, under the same kind of limit: the packet ring
+// (ring.slots: 2^20 x 1472 B, 1.5 GB) and the raw batches (arenas.packets_per_frame: 64 x 65 536
+// packets), each with arenas that fit. Their refusal says as much as the arenas' does.
+TEST_CASE("a ring or raw batches larger than the address-space limit: a clear error naming them",
+          "[daemon][arena]") {
+  if (test::kSanitizerBuild) {
+    WARN("sanitizer build: an address-space limit stops the runtime itself; not tested");
+    return;
+  }
+  const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
+  if (!capture) return;
+  struct Case {
+    const char* config;
+    const char* key;
+  };
+  for (const Case& c : {Case{"[ring]\nslots = 1048576\n", "ring.slots"},
+                        Case{"[arenas]\ncount = 64\npoints_per_frame = 1000\n"
+                             "packets_per_frame = 65536\n",
+                             "packets_per_frame"}}) {
+    test::ScratchDir dir("arena-neighbours-limits");
+    const auto config = dir / "pandarcap.toml";
+    std::ofstream(config) << c.config;
+    const auto run =
+        test::run_command("prlimit --as=1073741824 " + test::pandarcapd_command() + " -c " +
+                          test::quoted(config) + " --output-dir " + test::quoted(dir / "out") +
+                          " --replay " + test::quoted(*capture) + " 2>&1");
+    INFO(c.config);
+    INFO(run.out);
+    CHECK(run.exit_code > 0);
+    CHECK(run.exit_code < 128);
+    CHECK(run.out.find("std::bad_alloc") == std::string::npos);
+    CHECK(run.out.find(c.key) != std::string::npos);
+  }
+}
+
+// Memory enough for every buffer but not for every thread's stack (the limit counts stacks:
+// prlimit --stack=1GiB makes each one 1 GiB, and --as=3GiB leaves room for two of them): a
+// thread that cannot start must stop the start with an error. Bounded by `timeout -s KILL`, since
+// SIGTERM is not enough to end what it must not become (137: killed).
+TEST_CASE("a thread refused its stack at the start: an error and an exit, not a hang",
+          "[daemon][arena][threads]") {
+  if (test::kSanitizerBuild) {
+    WARN("sanitizer build: an address-space limit stops the runtime itself; not tested");
+    return;
+  }
+  const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
+  if (!capture) return;
+  test::ScratchDir dir("thread-stack-limits");
+  const auto run =
+      test::run_command("timeout -s KILL 30 prlimit --stack=1073741824 --as=3221225472 " +
+                        test::pandarcapd_command() + " --output-dir " + test::quoted(dir / "out") +
+                        " --replay " + test::quoted(*capture) + " 2>&1");
+  INFO(run.out);
+  CHECK(run.exit_code > 0);    // it cannot run all its threads: not a success
+  CHECK(run.exit_code < 128);  // 137: still there after 30 s, killed
+  CHECK(run.out.find("pandarcapd: ") != std::string::npos);
 }
