@@ -97,3 +97,32 @@ TEST_CASE("a thread refused its stack at the start: an error and an exit, not a 
   CHECK(run.exit_code < 128);  // 137: still there after 30 s, killed
   CHECK(run.out.find("pandarcapd: ") != std::string::npos);
 }
+
+// The writer's buffers follow the arenas' points (the lzf compressor, the MCAP chunk buffers and
+// messages: arena_points), so they are as large as the arenas and more: 2 arenas of 10 000 000
+// autoware points fit under 2 GB, the MCAP and lzf buffers for such frames do not. Their refusal
+// must name what sizes them, and is not an output directory's fault (73 says "not writable").
+TEST_CASE("the writer's frame buffers larger than the address-space limit: named, not exit 73",
+          "[daemon][arena][threads]") {
+  if (test::kSanitizerBuild) {
+    WARN("sanitizer build: an address-space limit stops the runtime itself; not tested");
+    return;
+  }
+  const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
+  if (!capture) return;
+  test::ScratchDir dir("writer-buffer-limits");
+  const auto config = dir / "pandarcap.toml";
+  std::ofstream(config) << "[arenas]\ncount = 2\npoints_per_frame = 10000000\n"
+                           "[output]\npcd_fields = \"autoware\"\nmcap = true\n"
+                           "pcd_compression = \"lzf\"\n";
+  const auto run = test::run_command("timeout -s KILL 30 prlimit --as=2000000000 " +
+                                     test::pandarcapd_command() + " -c " + test::quoted(config) +
+                                     " --output-dir " + test::quoted(dir / "out") + " --replay " +
+                                     test::quoted(*capture) + " 2>&1");
+  INFO(run.out);
+  CHECK(run.exit_code > 0);
+  CHECK(run.exit_code < 128);
+  CHECK(run.exit_code != 73);  // EX_CANTCREAT: the output directory is not at fault
+  CHECK(run.out.find("std::bad_alloc") == std::string::npos);
+  CHECK(run.out.find("points_per_frame") != std::string::npos);
+}
