@@ -303,7 +303,8 @@ SyntheticSensorConfig simulated_sensor_config(const RunSource& source, std::int6
   return sc;
 }
 
-live::LiveOptions live_options(const DaemonConfig& config, std::string_view version) {
+live::LiveOptions live_options(const DaemonConfig& config, std::string_view version,
+                               std::optional<SensorModelId> model) {
   live::LiveOptions o;
   o.address = config.live.address;
   o.port = config.live.port;
@@ -321,13 +322,15 @@ live::LiveOptions live_options(const DaemonConfig& config, std::string_view vers
   o.health_schema = std::string(kHealthJsonSchema);
   // Two of the largest frames queued per viewer (one being written, one waiting), and room for
   // the health and status messages beside them.
-  o.client_queue_bytes = 2 * live_points_capacity(config) + live::kHealthMessageCapacity;
+  o.client_queue_bytes = 2 * live_points_capacity(config, model) + live::kHealthMessageCapacity;
   return o;
 }
 
-std::size_t live_points_capacity(const DaemonConfig& config) {
+std::size_t live_points_capacity(const DaemonConfig& config, std::optional<SensorModelId> model) {
+  // The arenas' points (arena_points), not arenas.points_per_frame: a frame that fills its arena
+  // must fit the hand-over and a viewer's queue, or the live view drops every frame.
   return live::points_message_bytes(pcd_format(config).layout, config.output.mcap_frame_id.size(),
-                                    config.arenas.points_per_frame);
+                                    arena_points(config, model));
 }
 
 }  // namespace pandarcap

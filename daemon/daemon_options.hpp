@@ -91,9 +91,11 @@ bool status_polled(const DaemonConfig& config, const RunSource& source,
                    const std::optional<PtcClientOptions>& ptc);
 
 // The live view's server ([live]; the points and health topics are the MCAP's), and the bytes of
-// the largest frame's message, which the hand-over reserves.
-live::LiveOptions live_options(const DaemonConfig& config, std::string_view version);
-std::size_t live_points_capacity(const DaemonConfig& config);
+// the largest frame's message, which the hand-over reserves: a frame of the arenas' points
+// (arena_points, for `model`).
+live::LiveOptions live_options(const DaemonConfig& config, std::string_view version,
+                               std::optional<SensorModelId> model);
+std::size_t live_points_capacity(const DaemonConfig& config, std::optional<SensorModelId> model);
 
 // The simulated sensor's settings, starting now (`start_unix_ns`).
 SyntheticSensorConfig simulated_sensor_config(const RunSource& source, std::int64_t start_unix_ns);

@@ -281,6 +281,20 @@ int report_replay(const PacketSource& source, const RunSource& run_source) {
   return kExitDataDamaged;
 }
 
+// All the pipeline's memory, or an error that names the keys that size what did not fit (the
+// arenas name themselves: pipeline.cpp).
+Pipeline make_pipeline(const DaemonConfig& config, std::uint32_t points_per_arena) {
+  try {
+    return Pipeline(config, points_per_arena);
+  } catch (const std::bad_alloc&) {
+    throw std::runtime_error(fmt::format(
+        "memory: the packet ring ({} slots x {} B, ring.slots) or the raw batches ({} x {} "
+        "packets, arenas.count and arenas.packets_per_frame) do not fit: cannot allocate them",
+        config.ring.slots, sizeof(PacketSlot), Pipeline::raw_batches(config),
+        config.arenas.packets_per_frame));
+  }
+}
+
 // The daemon's life, in order; shutdown is the reverse (PipelineThreads).
 int run(const CommandLine& command_line) {
   CommandLine options = command_line;  // the start fills in the sensor model
@@ -315,7 +329,7 @@ int run(const CommandLine& command_line) {
 
   // All the memory, now: arenas sized for the model (every model's when the packets choose it).
   const std::uint32_t points_per_arena = arena_points(config, options.source.model);
-  Pipeline pipe(config, points_per_arena);
+  Pipeline pipe = make_pipeline(config, points_per_arena);
   spdlog::info(
       "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
       "packets",
@@ -358,10 +372,11 @@ int run(const CommandLine& command_line) {
   std::unique_ptr<live::LiveHandover> live_handover;
   std::unique_ptr<live::FoxgloveServer> live_server;
   if (config.live.foxglove) {
-    live_handover = std::make_unique<live::LiveHandover>(live_points_capacity(config));
+    live_handover =
+        std::make_unique<live::LiveHandover>(live_points_capacity(config, options.source.model));
     try {
-      live_server =
-          std::make_unique<live::FoxgloveServer>(live_options(config, kVersion), *live_handover);
+      live_server = std::make_unique<live::FoxgloveServer>(
+          live_options(config, kVersion, options.source.model), *live_handover);
     } catch (const std::exception& error) {
       throw StartupError{1, error.what()};  // as a data port in use is
     }
@@ -377,6 +392,13 @@ int run(const CommandLine& command_line) {
   }
   try {
     writer.prepare();
+  } catch (const std::bad_alloc&) {
+    // Not the output directory's fault (kExitCantCreate would say so): the frames' buffers.
+    throw StartupError{
+        1, fmt::format("outputs: the writer's buffers for frames of {} points (arenas."
+                       "points_per_frame, at least a revolution of the model; output.pcd_"
+                       "compression, output.mcap) do not fit: cannot allocate them",
+                       points_per_arena)};
   } catch (const std::exception& error) {
     throw StartupError{kExitCantCreate, fmt::format("outputs: {}", error.what())};
   }
@@ -408,36 +430,55 @@ int run(const CommandLine& command_line) {
     threads.start(
         "pc-sensorstat", {}, [&] { status_poller->run(); }, [&] { status_poller->stop(); });
   }
-  threads.start(
-      "pc-writer",
-      [&] {
-        place_this_thread("writer", {placement.writer_cpu, placement.writer_priority});
-      },
-      [&] { writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status); });
-  if (live_server) {
+  bool decoder_started = false;
+  try {
     threads.start(
-        "pc-live", {}, [&] { live_server->run(); }, [&] { live_server->stop(); });
-  }
-  threads.start(
-      "pc-decode",
-      [&] {
-        place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
-      },
-      [&] { worker.run(pipe.source_done, pipe.heartbeats.decode, pipe.live); });
-  threads.start(
-      source->thread_name(),
-      [&] {
-        place_this_thread("receive", {placement.receive_cpu, placement.receive_priority});
-      },
-      [&] {
-        source->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive,
-                    pipe.source_done);
-      },
-      [&] { pipe.stop_source.store(true, std::memory_order_relaxed); });
-  if (source->simulated()) {
+        "pc-writer",
+        [&] {
+          place_this_thread("writer", {placement.writer_cpu, placement.writer_priority});
+        },
+        [&] { writer.run(pipe.heartbeats.writer, pipe.rotate_generation, pipe.status); });
+    if (live_server) {
+      threads.start(
+          "pc-live", {}, [&] { live_server->run(); }, [&] { live_server->stop(); });
+    }
     threads.start(
-        "pc-simsensor", {}, [&] { source->run_simulator(stop_simulator); },
-        [&] { stop_simulator.store(true, std::memory_order_relaxed); });
+        "pc-decode",
+        [&] {
+          place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
+        },
+        [&] { worker.run(pipe.source_done, pipe.heartbeats.decode, pipe.live); });
+    decoder_started = true;
+    threads.start(
+        source->thread_name(),
+        [&] {
+          place_this_thread("receive", {placement.receive_cpu, placement.receive_priority});
+        },
+        [&] {
+          source->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive,
+                      pipe.source_done);
+        },
+        [&] { pipe.stop_source.store(true, std::memory_order_relaxed); });
+    if (source->simulated()) {
+      threads.start(
+          "pc-simsensor", {}, [&] { source->run_simulator(stop_simulator); },
+          [&] { stop_simulator.store(true, std::memory_order_relaxed); });
+    }
+  } catch (const std::system_error& error) {
+    // The threads that did start end when their input does: the decoder's is the source's end,
+    // the writer's the decoder's. One that never started cannot give it, so it is given here
+    // (the writer's queue has no other producer until the decoder runs), and stop_all() joins.
+    if (decoder_started) {
+      pipe.source_done.store(true, std::memory_order_release);
+    } else {
+      WriterMessage end;
+      end.kind = WriterMessage::Kind::kEnd;
+      (void)pipe.to_writer.try_push(end);
+    }
+    threads.stop_all();
+    throw std::runtime_error(fmt::format(
+        "{} (a stack or thread limit: ulimit -s / -u, systemd's LimitSTACK= / TasksMax=)",
+        error.what()));
   }
   if (config.threads.lock_memory) lock_all_memory();
   systemd::ready();

@@ -35,10 +35,15 @@ ArenaMemory arena_memory_for(const DaemonConfig& c, std::uint32_t points_per_fra
   try {
     return ArenaMemory(bytes);
   } catch (const std::system_error& error) {
+    const std::string raised =
+        points_per_frame > c.arenas.points_per_frame
+            ? fmt::format(", raised from {} to a revolution of the model at sensor.rotation_speed",
+                          c.arenas.points_per_frame)
+            : "";
     throw std::runtime_error(fmt::format(
-        "the frame arenas do not fit: {} arenas x {} points x {} bytes ({} MiB; arenas.count, "
+        "the frame arenas do not fit: {} arenas x {} points{} x {} bytes ({} MiB; arenas.count, "
         "arenas.points_per_frame and output.pcd_fields size them): {}",
-        c.arenas.count, points_per_frame, pcd_point_bytes(format.layout), bytes >> 20,
+        c.arenas.count, points_per_frame, raised, pcd_point_bytes(format.layout), bytes >> 20,
         error.what()));
   }
 }
@@ -71,14 +76,19 @@ void PipelineThreads::start(const char* name, std::function<void()> setup,
   // Room first: a vector that failed to grow after the thread started would join it unasked.
   started_.reserve(started_.size() + 1);
   std::latch placed(1);
-  started_.push_back(
-      Started{std::move(stop),
-              std::jthread([name, &placed, setup = std::move(setup), body = std::move(body)] {
-                pthread_setname_np(pthread_self(), name);
-                if (setup) setup();
-                placed.count_down();  // `placed` is not touched after this: start() returns
-                body();
-              })});
+  try {
+    started_.push_back(
+        Started{std::move(stop),
+                std::jthread([name, &placed, setup = std::move(setup), body = std::move(body)] {
+                  pthread_setname_np(pthread_self(), name);
+                  if (setup) setup();
+                  placed.count_down();  // `placed` is not touched after this: start() returns
+                  body();
+                })});
+  } catch (const std::system_error& error) {
+    // No thread: a stack or thread limit (ulimit -s / -u, systemd's LimitSTACK=, TasksMax=).
+    throw std::system_error(error.code(), fmt::format("cannot start thread {}", name));
+  }
   placed.wait();
 }
 

@@ -62,7 +62,9 @@ class PipelineThreads {
   // Starts a thread named `name` (at most 15 characters: `top -H`, /proc/PID/task) that runs
   // `setup` (pinning, priority), then `body`; returns once `setup` is done, so that READY=1
   // after the last start means every thread is named and placed. `stop` is what asks the body to
-  // end (nothing for a thread that ends when its input does).
+  // end (nothing for a thread that ends when its input does). Throws std::system_error naming the
+  // thread when it cannot be started (a stack or thread limit); those started before it run on
+  // until stop_all(), so their inputs must be ended first.
   void start(const char* name, std::function<void()> setup, std::function<void()> body,
              std::function<void()> stop = {});
 
