@@ -281,20 +281,6 @@ int report_replay(const PacketSource& source, const RunSource& run_source) {
   return kExitDataDamaged;
 }
 
-// All the pipeline's memory, or an error that names the keys that size what did not fit (the
-// arenas name themselves: pipeline.cpp).
-Pipeline make_pipeline(const DaemonConfig& config, std::uint32_t points_per_arena) {
-  try {
-    return Pipeline(config, points_per_arena);
-  } catch (const std::bad_alloc&) {
-    throw std::runtime_error(fmt::format(
-        "memory: the packet ring ({} slots x {} B, ring.slots) or the raw batches ({} x {} "
-        "packets, arenas.count and arenas.packets_per_frame) do not fit: cannot allocate them",
-        config.ring.slots, sizeof(PacketSlot), Pipeline::raw_batches(config),
-        config.arenas.packets_per_frame));
-  }
-}
-
 // The daemon's life, in order; shutdown is the reverse (PipelineThreads).
 int run(const CommandLine& command_line) {
   CommandLine options = command_line;  // the start fills in the sensor model
@@ -329,7 +315,7 @@ int run(const CommandLine& command_line) {
 
   // All the memory, now: arenas sized for the model (every model's when the packets choose it).
   const std::uint32_t points_per_arena = arena_points(config, options.source.model);
-  Pipeline pipe = make_pipeline(config, points_per_arena);
+  Pipeline pipe(config, points_per_arena);
   spdlog::info(
       "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
       "packets",

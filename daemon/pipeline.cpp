@@ -4,6 +4,7 @@
 #include <pthread.h>
 
 #include <latch>
+#include <new>
 #include <stdexcept>
 #include <system_error>
 
@@ -50,7 +51,9 @@ ArenaMemory arena_memory_for(const DaemonConfig& c, std::uint32_t points_per_fra
 
 }  // namespace
 
-Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame)
+// A refused allocation names the keys that size what did not fit: the arenas their own
+// (arena_memory_for), the ring and the raw batches here.
+Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame) try
     : ring(c.ring.slots),
       arena_memory(arena_memory_for(c, points_per_frame)),
       free_arenas(power_of_two_at_least(c.arenas.count)),
@@ -69,6 +72,11 @@ Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame)
     raw.push_back(std::make_unique<RawBatch>(c.arenas.packets_per_frame));
     free_raw.try_push(raw.back().get());
   }
+} catch (const std::bad_alloc&) {
+  throw std::runtime_error(fmt::format(
+      "memory: the packet ring ({} slots x {} B, ring.slots) or the raw batches ({} x {} "
+      "packets, arenas.count and arenas.packets_per_frame) do not fit: cannot allocate them",
+      c.ring.slots, sizeof(PacketSlot), raw_batches(c), c.arenas.packets_per_frame));
 }
 
 void PipelineThreads::start(const char* name, std::function<void()> setup,
