@@ -33,25 +33,43 @@ bool points_decoded(const DaemonConfig& config) {
   return config.output.frames || config.output.mcap || config.live.foxglove;
 }
 
-// A quarter of what the pipeline holds: the ring's slots and, when the pcap or MCAP records
-// packets, the raw batches between decoder and writer. Everything a wake takes arrives at once.
-std::size_t max_wake_datagrams(const DaemonConfig& config) {
+// A quarter of what the pipeline holds: the ring's slots; when the pcap or MCAP records
+// packets, the raw batches between decoder and writer; and when points are decoded, the frames
+// the arenas hold (each a revolution of `model` in dual return at sensor.rotation_speed: a wake
+// of more frames than the writer has arenas for drops frames). Everything a wake takes arrives at
+// once.
+std::size_t max_wake_datagrams(const DaemonConfig& config, SensorModelId model) {
   std::size_t held = config.ring.slots;
   if (config.output.pcap || (config.output.mcap && config.output.mcap_packets)) {
     held = std::min<std::size_t>(
         held, std::size_t{Pipeline::raw_batches(config)} * config.arenas.packets_per_frame);
   }
+  if (points_decoded(config)) {
+    const double per_frame = with_model(model, [&]<class M>(std::type_identity<M>) {
+      return std::ceil(M::packets_per_revolution(2, config.sensor.rotation_speed));
+    });
+    held = std::min<std::size_t>(
+        held, static_cast<std::size_t>(per_frame) * std::size_t{config.arenas.count});
+  }
   return std::max<std::size_t>(held / 4, 1);
 }
 
-// How long a recording alone lets packets wait before the receive thread hands them on: the
-// decoder's flush period, but no longer than max_wake_datagrams take to arrive at the sensor's
-// rate, nor than a quarter of the silence that health calls no_data (a longer wait fakes one).
-std::int64_t recording_wait_ns(const DaemonConfig& config, double packets_per_second) {
-  double seconds = static_cast<double>(kRecordingFlushNs) / 1e9;
-  seconds = std::min(seconds, static_cast<double>(max_wake_datagrams(config)) / packets_per_second);
+// The longest any wake lets packets wait, whatever latency.budget_ms asks: no longer than
+// max_wake_datagrams take to arrive at the sensor's rate, nor than a quarter of the silence that
+// health calls no_data (a longer wait fakes one: budget_ms = 1000 with no_data_timeout_seconds =
+// 0.3 said no_data twice a second while the sensor sent). 1 ms at least.
+std::int64_t longest_wait_ns(const DaemonConfig& config, SensorModelId model,
+                             double packets_per_second) {
+  double seconds = static_cast<double>(max_wake_datagrams(config, model)) / packets_per_second;
   seconds = std::min(seconds, config.health.no_data_timeout_seconds / 4);
-  return static_cast<std::int64_t>(seconds * 1e9);
+  return std::max<std::int64_t>(static_cast<std::int64_t>(seconds * 1e9), 1'000'000);
+}
+
+// How long a recording alone lets packets wait before the receive thread hands them on: the
+// decoder's flush period, or less (longest_wait_ns).
+std::int64_t recording_wait_ns(const DaemonConfig& config, SensorModelId model,
+                               double packets_per_second) {
+  return std::min(kRecordingFlushNs, longest_wait_ns(config, model, packets_per_second));
 }
 
 std::string device_name(const DaemonConfig& config) {
@@ -241,7 +259,7 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   });
   ro.expected_bytes_per_second = static_cast<std::uint64_t>(
       packets_per_second * static_cast<double>(ro.expected_datagram_bytes));
-  ro.max_wake_datagrams = max_wake_datagrams(config);
+  ro.max_wake_datagrams = max_wake_datagrams(config, model);
   ro.latency_budget_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
   // The budget is the frames' (users wait for frames). A recording alone waits for nothing
   // sooner than the decoder's flush of its packets to the writer: waking more often than that
@@ -251,7 +269,13 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   // a burst (ten times the rate for 100 ms) with all of it at once.
   if (ro.packet_ring && !points_decoded(config) && ro.latency_budget_ns > 0) {
     ro.latency_budget_ns =
-        std::max(ro.latency_budget_ns, recording_wait_ns(config, packets_per_second));
+        std::max(ro.latency_budget_ns, recording_wait_ns(config, model, packets_per_second));
+  }
+  // A budget is an upper bound, not a promise to wait: none may wait longer than the pipeline
+  // and the health allow.
+  if (ro.latency_budget_ns > 0) {
+    ro.latency_budget_ns =
+        std::min(ro.latency_budget_ns, longest_wait_ns(config, model, packets_per_second));
   }
   return ro;
 }

@@ -432,16 +432,23 @@ DecoderTarget choose_decoder(const DaemonConfig& config) {
 
 std::unique_ptr<PacketSource> open_source(const DaemonConfig& config, const RunSource& source) {
   try {
-    switch (source.kind) {
-      case RunSource::Kind::kReplay:
-        return PacketSource::replay(replay_options(config, source));
-      case RunSource::Kind::kSimulated:
-        return PacketSource::simulated(receiver_options(config, source), source.simulated_model,
-                                       simulated_sensor_config(source, realtime_ns()));
-      case RunSource::Kind::kLive:
-        break;
+    if (source.kind == RunSource::Kind::kReplay) {
+      return PacketSource::replay(replay_options(config, source));
     }
-    return PacketSource::live(receiver_options(config, source));
+    const UdpReceiverOptions options = receiver_options(config, source);
+    const std::int64_t asked_ns = std::int64_t{config.latency.budget_ms} * 1'000'000;
+    if (options.latency_budget_ns < asked_ns) {
+      spdlog::info(
+          "latency.budget_ms {} shortened to {:.1f} ms: no wake may take more than a quarter of "
+          "what the ring, the raw batches and the arenas hold at the sensor's rate, nor wait "
+          "more than a quarter of health.no_data_timeout_seconds",
+          config.latency.budget_ms, static_cast<double>(options.latency_budget_ns) / 1e6);
+    }
+    if (source.kind == RunSource::Kind::kSimulated) {
+      return PacketSource::simulated(options, source.simulated_model,
+                                     simulated_sensor_config(source, realtime_ns()));
+    }
+    return PacketSource::live(options);
   } catch (const CaptureError& error) {
     throw StartupError{kExitNoInput, error.what()};
   } catch (const MissingCapability& error) {

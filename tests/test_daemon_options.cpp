@@ -215,30 +215,79 @@ TEST_CASE("a pipeline thread is named and placed before its start returns", "[da
   threads.stop_all();  // idempotent
 }
 
+// What a 40P sends in dual return, and the waits the defaults' bounds allow: a quarter of the
+// arenas' frames (4 x 360 packets) with points decoded, a quarter of the raw batches (4 x 512)
+// for a recording alone; a quarter of the 1 s no_data timeout is longer than either.
+constexpr double k40PDualPps = 3599.7;
+constexpr double kFramesBoundMs = 4 * 360 / 4 / k40PDualPps * 1000;     // 100.0 ms
+constexpr double kRecordingBoundMs = 4 * 512 / 4 / k40PDualPps * 1000;  // 142.2 ms
+
 TEST_CASE("the latency budget is the frames': a recording alone wakes at its own flush period",
           "[daemon][options]") {
-  for (const std::uint32_t budget_ms : {0u, 5u, 100u, 400u}) {
+  const auto wait_ms = [](const DaemonConfig& config) {
+    return static_cast<double>(receiver_options(config, RunSource{}).latency_budget_ns) / 1e6;
+  };
+  for (const std::uint32_t budget_ms : {0u, 5u, 50u, 100u, 400u, 1000u}) {
     DaemonConfig config;
     config.input.receiver = "packet_ring";
     config.latency.budget_ms = budget_ms;
-    const std::int64_t budget_ns = std::int64_t{budget_ms} * 1'000'000;
+    const double budget = budget_ms;
     INFO("budget " << budget_ms << " ms");
-    // Anything that waits for frames keeps the budget as configured.
-    CHECK(receiver_options(config, RunSource{}).latency_budget_ns == budget_ns);
+    // Anything that waits for frames keeps the budget as configured, up to what a quarter of the
+    // arenas' frames take to arrive (a longer wait hands on more frames than there are arenas).
+    CHECK(wait_ms(config) == Approx(std::min(budget, kFramesBoundMs)).epsilon(0.001));
     config.output.frames = false;
     config.output.mcap = true;
-    CHECK(receiver_options(config, RunSource{}).latency_budget_ns == budget_ns);
+    CHECK(wait_ms(config) == Approx(std::min(budget, kFramesBoundMs)).epsilon(0.001));
     config.output.mcap = false;
     config.live.foxglove = true;
-    CHECK(receiver_options(config, RunSource{}).latency_budget_ns == budget_ns);
+    CHECK(wait_ms(config) == Approx(std::min(budget, kFramesBoundMs)).epsilon(0.001));
     // Nothing does: the decoder's flush of the recording (100 ms) is the shortest wait that
-    // buys anything; a longer budget stays, and 0 (a wake per datagram) is kept as asked.
+    // buys anything; a longer budget stays up to the raw batches' bound, and 0 (a wake per
+    // datagram) is kept as asked.
     config.live.foxglove = false;
-    CHECK(receiver_options(config, RunSource{}).latency_budget_ns ==
-          (budget_ns == 0 ? 0 : std::max(budget_ns, kRecordingFlushNs)));
+    CHECK(wait_ms(config) ==
+          Approx(budget_ms == 0 ? 0.0 : std::min(std::max(budget, 100.0), kRecordingBoundMs))
+              .epsilon(0.001));
     // The socket keeps the budget: it cannot wake on a burst as a full block does.
     config.input.receiver = "socket";
-    CHECK(receiver_options(config, RunSource{}).latency_budget_ns == budget_ns);
+    CHECK(wait_ms(config) == Approx(std::min(budget, kRecordingBoundMs)).epsilon(0.001));
+  }
+}
+
+TEST_CASE("no budget waits longer than a quarter of the no_data timeout, with either receiver",
+          "[daemon][options]") {
+  // budget_ms = 1000 with no_data_timeout_seconds = 0.3 said no_data while the sensor sent: the
+  // receive thread held the packets longer than the silence health calls one.
+  const auto wait_ms = [](const DaemonConfig& config) {
+    return static_cast<double>(receiver_options(config, RunSource{}).latency_budget_ns) / 1e6;
+  };
+  for (const char* receiver : {"socket", "packet_ring"}) {
+    for (const bool frames : {true, false}) {
+      for (const double timeout : {0.004, 0.02, 0.1, 0.3, 1.0, 10.0}) {
+        for (const std::uint32_t budget_ms : {1u, 5u, 100u, 1000u}) {
+          DaemonConfig config;
+          config.input.receiver = receiver;
+          config.output.frames = frames;
+          config.ring.slots = 65536;  // the ring and the raw batches hold seconds
+          config.arenas.count = 64;
+          config.arenas.packets_per_frame = 4096;
+          config.health.no_data_timeout_seconds = timeout;
+          config.latency.budget_ms = budget_ms;
+          CAPTURE(receiver, frames, timeout, budget_ms);
+          const double wait = wait_ms(config);
+          CHECK(wait <= std::max(timeout / 4 * 1000, 1.0) + 0.001);
+          CHECK(wait >= 1.0);  // never a wake per datagram unless 0 asks for it
+          // No shorter than asked for, unless the timeout or the recording's flush says so.
+          const bool recording_ring = !frames && std::string(receiver) == "packet_ring";
+          const double expected =
+              std::max(std::min(recording_ring ? std::max<double>(budget_ms, 100) : budget_ms,
+                                timeout / 4 * 1000),
+                       1.0);
+          CHECK(wait == Approx(expected).epsilon(0.001));
+        }
+      }
+    }
   }
 }
 
@@ -264,9 +313,13 @@ TEST_CASE("a recording alone waits no longer than a quarter of what its pipeline
   DaemonConfig silence = config;
   silence.health.no_data_timeout_seconds = 0.1;
   CHECK(wait_ms(silence) == Approx(25).epsilon(0.01));
-  // A configured budget longer than the bounds is the user's, as with frames.
+  // A configured budget longer than the bounds is held to them too (a longer wait fakes the
+  // silence, or hands on more than the pipeline holds).
   silence.latency.budget_ms = 60;
-  CHECK(wait_ms(silence) == 60);
+  CHECK(wait_ms(silence) == Approx(25).epsilon(0.01));
+  DaemonConfig small_ring = ring;
+  small_ring.latency.budget_ms = 60;
+  CHECK(wait_ms(small_ring) == Approx(256.0 / 3599.7 / 4 * 1000).epsilon(0.01));
   // A faster model fills the same slots sooner: a QT128 sends 9000 packets a second.
   RunSource qt;
   qt.model = SensorModelId::kPandarQT128;
@@ -274,20 +327,36 @@ TEST_CASE("a recording alone waits no longer than a quarter of what its pipeline
         Approx(256.0 / 9000 / 4 * 1000).epsilon(0.01));
 }
 
-TEST_CASE("a wake hands on at most a quarter of what the ring and the raw batches hold",
+TEST_CASE("a wake hands on at most a quarter of what the ring, the raw batches and the arenas hold",
           "[daemon][options]") {
-  DaemonConfig config;  // 4096 slots, 4 x 512 raw packets
-  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 2048 / 4);
+  DaemonConfig config;  // 4096 slots, 4 x 512 raw packets, 4 arenas of a 40P's 360 packets
+  const auto wake = [&] { return receiver_options(config, RunSource{}).max_wake_datagrams; };
+  CHECK(wake() == 4 * 360 / 4);
+  config.arenas.count = 8;  // 8 x 360 = 2880: the raw batches (8 x 512) and the ring hold more
+  CHECK(wake() == 8 * 360 / 4);
+  config.output.frames = false;  // no points decoded: the ring and raw batches alone
+  CHECK(wake() == 4096 / 4);
+  config.arenas.count = 4;
+  CHECK(wake() == 2048 / 4);
   config.output.pcap = false;  // no raw batches: the ring alone
-  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 4096 / 4);
-  config.output.mcap = true;  // MCAP's packets take raw batches too
-  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 4096 / 4);
-  config.output.mcap_packets = true;
-  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 2048 / 4);
+  CHECK(wake() == 4096 / 4);
+  config.output.mcap = true;  // MCAP decodes points: the arenas' frames again
+  CHECK(wake() == 4 * 360 / 4);
+  config.output.mcap_packets = true;  // and takes raw batches
+  config.arenas.packets_per_frame = 64;
+  CHECK(wake() == 4 * 64 / 4);
+  config.arenas.packets_per_frame = 512;
   config.ring.slots = 256;
-  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 256 / 4);
+  CHECK(wake() == 256 / 4);
   config.ring.slots = 2;
-  CHECK(receiver_options(config, RunSource{}).max_wake_datagrams == 1);
+  CHECK(wake() == 1);
+  // A faster model's frames hold more packets: a QT128 at 600 RPM sends 900 a revolution (no
+  // pcap, whose raw batches would hold fewer).
+  DaemonConfig qt_config;
+  qt_config.output.pcap = false;
+  RunSource qt;
+  qt.model = SensorModelId::kPandarQT128;
+  CHECK(receiver_options(qt_config, qt).max_wake_datagrams == Approx(4 * 900 / 4).margin(1));
 }
 
 TEST_CASE("the packet ring's expected rate follows the configured model", "[daemon][options]") {

@@ -4,9 +4,12 @@
 // bounded by the budget, that a burst is drained before the socket overflows, that SIGTERM still
 // takes everything, and that budget 0 keeps the wake per datagram. The CPU it saves is measured
 // in the benchmark (pandarcap-bench zero-loss), never here.
+#include <fmt/format.h>
+
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -211,4 +214,64 @@ TEST_CASE("latency budget: SIGTERM still takes everything the socket holds",
   CHECK(health_counter(h, "packets_accepted") == 150);
   CHECK(health_counter(h, "kernel_drops") == 0);
   CHECK(recorded_sequences(daemon.out).size() == 150);
+}
+
+// A budget longer than the pipeline and the health allow is held to them (daemon_options.cpp
+// longest_wait_ns): budget_ms = 1000 with no_data_timeout_seconds = 0.3 and a ring of seconds
+// said no_data twice a second while the sensor sent, and dropped a frame in ten for want of an
+// arena (a wake handed on ten frames to four arenas). A matrix of budgets, silences and the
+// bound that holds (the silence, the arenas); each run is tried again, up to three times, if a
+// busy machine stalls a thread past the silence (what this guards against fails every time).
+TEST_CASE("latency budget: a long budget neither fakes a silence nor drops frames",
+          "[daemon][latency][threads]") {
+  struct Case {
+    const char* name;
+    std::uint32_t budget_ms;
+    double no_data_s;
+    double expected_ms;  // the wait the start says it shortened the budget to
+  };
+  // A ring of 65 536 slots and no pcap: only the arenas (4 x 360 packets of a 40P, a quarter of
+  // them 100 ms) and the silence bound the wait.
+  const Case cases[] = {{"1000 ms, silence 0.3 s", 1000, 0.3, 75.0},
+                        {"300 ms, silence 0.2 s", 300, 0.2, 50.0},
+                        {"1000 ms, silence 1 s (the arenas hold)", 1000, 1.0, 100.0}};
+  for (const Case& c : cases) {
+    DYNAMIC_SECTION(c.name) {
+      bool whole = false;
+      const int attempts = test::kSanitizerBuild ? 1 : 3;
+      for (int attempt = 0; attempt < attempts && !whole; ++attempt) {
+        CAPTURE(attempt);
+        test::ScratchDir dir("latency-long-budget");
+        const fs::path config = dir / "long.toml";
+        std::ofstream(config) << "[ring]\nslots = 65536\n[output]\npcap = false\n[latency]\n"
+                              << "budget_ms = " << c.budget_ms << "\n[health]\n"
+                              << "no_data_timeout_seconds = " << c.no_data_s << "\n";
+        const auto r = test::run_command(test::pandarcapd_command() + " -c " +
+                                         test::quoted(config) + " --simulate --duration 2.5 " +
+                                         "--output-dir " + test::quoted(dir / "out") + " 2>&1");
+        INFO(r.out);
+        REQUIRE(r.exit_code == 0);
+        CHECK(r.out.find(fmt::format("latency.budget_ms {} shortened to {:.1f} ms", c.budget_ms,
+                                     c.expected_ms)) != std::string::npos);
+        const json last = test::last_health_record(dir / "out");
+        INFO(last.dump());
+        REQUIRE(health_counter(last, "datagrams_received") > 3000);
+        // A sanitizer's threads may stall past a silence: the shortened wait is what is checked.
+        if (test::kSanitizerBuild) break;
+        whole = health_counter(last, "frames_dropped") == 0;
+        bool flowing = false;
+        for (const json& record : health_records(dir / "out")) {
+          // Until the stop (the simulated sensor goes quiet first: a true silence).
+          if (record.at("gauges").at("uptime_seconds").get<double>() > 2.2) break;
+          if (flowing && record.at("state") == "no_data") {
+            WARN("attempt " << attempt << ": no_data while the sensor sends: " << record.dump());
+            whole = false;
+          }
+          flowing = flowing || health_counter(record, "datagrams_received") > 0;
+        }
+        if (!whole) WARN("attempt " << attempt << ": " << last.dump());
+      }
+      if (!test::kSanitizerBuild) CHECK(whole);
+    }
+  }
 }
