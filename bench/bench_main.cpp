@@ -199,6 +199,8 @@ int run_zero_loss(int argc, char** argv) {
       options.compare_budget_0 = true;
     } else if (arg == "--compare-mcap") {
       options.compare_mcap = true;
+    } else if (arg == "--sensor-rate-rounds") {
+      options.sensor_rate_rounds = static_cast<int>(args.integer(arg, 1, 9));
     } else if (arg == "--compare-tcpdump") {
       options.tcpdump_rounds = static_cast<int>(args.integer(arg, 1, 100));
     } else if (arg == "--receiver-command") {

@@ -201,12 +201,39 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   // machine: a bare recvmmsg loop woken by the same traffic, doing nothing else. The three run
   // back to back so that their ratios are measured under the same conditions.
   const double sensor_seconds = std::max(o.trial_seconds, 3.0);
-  ordered_json bare_at_sensor = ordered_json::object();  // stays empty with --daemon-only
-  if (!o.skip_references) {
-    bare_at_sensor =
-        harness.reference_trial(ReferenceReceiver::Kind::kRecvmmsg, o.sensor_rate, sensor_seconds);
+  // Alternated rounds of the two; the median round's pair stands for them (its ratio is the
+  // median ratio), every round's CPUs and ratio are kept.
+  const int rounds = o.skip_references ? 1 : std::max(o.sensor_rate_rounds, 1);
+  std::vector<ordered_json> bare_rounds, daemon_rounds;
+  for (int round = 0; round < rounds; ++round) {
+    bare_rounds.push_back(ordered_json::object());  // stays empty with --daemon-only
+    if (!o.skip_references) {
+      bare_rounds.back() = harness.reference_trial(ReferenceReceiver::Kind::kRecvmmsg,
+                                                   o.sensor_rate, sensor_seconds);
+    }
+    daemon_rounds.push_back(harness.daemon_trial(o.sensor_rate, sensor_seconds));
   }
-  ordered_json at_sensor = harness.daemon_trial(o.sensor_rate, sensor_seconds);
+  const auto round_ratio = [&](int round) {
+    const double bare = bare_rounds[round].value("cpu_fraction_of_one_core", 0.0);
+    return bare > 0 ? daemon_rounds[round]["cpu_fraction_of_one_core"].get<double>() / bare : 0.0;
+  };
+  std::vector<int> by_ratio(rounds);
+  for (int round = 0; round < rounds; ++round)
+    by_ratio[round] = round;
+  std::sort(by_ratio.begin(), by_ratio.end(),
+            [&](int a, int b) { return round_ratio(a) < round_ratio(b); });
+  const int median_round = by_ratio[(rounds - 1) / 2];
+  ordered_json sensor_rounds = ordered_json::array();
+  for (int round = 0; round < rounds; ++round) {
+    sensor_rounds.push_back(
+        {{"bare_recvmmsg_cpu_fraction_of_one_core",
+          bare_rounds[round].value("cpu_fraction_of_one_core", 0.0)},
+         {"daemon_cpu_fraction_of_one_core", daemon_rounds[round]["cpu_fraction_of_one_core"]},
+         {"daemon_vs_bare_cpu", round_ratio(round)},
+         {"median", round == median_round}});
+  }
+  const ordered_json bare_at_sensor = bare_rounds[median_round];
+  ordered_json at_sensor = daemon_rounds[median_round];
   ordered_json at_sensor_0 = at_sensor.value("budget_ms", ordered_json()) == ordered_json(0)
                                  ? at_sensor
                                  : harness.daemon_trial(o.sensor_rate, sensor_seconds, 0u);
@@ -335,6 +362,7 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
         {"mcap_messages_not_recorded", stages.value("mcap_messages_not_recorded", ordered_json())}};
   };
   ordered_json sensor = sensor_summary(at_sensor);
+  sensor["rounds"] = sensor_rounds;
   sensor["bare_recvmmsg_cpu_fraction_of_one_core"] = bare_cpu;
   sensor["bare_recvmmsg_generator_cpu_fraction_of_one_core"] =
       bare_at_sensor.value("generator_cpu_fraction_of_one_core", 0.0);

@@ -48,6 +48,10 @@ struct ZeroLossOptions {
   // output.mcap (and output.mcap_packets) on, with the bytes each wrote, so the extra CPU can be
   // set against the extra bytes.
   bool compare_mcap = false;
+  // The bare loop and the daemon at the sensor's rate, alternated this many times: the report's
+  // daemon_vs_bare_cpu is the median round's (its trials give every other at_sensor_rate key),
+  // each round's in at_sensor_rate.rounds. One trial of each on a shared VM varies by ~25 %.
+  int sensor_rate_rounds = 3;
   // tcpdump -w beside the daemon at the sensor's rate, in this many trials (0 = none): the CPU
   // each takes to record the same packets in the same seconds, and their ratio
   // (`tcpdump_comparison`). Give the daemon `[output] frames = false` (--config) to compare

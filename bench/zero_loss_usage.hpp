@@ -40,6 +40,10 @@ Options:
   --compare-budget-0     run the zero-loss search again with budget 0 (the same run)
   --compare-mcap         MCAP on vs off in the same run: the sensor-rate trial and the zero-loss
                          search again with --mcap --mcap-packets, with the bytes each wrote
+  --sensor-rate-rounds N the bare loop and the daemon at the sensor's rate alternated N times
+                         (1..9, default 3): daemon_vs_bare_cpu is the median round's, every
+                         round in at_sensor_rate.rounds (one trial of each varies by ~25 %
+                         on a shared VM); 1 with --daemon-only
   --compare-tcpdump N    N sensor-rate trials with tcpdump -w recording the same packets
                          beside the daemon (/usr/bin/tcpdump, as root): both CPUs, their ratio
   --receiver-command CMD measure another receiver (e.g. a vendor driver) under the same traffic
@@ -81,7 +85,8 @@ at_sensor_rate {receiver, budget_ms, lost, frames_dropped, pcap_not_recorded, lo
 ring_overruns, rejected, frames_dropped, pcap_packets_not_recorded, write_errors,
 mcap_messages_not_written, unaccounted}, cpu_fraction_of_one_core, cpu_us_per_packet, cpu_by_thread,
 bare_recvmmsg_cpu_fraction_of_one_core, bare_recvmmsg_generator_cpu_fraction_of_one_core,
-daemon_vs_bare_cpu, generator_cpu_fraction_of_one_core, kernel
+daemon_vs_bare_cpu, rounds [{bare_recvmmsg_cpu_fraction_of_one_core,
+daemon_cpu_fraction_of_one_core, daemon_vs_bare_cpu, median}], generator_cpu_fraction_of_one_core, kernel
 {machine_softirq_cpu_fraction_of_one_core, ksoftirqd_cpu_fraction_of_one_core}, wakeups_per_second {receive, decode,
 writer}, frame_latency_p50_ms, frame_latency_p99_ms, latency_p50_us, latency_p99_us,
 latency_p999_us, latency_max_us, hot_path_allocations, peak_rss_bytes, written_bytes {pcd,

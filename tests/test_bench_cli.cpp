@@ -17,6 +17,7 @@
 #include <sstream>
 #include <string>
 #include <type_traits>
+#include <vector>
 
 #include "bench/child_process.hpp"
 #include "core/decode/any_stream_decoder.hpp"
@@ -178,7 +179,7 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness",
   const auto report_dir = dir / "report";
   const auto result = test::run_command(
       bench() + " zero-loss --json --trial-seconds 0.5 --min-rate 1000 --max-rate 3000 --steps 1" +
-      " --sensor-rate 1800 --report-dir '" + report_dir.string() + "' 2>&1");
+      " --sensor-rate 1800 --sensor-rate-rounds 1 --report-dir '" + report_dir.string() + "' 2>&1");
   INFO(result.out);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
@@ -363,6 +364,29 @@ TEST_CASE(
           Approx((*t)["cpu_fraction_of_one_core"].get<double>() /
                  s["bare_recvmmsg_cpu_fraction_of_one_core"].get<double>()));
   }
+  // The bare loop and the daemon alternated three times (the default): the summary is the
+  // median round's, its ratio the median of the three.
+  const json& rounds = s["rounds"];
+  REQUIRE(rounds.size() == 3);
+  std::vector<double> ratios;
+  int medians = 0;
+  for (const json& round : rounds) {
+    INFO(round.dump());
+    CHECK(round["bare_recvmmsg_cpu_fraction_of_one_core"].get<double>() > 0);
+    CHECK(round["daemon_vs_bare_cpu"].get<double>() ==
+          Approx(round["daemon_cpu_fraction_of_one_core"].get<double>() /
+                 round["bare_recvmmsg_cpu_fraction_of_one_core"].get<double>()));
+    ratios.push_back(round["daemon_vs_bare_cpu"].get<double>());
+    if (round["median"] == true) {
+      ++medians;
+      CHECK(round["daemon_cpu_fraction_of_one_core"] == s["cpu_fraction_of_one_core"]);
+      CHECK(round["bare_recvmmsg_cpu_fraction_of_one_core"] ==
+            s["bare_recvmmsg_cpu_fraction_of_one_core"]);
+    }
+  }
+  CHECK(medians == 1);
+  std::sort(ratios.begin(), ratios.end());
+  CHECK(s["daemon_vs_bare_cpu"].get<double>() == Approx(ratios[1]));
   // The budget is why: fewer receive wake-ups than with budget 0 under the same traffic.
   CHECK(s["wakeups_per_second"]["receive"].get<double>() <
         s["budget_0"]["wakeups_per_second"]["receive"].get<double>());
@@ -376,6 +400,11 @@ TEST_CASE(
         64);
   CHECK(test::run_command(bench() + " zero-loss --latency-budget-ms 1001 2>/dev/null").exit_code ==
         64);
+  for (const char* bad : {"0", "10", "x"}) {
+    INFO(bad);
+    CHECK(test::run_command(bench() + " zero-loss --sensor-rate-rounds " + bad + " 2>/dev/null")
+              .exit_code == 64);
+  }
 }
 
 namespace {
@@ -528,7 +557,8 @@ TEST_CASE(
   // way, and agree with the trials' per-stage loss.
   const auto result = test::run_command(
       bench() + " zero-loss --json --sensor-rate-only --compare-mcap --sensor-rate 50000" +
-      " --trial-seconds 1 --report-dir '" + (dir / "report").string() + "' 2>&1");
+      " --trial-seconds 1 --sensor-rate-rounds 1 --report-dir '" + (dir / "report").string() +
+      "' 2>&1");
   INFO(result.out);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
