@@ -229,19 +229,34 @@ void DecodeWorker::send_snapshot(WriterMessage::Kind kind) {
 
 void DecodeWorker::run(const std::atomic<bool>& producer_done,
                        std::atomic<std::uint64_t>& heartbeat, DecodeLive& live) {
+  loop(heartbeat, live, [&] {
+    // Read the flag before looking at the ring again: if the producer was done then, an empty
+    // ring after it means everything has been taken.
+    if (producer_done.load(std::memory_order_acquire)) return ReceiveTurn::kEnded;
+    ring_.wait_for_data(std::chrono::milliseconds(100));
+    return ReceiveTurn::kWaited;
+  });
+}
+
+void DecodeWorker::run_inline(const ReceiveInline& receive, std::atomic<std::uint64_t>& heartbeat,
+                              DecodeLive& live) {
+  loop(heartbeat, live, [&] { return receive(ring_); });
+}
+
+template <class Wait>
+void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live, Wait&& wait) {
   std::int64_t next_snapshot_ns = coarse_monotonic_ns();
   const std::int64_t warm_ns = next_snapshot_ns + kWarmUpNs;
   bool hot = false;
+  bool ended = false;  // `wait` said nothing more will come: what the ring holds is the last
   for (;;) {
     ReceiveCounters::add(heartbeat, 1);
-    // Read the flag before looking at the ring: if the producer was done then, an empty ring now
-    // means everything has been taken.
-    const bool done = producer_done.load(std::memory_order_acquire);
     std::span<PacketSlot> batch = ring_.peek(kDecodeBatch);
     if (batch.empty()) {
-      if (done) break;
-      ring_.wait_for_data(std::chrono::milliseconds(100));
-      ReceiveCounters::add(live.wakeups, 1);
+      if (ended) break;
+      const ReceiveTurn turn = wait();
+      ended = turn == ReceiveTurn::kEnded;
+      if (turn == ReceiveTurn::kWaited) ReceiveCounters::add(live.wakeups, 1);
     } else {
       // The model's loop, a batch at a time (no packet pays a branch on the model).
       std::size_t taken = 0;

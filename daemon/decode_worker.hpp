@@ -11,6 +11,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -65,6 +66,17 @@ class DecodeWorker final : public FrameSink {
   void run(const std::atomic<bool>& producer_done, std::atomic<std::uint64_t>& heartbeat,
            DecodeLive& live);
 
+  // A source this thread reads itself, instead of waiting for another thread to fill the ring
+  // (the packet ring: the kernel's ring of blocks is then the queue between receive and decode,
+  // and one thread wakes per block where two did; daemon/source/packet_source.hpp). Called
+  // whenever the ring is empty: puts what has arrived into the ring, waiting for it when
+  // nothing has; says which, or that the source has ended.
+  using ReceiveInline = std::function<ReceiveTurn(PacketRing&)>;
+  // As run(), reading `receive` for its packets; ends when `receive` has ended and the ring is
+  // empty. `live`'s wake-ups are the returns from the source's wait.
+  void run_inline(const ReceiveInline& receive, std::atomic<std::uint64_t>& heartbeat,
+                  DecodeLive& live);
+
   // FrameSink (called by the assembler on this thread).
   Frame* acquire_frame() override;
   void frame_done(Frame& frame) override;
@@ -83,6 +95,10 @@ class DecodeWorker final : public FrameSink {
   void flush_raw(bool notify = true);
   DecodeSnapshot snapshot() const;
   void send_snapshot(WriterMessage::Kind kind);
+  // run()'s and run_inline()'s loop: `wait` waits for the ring to fill (or fills it), and
+  // says so (a ReceiveTurn).
+  template <class Wait>
+  void loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live, Wait&& wait);
 
   DecodeWorkerOptions options_;
   PacketRing& ring_;

@@ -1,6 +1,8 @@
 // pandarcapd: the Pandar40P capture daemon.
 //
 //   receive thread (recvmmsg) or replay --ring--> decode worker --queue--> writer thread
+//   (input.receiver = "packet_ring": the kernel's ring of blocks --> decode worker, which reads
+//   it itself; no receive thread)
 //   main thread: signals, sd_notify READY/STATUS/WATCHDOG/STOPPING, --duration, shutdown order
 //
 // Start-up, in dependency order (shutdown is the reverse):
@@ -428,23 +430,47 @@ int run(const CommandLine& command_line) {
       threads.start(
           "pc-live", {}, [&] { live_server->run(); }, [&] { live_server->stop(); });
     }
-    threads.start(
-        "pc-decode",
-        [&] {
-          place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
-        },
-        [&] { worker.run(pipe.source_done, pipe.heartbeats.decode, pipe.live); });
-    decoder_started = true;
-    threads.start(
-        source->thread_name(),
-        [&] {
-          place_this_thread("receive", {placement.receive_cpu, placement.receive_priority});
-        },
-        [&] {
-          source->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive,
-                      pipe.source_done);
-        },
-        [&] { pipe.stop_source.store(true, std::memory_order_relaxed); });
+    const auto stop_source = [&] { pipe.stop_source.store(true, std::memory_order_relaxed); };
+    if (source->read_by_decoder()) {
+      // The packet ring: the decode thread reads it (PacketSource::read_by_decoder), and a stop
+      // is asked of it. No receive thread to place.
+      if (placement.receive_cpu != -1 || placement.receive_priority != 0) {
+        spdlog::warn(
+            "threads.receive_cpu and receive_priority are not used with input.receiver = "
+            "\"packet_ring\": the decode thread reads the ring (threads.decode_cpu and "
+            "decode_priority place it)");
+      }
+      const DecodeWorker::ReceiveInline receive = [&](PacketRing& ring) {
+        return source->receive_turn(ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive,
+                                    pipe.source_done);
+      };
+      threads.start(
+          "pc-decode",
+          [&] {
+            place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
+          },
+          [&, receive] { worker.run_inline(receive, pipe.heartbeats.decode, pipe.live); },
+          stop_source);
+      decoder_started = true;
+    } else {
+      threads.start(
+          "pc-decode",
+          [&] {
+            place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
+          },
+          [&] { worker.run(pipe.source_done, pipe.heartbeats.decode, pipe.live); });
+      decoder_started = true;
+      threads.start(
+          source->thread_name(),
+          [&] {
+            place_this_thread("receive", {placement.receive_cpu, placement.receive_priority});
+          },
+          [&] {
+            source->run(pipe.ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive,
+                        pipe.source_done);
+          },
+          stop_source);
+    }
     if (source->simulated()) {
       threads.start(
           "pc-simsensor", {}, [&] { source->run_simulator(stop_simulator); },

@@ -1,6 +1,8 @@
 // The daemon's pipeline: its fixed memory, and its threads, stopped in the reverse of their start.
 //
 //   receive/replay --ring--> decode worker --queue--> writer        (see pipeline_types.hpp)
+//   the packet ring: the kernel's ring of blocks, read by the decode worker itself
+//   (PacketSource::read_by_decoder): no receive thread
 //
 // Pipeline holds every buffer the threads share, all allocated before the first thread starts
 // (config: ring.slots, arenas.count, arenas.points_per_frame, arenas.packets_per_frame).

@@ -130,6 +130,10 @@ struct DecodeLive {
   std::atomic<std::uint64_t> wakeups{0};
 };
 
+// One turn of a source that the decode thread reads itself (the packet ring, between batches):
+// it took packets into the ring, or waited for some (a wake-up), or has ended.
+enum class ReceiveTurn : std::uint8_t { kTook, kWaited, kEnded };
+
 // Written only by the receive (or replay) thread, read by the writer for health.
 // The receive, decode and writer loops count heap allocations (see allocation_counter.hpp) from
 // this long after they start: the first frame, file and health record are behind them by then.

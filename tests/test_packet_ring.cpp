@@ -446,6 +446,56 @@ TEST_CASE("packet_ring: a recording alone takes a burst of ten times the rate wh
   if (!test::kSanitizerBuild) CHECK(lost_in_every_attempt == 0);
 }
 
+// The decode thread reads the kernel's ring itself (PacketSource::read_by_decoder): no receive
+// thread, a receive thread's placement said to be unused, the decode thread placed as asked, the
+// ring between them never overrun (the decoder takes a block only into an empty ring), and one
+// wake per block: the decoder's wake-ups are the ring's polls.
+TEST_CASE("packet_ring: the decode thread reads the ring: no receive thread, one wake a block",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("pt", "packet-ring-threads");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port, "[threads]\nreceive_cpu = 0\ndecode_cpu = 0\n");
+  {
+    const std::string log = daemon.process->log();
+    INFO(log);
+    CHECK(log.find("threads.receive_cpu and receive_priority are not used with input.receiver = "
+                   "\"packet_ring\"") != std::string::npos);
+    const auto threads = test::threads_of(daemon.process->pid());
+    CHECK(threads.count("pc-receive") == 0);
+    REQUIRE(threads.count("pc-decode") == 1);
+    CHECK(threads.at("pc-decode").cpus == "0");
+    CHECK(threads.count("pc-writer") == 1);
+  }
+  bench::GeneratorResult sent;
+  {
+    test::FarNamespace far(veth.ns());
+    bench::GeneratorOptions traffic;
+    traffic.destination_ip = veth.near_ip();
+    traffic.port = port;
+    traffic.rate_pps = 3600;
+    traffic.seconds = 2;
+    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    REQUIRE(sent.send_errors == 0);
+  }
+  const nlohmann::json h = daemon.stop_after(sent.sent);
+  INFO(daemon.process->log());
+  INFO(h.dump());
+  const auto c = [&](const char* name) { return test::health_counter(h, name); };
+  CHECK(c("datagrams_received") + c("kernel_drops") == sent.sent);
+  CHECK(c("packets_accepted") == c("datagrams_received"));
+  CHECK(c("ring_overruns") == 0);  // under every sanitizer too: it cannot happen
+  if (!test::kSanitizerBuild) CHECK(c("kernel_drops") == 0);
+  // The same wake-ups, counted as the receive's and the decoder's (the last poll of the stop
+  // ends the decoder without a wake of its own).
+  CHECK(c("receive_wakeups") > 0);
+  CHECK(c("decode_wakeups") + 1 >= c("receive_wakeups"));
+  CHECK(c("decode_wakeups") <= c("receive_wakeups"));
+  // A 5 ms block at a time: about 200 wakes a second while the sensor sends, 10 idle (the
+  // poll's 100 ms), never one per packet (3600).
+  CHECK(c("receive_wakeups") < 4 * 250);
+}
+
 TEST_CASE("packet_ring: refused with the reason, before any thread: privilege, interface, config",
           "[packet_ring][daemon]") {
   test::ScratchDir dir("packet-ring-refused");

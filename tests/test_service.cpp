@@ -91,40 +91,6 @@ TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, res
   CHECK(notify.first("READY=1") < notify.first("STOPPING=1"));
 }
 
-namespace {
-
-// /proc/PID/task/*: thread name -> {Cpus_allowed_list, scheduling policy (0 other, 1 FIFO)}.
-struct ThreadState {
-  std::string cpus;
-  int policy = -1;
-};
-std::map<std::string, ThreadState> threads_of(int pid) {
-  std::map<std::string, ThreadState> threads;
-  for (const auto& task :
-       fs::directory_iterator(fs::path("/proc") / std::to_string(pid) / "task")) {
-    std::string name = harness::read_file(task.path() / "comm");
-    if (!name.empty() && name.back() == '\n') name.pop_back();
-    ThreadState state;
-    std::istringstream status(harness::read_file(task.path() / "status"));
-    for (std::string line; std::getline(status, line);) {
-      if (line.rfind("Cpus_allowed_list:", 0) == 0) {
-        state.cpus = line.substr(line.find_first_not_of(" \t", 18));
-      }
-    }
-    // Field 41 of stat is the policy; the command name (field 2) may hold spaces, so count
-    // from the closing parenthesis.
-    const std::string stat = harness::read_file(task.path() / "stat");
-    std::istringstream fields(stat.substr(stat.rfind(')') + 2));
-    std::string field;
-    for (int i = 3; i <= 41 && fields >> field; ++i)
-      if (i == 41) state.policy = std::stoi(field);
-    threads[name] = state;
-  }
-  return threads;
-}
-
-}  // namespace
-
 TEST_CASE("[threads]: pinning and SCHED_FIFO as granted, refusals logged, health paths honoured",
           "[daemon][systemd][threads]") {
   test::ScratchDir dir("daemon-threads");
@@ -147,7 +113,7 @@ TEST_CASE("[threads]: pinning and SCHED_FIFO as granted, refusals logged, health
       dir / "log.txt");
   REQUIRE(harness::wait_until(
       [&] { return daemon.log().find("ready: writing to") != std::string::npos; }, 15s));
-  const auto threads = threads_of(daemon.pid());
+  const auto threads = test::threads_of(daemon.pid());
   const std::string log = daemon.log();
   INFO(log);
   REQUIRE(threads.count("pc-receive") == 1);

@@ -433,55 +433,50 @@ void PacketRingReceiver::look_for_interface(std::int64_t now_ns) noexcept {
   }
 }
 
-void PacketRingReceiver::run(PacketRing& ring, const std::atomic<bool>& stop,
-                             ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat) {
-  const std::int64_t warm_ns = coarse_monotonic_ns() + kWarmUpNs;
-  bool hot = false;
-  std::int64_t next_statistics_ns = 0;
+ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool>& stop,
+                                        ReceiveCounters& counters,
+                                        std::atomic<std::uint64_t>& heartbeat) {
   // On stop the block being filled is handed over by its retire timer at the latest: waiting
   // for that (twice its period) takes every frame the kernel accepted before the stop.
   const std::int64_t drain_ns = std::max<std::int64_t>(200'000'000, 3'000'000LL * retire_ms_);
-  std::int64_t drain_until = 0;
-  for (;;) {
-    const std::int64_t now = coarse_monotonic_ns();
-    if (drain_until == 0 && stop.load(std::memory_order_relaxed)) drain_until = now + drain_ns;
-    const bool draining = drain_until != 0;
-    if (draining && now >= drain_until) break;
-    ReceiveCounters::add(heartbeat, 1);
-    if (!hot && now >= warm_ns) {
-      alloc::mark_this_thread_hot(alloc::HotThread::kReceive);
-      hot = true;
-    }
-    if (now >= next_statistics_ns) {
-      read_statistics(counters);
-      next_statistics_ns = now + 1'000'000'000;
-    }
-    if (tpacket_block_desc* block = ready_block()) {
-      if (link_down_) {
-        link_down_ = false;
-        spdlog::info("packet ring: {} delivers again", interface_);
-      }
-      take_block(*block, ring, counters);
-      continue;
-    }
-    if (link_down_) look_for_interface(now);
-    // No block ready: sleep until the kernel hands one over (full, or its timer ran out).
-    pollfd pfd{fd_.get(), POLLIN | POLLERR, 0};
-    const int timeout_ms = draining ? static_cast<int>(2 * retire_ms_ + 1) : 100;
-    const int ready = ::poll(&pfd, 1, timeout_ms);
-    ReceiveCounters::add(counters.wakeups, 1);
-    if (ready < 0 && errno != EINTR) ReceiveCounters::add(counters.receive_errors, 1);
-    // The interface went down or away: the error stays set (and poll() returns at once) until
-    // it is read.
-    if (ready > 0 && (pfd.revents & POLLERR) != 0) take_socket_error(counters);
-    if (ready == 0 && draining && ready_block() == nullptr) break;  // nothing more is coming
+  const std::int64_t now = coarse_monotonic_ns();
+  if (drain_until_ == 0 && stop.load(std::memory_order_relaxed)) drain_until_ = now + drain_ns;
+  const bool draining = drain_until_ != 0;
+  if (draining && now >= drain_until_) return ReceiveTurn::kEnded;
+  ReceiveCounters::add(heartbeat, 1);
+  if (now >= next_statistics_ns_) {
+    read_statistics(counters);
+    next_statistics_ns_ = now + 1'000'000'000;
   }
+  if (tpacket_block_desc* block = ready_block()) {
+    if (link_down_) {
+      link_down_ = false;
+      spdlog::info("packet ring: {} delivers again", interface_);
+    }
+    take_block(*block, ring, counters);
+    return ReceiveTurn::kTook;
+  }
+  if (link_down_) look_for_interface(now);
+  // No block ready: sleep until the kernel hands one over (full, or its timer ran out).
+  pollfd pfd{fd_.get(), POLLIN | POLLERR, 0};
+  const int timeout_ms = draining ? static_cast<int>(2 * retire_ms_ + 1) : 100;
+  const int ready = ::poll(&pfd, 1, timeout_ms);
+  ReceiveCounters::add(counters.wakeups, 1);
+  if (ready < 0 && errno != EINTR) ReceiveCounters::add(counters.receive_errors, 1);
+  // The interface went down or away: the error stays set (and poll() returns at once) until
+  // it is read.
+  if (ready > 0 && (pfd.revents & POLLERR) != 0) take_socket_error(counters);
+  // Nothing more is coming.
+  if (ready == 0 && draining && ready_block() == nullptr) return ReceiveTurn::kEnded;
+  return ReceiveTurn::kWaited;
+}
+
+void PacketRingReceiver::finish(ReceiveCounters& counters) noexcept {
   read_statistics(counters);  // the last drops, for the final health
   if (queue_freezes_ > 0) {
     spdlog::warn("packet ring: the kernel found no free block {} times ({} frames dropped)",
                  queue_freezes_, kernel_drops_);
   }
-  alloc::mark_this_thread_cold();
 }
 
 }  // namespace pandarcap

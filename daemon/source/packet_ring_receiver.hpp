@@ -1,8 +1,15 @@
-// The receive thread's AF_PACKET receiver (input.receiver = "packet_ring"): the kernel writes
-// every frame that passes a BPF filter into a TPACKET_V3 ring of blocks mapped into this
-// process, and hands over a whole block at a time; the thread reads the blocks in place, with no
-// system call per packet or per batch (only a poll() when no block is ready). tcpdump reads the
-// same way, which is why it records for less than any recvmmsg loop.
+// The AF_PACKET receiver (input.receiver = "packet_ring"): the kernel writes every frame that
+// passes a BPF filter into a TPACKET_V3 ring of blocks mapped into this process, and hands over a
+// whole block at a time; the blocks are read in place, with no system call per packet or per
+// batch (only a poll() when no block is ready). tcpdump reads the same way, which is why it
+// records for less than any recvmmsg loop.
+//
+// The kernel's ring is the queue between receive and decode: the decode thread reads it itself,
+// a block at a time between its batches (receive()), and no thread of ours sits between the two.
+// A thread that only moved blocks on cost as much as the decoding (0.4-0.5 % of a core at one
+// sensor's rate, against the decoder's 0.6: 200 wake-ups a second each, and a futex wake of the
+// decoder per block); read by the decoder, the daemon measured 1.60-1.89 % of a core where it
+// had measured 1.87-2.27 % (docs/performance.md).
 //
 // The socket and filter: SOCK_RAW on sensor.interface, with a classic BPF program for UDP to the
 // data port compiled by libpcap (pcap_compile; "udp dst port N"). It is attached before the
@@ -31,14 +38,16 @@
 // wire carried them, the VLAN tag put back from tp_vlan_tci (with its TPID), so the pcap holds
 // the frame byte for byte as `tcpdump -w` writes it (PacketSlot::wire_header).
 //
-// Copy, not zero copy: each datagram is copied from the block into a PacketRing slot, so the
-// block goes back to the kernel at once and the decoder, the accounting and the replay path are
-// the socket receiver's. A copy of 1.3 kB is a few hundred nanoseconds: what the ring saves is
-// the system calls and wake-ups, not the copy (docs/performance.md measures both receivers).
+// Each datagram is still copied from the block into a PacketRing slot (its payload, headers and
+// times), so the block goes back to the kernel at once and the decoder, the accounting and the
+// replay path are the socket receiver's. On the decode thread the copy is into slots it reads
+// next, a few hundred nanoseconds a packet: what the ring saves is system calls and wake-ups,
+// not the copy.
 //
 // Drops: PACKET_STATISTICS (tp_drops, the frames the kernel had no free block for) is read once a
-// second and at the end; reading resets it, so it is added up into kernel_drops. A full
-// PacketRing drops the rest of the block, counted as ring overruns, as the socket receiver does.
+// second and at the end; reading resets it, so it is added up into kernel_drops. A PacketRing
+// without room for a block's datagrams would drop the rest, counted as ring overruns, as the
+// socket receiver does; read a block at a time by the thread that empties the ring, it has room.
 //
 // No reply from this host: without a UDP socket on the data port the kernel answers every
 // datagram with ICMP port-unreachable (a flood towards the sensor). A UDP socket is bound to
@@ -108,9 +117,17 @@ class PacketRingReceiver {
   std::uint16_t bound_port() const noexcept { return port_; }
   std::uint64_t ring_bytes() const noexcept { return std::uint64_t{block_bytes_} * block_count_; }
 
-  // Receives until `stop` is set (checked at least every 100 ms).
-  void run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
-           std::atomic<std::uint64_t>& heartbeat);
+  // One turn of the receive loop, on the thread that reads the ring between its other work
+  // (the decoder's: daemon/source/packet_source.hpp): takes the next block the kernel handed
+  // over into `ring`, or waits up to 100 ms for one. One block at most, so the caller empties
+  // `ring` between blocks and a backlog waits in the kernel's ring, not in `ring` (a block holds
+  // no more than a quarter of its slots). Says which it did; kEnded once `stop` was set and
+  // every block before it taken (the block being filled is handed over by its retire timer
+  // within 3 periods), and then call finish(). `heartbeat` counts the turns, for the watchdog.
+  ReceiveTurn receive(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
+                      std::atomic<std::uint64_t>& heartbeat);
+  // After the last receive(): the last drops read into the counters.
+  void finish(ReceiveCounters& counters) noexcept;
 
  private:
   void open_guard(const UdpReceiverOptions& options);
@@ -144,6 +161,8 @@ class PacketRingReceiver {
   std::uint32_t multicast_ip_ = 0;  // host order; 0 = none
   bool link_down_ = false;          // an error said so; until a block arrives again
   std::int64_t next_link_check_ns_ = 0;
+  std::int64_t next_statistics_ns_ = 0;
+  std::int64_t drain_until_ = 0;  // when a stop's drain ends (0: no stop yet)
   std::uint64_t kernel_drops_ = 0;
   std::uint64_t queue_freezes_ = 0;
   SourceLock sources_{std::nullopt};

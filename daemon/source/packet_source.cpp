@@ -39,12 +39,27 @@ void PacketSource::run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveC
   if (replay_) {
     replay_result_ = replay_->run(ring, stop, counters, heartbeat);
   } else if (ring_receiver_) {
-    ring_receiver_->run(ring, stop, counters, heartbeat);
+    // The decoder reads the packet ring itself (read_by_decoder()); on a thread of its own it
+    // is read the same way, a block a turn.
+    while (receive_turn(ring, stop, counters, heartbeat, done) != ReceiveTurn::kEnded) {
+    }
   } else {
     receiver_->run(ring, stop, counters, heartbeat);
   }
   // release: everything the source published happens before the decoder sees "done".
   done.store(true, std::memory_order_release);
+}
+
+ReceiveTurn PacketSource::receive_turn(PacketRing& ring, const std::atomic<bool>& stop,
+                                       ReceiveCounters& counters,
+                                       std::atomic<std::uint64_t>& heartbeat,
+                                       std::atomic<bool>& done) {
+  const ReceiveTurn turn = ring_receiver_->receive(ring, stop, counters, heartbeat);
+  if (turn == ReceiveTurn::kEnded) {
+    ring_receiver_->finish(counters);
+    done.store(true, std::memory_order_release);
+  }
+  return turn;
 }
 
 void PacketSource::run_simulator(const std::atomic<bool>& stop) {

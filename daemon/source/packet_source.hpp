@@ -37,10 +37,20 @@ class PacketSource {
   const char* thread_name() const noexcept { return replay_ ? "pc-replay" : "pc-receive"; }
   bool simulated() const noexcept { return simulator_ != nullptr; }
 
-  // The source thread: receives (or replays) into `ring` until `stop`, or the end of the file;
-  // then sets `done`.
+  // The source thread (unless read_by_decoder()): receives (or replays) into `ring` until
+  // `stop`, or the end of the file; then sets `done`.
   void run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
            std::atomic<std::uint64_t>& heartbeat, std::atomic<bool>& done);
+  // The packet ring is read by the decode thread itself (DecodeWorker::run_inline), not by a
+  // thread of its own: the kernel's ring of blocks is the queue between receive and decode, so
+  // a block wakes one thread, not a receive thread that then wakes the decoder. At a sensor's
+  // rate each wake costs more than the packets it hands on (docs/performance.md).
+  bool read_by_decoder() const noexcept { return ring_receiver_ != nullptr; }
+  // read_by_decoder() only: one turn of the receive loop, on the decode thread, until `stop` is
+  // set and what came before it is taken; then sets `done`.
+  ReceiveTurn receive_turn(PacketRing& ring, const std::atomic<bool>& stop,
+                           ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat,
+                           std::atomic<bool>& done);
   // The simulator thread (simulated() only): sends until `stop`.
   void run_simulator(const std::atomic<bool>& stop);
 

@@ -273,4 +273,29 @@ std::filesystem::path tmpfs_view(int pid, const std::filesystem::path& mount_poi
          mount_point.relative_path();
 }
 
+std::map<std::string, ThreadState> threads_of(int pid) {
+  std::map<std::string, ThreadState> threads;
+  for (const auto& task : std::filesystem::directory_iterator(std::filesystem::path("/proc") /
+                                                              std::to_string(pid) / "task")) {
+    std::string name = harness::read_file(task.path() / "comm");
+    if (!name.empty() && name.back() == '\n') name.pop_back();
+    ThreadState state;
+    std::istringstream status(harness::read_file(task.path() / "status"));
+    for (std::string line; std::getline(status, line);) {
+      if (line.rfind("Cpus_allowed_list:", 0) == 0) {
+        state.cpus = line.substr(line.find_first_not_of(" \t", 18));
+      }
+    }
+    // Field 41 of stat is the policy; the command name (field 2) may hold spaces, so count
+    // from the closing parenthesis.
+    const std::string stat = harness::read_file(task.path() / "stat");
+    std::istringstream fields(stat.substr(stat.rfind(')') + 2));
+    std::string field;
+    for (int i = 3; i <= 41 && fields >> field; ++i)
+      if (i == 41) state.policy = std::stoi(field);
+    threads[name] = state;
+  }
+  return threads;
+}
+
 }  // namespace pandarcap::test

@@ -100,6 +100,13 @@ nlohmann::json last_health_record(const std::filesystem::path& output_dir);
 
 // The daemon as the shell commands of the tests run it. --allow-root: the tests (and CI) may run
 // as root; the refusal itself is tested in test_privileges.cpp.
+// /proc/PID/task/*: thread name -> {Cpus_allowed_list, scheduling policy (0 other, 1 FIFO)}.
+struct ThreadState {
+  std::string cpus;
+  int policy = -1;
+};
+std::map<std::string, ThreadState> threads_of(int pid);
+
 std::string pandarcapd_command();
 
 // A counter of a health record (its "counters" object); 0 when absent or not a record.
