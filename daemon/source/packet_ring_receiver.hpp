@@ -8,8 +8,8 @@
 // a block at a time between its batches (receive()), and no thread of ours sits between the two.
 // A thread that only moved blocks on cost as much as the decoding (0.4-0.5 % of a core at one
 // sensor's rate, against the decoder's 0.6: 200 wake-ups a second each, and a futex wake of the
-// decoder per block); read by the decoder, the daemon measured 1.60-1.89 % of a core where it
-// had measured 1.87-2.27 % (docs/performance.md).
+// decoder per block); read by the decoder, the daemon measured a median 1.70 % of a core where
+// it had measured 1.98 % (alternated bench runs; docs/performance.md, "Fourth round").
 //
 // The socket and filter: SOCK_RAW on sensor.interface, with a classic BPF program for UDP to the
 // data port compiled by libpcap (pcap_compile; "udp dst port N"). It is attached before the
