@@ -261,6 +261,19 @@ struct RingDaemon {
   std::optional<ChildProcess> process;
 };
 
+// The simulated sensor's traffic as `traffic` says (rate, length, bursts), sent from the far
+// end's namespace to the near end's `port`; what was sent.
+bench::GeneratorResult send_sensor(const test::VethPair& veth, std::uint16_t port,
+                                   bench::GeneratorOptions traffic) {
+  test::FarNamespace far(veth.ns());
+  traffic.destination_ip = veth.near_ip();
+  traffic.port = port;
+  const bench::GeneratorResult sent =
+      bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+  REQUIRE(sent.send_errors == 0);
+  return sent;
+}
+
 }  // namespace
 
 TEST_CASE("packet_ring on a veth pair: filter, VLAN tag, second host, tcpdump's bytes, no ICMP",
@@ -371,17 +384,10 @@ TEST_CASE("packet_ring: a burst the ring cannot hold is counted as kernel drops,
   // The receive thread stopped (the whole daemon, SIGSTOP), the kernel fills the ring and then
   // has nowhere to put the rest of a 4000-packet burst.
   daemon.process->signal(SIGSTOP);
-  bench::GeneratorResult sent;
-  {
-    test::FarNamespace far(veth.ns());
-    bench::GeneratorOptions traffic;
-    traffic.destination_ip = veth.near_ip();
-    traffic.port = port;
-    traffic.rate_pps = 40'000;
-    traffic.seconds = 0.1;
-    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
-    REQUIRE(sent.send_errors == 0);
-  }
+  bench::GeneratorOptions traffic;
+  traffic.rate_pps = 40'000;
+  traffic.seconds = 0.1;
+  const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
   daemon.process->signal(SIGCONT);
   const nlohmann::json h = daemon.stop_after(sent.sent);
   INFO(daemon.process->log());
@@ -415,21 +421,13 @@ TEST_CASE("packet_ring: a recording alone takes a burst of ten times the rate wh
     INFO(daemon.process->log());
     CHECK(daemon.process->log().find("blocks of 64 KiB, handed over when full or after 17 ms") !=
           std::string::npos);
-    bench::GeneratorResult sent;
-    {
-      test::FarNamespace far(veth.ns());
-      bench::GeneratorOptions traffic;
-      traffic.destination_ip = veth.near_ip();
-      traffic.port = port;
-      traffic.rate_pps = 3600;
-      traffic.seconds = 2;
-      traffic.burst_factor = 10;
-      traffic.burst_ms = 100;
-      traffic.burst_every_s = 1;
-      sent =
-          bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
-      REQUIRE(sent.send_errors == 0);
-    }
+    bench::GeneratorOptions traffic;
+    traffic.rate_pps = 3600;
+    traffic.seconds = 2;
+    traffic.burst_factor = 10;
+    traffic.burst_ms = 100;
+    traffic.burst_every_s = 1;
+    const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
     const nlohmann::json h = daemon.stop_after(sent.sent);
     INFO(daemon.process->log());
     INFO(h.dump());
@@ -467,17 +465,10 @@ TEST_CASE("packet_ring: the decode thread reads the ring: no receive thread, one
     CHECK(threads.at("pc-decode").cpus == "0");
     CHECK(threads.count("pc-writer") == 1);
   }
-  bench::GeneratorResult sent;
-  {
-    test::FarNamespace far(veth.ns());
-    bench::GeneratorOptions traffic;
-    traffic.destination_ip = veth.near_ip();
-    traffic.port = port;
-    traffic.rate_pps = 3600;
-    traffic.seconds = 2;
-    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
-    REQUIRE(sent.send_errors == 0);
-  }
+  bench::GeneratorOptions traffic;
+  traffic.rate_pps = 3600;
+  traffic.seconds = 2;
+  const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
   const nlohmann::json h = daemon.stop_after(sent.sent);
   INFO(daemon.process->log());
   INFO(h.dump());
