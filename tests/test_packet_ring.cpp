@@ -803,3 +803,46 @@ TEST_CASE("packet_ring: a block holds one retire period of the sensor, within th
 }
 
 }  // namespace pandarcap
+
+namespace pandarcap {
+
+// The decode thread takes a whole block into its emptied ring (PacketRingReceiver::receive), and
+// says it always has room: "a block holds no more than a quarter of its slots". A block is sized
+// in bytes for the sensor's datagrams (32 KiB at least), so small datagrams from the sensor's
+// address (a misbehaving sensor, a tool on its address) put hundreds in one block where the ring
+// has 64 slots: the sensor's valid packets after the 64th of a block are lost as ring overruns,
+// although the kernel held them and the decoder had time for them. The socket receiver, whose
+// ring the decoder empties while it fills, keeps them.
+TEST_CASE("packet_ring: a block of small datagrams never overruns a small ring",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("ps", "packet-ring-small-datagrams");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port, "[ring]\nslots = 64\n");
+  // 40 rounds of 200 eight-byte datagrams then one valid packet, all from the sensor's address:
+  // each round reaches the ring as one or two blocks.
+  constexpr int kRounds = 40;
+  constexpr int kSmall = 200;
+  {
+    test::FarNamespace far(veth.ns());
+    std::vector<std::vector<std::uint8_t>> round(kSmall, std::vector<std::uint8_t>(8, 0x5a));
+    for (int r = 0; r < kRounds; ++r) {
+      round.resize(kSmall);
+      round.push_back(sensor_datagram(static_cast<std::uint32_t>(r)));
+      send_udp(veth.far_ip(), veth.near_ip(), port, round);
+    }
+  }
+  const std::uint64_t sent = std::uint64_t{kRounds} * (kSmall + 1);
+  const nlohmann::json h = daemon.stop_after(sent);
+  INFO(daemon.process->log());
+  INFO(h.dump());
+  const auto c = [&](const char* name) { return test::health_counter(h, name); };
+  CHECK(c("datagrams_received") + c("kernel_drops") == sent);
+  CHECK(c("kernel_drops") == 0);
+  CHECK(c("ring_overruns") == 0);
+  // Every valid packet decoded, every datagram recorded.
+  CHECK(c("packets_accepted") == kRounds);
+  CHECK(c("pcap_packets_written") == c("datagrams_received"));
+}
+
+}  // namespace pandarcap
