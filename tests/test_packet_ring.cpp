@@ -846,3 +846,40 @@ TEST_CASE("packet_ring: a block of small datagrams never overruns a small ring",
 }
 
 }  // namespace pandarcap
+
+namespace pandarcap {
+
+// A stop that comes while the kernel still holds the last block open (frames off: blocks retire
+// after 100 ms): the decode thread, which now reads the ring itself, drains it before it ends
+// (PacketRingReceiver::receive's drain), so everything the kernel took before the stop is
+// counted, received or dropped. The other tests stop only after every datagram was counted.
+TEST_CASE("packet_ring: SIGINT right after the last datagram: every datagram counted",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("pi", "packet-ring-stop-at-once");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port, "[output]\nframes = false\n");
+  CHECK(daemon.process->log().find("handed over when full or after 100 ms") != std::string::npos);
+  bench::GeneratorResult sent;
+  {
+    test::FarNamespace far(veth.ns());
+    bench::GeneratorOptions traffic;
+    traffic.destination_ip = veth.near_ip();
+    traffic.port = port;
+    traffic.rate_pps = 3600;
+    traffic.seconds = 1;
+    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    REQUIRE(sent.send_errors == 0);
+  }
+  daemon.process->signal(SIGINT);  // at once: the last block is still being filled
+  REQUIRE(daemon.process->wait_exit(30s) == 0);
+  const nlohmann::json h = test::last_health_record(daemon.out);
+  INFO(daemon.process->log());
+  INFO(h.dump());
+  const auto c = [&](const char* name) { return test::health_counter(h, name); };
+  CHECK(c("datagrams_received") + c("kernel_drops") == sent.sent);
+  CHECK(c("pcap_packets_written") + c("pcap_packets_not_recorded") == c("datagrams_received"));
+  CHECK(c("ring_overruns") == 0);
+}
+
+}  // namespace pandarcap
