@@ -201,6 +201,12 @@ int run_zero_loss(int argc, char** argv) {
       options.compare_mcap = true;
     } else if (arg == "--sensor-rate-rounds") {
       options.sensor_rate_rounds = static_cast<int>(args.integer(arg, 1, 9));
+      // An even count has two middle rounds, and either would flatter or blame one of them.
+      if (options.sensor_rate_rounds % 2 == 0) {
+        args.usage_error(
+            "--sensor-rate-rounds: an odd number (1, 3, 5, 7 or 9), so that one "
+            "round is the median");
+      }
     } else if (arg == "--compare-tcpdump") {
       options.tcpdump_rounds = static_cast<int>(args.integer(arg, 1, 100));
     } else if (arg == "--receiver-command") {

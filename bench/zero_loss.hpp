@@ -51,6 +51,7 @@ struct ZeroLossOptions {
   // The bare loop and the daemon at the sensor's rate, alternated this many times: the report's
   // daemon_vs_bare_cpu is the median round's (its trials give every other at_sensor_rate key),
   // each round's in at_sensor_rate.rounds. One trial of each on a shared VM varies by ~25 %.
+  // Odd (the command line refuses an even count: two middle rounds).
   int sensor_rate_rounds = 3;
   // tcpdump -w beside the daemon at the sensor's rate, in this many trials (0 = none): the CPU
   // each takes to record the same packets in the same seconds, and their ratio

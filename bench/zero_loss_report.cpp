@@ -414,6 +414,19 @@ std::string zero_loss_markdown(const ordered_json& r) {
                            t.at("cpu_us_per_packet").get<double>());
   }
   md += ": " + threads + ".\n";
+  if (s.contains("rounds") && s.at("rounds").size() > 1) {
+    std::string rounds;
+    for (const auto& round : s.at("rounds")) {
+      rounds += fmt::format("{}{:.2f} / {:.2f} % = {:.2f}x", rounds.empty() ? "" : ", ",
+                            100 * round.at("daemon_cpu_fraction_of_one_core").get<double>(),
+                            100 * round.at("bare_recvmmsg_cpu_fraction_of_one_core").get<double>(),
+                            round.at("daemon_vs_bare_cpu").get<double>());
+    }
+    md += fmt::format(
+        "- Against the bare loop: **{:.2f}x**, the median of {} alternated rounds (daemon / bare "
+        "loop: {}); the figures above are that round's.\n",
+        s.at("daemon_vs_bare_cpu").get<double>(), s.at("rounds").size(), rounds);
+  }
   md += fmt::format(
       "- Frame latency (the packet that completes a frame -> its PCD in place): p50 {:.1f} ms, "
       "**p99 {:.1f} ms** (goal <= budget + 30 ms: {}).\n",

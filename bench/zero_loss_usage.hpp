@@ -41,7 +41,7 @@ Options:
   --compare-mcap         MCAP on vs off in the same run: the sensor-rate trial and the zero-loss
                          search again with --mcap --mcap-packets, with the bytes each wrote
   --sensor-rate-rounds N the bare loop and the daemon at the sensor's rate alternated N times
-                         (1..9, default 3): daemon_vs_bare_cpu is the median round's, every
+                         (1, 3, 5, 7 or 9; default 3): daemon_vs_bare_cpu is the median round's, every
                          round in at_sensor_rate.rounds (one trial of each varies by ~25 %
                          on a shared VM); 1 with --daemon-only
   --compare-tcpdump N    N sensor-rate trials with tcpdump -w recording the same packets

@@ -1,6 +1,7 @@
 // pandarcap-bench as a user runs it. Only the shape and the correctness of the report are checked
 // here (every key the acceptance checks read, no item out of order, consistent ratios); the
 // figures themselves are performance claims and belong to docs/performance.md, not to a test.
+#include <fmt/format.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -338,7 +339,7 @@ TEST_CASE(
   const auto result = test::run_command(
       bench() + " zero-loss --json --sensor-rate-only --trial-seconds 1 --sensor-rate 1800" +
       " --latency-budget-ms 10 --receiver-command 'python3 " + receiver.string() + " " + port +
-      "' --receiver-port " + port + " 2>&1");
+      "' --receiver-port " + port + " --report-dir '" + (dir / "report").string() + "' 2>&1");
   INFO(result.out);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
@@ -387,6 +388,9 @@ TEST_CASE(
   CHECK(medians == 1);
   std::sort(ratios.begin(), ratios.end());
   CHECK(s["daemon_vs_bare_cpu"].get<double>() == Approx(ratios[1]));
+  CHECK_THAT(md_text(dir / "report"),
+             Catch::Contains(fmt::format("**{:.2f}x**, the median of 3 alternated rounds",
+                                         s["daemon_vs_bare_cpu"].get<double>())));
   // The budget is why: fewer receive wake-ups than with budget 0 under the same traffic.
   CHECK(s["wakeups_per_second"]["receive"].get<double>() <
         s["budget_0"]["wakeups_per_second"]["receive"].get<double>());
@@ -400,7 +404,7 @@ TEST_CASE(
         64);
   CHECK(test::run_command(bench() + " zero-loss --latency-budget-ms 1001 2>/dev/null").exit_code ==
         64);
-  for (const char* bad : {"0", "10", "x"}) {
+  for (const char* bad : {"0", "2", "4", "10", "x"}) {
     INFO(bad);
     CHECK(test::run_command(bench() + " zero-loss --sensor-rate-rounds " + bad + " 2>/dev/null")
               .exit_code == 64);

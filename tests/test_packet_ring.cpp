@@ -446,8 +446,8 @@ TEST_CASE("packet_ring: a recording alone takes a burst of ten times the rate wh
 
 // The decode thread reads the kernel's ring itself (PacketSource::read_by_decoder): no receive
 // thread, a receive thread's placement said to be unused, the decode thread placed as asked, the
-// ring between them never overrun (the decoder takes a block only into an empty ring), and one
-// wake per block: the decoder's wake-ups are the ring's polls.
+// ring between them never overrun (the decoder takes of a block what its emptied ring holds, the
+// rest on its next turn), and one wake per block: the decoder's wake-ups are the ring's polls.
 TEST_CASE("packet_ring: the decode thread reads the ring: no receive thread, one wake a block",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
@@ -475,7 +475,7 @@ TEST_CASE("packet_ring: the decode thread reads the ring: no receive thread, one
   const auto c = [&](const char* name) { return test::health_counter(h, name); };
   CHECK(c("datagrams_received") + c("kernel_drops") == sent.sent);
   CHECK(c("packets_accepted") == c("datagrams_received"));
-  CHECK(c("ring_overruns") == 0);  // under every sanitizer too: it cannot happen
+  CHECK(c("ring_overruns") == 0);  // under every sanitizer too: it cannot happen here
   if (!test::kSanitizerBuild) CHECK(c("kernel_drops") == 0);
   // The same wake-ups, counted as the receive's and the decoder's (the last poll of the stop
   // ends the decoder without a wake of its own).
@@ -840,9 +840,11 @@ TEST_CASE("packet_ring: a block of small datagrams never overruns a small ring",
   CHECK(c("datagrams_received") + c("kernel_drops") == sent);
   CHECK(c("kernel_drops") == 0);
   CHECK(c("ring_overruns") == 0);
-  // Every valid packet decoded, every datagram recorded.
+  // Every valid packet decoded, every datagram recorded (a sanitizer's writer may fall behind:
+  // then counted as not recorded).
   CHECK(c("packets_accepted") == kRounds);
-  CHECK(c("pcap_packets_written") == c("datagrams_received"));
+  CHECK(c("pcap_packets_written") + c("pcap_packets_not_recorded") == c("datagrams_received"));
+  if (!test::kSanitizerBuild) CHECK(c("pcap_packets_not_recorded") == 0);
 }
 
 }  // namespace pandarcap
@@ -860,17 +862,10 @@ TEST_CASE("packet_ring: SIGINT right after the last datagram: every datagram cou
   auto& [veth, dir, port] = rig;
   RingDaemon daemon(dir, veth, port, "[output]\nframes = false\n");
   CHECK(daemon.process->log().find("handed over when full or after 100 ms") != std::string::npos);
-  bench::GeneratorResult sent;
-  {
-    test::FarNamespace far(veth.ns());
-    bench::GeneratorOptions traffic;
-    traffic.destination_ip = veth.near_ip();
-    traffic.port = port;
-    traffic.rate_pps = 3600;
-    traffic.seconds = 1;
-    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
-    REQUIRE(sent.send_errors == 0);
-  }
+  bench::GeneratorOptions traffic;
+  traffic.rate_pps = 3600;
+  traffic.seconds = 1;
+  const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
   daemon.process->signal(SIGINT);  // at once: the last block is still being filled
   REQUIRE(daemon.process->wait_exit(30s) == 0);
   const nlohmann::json h = test::last_health_record(daemon.out);

@@ -278,13 +278,15 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
                                     ReceiveCounters& counters) {
   const std::uint32_t count = block.hdr.bh1.num_pkts;
   const auto* base = reinterpret_cast<const std::uint8_t*>(&block);
-  std::uint32_t offset = block.hdr.bh1.offset_to_first_pkt;
+  // Where the last turn stopped in this block, when the ring had no room for the rest.
+  std::uint32_t offset = resume_index_ > 0 ? resume_offset_ : block.hdr.bh1.offset_to_first_pkt;
   std::uint64_t datagrams = 0, bytes = 0, truncated = 0, foreign = 0, other_sensor = 0;
-  std::uint64_t overruns = 0;
   std::span<PacketSlot> slots;
   std::size_t filled = 0;
   std::size_t published = 0;
-  for (std::uint32_t i = 0; i < count && offset != 0 && offset < block_bytes_; ++i) {
+  bool whole = true;  // every frame of the block taken
+  for (std::uint32_t i = resume_index_; i < count && offset != 0 && offset < block_bytes_; ++i) {
+    const std::uint32_t frame_offset = offset;
     const auto* header = reinterpret_cast<const tpacket3_hdr*>(base + offset);
     const std::uint32_t next = header->tp_next_offset;
     const auto* link = reinterpret_cast<const sockaddr_ll*>(
@@ -297,8 +299,6 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
     const std::uint8_t* mac = base + mac_offset;
     const std::optional<WireFrame> f = parse_wire_frame({mac, header->tp_snaplen}, header->tp_len);
     if (!f || !for_this_host(f->destination_ip, link->sll_pkttype)) continue;
-    ++datagrams;
-    bytes += f->arrived_bytes;
     if (filled == slots.size()) {
       if (filled > 0) {
         ring.publish(filled);
@@ -308,9 +308,16 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
       filled = 0;
     }
     if (slots.empty()) {
-      ++overruns;  // the decoder is behind: dropped, newest first, counted
-      continue;
+      // No room: the rest of the block stays in the kernel's ring for the next turn, after the
+      // caller has emptied this one. A block is sized in bytes, so one of small datagrams can
+      // hold more of them than the ring has slots; none is lost for that.
+      whole = false;
+      resume_index_ = i;
+      resume_offset_ = frame_offset;
+      break;
     }
+    ++datagrams;
+    bytes += f->arrived_bytes;
     PacketSlot& slot = slots[filled];
     slot.length = static_cast<std::uint32_t>(std::min(f->payload_bytes, sizeof slot.payload));
     // The frame's trailer (padding) is kept after the datagram where the slot has room, for the
@@ -369,16 +376,18 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
     ring.publish(filled);
     published += filled;
   }
-  // release: the kernel may write the block again once every read of it is done.
-  __atomic_store_n(&block.hdr.bh1.block_status, TP_STATUS_KERNEL, __ATOMIC_RELEASE);
-  next_block_ = (next_block_ + 1) % block_count_;
+  if (whole) {
+    // release: the kernel may write the block again once every read of it is done.
+    __atomic_store_n(&block.hdr.bh1.block_status, TP_STATUS_KERNEL, __ATOMIC_RELEASE);
+    next_block_ = (next_block_ + 1) % block_count_;
+    resume_index_ = 0;
+  }
 
   ReceiveCounters::add(counters.datagrams, datagrams);
   ReceiveCounters::add(counters.bytes, bytes);
   ReceiveCounters::add(counters.truncated, truncated);
   ReceiveCounters::add(counters.foreign, foreign);
   ReceiveCounters::add(counters.other_sensor, other_sensor);
-  ReceiveCounters::add(counters.ring_overruns, overruns);
   counters.publish_sources(sources_.sensor_source(), sources_.other_source(),
                            sources_.source_changes());
   if (published > 0) ring.notify();

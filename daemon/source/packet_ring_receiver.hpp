@@ -45,9 +45,11 @@
 // not the copy.
 //
 // Drops: PACKET_STATISTICS (tp_drops, the frames the kernel had no free block for) is read once a
-// second and at the end; reading resets it, so it is added up into kernel_drops. A PacketRing
-// without room for a block's datagrams would drop the rest, counted as ring overruns, as the
-// socket receiver does; read a block at a time by the thread that empties the ring, it has room.
+// second and at the end; reading resets it, so it is added up into kernel_drops. A block is
+// sized in bytes, so one of small datagrams may hold more than the PacketRing has slots: what does
+// not fit stays in the block, which the next turn goes on reading once the decoder has emptied
+// the ring. Nothing is dropped between the two rings (no ring overruns), and a backlog waits in
+// the kernel's, where its drops are counted.
 //
 // No reply from this host: without a UDP socket on the data port the kernel answers every
 // datagram with ICMP port-unreachable (a flood towards the sensor). A UDP socket is bound to
@@ -119,11 +121,12 @@ class PacketRingReceiver {
 
   // One turn of the receive loop, on the thread that reads the ring between its other work
   // (the decoder's: daemon/source/packet_source.hpp): takes the next block the kernel handed
-  // over into `ring`, or waits up to 100 ms for one. One block at most, so the caller empties
-  // `ring` between blocks and a backlog waits in the kernel's ring, not in `ring` (a block holds
-  // no more than a quarter of its slots). Says which it did; kEnded once `stop` was set and
-  // every block before it taken (the block being filled is handed over by its retire timer
-  // within 3 periods), and then call finish(). `heartbeat` counts the turns, for the watchdog.
+  // over into `ring`, or waits up to 100 ms for one. One block at most, and no more of it than
+  // `ring` has room for (the rest on the next turn), so the caller empties `ring` between turns
+  // and a backlog waits in the kernel's ring, not in `ring`. Says which it did; kEnded once `stop`
+  // was set and every block before it taken (the block being filled is handed over by its retire
+  // timer within 3 periods), and then call finish(). `heartbeat` counts the turns, for the
+  // watchdog.
   ReceiveTurn receive(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
                       std::atomic<std::uint64_t>& heartbeat);
   // After the last receive(): the last drops read into the counters.
@@ -134,7 +137,8 @@ class PacketRingReceiver {
   void open_ring(const UdpReceiverOptions& options);
   // The block the kernel handed over (TP_STATUS_USER), or null.
   tpacket_block_desc* ready_block() noexcept;
-  // Copies a block's datagrams into the ring and gives the block back to the kernel.
+  // Copies a block's datagrams into the ring and gives the block back to the kernel; or, when
+  // the ring has no room for the rest, keeps the block and where it stopped for the next turn.
   void take_block(tpacket_block_desc& block, PacketRing& ring, ReceiveCounters& counters);
   // Adds the kernel's drops since the last read to kernel_drops.
   void read_statistics(ReceiveCounters& counters) noexcept;
@@ -153,6 +157,8 @@ class PacketRingReceiver {
   std::uint32_t block_bytes_ = kMinBlockBytes;
   std::uint32_t block_count_ = 0;
   std::uint32_t next_block_ = 0;
+  std::uint32_t resume_index_ = 0;   // the next frame of next_block_ to take (0: a new block)
+  std::uint32_t resume_offset_ = 0;  // its offset in the block
   std::uint32_t retire_ms_ = 1;
   std::uint16_t port_ = 0;
   std::string interface_;
