@@ -806,13 +806,13 @@ TEST_CASE("packet_ring: a block holds one retire period of the sensor, within th
 
 namespace pandarcap {
 
-// The decode thread takes a whole block into its emptied ring (PacketRingReceiver::receive), and
-// says it always has room: "a block holds no more than a quarter of its slots". A block is sized
-// in bytes for the sensor's datagrams (32 KiB at least), so small datagrams from the sensor's
-// address (a misbehaving sensor, a tool on its address) put hundreds in one block where the ring
-// has 64 slots: the sensor's valid packets after the 64th of a block are lost as ring overruns,
-// although the kernel held them and the decoder had time for them. The socket receiver, whose
-// ring the decoder empties while it fills, keeps them.
+// A block is sized in bytes for the sensor's datagrams (32 KiB at least), so small datagrams from
+// the sensor's address (a misbehaving sensor, a tool on its address) put hundreds in one block
+// where the ring has 64 slots. The decode thread took a whole block into its emptied ring
+// (PacketRingReceiver::receive), and the sensor's valid packets after the 64th of a block were
+// lost as ring overruns, although the kernel held them and the decoder had time for them (5281
+// overruns, 0 of 40 valid packets decoded). It now takes what the ring has room for and the rest
+// of the block on its next turn.
 TEST_CASE("packet_ring: a block of small datagrams never overruns a small ring",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
