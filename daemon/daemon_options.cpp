@@ -19,6 +19,7 @@
 #include "daemon/pcap/xxh64.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/pipeline_types.hpp"
+#include "daemon/source/packet_ring_receiver.hpp"
 
 namespace pandarcap {
 
@@ -276,6 +277,13 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
   if (ro.latency_budget_ns > 0) {
     ro.latency_budget_ns =
         std::min(ro.latency_budget_ns, longest_wait_ns(config, model, packets_per_second));
+    // The packet ring's retire timer counts whole milliseconds, up to its own longest: the
+    // budget said is the one it keeps.
+    if (ro.packet_ring) {
+      constexpr std::int64_t kMs = 1'000'000;
+      ro.latency_budget_ns = std::clamp<std::int64_t>(ro.latency_budget_ns / kMs * kMs, kMs,
+                                                      PacketRingReceiver::kMaxRetireMs * kMs);
+    }
   }
   return ro;
 }

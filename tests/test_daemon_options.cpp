@@ -221,6 +221,10 @@ TEST_CASE("a pipeline thread is named and placed before its start returns", "[da
 constexpr double k40PDualPps = 3599.7;
 constexpr double kFramesBoundMs = 4 * 360 / 4 / k40PDualPps * 1000;     // 100.0 ms
 constexpr double kRecordingBoundMs = 4 * 512 / 4 / k40PDualPps * 1000;  // 142.2 ms
+// The packet ring's retire timer: whole milliseconds, 1 to 100.
+double ring_wait_ms(double ms) {
+  return std::clamp(std::floor(ms), 1.0, 100.0);
+}
 
 TEST_CASE("the latency budget is the frames': a recording alone wakes at its own flush period",
           "[daemon][options]") {
@@ -235,20 +239,20 @@ TEST_CASE("the latency budget is the frames': a recording alone wakes at its own
     INFO("budget " << budget_ms << " ms");
     // Anything that waits for frames keeps the budget as configured, up to what a quarter of the
     // arenas' frames take to arrive (a longer wait hands on more frames than there are arenas).
-    CHECK(wait_ms(config) == Approx(std::min(budget, kFramesBoundMs)).epsilon(0.001));
+    // 0 (a wake per datagram) is kept as asked.
+    const auto ring = [&](double ms) { return budget_ms == 0 ? 0.0 : ring_wait_ms(ms); };
+    CHECK(wait_ms(config) == Approx(ring(std::min(budget, kFramesBoundMs))).epsilon(0.001));
     config.output.frames = false;
     config.output.mcap = true;
-    CHECK(wait_ms(config) == Approx(std::min(budget, kFramesBoundMs)).epsilon(0.001));
+    CHECK(wait_ms(config) == Approx(ring(std::min(budget, kFramesBoundMs))).epsilon(0.001));
     config.output.mcap = false;
     config.live.foxglove = true;
-    CHECK(wait_ms(config) == Approx(std::min(budget, kFramesBoundMs)).epsilon(0.001));
+    CHECK(wait_ms(config) == Approx(ring(std::min(budget, kFramesBoundMs))).epsilon(0.001));
     // Nothing does: the decoder's flush of the recording (100 ms) is the shortest wait that
-    // buys anything; a longer budget stays up to the raw batches' bound, and 0 (a wake per
-    // datagram) is kept as asked.
+    // buys anything; a longer budget stays up to the raw batches' bound and the ring's 100 ms.
     config.live.foxglove = false;
     CHECK(wait_ms(config) ==
-          Approx(budget_ms == 0 ? 0.0 : std::min(std::max(budget, 100.0), kRecordingBoundMs))
-              .epsilon(0.001));
+          Approx(ring(std::min(std::max(budget, 100.0), kRecordingBoundMs))).epsilon(0.001));
     // The socket keeps the budget: it cannot wake on a burst as a full block does.
     config.input.receiver = "socket";
     CHECK(wait_ms(config) == Approx(std::min(budget, kRecordingBoundMs)).epsilon(0.001));
@@ -279,11 +283,13 @@ TEST_CASE("no budget waits longer than a quarter of the no_data timeout, with ei
           CHECK(wait <= std::max(timeout / 4 * 1000, 1.0) + 0.001);
           CHECK(wait >= 1.0);  // never a wake per datagram unless 0 asks for it
           // No shorter than asked for, unless the timeout or the recording's flush says so.
-          const bool recording_ring = !frames && std::string(receiver) == "packet_ring";
-          const double expected =
+          const bool packet_ring = std::string(receiver) == "packet_ring";
+          const bool recording_ring = !frames && packet_ring;
+          double expected =
               std::max(std::min(recording_ring ? std::max<double>(budget_ms, 100) : budget_ms,
                                 timeout / 4 * 1000),
                        1.0);
+          if (packet_ring) expected = ring_wait_ms(expected);
           CHECK(wait == Approx(expected).epsilon(0.001));
         }
       }
@@ -303,11 +309,11 @@ TEST_CASE("a recording alone waits no longer than a quarter of what its pipeline
   // Each bound alone, at a 40P's 3600 packets a second in dual return.
   DaemonConfig ring = config;
   ring.ring.slots = 256;  // 71 ms of packets: a quarter is 17.8 ms
-  CHECK(wait_ms(ring) == Approx(256.0 / 3599.7 / 4 * 1000).epsilon(0.01));
+  CHECK(wait_ms(ring) == ring_wait_ms(256.0 / 3599.7 / 4 * 1000));
   DaemonConfig raw = config;
   raw.arenas.count = 2;
   raw.arenas.packets_per_frame = 128;
-  CHECK(wait_ms(raw) == Approx(256.0 / 3599.7 / 4 * 1000).epsilon(0.01));
+  CHECK(wait_ms(raw) == ring_wait_ms(256.0 / 3599.7 / 4 * 1000));
   raw.output.pcap = false;  // health only: no raw batches to fill
   CHECK(wait_ms(raw) == 100);
   DaemonConfig silence = config;
@@ -319,12 +325,12 @@ TEST_CASE("a recording alone waits no longer than a quarter of what its pipeline
   CHECK(wait_ms(silence) == Approx(25).epsilon(0.01));
   DaemonConfig small_ring = ring;
   small_ring.latency.budget_ms = 60;
-  CHECK(wait_ms(small_ring) == Approx(256.0 / 3599.7 / 4 * 1000).epsilon(0.01));
+  CHECK(wait_ms(small_ring) == ring_wait_ms(256.0 / 3599.7 / 4 * 1000));
   // A faster model fills the same slots sooner: a QT128 sends 9000 packets a second.
   RunSource qt;
   qt.model = SensorModelId::kPandarQT128;
   CHECK(static_cast<double>(receiver_options(ring, qt).latency_budget_ns) / 1e6 ==
-        Approx(256.0 / 9000 / 4 * 1000).epsilon(0.01));
+        ring_wait_ms(256.0 / 9000 / 4 * 1000));
 }
 
 TEST_CASE("a wake hands on at most a quarter of what the ring, the raw batches and the arenas hold",
