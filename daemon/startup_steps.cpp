@@ -212,8 +212,8 @@ DaemonConfig load_configuration(const CommandLine& options, const std::string& s
 void refuse_root_unless_allowed(const CommandLine& options, const DaemonConfig& config) {
   if (::geteuid() != 0) return;
   // The packet ring needs CAP_NET_RAW: root is one way to have it (the drop-in, for an
-  // unprivileged user, the better one). A replay never opens it.
-  if (config.input.receiver == "packet_ring" && options.source.kind == RunSource::Kind::kLive) {
+  // unprivileged user, the better one). A replay never opens it; a simulated run opens it on lo.
+  if (config.input.receiver == "packet_ring" && options.source.kind != RunSource::Kind::kReplay) {
     spdlog::warn(
         "running as root for input.receiver = \"packet_ring\" (CAP_NET_RAW); an unprivileged "
         "user with the capability alone is safer (the systemd drop-in "
@@ -226,7 +226,7 @@ void refuse_root_unless_allowed(const CommandLine& options, const DaemonConfig& 
         "refusing to run as root: pandarcapd needs no privilege (UDP on any port it is given, "
         "files it owns). Run it as an unprivileged user (the systemd unit uses 'pandarcap'), or "
         "pass --allow-root to accept the risk (containers, CI); input.receiver = \"packet_ring\" "
-        "is the one setting that needs a privilege (CAP_NET_RAW), and runs as root"};
+        "is the one setting that needs a privilege (CAP_NET_RAW), and runs as root without it"};
   }
   spdlog::warn("running as root (--allow-root)");
 }

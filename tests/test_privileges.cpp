@@ -68,6 +68,26 @@ TEST_CASE("as root without --allow-root: refused with 77 before any socket or fi
   CHECK(fs::exists(out / "health" / "health.jsonl"));
   // Configuration checks need no privilege and are not refused.
   CHECK(test::run_command(as_root + daemon + " --check-config").exit_code == 0);
+
+  // The packet ring needs CAP_NET_RAW, which root has (a user namespace's root has not, for the
+  // host's interfaces): live or simulated over lo, it runs as root without --allow-root, and
+  // says so; a replay of a file is refused as any other run.
+  if (::geteuid() == 0) {
+    const auto ring = test::run_command(
+        daemon + " --simulate --receiver packet_ring --interface lo --duration 1 --output-dir '" +
+        (dir / "ring").string() + "' 2>&1");
+    INFO(ring.out);
+    CHECK(ring.exit_code == 0);
+    CHECK(ring.out.find("running as root for input.receiver = \"packet_ring\"") !=
+          std::string::npos);
+    const auto replay = test::run_command(
+        daemon + " --receiver packet_ring --interface lo --replay '" +
+        (fs::path(PANDARCAP_SOURCE_DIR) / "tests" / "data" / "none.pcap").string() +
+        "' --output-dir '" + (dir / "replay").string() + "' 2>&1");
+    INFO(replay.out);
+    CHECK(replay.exit_code == 77);
+    CHECK(replay.out.find("refusing to run as root") != std::string::npos);
+  }
 }
 
 TEST_CASE("an unprivileged user captures with no capability (CapEff 0)",
