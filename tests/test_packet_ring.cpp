@@ -910,3 +910,54 @@ TEST_CASE("packet_ring: a stop with a backlog the drain cannot take: the rest co
 }
 
 }  // namespace pandarcap
+
+namespace pandarcap {
+
+// The interface going down while the kernel still holds an open block of its datagrams (frames
+// off: blocks retire after 100 ms): the down is said at once (the socket's error), and then the
+// block the retire timer hands over is taken, which said "h6n delivers again" 73 ms later while
+// the interface was still down (for as long as it stayed down): the log said the link was back
+// when it was not. A block taken says only that the kernel had it, from before the down.
+TEST_CASE("packet_ring: the interface down with a block still open: not said to deliver again",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("pw", "packet-ring-down-open-block");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port, "[output]\nframes = false\n");
+  bench::GeneratorOptions traffic;
+  traffic.rate_pps = 3600;
+  traffic.seconds = 0.02;
+  const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
+  const std::string link = "ip link set " + veth.near() + " ";
+  REQUIRE(test::run_command(link + "down").exit_code == 0);  // the block still open
+  REQUIRE(
+      wait_until([&] { return daemon.process->log().find("is down") != std::string::npos; }, 10s));
+  // The open block, handed over by its timer, taken: what was sent before the down, received.
+  const bool taken = wait_until(
+      [&] {
+        const auto records = test::health_records(daemon.out);
+        return !records.empty() &&
+               test::health_counter(records.back(), "datagrams_received") == sent.sent;
+      },
+      10s);
+  const std::string log = daemon.process->log();
+  INFO(log);
+  CHECK(taken);
+  const std::size_t down = log.find("is down");
+  CHECK(log.find("delivers again", down) == std::string::npos);  // it is still down
+
+  // Up again: said once a datagram arrives.
+  REQUIRE(test::run_command(link + "up").exit_code == 0);
+  REQUIRE(test::run_command("ip neigh replace " + veth.far_ip() + " lladdr " + veth.far_mac() +
+                            " dev " + veth.near() + " nud permanent")
+              .exit_code == 0);
+  {
+    test::FarNamespace far(veth.ns());
+    send_udp(veth.far_ip(), veth.near_ip(), port, {sensor_datagram(0)});
+  }
+  const nlohmann::json h = daemon.stop_after(sent.sent + 1);
+  CHECK(test::health_counter(h, "datagrams_received") == sent.sent + 1);
+  CHECK(daemon.process->log().find("delivers again", down) != std::string::npos);
+}
+
+}  // namespace pandarcap
