@@ -961,3 +961,100 @@ TEST_CASE("packet_ring: the interface down with a block still open: not said to 
 }
 
 }  // namespace pandarcap
+
+namespace pandarcap {
+
+// The decode thread takes of a block what its 64 slots hold and goes on from there on its next
+// turn: frames it skips (another host's MAC, a second sensor's address) and frames it takes
+// (the sensor's valid packets, its malformed datagrams, a UDP length the frame does not hold),
+// small enough that a block of 32 KiB holds ~150 it takes, in a pattern whose period (8 to 14
+// frames, 7 lengths of round) puts every kind at the point where the ring fills. Each datagram
+// counted once, each valid packet decoded once (no sequence gap or duplicate), the recording in
+// order.
+TEST_CASE("packet_ring: a block taken in parts, every kind of frame where the ring fills",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("pk", "packet-ring-resume-kinds");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port, "[ring]\nslots = 64\n");
+  const auto set_ip = [](std::vector<std::uint8_t>& f, std::size_t at, const std::string& ip) {
+    in_addr a{};
+    inet_pton(AF_INET, ip.c_str(), &a);
+    std::memcpy(f.data() + 18 + at, &a, 4);
+    f[18 + 10] = f[18 + 11] = 0;
+    const std::uint16_t sum = checksum(f.data() + 18, 20);
+    f[18 + 10] = static_cast<std::uint8_t>(sum >> 8);
+    f[18 + 11] = static_cast<std::uint8_t>(sum);
+  };
+  constexpr int kRounds = 400;
+  int send_errors = 0;
+  std::uint64_t taken = 0, foreign = 0, valid = 0, truncated = 0;
+  {
+    test::FarNamespace far(veth.ns());
+    const io::UniqueFd raw = frame_sender(veth);
+    // Each kind's frame made once (making one reads the MACs through a shell), then sent as is
+    // or with its sequence written in.
+    const std::vector<std::uint8_t> body = sensor_datagram(0);
+    const std::vector<std::uint8_t> valid_frame = tagged_frame(veth, port, 7, body, 1);
+    auto other_host = tagged_frame(veth, port, 7, std::vector<std::uint8_t>(8, 0x22), 5);
+    other_host[5] ^= 0x40;  // another host's MAC: never this host's
+    auto second = tagged_frame(veth, port, 7, std::vector<std::uint8_t>(8, 0x11), 2);
+    set_ip(second, 12, veth.second_far_ip());
+    std::vector<std::vector<std::uint8_t>> small;
+    for (int k = 0; k < 10; ++k) {
+      small.push_back(tagged_frame(veth, port, 7, std::vector<std::uint8_t>(8 + k, 0x5a), 3));
+    }
+    auto lying = tagged_frame(veth, port, 7, std::vector<std::uint8_t>(16, 9), 4);
+    lying[18 + 20 + 4] = 2000 >> 8;
+    lying[18 + 20 + 5] = 2000 & 0xFF;
+    const auto send = [&](const std::vector<std::uint8_t>& frame) {
+      if (::send(raw.get(), frame.data(), frame.size(), 0) != static_cast<ssize_t>(frame.size()))
+        ++send_errors;
+    };
+    auto numbered = valid_frame;
+    for (int r = 0; r < kRounds; ++r) {
+      const auto sequence = static_cast<std::uint32_t>(r);
+      std::memcpy(numbered.data() + numbered.size() - 4, &sequence, 4);
+      send(numbered);
+      ++valid;
+      send(other_host);
+      send(second);
+      ++foreign;
+      for (int k = 0; k < 4 + r % 7; ++k)
+        send(small[static_cast<std::size_t>(k)]);
+      taken += 4 + r % 7;
+      send(lying);
+      ++truncated;
+    }
+  }
+  REQUIRE(send_errors == 0);
+  const std::uint64_t received = valid + foreign + taken + truncated;
+  const nlohmann::json h = daemon.stop_after(received);
+  INFO(daemon.process->log());
+  INFO(h.dump());
+  const auto c = [&](const char* name) { return test::health_counter(h, name); };
+  CHECK(c("kernel_drops") == 0);
+  CHECK(c("datagrams_received") == received);
+  CHECK(c("foreign_datagrams") == foreign);
+  CHECK(c("truncated_datagrams") == truncated);
+  CHECK(c("ring_overruns") == 0);
+  CHECK(c("packets_accepted") == valid);
+  CHECK(c("sequence_duplicates") == 0);
+  CHECK(c("sequence_lost") == 0);
+  CHECK(c("sequence_reordered") == 0);
+  CHECK(c("pcap_packets_written") == received - foreign);
+  // The recording: the valid packets' sequences 0, 1, 2, ... in the order sent.
+  const auto pcaps = test::files_ending(daemon.out / "raw", ".pcap");
+  REQUIRE(pcaps.size() == 1);
+  std::uint32_t next = 0;
+  std::size_t in_order = 0;
+  for (const Record& record : pcap_records(pcaps[0])) {
+    if (record.bytes.size() < 18 + 28 + 1266) continue;
+    std::uint32_t sequence = 0;
+    std::memcpy(&sequence, record.bytes.data() + record.bytes.size() - 4, 4);
+    in_order += sequence == next++;
+  }
+  CHECK(in_order == valid);
+}
+
+}  // namespace pandarcap
