@@ -422,6 +422,7 @@ void PacketRingReceiver::take_socket_error(ReceiveCounters& counters) noexcept {
                  std::strerror(error));
   }
   link_down_ = true;
+  link_down_at_ns_ = realtime_ns();
   next_link_check_ns_ = 0;
 }
 
@@ -458,7 +459,10 @@ ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool
     next_statistics_ns_ = now + 1'000'000'000;
   }
   if (tpacket_block_desc* block = ready_block()) {
-    if (link_down_) {
+    // A block the retire timer hands over after the error may hold only frames from before it:
+    // the interface delivers again when a frame arrived after the error.
+    const tpacket_bd_ts& last = block->hdr.bh1.ts_last_pkt;
+    if (link_down_ && std::int64_t{last.ts_sec} * 1'000'000'000 + last.ts_nsec > link_down_at_ns_) {
       link_down_ = false;
       spdlog::info("packet ring: {} delivers again", interface_);
     }
@@ -480,7 +484,31 @@ ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool
   return ReceiveTurn::kWaited;
 }
 
+std::uint64_t PacketRingReceiver::frames_unread() const noexcept {
+  std::uint64_t unread = 0;
+  for (std::uint32_t n = 0; n < block_count_; ++n) {
+    const std::uint32_t index = (next_block_ + n) % block_count_;
+    const auto* block = reinterpret_cast<const tpacket_block_desc*>(
+        static_cast<const std::uint8_t*>(map_) + std::size_t{index} * block_bytes_);
+    if ((__atomic_load_n(&block->hdr.bh1.block_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) == 0)
+      break;
+    const std::uint32_t taken = n == 0 ? resume_index_ : 0;
+    unread += block->hdr.bh1.num_pkts > taken ? block->hdr.bh1.num_pkts - taken : 0;
+  }
+  return unread;
+}
+
 void PacketRingReceiver::finish(ReceiveCounters& counters) noexcept {
+  // A backlog longer than the stop's drain: the blocks it did not reach are counted as dropped
+  // (the kernel's count is of the frames its filter passed, as these are), not left in no
+  // counter.
+  if (const std::uint64_t unread = frames_unread(); unread > 0) {
+    kernel_drops_ += unread;
+    spdlog::warn(
+        "packet ring: the stop's drain ended with {} frames still in the ring (a backlog longer "
+        "than it takes): counted as kernel drops",
+        unread);
+  }
   read_statistics(counters);  // the last drops, for the final health
   if (queue_freezes_ > 0) {
     spdlog::warn("packet ring: the kernel found no free block {} times ({} frames dropped)",

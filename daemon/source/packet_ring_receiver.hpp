@@ -32,7 +32,9 @@
 //
 // The interface going down or away: the socket's error (POLLERR) is read and counted as a
 // receive error, logged with the interface's name; the thread sleeps in poll() meanwhile, and
-// binds again when an interface of that name is back.
+// binds again when an interface of that name is back. It delivers again when a block holds a
+// frame that arrived after the error (a block the retire timer hands over after the down holds
+// only frames from before it).
 //
 // Each packet keeps its kernel timestamp (tp_sec/tp_nsec, nanoseconds) and its headers as the
 // wire carried them, the VLAN tag put back from tp_vlan_tci (with its TPID), so the pcap holds
@@ -49,7 +51,8 @@
 // sized in bytes, so one of small datagrams may hold more than the PacketRing has slots: what does
 // not fit stays in the block, which the next turn goes on reading once the decoder has emptied
 // the ring. Nothing is dropped between the two rings (no ring overruns), and a backlog waits in
-// the kernel's, where its drops are counted.
+// the kernel's, where its drops are counted. A stop drains the ring for 200 ms at least (the open
+// block's retire timer); what a longer backlog leaves in it is counted as kernel drops too.
 //
 // No reply from this host: without a UDP socket on the data port the kernel answers every
 // datagram with ICMP port-unreachable (a flood towards the sensor). A UDP socket is bound to
@@ -129,7 +132,8 @@ class PacketRingReceiver {
   // watchdog.
   ReceiveTurn receive(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
                       std::atomic<std::uint64_t>& heartbeat);
-  // After the last receive(): the last drops read into the counters.
+  // After the last receive(): the last drops read into the counters, with the frames a stop's
+  // drain left in the ring (a backlog longer than the drain).
   void finish(ReceiveCounters& counters) noexcept;
 
  private:
@@ -140,6 +144,8 @@ class PacketRingReceiver {
   // Copies a block's datagrams into the ring and gives the block back to the kernel; or, when
   // the ring has no room for the rest, keeps the block and where it stopped for the next turn.
   void take_block(tpacket_block_desc& block, PacketRing& ring, ReceiveCounters& counters);
+  // The frames in the blocks the kernel has handed over and this side has not taken.
+  std::uint64_t frames_unread() const noexcept;
   // Adds the kernel's drops since the last read to kernel_drops.
   void read_statistics(ReceiveCounters& counters) noexcept;
   // Whether a UDP socket on host_ip (joined to multicast_ip) would have been given a datagram
@@ -163,9 +169,10 @@ class PacketRingReceiver {
   std::uint16_t port_ = 0;
   std::string interface_;
   unsigned ifindex_ = 0;
-  std::uint32_t host_ip_ = 0;       // host order; 0 = any address of this host
-  std::uint32_t multicast_ip_ = 0;  // host order; 0 = none
-  bool link_down_ = false;          // an error said so; until a block arrives again
+  std::uint32_t host_ip_ = 0;         // host order; 0 = any address of this host
+  std::uint32_t multicast_ip_ = 0;    // host order; 0 = none
+  bool link_down_ = false;            // an error said so; until a frame arrives after it
+  std::int64_t link_down_at_ns_ = 0;  // when the error was read (CLOCK_REALTIME, as the frames')
   std::int64_t next_link_check_ns_ = 0;
   std::int64_t next_statistics_ns_ = 0;
   std::int64_t drain_until_ = 0;  // when a stop's drain ends (0: no stop yet)
