@@ -253,7 +253,11 @@ struct RingDaemon {
                                          total;
         },
         20s);
-    process->signal(SIGTERM);
+    return stop(SIGTERM);
+  }
+  // Sends `signal` now, waits for a clean exit, and returns the final health record.
+  nlohmann::json stop(int signal) {
+    process->signal(signal);
     REQUIRE(process->wait_exit(30s) == 0);
     return test::last_health_record(out);
   }
@@ -802,10 +806,6 @@ TEST_CASE("packet_ring: a block holds one retire period of the sensor, within th
   }
 }
 
-}  // namespace pandarcap
-
-namespace pandarcap {
-
 // A block is sized in bytes for the sensor's datagrams (32 KiB at least), so small datagrams from
 // the sensor's address (a misbehaving sensor, a tool on its address) put hundreds in one block
 // where the ring has 64 slots. The decode thread took a whole block into its emptied ring
@@ -847,10 +847,6 @@ TEST_CASE("packet_ring: a block of small datagrams never overruns a small ring",
   if (!test::kSanitizerBuild) CHECK(c("pcap_packets_not_recorded") == 0);
 }
 
-}  // namespace pandarcap
-
-namespace pandarcap {
-
 // A stop that comes while the kernel still holds the last block open (frames off: blocks retire
 // after 100 ms): the decode thread, which now reads the ring itself, drains it before it ends
 // (PacketRingReceiver::receive's drain), so everything the kernel took before the stop is
@@ -866,9 +862,8 @@ TEST_CASE("packet_ring: SIGINT right after the last datagram: every datagram cou
   traffic.rate_pps = 3600;
   traffic.seconds = 1;
   const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
-  daemon.process->signal(SIGINT);  // at once: the last block is still being filled
-  REQUIRE(daemon.process->wait_exit(30s) == 0);
-  const nlohmann::json h = test::last_health_record(daemon.out);
+  // At once: the last block is still being filled.
+  const nlohmann::json h = daemon.stop(SIGINT);
   INFO(daemon.process->log());
   INFO(h.dump());
   const auto c = [&](const char* name) { return test::health_counter(h, name); };
@@ -876,10 +871,6 @@ TEST_CASE("packet_ring: SIGINT right after the last datagram: every datagram cou
   CHECK(c("pcap_packets_written") + c("pcap_packets_not_recorded") == c("datagrams_received"));
   CHECK(c("ring_overruns") == 0);
 }
-
-}  // namespace pandarcap
-
-namespace pandarcap {
 
 // A stop while the kernel's ring holds more than the decode thread takes in its drain (200 ms):
 // the daemon stopped (SIGSTOP) while the sensor sent 300 000 datagrams into a 512 MiB ring, then
@@ -899,19 +890,13 @@ TEST_CASE("packet_ring: a stop with a backlog the drain cannot take: the rest co
   traffic.seconds = 2;
   const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
   daemon.process->signal(SIGCONT);
-  daemon.process->signal(SIGTERM);  // at once: the ring holds the whole backlog
-  REQUIRE(daemon.process->wait_exit(30s) == 0);
-  const nlohmann::json h = test::last_health_record(daemon.out);
+  const nlohmann::json h = daemon.stop(SIGTERM);  // at once: the ring holds the whole backlog
   INFO(daemon.process->log());
   INFO(h.dump());
   const auto c = [&](const char* name) { return test::health_counter(h, name); };
   CHECK(c("datagrams_received") + c("kernel_drops") == sent.sent);
   CHECK(c("ring_overruns") == 0);
 }
-
-}  // namespace pandarcap
-
-namespace pandarcap {
 
 // The interface going down while the kernel still holds an open block of its datagrams (frames
 // off: blocks retire after 100 ms): the down is said at once (the socket's error), and then the
@@ -959,10 +944,6 @@ TEST_CASE("packet_ring: the interface down with a block still open: not said to 
   CHECK(test::health_counter(h, "datagrams_received") == sent.sent + 1);
   CHECK(daemon.process->log().find("delivers again", down) != std::string::npos);
 }
-
-}  // namespace pandarcap
-
-namespace pandarcap {
 
 // The decode thread takes of a block what its 64 slots hold and goes on from there on its next
 // turn: frames it skips (another host's MAC, a second sensor's address) and frames it takes
