@@ -92,8 +92,13 @@ class UdpReceiver {
   static constexpr std::int64_t kMinSleepNs = 100'000;
 
   void configure(const UdpReceiverOptions& options);
-  // Reads SO_MEMINFO: stores the kernel's drop count, returns the buffer's fill (0..1).
+  // Reads SO_MEMINFO: stores the kernel's drop count (plus left_at_stop_), returns the
+  // buffer's fill (0..1).
   double read_socket_memory(ReceiveCounters& counters);
+  // After the stop's drain: receives, without keeping them, the datagrams the socket still holds
+  // that arrived before this call, and adds them to left_at_stop_ (counted as kernel drops: the
+  // socket's close would drop them). Returns how many.
+  std::uint64_t count_left_at_stop();
   Received receive_batch(PacketRing& ring, int flags, ReceiveCounters& counters);
   void run_per_datagram(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
                         std::atomic<std::uint64_t>& heartbeat);
@@ -107,6 +112,7 @@ class UdpReceiver {
   std::size_t batch_;
   std::int64_t budget_ns_ = 0;
   std::size_t max_wake_datagrams_ = 0;
+  std::uint64_t left_at_stop_ = 0;
   std::unique_ptr<Batch> buffers_;
 };
 
