@@ -22,6 +22,13 @@ constexpr std::size_t kDecodeBatch = 64;
 // phase, left a record up to a second behind the stream (a motor stop said after 2 s). Ten a
 // second keep every record within 0.1 s of it.
 constexpr std::int64_t kSnapshotIntervalNs = kRecordingFlushNs;
+// The longest a live source waits for the writer in one stretch, whatever room is upstream: a
+// writer gone for longer (a disk that does not answer) gets the old behaviour, frames dropped
+// and counted, and the stall report says why.
+constexpr std::int64_t kLongestWriterWaitNs = 1'000'000'000;
+// Each wait's slice: the writer wakes this thread when it returns an arena or batch; the slice
+// only bounds how late a full upstream is noticed.
+constexpr auto kWriterWaitSlice = std::chrono::milliseconds(1);
 
 }  // namespace
 
@@ -78,9 +85,9 @@ Frame* DecodeWorker::acquire_frame() {
   // producer, the writer, so this thread never pushes into it.
   if (spares_ > 0) arena = spare_[--spares_];
   while (arena == nullptr && !free_arenas_.try_pop(arena)) {
-    if (!options_.lossless) return nullptr;  // the assembler counts the dropped frame
-    free_arenas_.wait_for_data(std::chrono::milliseconds(100));
+    if (!wait_for_writer(free_arenas_)) return nullptr;  // the assembler counts the dropped frame
   }
+  waiting_since_ns_ = 0;
   for (FrameArena*& open : open_) {
     if (open == nullptr) {
       open = arena;
@@ -135,12 +142,14 @@ void DecodeWorker::frame_done(Frame& frame) {
 }
 
 void DecodeWorker::record_raw(const PacketSlot& slot) {
-  while (raw_ == nullptr && !free_raw_.try_pop(raw_)) {
-    if (!options_.lossless) {
-      ++raw_dropped_;
-      return;
+  if (raw_ == nullptr) {
+    while (!free_raw_.try_pop(raw_)) {
+      if (!wait_for_writer(free_raw_)) {
+        ++raw_dropped_;
+        return;
+      }
     }
-    free_raw_.wait_for_data(std::chrono::milliseconds(100));
+    waiting_since_ns_ = 0;
   }
   RawPacket& packet = raw_->packets[raw_->size++];
   packet.receive_time_ns = slot.receive_time_ns;
@@ -163,6 +172,27 @@ void DecodeWorker::record_raw(const PacketSlot& slot) {
                                ? std::max<std::uint32_t>(slot.original_length, packet.length + 1u)
                                : packet.length;
   if (raw_->size == raw_->capacity) flush_raw();
+}
+
+template <class Queue>
+bool DecodeWorker::wait_for_writer(Queue& queue) {
+  if (options_.lossless) {  // a replay: a file can wait
+    queue.wait_for_data(std::chrono::milliseconds(100));
+    return true;
+  }
+  if (upstream_room_ == nullptr || !(*upstream_room_)()) return false;
+  const std::int64_t now = coarse_monotonic_ns();
+  if (waiting_since_ns_ == 0) {
+    waiting_since_ns_ = now;
+  } else if (now - waiting_since_ns_ > kLongestWriterWaitNs) {
+    return false;  // and at once for every frame and datagram, until the writer returns one
+  }
+  // Alive, and with packets in hand: neither the watchdog nor the health's silence should take
+  // this wait for a hang or a sensor that stopped.
+  ReceiveCounters::add(*heartbeat_, 1);
+  live_->last_packet_monotonic_ns.store(now, std::memory_order_relaxed);
+  queue.wait_for_data(kWriterWaitSlice);
+  return true;
 }
 
 void DecodeWorker::flush_raw(bool notify) {
@@ -229,6 +259,14 @@ void DecodeWorker::send_snapshot(WriterMessage::Kind kind) {
 
 void DecodeWorker::run(const std::atomic<bool>& producer_done,
                        std::atomic<std::uint64_t>& heartbeat, DecodeLive& live) {
+  // The receive thread fills the ring meanwhile: half of it is room to wait in. Once the source
+  // is done (a stop) nothing fills it, and what it holds waits for the writer (a second at most
+  // in one stretch) rather than be dropped.
+  const UpstreamRoom room = [&] {
+    return producer_done.load(std::memory_order_relaxed) ||
+           ring_.size_approx() < ring_.capacity() / 2;
+  };
+  upstream_room_ = &room;
   loop(heartbeat, live, [&] {
     // Read the flag before looking at the ring again: if the producer was done then, an empty
     // ring after it means everything has been taken.
@@ -238,13 +276,16 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
   });
 }
 
-void DecodeWorker::run_inline(const ReceiveInline& receive, std::atomic<std::uint64_t>& heartbeat,
-                              DecodeLive& live) {
+void DecodeWorker::run_inline(const ReceiveInline& receive, const UpstreamRoom& room,
+                              std::atomic<std::uint64_t>& heartbeat, DecodeLive& live) {
+  upstream_room_ = &room;
   loop(heartbeat, live, [&] { return receive(ring_); });
 }
 
 template <class Wait>
 void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live, Wait&& wait) {
+  heartbeat_ = &heartbeat;
+  live_ = &live;
   std::int64_t next_snapshot_ns = coarse_monotonic_ns();
   const std::int64_t warm_ns = next_snapshot_ns + kWarmUpNs;
   bool hot = false;
@@ -288,6 +329,7 @@ void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live,
     }
   }
   alloc::mark_this_thread_cold();
+  upstream_room_ = nullptr;  // the shutdown's frames and batch do not wait on the writer
   // Frames finished by the shutdown, not by a packet: no frame latency to measure.
   current_receive_ns_ = 0;
   decoder_.flush();

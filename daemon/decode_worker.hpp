@@ -3,8 +3,13 @@
 // each datagram into a RawBatch for the pcap recording, and hands finished arenas and batches to
 // the writer. Once a second (and at the end) it sends the writer a snapshot of its counters.
 //
-// It never allocates and never waits for the writer: with no empty arena the frame is dropped
-// (the assembler counts it), with no empty raw batch the datagram is not recorded (counted).
+// It never allocates. With no empty arena (or raw batch) it waits for the writer to return one
+// only while what is upstream can hold more (live: the receive ring, or the kernel's packet ring,
+// less than half full; after a stop, and in a replay, always): a writer that falls behind for a
+// moment then costs nothing, its backlog waiting where the packets already are. Past that (or a
+// second of waiting in one stretch) the frame is dropped (the assembler counts it) and the
+// datagram is not recorded (counted), so a writer that stays behind never makes the receive side
+// drop instead.
 // Every `frame_decimation`-th frame goes to the writer; the others go straight back to the pool,
 // counted as decimated.
 #pragma once
@@ -72,10 +77,12 @@ class DecodeWorker final : public FrameSink {
   // whenever the ring is empty: puts what has arrived into the ring, waiting for it when
   // nothing has; says which, or that the source has ended.
   using ReceiveInline = std::function<ReceiveTurn(PacketRing&)>;
+  // Whether the source can hold more while this thread waits for the writer (see above).
+  using UpstreamRoom = std::function<bool()>;
   // As run(), reading `receive` for its packets; ends when `receive` has ended and the ring is
   // empty. `live`'s wake-ups are the returns from the source's wait.
-  void run_inline(const ReceiveInline& receive, std::atomic<std::uint64_t>& heartbeat,
-                  DecodeLive& live);
+  void run_inline(const ReceiveInline& receive, const UpstreamRoom& room,
+                  std::atomic<std::uint64_t>& heartbeat, DecodeLive& live);
 
   // FrameSink (called by the assembler on this thread).
   Frame* acquire_frame() override;
@@ -99,6 +106,16 @@ class DecodeWorker final : public FrameSink {
   // says so (a ReceiveTurn).
   template <class Wait>
   void loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live, Wait&& wait);
+  // With no arena or raw batch free: waits a little for the writer to return one to `queue` and
+  // says so (true: look again), or says the frame or datagram is to be dropped (false).
+  template <class Queue>
+  bool wait_for_writer(Queue& queue);
+
+  // Set for the loop's life (live sources): see UpstreamRoom.
+  const UpstreamRoom* upstream_room_ = nullptr;
+  std::atomic<std::uint64_t>* heartbeat_ = nullptr;
+  DecodeLive* live_ = nullptr;
+  std::int64_t waiting_since_ns_ = 0;  // 0: not waiting for the writer
 
   DecodeWorkerOptions options_;
   PacketRing& ring_;

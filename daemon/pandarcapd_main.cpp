@@ -444,12 +444,19 @@ int run(const CommandLine& command_line) {
         return source->receive_turn(ring, pipe.stop_source, pipe.receive, pipe.heartbeats.receive,
                                     pipe.source_done);
       };
+      // After a stop what arrives no longer matters: what was taken waits for the writer (its
+      // drain's deadline counts what it leaves in the kernel's ring).
+      const DecodeWorker::UpstreamRoom room = [&] {
+        return pipe.stop_source.load(std::memory_order_relaxed) || source->has_room();
+      };
       threads.start(
           "pc-decode",
           [&] {
             place_this_thread("decode", {placement.decode_cpu, placement.decode_priority});
           },
-          [&, receive] { worker.run_inline(receive, pipe.heartbeats.decode, pipe.live); },
+          [&, receive, room] {
+            worker.run_inline(receive, room, pipe.heartbeats.decode, pipe.live);
+          },
           stop_source);
       decoder_started = true;
     } else {

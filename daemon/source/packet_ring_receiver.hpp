@@ -135,6 +135,9 @@ class PacketRingReceiver {
   // After the last receive(): the last drops read into the counters, with the frames a stop's
   // drain left in the ring (a backlog longer than the drain).
   void finish(ReceiveCounters& counters) noexcept;
+  // Whether fewer than half the blocks wait, handed over and not taken: while so, the reader may
+  // wait for its own consumer (the writer) and leave the backlog here (DecodeWorker).
+  bool has_room() const noexcept;
 
  private:
   void open_guard(const UdpReceiverOptions& options);

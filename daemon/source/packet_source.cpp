@@ -39,10 +39,10 @@ void PacketSource::run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveC
   if (replay_) {
     replay_result_ = replay_->run(ring, stop, counters, heartbeat);
   } else if (ring_receiver_) {
-    // The decoder reads the packet ring itself (read_by_decoder()); on a thread of its own it
-    // is read the same way, a block a turn.
-    while (receive_turn(ring, stop, counters, heartbeat, done) != ReceiveTurn::kEnded) {
-    }
+    // The packet ring has no thread of its own: the decoder reads it (read_by_decoder(),
+    // receive_turn()), one block into a ring it has just emptied. A loop here would find the
+    // ring full and spin, so a caller that gets this wrong gets an error and an ended source.
+    spdlog::error("internal: the packet ring is read by the decode thread, not by run()");
   } else {
     receiver_->run(ring, stop, counters, heartbeat);
   }

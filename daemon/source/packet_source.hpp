@@ -37,8 +37,9 @@ class PacketSource {
   const char* thread_name() const noexcept { return replay_ ? "pc-replay" : "pc-receive"; }
   bool simulated() const noexcept { return simulator_ != nullptr; }
 
-  // The source thread (unless read_by_decoder()): receives (or replays) into `ring` until
-  // `stop`, or the end of the file; then sets `done`.
+  // The source thread (not for read_by_decoder(): that source ends at once, with an error
+  // logged): receives (or replays) into `ring` until `stop`, or the end of the file; then sets
+  // `done`.
   void run(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
            std::atomic<std::uint64_t>& heartbeat, std::atomic<bool>& done);
   // The packet ring is read by the decode thread itself (DecodeWorker::run_inline), not by a
@@ -51,6 +52,9 @@ class PacketSource {
   ReceiveTurn receive_turn(PacketRing& ring, const std::atomic<bool>& stop,
                            ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat,
                            std::atomic<bool>& done);
+  // read_by_decoder() only: whether the kernel's ring can hold more while the decode thread
+  // waits for the writer (PacketRingReceiver::has_room).
+  bool has_room() const noexcept { return ring_receiver_->has_room(); }
   // The simulator thread (simulated() only): sends until `stop`.
   void run_simulator(const std::atomic<bool>& stop);
 
