@@ -51,6 +51,7 @@
 #include "daemon/live/live_port_probe.hpp"
 #include "daemon/output/stall_report.hpp"
 #include "daemon/output/writer.hpp"
+#include "daemon/output/writer_stall_watch.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pandarcapd_command_line.hpp"
 #include "daemon/pipeline.hpp"
@@ -177,11 +178,11 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
   auto next_watchdog = start;
   std::uint64_t seen[3] = {~0ull, ~0ull, ~0ull};
   HealthStateLog state_log;
-  // The writer's heartbeat, and since when it stands: stuck on its disk for kWriterStall, its
-  // health is reported from here (daemon/output/stall_report.hpp), once a second.
-  constexpr auto kWriterStall = std::chrono::seconds(2);
-  std::uint64_t writer_beat = pipe.heartbeats.writer.load();
-  auto writer_beat_at = start, next_stall_report = start;
+  // The writer's heartbeat, and since when it stands: stuck on its disk for
+  // WriterStallWatch::kStall, its health is reported from here (daemon/output/stall_report.hpp),
+  // once a second.
+  WriterStallWatch writer_watch(start, tick, pipe.heartbeats.writer.load());
+  auto next_stall_report = start;
   for (;;) {
     auto wait = tick;
     if (duration_s) {  // a --duration ends on time, not at the next tick
@@ -215,12 +216,10 @@ void supervise(Pipeline& pipe, const sigset_t& signals, std::optional<double> du
         }
       }
     }
-    if (const std::uint64_t beat = pipe.heartbeats.writer.load(); beat != writer_beat) {
-      writer_beat = beat;
-      writer_beat_at = now;
+    if (const auto stood = writer_watch.look(now, pipe.heartbeats.writer.load()); !stood) {
       if (stall.active()) stall.clear();
-    } else if (now - writer_beat_at >= kWriterStall && now >= next_stall_report) {
-      const double stalled = std::chrono::duration<double>(now - writer_beat_at).count();
+    } else if (now >= next_stall_report) {
+      const double stalled = std::chrono::duration<double>(*stood).count();
       stall.write(stalled, std::chrono::duration_cast<std::chrono::nanoseconds>(
                                std::chrono::system_clock::now().time_since_epoch())
                                .count());
