@@ -1122,3 +1122,96 @@ TEST_CASE("a backlog the writer is slower than, within half of what is upstream:
 }
 
 }  // namespace pandarcap
+
+namespace pandarcap {
+
+namespace {
+std::uint32_t host_order(const std::string& ip) {
+  in_addr a{};
+  REQUIRE(inet_pton(AF_INET, ip.c_str(), &a) == 1);
+  return ntohl(a.s_addr);
+}
+}  // namespace
+
+// The destinations the kernel delivers here, read from its local routing table and followed:
+// made in a namespace of its own (a veth pair's far end), so the test changes no address of the
+// machine's. An address, its subnet's broadcast, 127.0.0.0/8 and a range routed as local (AnyIP)
+// are this host's; another is not; an address added or removed is seen at the next refresh().
+TEST_CASE("packet_ring: this host's destinations, from the local routing table, followed",
+          "[packet_ring]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("ld");
+  REQUIRE(veth.ok());
+  test::FarNamespace far(veth.ns());  // sockets made from here on are the namespace's
+  LocalDestinations local;
+  CHECK(local.contains(host_order(veth.far_ip())));
+  CHECK(local.contains(host_order(veth.second_far_ip())));
+  CHECK(local.contains(host_order("127.0.0.1")));
+  CHECK(local.contains(host_order("127.3.2.1")));
+  CHECK_FALSE(local.contains(host_order(veth.near_ip())));  // the other end's
+  CHECK_FALSE(local.contains(host_order("198.51.100.9")));
+  CHECK_FALSE(local.contains(host_order("0.0.0.0")));
+
+  const std::string ns = " -n " + veth.ns() + " ";
+  REQUIRE(test::shell("ip" + ns + "addr add 198.51.100.9/32 dev lo"));
+  REQUIRE(test::shell("ip" + ns + "route add local 203.0.113.0/28 dev lo"));
+  local.refresh();
+  CHECK(local.contains(host_order("198.51.100.9")));
+  CHECK_FALSE(local.contains(host_order("198.51.100.10")));
+  CHECK(local.contains(host_order("203.0.113.0")));
+  CHECK(local.contains(host_order("203.0.113.15")));
+  CHECK_FALSE(local.contains(host_order("203.0.113.16")));
+
+  REQUIRE(test::shell("ip" + ns + "addr del 198.51.100.9/32 dev lo"));
+  REQUIRE(test::shell("ip" + ns + "route del local 203.0.113.0/28 dev lo"));
+  local.refresh();
+  CHECK_FALSE(local.contains(host_order("198.51.100.9")));
+  CHECK_FALSE(local.contains(host_order("203.0.113.7")));
+  CHECK(local.contains(host_order(veth.far_ip())));  // the others stay
+}
+
+// host_ip = 0.0.0.0 on the packet ring takes what a UDP socket on 0.0.0.0 would be given: not a
+// datagram routed through this host (it reaches the near end with its MAC, to another address),
+// which it took before; yes once that address is added to the interface while the daemon runs.
+TEST_CASE("packet_ring: host_ip 0.0.0.0 takes only this host's destinations, followed",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("pa", "packet-ring-addresses");
+  auto& [veth, dir, port] = rig;
+  const std::string routed = "198.51.100.9";
+  REQUIRE(test::shell("ip -n " + veth.ns() + " route add 198.51.100.0/24 via " + veth.near_ip()));
+  RingDaemon daemon(dir, veth, port);
+  const auto send = [&](const std::string& to, std::uint32_t sequence) {
+    test::FarNamespace far(veth.ns());
+    send_udp(veth.far_ip(), to, port, {sensor_datagram(sequence)});
+  };
+  const auto received = [&] {
+    const auto records = test::health_records(daemon.out);
+    return records.empty() ? 0 : test::health_counter(records.back(), "datagrams_received");
+  };
+  // In order, each waited for: the routed ones must not count, the others must.
+  send(routed, 0);
+  send(veth.near_ip(), 1);
+  REQUIRE(wait_until([&] { return received() >= 1; }, 10s));
+  REQUIRE(test::shell("ip addr add " + routed + "/32 dev " + veth.near()));
+  send(routed, 2);
+  send(veth.near_ip(), 3);
+  REQUIRE(wait_until([&] { return received() >= 3; }, 10s));
+  const nlohmann::json h = daemon.stop(SIGTERM);
+  INFO(daemon.process->log());
+  INFO(h.dump());
+  CHECK(test::health_counter(h, "datagrams_received") == 3);
+  CHECK(test::health_counter(h, "packets_accepted") == 3);
+  // The recording holds the three, not the one sent before the address was this host's.
+  const auto pcaps = test::files_ending(daemon.out / "raw", ".pcap");
+  REQUIRE(pcaps.size() == 1);
+  std::set<std::uint32_t> sequences;
+  for (const Record& record : pcap_records(pcaps[0])) {
+    std::uint32_t sequence = 0;
+    std::memcpy(&sequence, record.bytes.data() + record.bytes.size() - 4, 4);
+    sequences.insert(sequence);
+  }
+  CHECK(sequences == std::set<std::uint32_t>{1, 2, 3});
+}
+
+}  // namespace pandarcap

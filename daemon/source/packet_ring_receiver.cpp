@@ -112,6 +112,18 @@ PacketRingReceiver::PacketRingReceiver(const UdpReceiverOptions& options)
     sources_ = SourceLock(ntohl(require_ipv4(options.sensor_ip, "sensor_ip").s_addr));
   }
   host_ip_ = ntohl(require_ipv4(options.host_ip, "host_ip").s_addr);
+  if (host_ip_ == 0) {
+    try {
+      local_ = std::make_unique<LocalDestinations>();
+    } catch (const std::exception& e) {
+      // Not a reason to refuse the sensor: without the table, a datagram to another host that
+      // reaches the interface with this one's MAC (routed through it) is taken too.
+      spdlog::warn(
+          "packet ring: {}: this host's addresses cannot be followed, so a datagram to any "
+          "address that reaches {} with its MAC is taken (set sensor.host_ip to take one)",
+          e.what(), options.interface);
+    }
+  }
   if (!options.multicast_ip.empty()) {
     multicast_ip_ = ntohl(require_ipv4(options.multicast_ip, "multicast_ip").s_addr);
   }
@@ -278,6 +290,7 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
                                     ReceiveCounters& counters) {
   const std::uint32_t count = block.hdr.bh1.num_pkts;
   const auto* base = reinterpret_cast<const std::uint8_t*>(&block);
+  local_read_this_block_ = false;
   // Where the last turn stopped in this block, when the ring had no room for the rest.
   std::uint32_t offset = resume_index_ > 0 ? resume_offset_ : block.hdr.bh1.offset_to_first_pkt;
   std::uint64_t datagrams = 0, bytes = 0, truncated = 0, foreign = 0, other_sensor = 0;
@@ -394,12 +407,19 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
 }
 
 bool PacketRingReceiver::for_this_host(std::uint32_t destination,
-                                       unsigned char packet_type) const noexcept {
+                                       unsigned char packet_type) noexcept {
   // What a UDP socket bound to host_ip (and joined to multicast_ip) would be given: a datagram
   // to host_ip (any address of this host's, with 0.0.0.0), a broadcast, or the group.
   if (packet_type == PACKET_MULTICAST) return multicast_ip_ != 0 && destination == multicast_ip_;
   if (packet_type == PACKET_BROADCAST || destination == 0xFFFFFFFFu) return true;
-  return host_ip_ == 0 || destination == host_ip_;
+  if (host_ip_ != 0) return destination == host_ip_;
+  if (local_ == nullptr || local_->contains(destination)) return true;
+  // An address added since the last read (its change is queued before its first datagram can
+  // arrive); once a block, so that traffic routed through the host costs no read a frame.
+  if (local_read_this_block_) return false;
+  local_read_this_block_ = true;
+  local_->refresh();
+  return local_->contains(destination);
 }
 
 void PacketRingReceiver::read_statistics(ReceiveCounters& counters) noexcept {
@@ -456,6 +476,7 @@ ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool
   ReceiveCounters::add(heartbeat, 1);
   if (now >= next_statistics_ns_) {
     read_statistics(counters);
+    if (local_ != nullptr) local_->refresh();  // an address removed is no longer this host's
     next_statistics_ns_ = now + 1'000'000'000;
   }
   if (tpacket_block_desc* block = ready_block()) {

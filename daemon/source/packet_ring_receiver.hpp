@@ -67,6 +67,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -74,6 +75,7 @@
 #include "daemon/io/unique_fd.hpp"
 #include "daemon/packet_slot.hpp"
 #include "daemon/pipeline_types.hpp"
+#include "daemon/source/local_destinations.hpp"
 #include "daemon/source/udp_receiver.hpp"
 
 namespace pandarcap {
@@ -152,8 +154,10 @@ class PacketRingReceiver {
   // Adds the kernel's drops since the last read to kernel_drops.
   void read_statistics(ReceiveCounters& counters) noexcept;
   // Whether a UDP socket on host_ip (joined to multicast_ip) would have been given a datagram
-  // to `destination` (host order) arriving as `packet_type` (PACKET_HOST, ...).
-  bool for_this_host(std::uint32_t destination, unsigned char packet_type) const noexcept;
+  // to `destination` (host order) arriving as `packet_type` (PACKET_HOST, ...). With 0.0.0.0:
+  // a destination the kernel delivers here (local_); one not known reads the changes queued
+  // since, once a block.
+  bool for_this_host(std::uint32_t destination, unsigned char packet_type) noexcept;
   // The socket's pending error (POLLERR: the interface went down or away), read and cleared.
   void take_socket_error(ReceiveCounters& counters) noexcept;
   // While the interface is away: binds again once it is back (a new interface of the same
@@ -172,7 +176,10 @@ class PacketRingReceiver {
   std::uint16_t port_ = 0;
   std::string interface_;
   unsigned ifindex_ = 0;
-  std::uint32_t host_ip_ = 0;         // host order; 0 = any address of this host
+  std::uint32_t host_ip_ = 0;  // host order; 0 = any address of this host
+  // host_ip 0.0.0.0: the destinations the kernel delivers here (null: any; see the start's log).
+  std::unique_ptr<LocalDestinations> local_;
+  bool local_read_this_block_ = false;
   std::uint32_t multicast_ip_ = 0;    // host order; 0 = none
   bool link_down_ = false;            // an error said so; until a frame arrives after it
   std::int64_t link_down_at_ns_ = 0;  // when the error was read (CLOCK_REALTIME, as the frames')
