@@ -1312,4 +1312,60 @@ TEST_CASE("writer wait: a sensor that stops while the decoder waits: no_data on 
   }
 }
 
+// The wait's 1 ms slices are blind to the receive ring: with a small one ([ring] slots = 64, the
+// least: half is 32) and a sensor in dual-return mode (7 200 packets a second, 7 a millisecond),
+// a stalled writer must still cost only counted frame drops, as before the decoder waited: no
+// ring overrun, no kernel drop (the receiver never blocks, docs/reliability.md). Then SIGTERM
+// while the writer is still stalled: the stop ends once it comes back, every count adds up.
+TEST_CASE("writer wait: a small receive ring and a stalled writer; a stop during the stall",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  for (const char* receiver : {"socket", "packet_ring"}) {
+    SECTION(receiver) {
+      Rig rig("wr", "writer-wait-small-ring");
+      auto& [veth, dir, port] = rig;
+      const fs::path stall = dir / "stall-writer";
+      RingDaemon daemon(dir, veth, port,
+                        "[latency]\nbudget_ms = 0\n[ring]\nslots = 64\n[arenas]\ncount = 2\n",
+                        receiver, {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
+      std::ofstream(stall).put('\n');
+      REQUIRE(wait_until(
+          [&] {
+            return daemon.process->log().find("test hook: writer stalled") != std::string::npos;
+          },
+          5s));
+      bench::GeneratorOptions traffic;
+      traffic.rate_pps = 7200;
+      traffic.seconds = 1.0;
+      const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
+      daemon.process->signal(SIGTERM);
+      // Still stalled: the stop waits for the writer, the rest of the daemon is done.
+      CHECK(daemon.process->wait_exit(300ms) == std::nullopt);
+      fs::remove(stall);
+      const auto resumed = std::chrono::steady_clock::now();
+      REQUIRE(daemon.process->wait_exit(10s) == 0);
+      const double stop_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - resumed).count();
+      const nlohmann::json h = test::last_health_record(daemon.out);
+      INFO(daemon.process->log());
+      INFO(h.dump());
+      INFO("sent " << sent.sent << ", exit " << stop_s << " s after the writer came back");
+      const auto c = [&](const char* name) { return test::health_counter(h, name); };
+      CHECK(c("datagrams_received") + c("kernel_drops") == sent.sent);
+      CHECK(c("kernel_drops") == 0);
+      CHECK(c("ring_overruns") == 0);
+      CHECK(c("frames_dropped_no_arena") > 0);
+      CHECK(stop_s < 2.0);
+      check_identities(h);
+      // The threads the wait is on (the writer's first frame after its warm-up allocates: see
+      // "hot path: a sensor that starts after the warm-up").
+      if (h.at("counters").contains("hot_path_allocations_by_thread")) {
+        const nlohmann::json& allocations = h.at("counters").at("hot_path_allocations_by_thread");
+        CHECK(allocations.at("receive") == 0);
+        CHECK(allocations.at("decode") == 0);
+      }
+    }
+  }
+}
+
 }  // namespace pandarcap
