@@ -1368,4 +1368,39 @@ TEST_CASE("writer wait: a small receive ring and a stalled writer; a stop during
   }
 }
 
+// The usual boot order: the daemon starts, the sensor (its power, its switch) a few seconds
+// later, after the loops' 2 s warm-up. The writer's first frame then pads its PCD header to a
+// 4096-byte block (pad_pcd_header in FrameOutput::write, for O_DIRECT): a string that grows,
+// counted as a hot-path allocation of the writer's. A daemon whose sensor sent from the start
+// allocated it in the warm-up and counted nothing.
+TEST_CASE("hot path: a sensor that starts after the warm-up: no allocation in the writer",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("hw", "hot-path-late-sensor");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port, "", "socket");
+  // Past the warm-up (kWarmUpNs, 2 s), by the health's uptime.
+  REQUIRE(wait_until(
+      [&] {
+        const auto records = test::health_records(daemon.out);
+        return !records.empty() &&
+               records.back().at("gauges").at("uptime_seconds").get<double>() > 2.2;
+      },
+      10s));
+  bench::GeneratorOptions traffic;
+  traffic.rate_pps = 3600;
+  traffic.seconds = 0.3;
+  const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
+  const nlohmann::json h = daemon.stop_after(sent.sent);
+  INFO(daemon.process->log());
+  INFO(h.dump());
+  REQUIRE(test::health_counter(h, "frames_written") >= 1);
+  if (h.at("counters").contains("hot_path_allocations_by_thread")) {
+    const nlohmann::json& allocations = h.at("counters").at("hot_path_allocations_by_thread");
+    CHECK(allocations.at("writer") == 0);
+    CHECK(allocations.at("decode") == 0);
+    CHECK(allocations.at("receive") == 0);
+  }
+}
+
 }  // namespace pandarcap
