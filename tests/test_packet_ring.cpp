@@ -24,6 +24,7 @@
 #include <map>
 #include <set>
 #include <string>
+#include <thread>
 #include <tuple>
 #include <vector>
 
@@ -1401,6 +1402,57 @@ TEST_CASE("hot path: a sensor that starts after the warm-up: no allocation in th
     CHECK(allocations.at("decode") == 0);
     CHECK(allocations.at("receive") == 0);
   }
+}
+
+// The socket receiver's count at the stop with a sensor that does not stop: the daemon stopped
+// (SIGSTOP) while a backlog builds, then SIGCONT and SIGTERM with the sender still going at
+// 100 000 a second. The count must end at the first datagram that arrived after it began (the
+// stop prompt while the sender goes on), and count nothing that was not sent.
+TEST_CASE("socket receiver: the stop's count with a sender that goes on through it",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("sg", "socket-stop-sender-goes-on");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port,
+                    "udp_socket_receive_buffer_size_bytes = 268435456\n[latency]\nbudget_ms = 0\n",
+                    "socket");
+  daemon.process->signal(SIGSTOP);
+  bench::GeneratorResult sent;
+  std::atomic<bool> sending{true};
+  std::thread sender([&] {
+    test::FarNamespace far(veth.ns());
+    bench::GeneratorOptions traffic;
+    traffic.destination_ip = veth.near_ip();
+    traffic.port = port;
+    traffic.rate_pps = 100'000;
+    traffic.seconds = 2.0;
+    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    sending = false;
+  });
+  // A backlog of about 60 000 datagrams (0.6 s of it) in the socket, then the stop.
+  const auto backlog_at = std::chrono::steady_clock::now() + 600ms;
+  while (std::chrono::steady_clock::now() < backlog_at)
+    CHECK(daemon.process->wait_exit(50ms) == std::nullopt);
+  daemon.process->signal(SIGCONT);
+  daemon.process->signal(SIGTERM);
+  const auto stopped_at = std::chrono::steady_clock::now();
+  const std::optional<int> status = daemon.process->wait_exit(10s);
+  const double stop_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - stopped_at).count();
+  const bool sender_still_going = sending.load();
+  sender.join();
+  REQUIRE(status == 0);
+  const nlohmann::json h = test::last_health_record(daemon.out);
+  INFO(daemon.process->log());
+  INFO(h.dump());
+  INFO("sent " << sent.sent << ", the stop took " << stop_s << " s");
+  const auto c = [&](const char* name) { return test::health_counter(h, name); };
+  CHECK(sent.send_errors == 0);
+  CHECK(sender_still_going);  // the stop ended while the sender went on
+  CHECK(stop_s < 1.5);
+  CHECK(c("datagrams_received") + c("kernel_drops") <= sent.sent);
+  CHECK(c("datagrams_received") + c("kernel_drops") >= 50'000);
+  check_identities(h);
 }
 
 }  // namespace pandarcap
