@@ -1318,7 +1318,7 @@ TEST_CASE("writer wait: a sensor that stops while the decoder waits: no_data on 
 // a stalled writer must still cost only counted frame drops, as before the decoder waited: no
 // ring overrun, no kernel drop (the receiver never blocks, docs/reliability.md). Then SIGTERM
 // while the writer is still stalled: the stop ends once it comes back, every count adds up.
-TEST_CASE("writer wait: a small receive ring and a stalled writer; a stop during the stall",
+TEST_CASE("writer wait: a small receive ring and a stalled writer then a stop during the stall",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
   for (const char* receiver : {"socket", "packet_ring"}) {
