@@ -1214,6 +1214,9 @@ TEST_CASE("packet_ring: host_ip 0.0.0.0 takes only this host's destinations, fol
     sequences.insert(sequence);
   }
   CHECK(sequences == std::set<std::uint32_t>{1, 2, 3});
+}
+
+}  // namespace pandarcap
 
 // The hostile tester's tests of the decoder's wait for the writer (e868096) and of the socket
 // receiver's count at the stop (0c0ab2c).
