@@ -26,9 +26,15 @@ constexpr std::int64_t kSnapshotIntervalNs = kRecordingFlushNs;
 // writer gone for longer (a disk that does not answer) gets the old behaviour, frames dropped
 // and counted, and the stall report says why.
 constexpr std::int64_t kLongestWriterWaitNs = 1'000'000'000;
+// After a stop, what is upstream waits for a slow writer this long in all, not the backlog's
+// length at the writer's pace (a million-slot ring on a slow disk would outlast systemd's
+// TimeoutStopSec): the rest is dropped and counted.
+constexpr std::int64_t kLongestStopWaitNs = 5'000'000'000;
 // Each wait's slice: the writer wakes this thread when it returns an arena or batch; the slice
 // only bounds how late a full upstream is noticed.
 constexpr auto kWriterWaitSlice = std::chrono::milliseconds(1);
+// The most a packet's arrival is set back from when it is taken (see note_arrival's caller).
+constexpr std::int64_t kLongestArrivalAgeNs = 10'000'000'000;
 
 }  // namespace
 
@@ -180,19 +186,35 @@ bool DecodeWorker::wait_for_writer(Queue& queue) {
     queue.wait_for_data(std::chrono::milliseconds(100));
     return true;
   }
-  if (upstream_room_ == nullptr || !(*upstream_room_)()) return false;
+  if (upstream_room_ == nullptr) return false;
+  const Upstream up = (*upstream_room_)();
   const std::int64_t now = coarse_monotonic_ns();
+  if (up.stopping) {
+    if (stop_waits_since_ns_ == 0) stop_waits_since_ns_ = now;
+    if (now - stop_waits_since_ns_ > kLongestStopWaitNs) return false;
+  } else if (!up.room) {
+    return false;
+  }
   if (waiting_since_ns_ == 0) {
     waiting_since_ns_ = now;
+    waiting_level_ = up.level;
   } else if (now - waiting_since_ns_ > kLongestWriterWaitNs) {
     return false;  // and at once for every frame and datagram, until the writer returns one
+  } else if (up.level > waiting_level_) {
+    // Packets still arrive while this thread waits: the sensor is not silent, whatever the
+    // time since the last batch taken says. (One that stopped shows as no_data on time.)
+    waiting_level_ = up.level;
+    note_arrival(now);
   }
-  // Alive, and with packets in hand: neither the watchdog nor the health's silence should take
-  // this wait for a hang or a sensor that stopped.
-  ReceiveCounters::add(*heartbeat_, 1);
-  live_->last_packet_monotonic_ns.store(now, std::memory_order_relaxed);
+  ReceiveCounters::add(*heartbeat_, 1);  // alive: the watchdog should not take this for a hang
   queue.wait_for_data(kWriterWaitSlice);
   return true;
+}
+
+void DecodeWorker::note_arrival(std::int64_t monotonic_ns) noexcept {
+  if (monotonic_ns <= last_arrival_ns_) return;
+  last_arrival_ns_ = monotonic_ns;
+  live_->last_packet_monotonic_ns.store(monotonic_ns, std::memory_order_relaxed);
 }
 
 void DecodeWorker::flush_raw(bool notify) {
@@ -260,11 +282,12 @@ void DecodeWorker::send_snapshot(WriterMessage::Kind kind) {
 void DecodeWorker::run(const std::atomic<bool>& producer_done,
                        std::atomic<std::uint64_t>& heartbeat, DecodeLive& live) {
   // The receive thread fills the ring meanwhile: half of it is room to wait in. Once the source
-  // is done (a stop) nothing fills it, and what it holds waits for the writer (a second at most
-  // in one stretch) rather than be dropped.
+  // is done (a stop) nothing fills it, and what it holds waits for the writer rather than be
+  // dropped (kLongestStopWaitNs).
   const UpstreamRoom room = [&] {
-    return producer_done.load(std::memory_order_relaxed) ||
-           ring_.size_approx() < ring_.capacity() / 2;
+    const std::size_t size = ring_.size_approx();
+    return Upstream{size < ring_.capacity() / 2, producer_done.load(std::memory_order_relaxed),
+                    size};
   };
   upstream_room_ = &room;
   loop(heartbeat, live, [&] {
@@ -305,15 +328,21 @@ void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live,
         taken = decoder_.visit([&](auto& d) { return process_batch(d, batch, taken); });
         if (pending_model_) choose_model(*std::exchange(pending_model_, std::nullopt));
       }
+      std::int64_t arrived_ns = coarse_monotonic_ns();
       if (options_.measure_latency) {
         // One clock read per batch: "decoded" is when the batch is done.
         const std::int64_t decoded_ns = realtime_ns();
         for (const PacketSlot& slot : batch) {
           if (slot.receive_time_ns > 0) latency_.record(decoded_ns - slot.receive_time_ns);
         }
+        // When the batch's last packet arrived, not when it was taken: a decoder behind its
+        // stream (the backlog a wait for the writer leaves) must not make a sensor that has
+        // gone silent look alive. (Bounded: a wall clock stepped meanwhile moves it once.)
+        if (const std::int64_t received = batch.back().receive_time_ns; received > 0)
+          arrived_ns -= std::clamp<std::int64_t>(decoded_ns - received, 0, kLongestArrivalAgeNs);
       }
       ring_.release(batch.size());
-      live.last_packet_monotonic_ns.store(coarse_monotonic_ns(), std::memory_order_relaxed);
+      note_arrival(arrived_ns);
     }
     const std::int64_t now = coarse_monotonic_ns();
     if (!hot && now >= warm_ns) {

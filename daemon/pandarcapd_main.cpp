@@ -446,7 +446,9 @@ int run(const CommandLine& command_line) {
       // After a stop what arrives no longer matters: what was taken waits for the writer (its
       // drain's deadline counts what it leaves in the kernel's ring).
       const DecodeWorker::UpstreamRoom room = [&] {
-        return pipe.stop_source.load(std::memory_order_relaxed) || source->has_room();
+        const std::uint32_t waiting = source->blocks_waiting();
+        return DecodeWorker::Upstream{waiting < source->block_count() / 2,
+                                      pipe.stop_source.load(std::memory_order_relaxed), waiting};
       };
       threads.start(
           "pc-decode",

@@ -119,7 +119,9 @@ struct Heartbeats {
 
 // What the writer reads from the decoder at its own moments rather than from the once-a-second
 // counter snapshot. Written only by the decode thread.
-// - When the decoder last took a packet (CLOCK_MONOTONIC ns, 0 = never), stored once per batch:
+// - When the latest packet the decoder took arrived (CLOCK_MONOTONIC ns, 0 = never; live: from
+//   its kernel timestamp, so a decoder behind its stream does not make a silence look shorter;
+//   or while it waits for the writer, when more arrives upstream), stored once per batch:
 //   the writer reads it at every wake-up (at least every 100 ms), so silence and its end show in
 //   the health within a tenth of a second of the no-data timeout instead of up to a second later.
 // - The decoder's returns from its wait on the ring: read at each health tick, so its wake-ups

@@ -35,7 +35,9 @@ void FrameOutput::reserve() {
   path_.reserve(4096);
   temporary_path_.reserve(4096);
   file_.reserve_path(4096);
-  pcd_header_.reserve(1024);
+  // Room for the header padded to a direct write's block (pad_pcd_header): the first frame
+  // written after the warm-up (a sensor that starts after the daemon) must not grow it.
+  pcd_header_.reserve(kDirectIoBlock);
   refusal_.reserve(1024);  // a refused write's reason (HealthRoom::allows) at any moment
   retention_.reserve(dir_.native().size() + 96);  // frame_<N>_<UTC>[_partial][_dupN].pcd
   if (lzf_) compressor_.reserve(max_frame_points_, format_.layout);

@@ -519,15 +519,16 @@ std::uint64_t PacketRingReceiver::frames_unread() const noexcept {
   return unread;
 }
 
-bool PacketRingReceiver::has_room() const noexcept {
-  for (std::uint32_t n = 0; n < block_count_ / 2; ++n) {
+std::uint32_t PacketRingReceiver::blocks_waiting() const noexcept {
+  std::uint32_t n = 0;
+  for (; n < block_count_; ++n) {
     const std::uint32_t index = (next_block_ + n) % block_count_;
     const auto* block = reinterpret_cast<const tpacket_block_desc*>(
         static_cast<const std::uint8_t*>(map_) + std::size_t{index} * block_bytes_);
     if ((__atomic_load_n(&block->hdr.bh1.block_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) == 0)
-      return true;
+      break;
   }
-  return false;
+  return n;
 }
 
 void PacketRingReceiver::finish(ReceiveCounters& counters) noexcept {

@@ -137,9 +137,11 @@ class PacketRingReceiver {
   // After the last receive(): the last drops read into the counters, with the frames a stop's
   // drain left in the ring (a backlog longer than the drain).
   void finish(ReceiveCounters& counters) noexcept;
-  // Whether fewer than half the blocks wait, handed over and not taken: while so, the reader may
-  // wait for its own consumer (the writer) and leave the backlog here (DecodeWorker).
-  bool has_room() const noexcept;
+  // The blocks handed over and not taken (a block taken in part counts): while fewer than half,
+  // the reader may wait for its own consumer (the writer) and leave the backlog here
+  // (DecodeWorker); it grows while packets arrive.
+  std::uint32_t blocks_waiting() const noexcept;
+  std::uint32_t block_count() const noexcept { return block_count_; }
 
  private:
   void open_guard(const UdpReceiverOptions& options);

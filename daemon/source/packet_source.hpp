@@ -52,9 +52,10 @@ class PacketSource {
   ReceiveTurn receive_turn(PacketRing& ring, const std::atomic<bool>& stop,
                            ReceiveCounters& counters, std::atomic<std::uint64_t>& heartbeat,
                            std::atomic<bool>& done);
-  // read_by_decoder() only: whether the kernel's ring can hold more while the decode thread
-  // waits for the writer (PacketRingReceiver::has_room).
-  bool has_room() const noexcept { return ring_receiver_->has_room(); }
+  // read_by_decoder() only: how full the kernel's ring is, for the decode thread's waits for
+  // the writer (PacketRingReceiver::blocks_waiting).
+  std::uint32_t blocks_waiting() const noexcept { return ring_receiver_->blocks_waiting(); }
+  std::uint32_t block_count() const noexcept { return ring_receiver_->block_count(); }
   // The simulator thread (simulated() only): sends until `stop`.
   void run_simulator(const std::atomic<bool>& stop);
 

@@ -204,10 +204,12 @@ std::uint64_t UdpReceiver::count_left_at_stop() {
   Batch& batch = *buffers_;
   std::span<PacketSlot> slots = batch.scratch;
   const std::int64_t now_ns = realtime_ns();
-  // Bounded whatever the kernel says: a buffer's worth of the smallest datagrams, and then some.
+  // Bounded whatever the kernel says: a buffer's worth of the smallest datagrams, and then some,
+  // and a fifth of a second (datagrams without a timestamp cannot say they came after the stop).
   const std::uint64_t most = granted_rcvbuf_ / 32 + slots.size();
+  const std::int64_t until_ns = monotonic_ns() + 200'000'000;
   std::uint64_t left = 0;
-  for (std::uint64_t read = 0; read < most;) {
+  for (std::uint64_t read = 0; read < most && monotonic_ns() < until_ns;) {
     for (std::size_t i = 0; i < slots.size(); ++i) {
       batch.iov[i] = {slots[i].payload, sizeof slots[i].payload};
       msghdr& header = batch.headers[i].msg_hdr;
