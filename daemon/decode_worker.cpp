@@ -33,8 +33,6 @@ constexpr std::int64_t kLongestStopWaitNs = 5'000'000'000;
 // Each wait's slice: the writer wakes this thread when it returns an arena or batch; the slice
 // only bounds how late a full upstream is noticed.
 constexpr auto kWriterWaitSlice = std::chrono::milliseconds(1);
-// The most a packet's arrival is set back from when it is taken (see note_arrival's caller).
-constexpr std::int64_t kLongestArrivalAgeNs = 10'000'000'000;
 
 }  // namespace
 
@@ -311,6 +309,7 @@ void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live,
   live_ = &live;
   std::int64_t next_snapshot_ns = coarse_monotonic_ns();
   const std::int64_t warm_ns = next_snapshot_ns + kWarmUpNs;
+  std::int64_t caught_up_ns = next_snapshot_ns;  // when this thread last found nothing to take
   bool hot = false;
   bool ended = false;  // `wait` said nothing more will come: what the ring holds is the last
   for (;;) {
@@ -320,7 +319,10 @@ void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live,
       if (ended) break;
       const ReceiveTurn turn = wait();
       ended = turn == ReceiveTurn::kEnded;
-      if (turn == ReceiveTurn::kWaited) ReceiveCounters::add(live.wakeups, 1);
+      if (turn == ReceiveTurn::kWaited) {
+        ReceiveCounters::add(live.wakeups, 1);
+        caught_up_ns = coarse_monotonic_ns();  // nothing was waiting: no backlog older than this
+      }
     } else {
       // The model's loop, a batch at a time (no packet pays a branch on the model).
       std::size_t taken = 0;
@@ -337,9 +339,13 @@ void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live,
         }
         // When the batch's last packet arrived, not when it was taken: a decoder behind its
         // stream (the backlog a wait for the writer leaves) must not make a sensor that has
-        // gone silent look alive. (Bounded: a wall clock stepped meanwhile moves it once.)
-        if (const std::int64_t received = batch.back().receive_time_ns; received > 0)
-          arrived_ns -= std::clamp<std::int64_t>(decoded_ns - received, 0, kLongestArrivalAgeNs);
+        // gone silent look alive. The packet is on the wall clock, which may have been stepped
+        // since it arrived: it is no older than the backlog, which began after this thread
+        // last found nothing to take.
+        if (const std::int64_t received = batch.back().receive_time_ns; received > 0) {
+          arrived_ns -= std::clamp<std::int64_t>(
+              decoded_ns - received, 0, std::max<std::int64_t>(arrived_ns - caught_up_ns, 0));
+        }
       }
       ring_.release(batch.size());
       note_arrival(arrived_ns);
