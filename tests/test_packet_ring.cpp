@@ -1459,3 +1459,78 @@ TEST_CASE("socket receiver: the stop's count with a sender that goes on through 
 }
 
 }  // namespace pandarcap
+
+// The hostile tester's tests of the local destinations (6b2497a), the arrival time of the last
+// packet (1b77f8b, 4ba5248), the stall watch's pauses (6eca3c6) and the writer's first use of
+// each output after the warm-up (1b77f8b).
+namespace pandarcap {
+namespace {
+
+// The kernel's own local table in `ns` (IPv4): its routes, one a line ("local 10.0.0.1 dev x").
+std::vector<std::string> kernel_local_routes(const std::string& ns) {
+  const std::string out = test::run_command("ip -4 -n " + ns + " route show table local").out;
+  std::vector<std::string> routes;
+  std::size_t at = 0;
+  while (at < out.size()) {
+    const std::size_t end = std::min(out.find('\n', at), out.size());
+    const std::string line = out.substr(at, end - at);
+    if (line.rfind("local ", 0) == 0 || line.rfind("broadcast ", 0) == 0) routes.push_back(line);
+    at = end + 1;
+  }
+  return routes;
+}
+
+// `ip -batch` in `ns` with `lines` (one command a line): thousands of changes in one go.
+void ip_batch(const test::ScratchDir& dir, const std::string& ns,
+              const std::vector<std::string>& lines) {
+  const fs::path file = dir / "ip-batch.txt";
+  {
+    std::ofstream out(file);
+    for (const auto& line : lines)
+      out << line << '\n';
+  }
+  REQUIRE(test::shell("ip -n " + ns + " -batch " + file.string()));
+}
+
+// The i-th of the test's /32 addresses on lo (198.18.0.0/15, benchmarking: no one's).
+std::string bench_address(int i) {
+  return "198.18." + std::to_string(i / 250) + "." + std::to_string(i % 250 + 1);
+}
+
+}  // namespace
+
+// Thousands of route changes at once (ip -batch): the netlink socket's queue overflows
+// (ENOBUFS) and the table is read whole again. What the queue held from before the overflow
+// (the adds of addresses whose removal was lost) must not stay on top of the fresh dump: after
+// the refresh the table is the kernel's, no more.
+TEST_CASE("packet_ring: local destinations after a netlink overflow: the kernel's table only",
+          "[packet_ring]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("lq");
+  REQUIRE(veth.ok());
+  test::ScratchDir dir("local-destinations-overflow");
+  test::FarNamespace far(veth.ns());
+  LocalDestinations local;
+  const std::size_t before = kernel_local_routes(veth.ns()).size();
+  CHECK(local.size() == before);
+  constexpr int kAddresses = 1000;
+  std::vector<std::string> lines;
+  for (int i = 0; i < kAddresses; ++i)
+    lines.push_back("addr add " + bench_address(i) + "/32 dev lo");
+  for (int i = 0; i < kAddresses; ++i)
+    lines.push_back("addr del " + bench_address(i) + "/32 dev lo");
+  ip_batch(dir, veth.ns(), lines);
+  local.refresh();
+  REQUIRE(kernel_local_routes(veth.ns()).size() == before);
+  int stale = 0;
+  for (int i = 0; i < kAddresses; ++i)
+    stale += local.contains(host_order(bench_address(i)));
+  INFO("held " << local.size() << " routes, the kernel " << before << "; " << stale << " of "
+               << kAddresses << " removed addresses still said to be this host's");
+  CHECK(stale == 0);
+  CHECK(local.size() == before);
+  CHECK(local.contains(host_order(veth.far_ip())));
+  CHECK_FALSE(local.contains(host_order("192.0.2.1")));
+}
+
+}  // namespace pandarcap
