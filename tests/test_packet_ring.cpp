@@ -1533,4 +1533,38 @@ TEST_CASE("packet_ring: local destinations after a netlink overflow: the kernel'
   CHECK_FALSE(local.contains(host_order("192.0.2.1")));
 }
 
+// More than kMaxRoutes local routes: every destination is taken (as documented), until the
+// table is back under it: then a datagram routed through the host is refused again. Changes
+// read in steps small enough for the netlink queue (no overflow: the table is followed).
+TEST_CASE("packet_ring: local destinations past 512 routes and back under: refused again",
+          "[packet_ring]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("lm");
+  REQUIRE(veth.ok());
+  test::ScratchDir dir("local-destinations-many");
+  test::FarNamespace far(veth.ns());
+  LocalDestinations local;
+  const std::size_t before = kernel_local_routes(veth.ns()).size();
+  constexpr int kAddresses = 600, kStep = 100;
+  const auto step = [&](const char* verb, int from) {
+    std::vector<std::string> lines;
+    for (int i = from; i < from + kStep; ++i)
+      lines.push_back(std::string("addr ") + verb + " " + bench_address(i) + "/32 dev lo");
+    ip_batch(dir, veth.ns(), lines);
+    local.refresh();
+  };
+  for (int from = 0; from < kAddresses; from += kStep)
+    step("add", from);
+  REQUIRE(kernel_local_routes(veth.ns()).size() == before + kAddresses);
+  CHECK(local.contains(host_order("192.0.2.1")));  // overflow: nothing refused
+  CHECK(local.contains(host_order(bench_address(kAddresses - 1))));
+  for (int from = 0; from < kAddresses; from += kStep)
+    step("del", from);
+  REQUIRE(kernel_local_routes(veth.ns()).size() == before);
+  INFO("held " << local.size() << " routes, the kernel " << before);
+  CHECK_FALSE(local.contains(host_order("192.0.2.1")));
+  CHECK_FALSE(local.contains(host_order(bench_address(0))));
+  CHECK(local.contains(host_order(veth.far_ip())));
+}
+
 }  // namespace pandarcap
