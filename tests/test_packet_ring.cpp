@@ -1567,4 +1567,46 @@ TEST_CASE("packet_ring: local destinations past 512 routes and back under: refus
   CHECK(local.contains(host_order(veth.far_ip())));
 }
 
+// An interface of this host's that goes down, comes up and is deleted (a USB adapter pulled, a
+// VPN's tun gone, the capture interface re-made): the kernel takes its subnet's broadcast route
+// out without a netlink message on the way down and when the interface is deleted. A datagram
+// to that broadcast address is then no longer delivered here; the table must say so.
+TEST_CASE("packet_ring: local destinations of an interface down then deleted: its broadcast gone",
+          "[packet_ring]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("li");
+  REQUIRE(veth.ok());
+  test::FarNamespace far(veth.ns());
+  LocalDestinations local;
+  const std::string ns = " -n " + veth.ns() + " ";
+  REQUIRE(test::shell("ip" + ns + "link add xa type veth peer name xb"));
+  REQUIRE(test::shell("ip" + ns + "addr add 10.77.0.1/24 dev xa"));
+  REQUIRE(test::shell("ip" + ns + "link set xa up"));
+  REQUIRE(test::shell("ip" + ns + "link set xb up"));
+  local.refresh();
+  CHECK(local.contains(host_order("10.77.0.1")));
+  CHECK(local.contains(host_order("10.77.0.255")));
+  CHECK(local.size() == kernel_local_routes(veth.ns()).size());
+
+  REQUIRE(test::shell("ip" + ns + "link set xa down"));
+  local.refresh();
+  {
+    const auto routes = kernel_local_routes(veth.ns());
+    INFO("the kernel's local table with xa down:\n"
+         << test::run_command("ip -4" + ns + "route show table local").out);
+    CHECK(local.size() == routes.size());
+    CHECK_FALSE(local.contains(host_order("10.77.0.255")));
+  }
+  REQUIRE(test::shell("ip" + ns + "link set xa up"));
+  local.refresh();
+  CHECK(local.contains(host_order("10.77.0.255")));
+  REQUIRE(test::shell("ip" + ns + "link del xa"));
+  local.refresh();
+  INFO("held " << local.size() << " routes, the kernel " << kernel_local_routes(veth.ns()).size());
+  CHECK(local.size() == kernel_local_routes(veth.ns()).size());
+  CHECK_FALSE(local.contains(host_order("10.77.0.1")));
+  CHECK_FALSE(local.contains(host_order("10.77.0.255")));
+  CHECK(local.contains(host_order(veth.far_ip())));
+}
+
 }  // namespace pandarcap
