@@ -1609,4 +1609,44 @@ TEST_CASE("packet_ring: local destinations of an interface down then deleted: it
   CHECK(local.contains(host_order(veth.far_ip())));
 }
 
+// Neighbours found sound: secondary addresses (the primary's removal takes them, without
+// promote_secondaries), a /32, a /24 AnyIP range, an address that moves between interfaces:
+// after each refresh the table is the kernel's.
+TEST_CASE("packet_ring: local destinations of secondary addresses and moves: the kernel's",
+          "[packet_ring]") {
+  if (!can_make_links()) return;
+  test::VethPair veth("ls");
+  REQUIRE(veth.ok());
+  test::FarNamespace far(veth.ns());
+  LocalDestinations local;
+  const std::string ns = " -n " + veth.ns() + " ";
+  const auto same_as_kernel = [&] {
+    local.refresh();
+    INFO(test::run_command("ip -4" + ns + "route show table local").out);
+    CHECK(local.size() == kernel_local_routes(veth.ns()).size());
+  };
+  REQUIRE(test::shell("ip" + ns + "addr add 10.88.0.1/24 dev " + veth.far()));
+  REQUIRE(test::shell("ip" + ns + "addr add 10.88.0.2/24 dev " + veth.far()));
+  REQUIRE(test::shell("ip" + ns + "addr add 10.88.0.3/32 dev " + veth.far()));
+  REQUIRE(test::shell("ip" + ns + "route add local 10.99.0.0/24 dev lo"));
+  same_as_kernel();
+  CHECK(local.contains(host_order("10.88.0.2")));
+  CHECK(local.contains(host_order("10.88.0.255")));
+  CHECK(local.contains(host_order("10.99.0.77")));
+  CHECK_FALSE(local.contains(host_order("10.88.0.4")));
+  REQUIRE(test::shell("ip" + ns + "addr del 10.88.0.1/24 dev " + veth.far()));
+  same_as_kernel();
+  CHECK_FALSE(local.contains(host_order("10.88.0.1")));
+  CHECK_FALSE(local.contains(host_order("10.88.0.2")));
+  CHECK_FALSE(local.contains(host_order("10.88.0.255")));
+  CHECK(local.contains(host_order("10.88.0.3")));
+  REQUIRE(test::shell("ip" + ns + "addr del 10.88.0.3/32 dev " + veth.far()));
+  REQUIRE(test::shell("ip" + ns + "addr add 10.88.0.3/32 dev lo"));
+  same_as_kernel();
+  CHECK(local.contains(host_order("10.88.0.3")));
+  REQUIRE(test::shell("ip" + ns + "route del local 10.99.0.0/24 dev lo"));
+  same_as_kernel();
+  CHECK_FALSE(local.contains(host_order("10.99.0.77")));
+}
+
 }  // namespace pandarcap
