@@ -5,6 +5,7 @@
 // valid packets, another port's datagrams; and a burst into a stopped daemon that the ring cannot
 // hold. tcpdump -w on the same interface is the independent witness of what the wire carried.
 #include <arpa/inet.h>
+#include <fmt/format.h>
 #include <linux/if_packet.h>
 #include <net/ethernet.h>
 #include <net/if.h>
@@ -1647,6 +1648,93 @@ TEST_CASE("packet_ring: local destinations of secondary addresses and moves: the
   REQUIRE(test::shell("ip" + ns + "route del local 10.99.0.0/24 dev lo"));
   same_as_kernel();
   CHECK_FALSE(local.contains(host_order("10.99.0.77")));
+}
+
+namespace {
+// The daemon (`receiver`) paused 2.2 s by SIGSTOP while the sensor sends: all along
+// (`goes_on`), or for 0.6 s from before the pause (it stops during it). See below.
+void pause_whole_daemon(bool goes_on, const char* receiver) {
+  Rig rig("pz", "pause-whole-daemon");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port, "", receiver);
+  bench::GeneratorResult sent;
+  std::atomic<bool> sending{true};
+  std::int64_t silent_from_ns = 0;
+  std::thread sender([&] {
+    test::FarNamespace far(veth.ns());
+    bench::GeneratorOptions traffic;
+    traffic.destination_ip = veth.near_ip();
+    traffic.port = port;
+    traffic.rate_pps = 3600;
+    traffic.seconds = goes_on ? 3.4 : 0.6;
+    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    silent_from_ns = unix_now_ns();
+    sending = false;
+  });
+  const auto received = [&] {
+    const auto records = test::health_records(daemon.out);
+    return records.empty() ? 0 : test::health_counter(records.back(), "datagrams_received");
+  };
+  REQUIRE(wait_until([&] { return received() > 0; }, 5s));
+  const std::size_t records_before = test::health_records(daemon.out).size();
+  daemon.process->signal(SIGSTOP);
+  const auto resume_at = std::chrono::steady_clock::now() + 2200ms;  // the fault: its length
+  while (std::chrono::steady_clock::now() < resume_at)
+    CHECK(daemon.process->wait_exit(50ms) == std::nullopt);
+  const bool sending_at_resume = sending.load();
+  daemon.process->signal(SIGCONT);
+  const std::int64_t resumed_ns = unix_now_ns();
+  std::vector<nlohmann::json> after;
+  REQUIRE(wait_until(
+      [&] {
+        const auto records = test::health_records(daemon.out);
+        after.assign(
+            records.begin() + static_cast<std::ptrdiff_t>(std::min(records_before, records.size())),
+            records.end());
+        return after.size() >= 2;
+      },
+      10s));
+  sender.join();
+  const nlohmann::json h = daemon.stop(SIGTERM);
+  INFO(daemon.process->log());
+  INFO("sent " << sent.sent);
+  CHECK(sending_at_resume == goes_on);
+  std::string said_after;  // every record from the pause on, for the failure's message
+  for (const auto& r : after) {
+    said_after += fmt::format(
+        "{:+.3f} s from the resume: {} {:.3f}\n",
+        static_cast<double>(r.at("unix_time_ns").get<std::int64_t>() - resumed_ns) / 1e9,
+        r.value("state", ""), r.at("gauges").at("seconds_since_last_packet").get<double>());
+  }
+  INFO(said_after);
+  CHECK(daemon.process->log().find("stalled for") == std::string::npos);
+  for (const auto& r : after) {
+    const std::int64_t at = r.at("unix_time_ns").get<std::int64_t>();
+    const double said = r.at("gauges").at("seconds_since_last_packet").get<double>();
+    INFO("record " << static_cast<double>(at - resumed_ns) / 1e9 << " s after the resume: state "
+                   << r.value("state", "") << ", seconds_since_last_packet " << said);
+    if (goes_on) {
+      CHECK(r.value("state", "") != "no_data");
+    } else if (at >= resumed_ns) {
+      const double silence = static_cast<double>(at - silent_from_ns) / 1e9;
+      CHECK(said >= silence - 0.25);
+      CHECK(r.value("state", "") == "no_data");
+    }
+  }
+  check_identities(h);
+}
+}  // namespace
+
+// The whole daemon paused (SIGSTOP: a debugger, a frozen cgroup, a VM paused) for 2.2 s, longer
+// than the no-data timeout (1 s) and the writer stall's 2 s. With the sensor sending all along,
+// no record written after the pause may say no_data (packets arrived the whole time: the kernel
+// held them), and the main thread must not report a writer stall (6eca3c6). With a sensor that
+// stopped during the pause, the first record after it must say no_data, with the silence's
+// length (the last packet's arrival, not when the backlog was taken).
+TEST_CASE("pause: the daemon stopped 2.2 s and the sensor stopped in it: the silence said",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  pause_whole_daemon(false, "socket");
 }
 
 }  // namespace pandarcap
