@@ -1731,6 +1731,12 @@ void pause_whole_daemon(bool goes_on, const char* receiver) {
 // held them), and the main thread must not report a writer stall (6eca3c6). With a sensor that
 // stopped during the pause, the first record after it must say no_data, with the silence's
 // length (the last packet's arrival, not when the backlog was taken).
+TEST_CASE("pause: the daemon stopped 2.2 s with the sensor going on: no no_data said",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  pause_whole_daemon(true, "packet_ring");
+}
+
 TEST_CASE("pause: the daemon stopped 2.2 s and the sensor stopped in it: the silence said",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
