@@ -1743,4 +1743,41 @@ TEST_CASE("pause: the daemon stopped 2.2 s and the sensor stopped in it: the sil
   pause_whole_daemon(false, "socket");
 }
 
+// The writer's first use of every other output after the warm-up (a sensor that starts late):
+// MCAP with points and packets, pcap and MCAP rotated by time, frames retention and decimation,
+// the compact PCD fields compressed. Nothing may allocate on the writer's hot path.
+TEST_CASE("hot path: a late sensor with every output and rotation: no allocation in the writer",
+          "[packet_ring][daemon][threads]") {
+  if (!can_make_links()) return;
+  Rig rig("ha", "hot-path-late-sensor-all-outputs");
+  auto& [veth, dir, port] = rig;
+  RingDaemon daemon(dir, veth, port,
+                    "[output]\nmcap = true\nmcap_packets = true\npcap_rotate_seconds = 1\n"
+                    "mcap_rotate_seconds = 1\nframes_max_files = 2\nframe_decimation = 2\n"
+                    "pcd_fields = \"velodyne\"\npcd_compression = \"lzf\"\n",
+                    "socket");
+  REQUIRE(wait_until(
+      [&] {
+        const auto records = test::health_records(daemon.out);
+        return !records.empty() &&
+               records.back().at("gauges").at("uptime_seconds").get<double>() > 2.2;
+      },
+      10s));
+  bench::GeneratorOptions traffic;
+  traffic.rate_pps = 3600;
+  traffic.seconds = 1.3;
+  const bench::GeneratorResult sent = send_sensor(veth, port, traffic);
+  const nlohmann::json h = daemon.stop_after(sent.sent);
+  INFO(daemon.process->log());
+  INFO(h.dump());
+  REQUIRE(test::health_counter(h, "frames_written") >= 2);
+  CHECK(test::files_ending(daemon.out / "raw", ".pcap").size() >= 2);
+  if (h.at("counters").contains("hot_path_allocations_by_thread")) {
+    const nlohmann::json& allocations = h.at("counters").at("hot_path_allocations_by_thread");
+    CHECK(allocations.at("writer") == 0);
+    CHECK(allocations.at("decode") == 0);
+    CHECK(allocations.at("receive") == 0);
+  }
+}
+
 }  // namespace pandarcap
