@@ -15,17 +15,25 @@
 #include "daemon/io/errors.hpp"
 
 namespace pandarcap {
+namespace {
 
-LocalDestinations::LocalDestinations()
-    : fd_(::socket(AF_NETLINK, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, NETLINK_ROUTE)) {
-  if (!fd_) io::throw_errno("netlink socket (this host's local routes)");
+io::UniqueFd netlink_socket(std::uint32_t groups, const char* what) {
+  io::UniqueFd fd(::socket(AF_NETLINK, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, NETLINK_ROUTE));
+  if (!fd) io::throw_errno(what);
   sockaddr_nl local{};
   local.nl_family = AF_NETLINK;
-  local.nl_groups = RTMGRP_IPV4_ROUTE;
-  if (::bind(fd_.get(), reinterpret_cast<const sockaddr*>(&local), sizeof local) != 0)
-    io::throw_errno("netlink bind (this host's local routes)");
-  if (!request_dump()) io::throw_errno("netlink RTM_GETROUTE (this host's local routes)");
-  read_messages(/*wait_for_dump=*/true);
+  local.nl_groups = groups;
+  if (::bind(fd.get(), reinterpret_cast<const sockaddr*>(&local), sizeof local) != 0)
+    io::throw_errno(what);
+  return fd;
+}
+
+}  // namespace
+
+LocalDestinations::LocalDestinations()
+    : changes_(netlink_socket(RTMGRP_IPV4_ROUTE, "netlink socket (this host's route changes)")),
+      table_(netlink_socket(0, "netlink socket (this host's local routes)")) {
+  if (!load(/*patient=*/true)) io::throw_errno("netlink RTM_GETROUTE (this host's local routes)");
 }
 
 bool LocalDestinations::contains(std::uint32_t destination) const noexcept {
@@ -36,7 +44,73 @@ bool LocalDestinations::contains(std::uint32_t destination) const noexcept {
   });
 }
 
-bool LocalDestinations::request_dump() noexcept {
+void LocalDestinations::Table::add(const Route& route) noexcept {
+  const auto end = routes.begin() + static_cast<std::ptrdiff_t>(count);
+  if (std::find(routes.begin(), end, route) != end) return;
+  if (count == routes.size()) {
+    overflow = true;
+    return;
+  }
+  routes[count++] = route;
+}
+
+void LocalDestinations::Table::remove(const Route& route) noexcept {
+  const auto end = routes.begin() + static_cast<std::ptrdiff_t>(count);
+  const auto it = std::find(routes.begin(), end, route);
+  if (it == end) return;
+  *it = routes[--count];
+}
+
+void LocalDestinations::set_overflow(bool overflow) noexcept {
+  if (overflow && !overflow_) {
+    spdlog::warn(
+        "packet ring: this host's local routing table has more than {} routes: a datagram to "
+        "any address that reaches the interface with its MAC is taken until it has fewer",
+        kMaxRoutes);
+  } else if (!overflow && overflow_) {
+    spdlog::info("packet ring: the local routing table has {} routes again: followed", count_);
+  }
+  overflow_ = overflow;
+}
+
+void LocalDestinations::read_changes() noexcept {
+  for (;;) {
+    const ssize_t n = ::recv(changes_.get(), buffer_.data(), buffer_.size(), MSG_DONTWAIT);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      if (errno == ENOBUFS) {
+        // Changes were lost: the whole table, read now, says what they would have.
+        load(/*patient=*/false);
+      }
+      return;
+    }
+    auto left = static_cast<unsigned>(n);
+    for (auto* h = reinterpret_cast<const nlmsghdr*>(buffer_.data()); NLMSG_OK(h, left);
+         h = NLMSG_NEXT(h, left)) {
+      Route route;
+      if (!parse(h, route)) continue;
+      const auto end = routes_.begin() + static_cast<std::ptrdiff_t>(count_);
+      const auto it = std::find(routes_.begin(), end, route);
+      if (h->nlmsg_type == RTM_NEWROUTE) {
+        if (it != end) continue;
+        if (count_ == routes_.size()) {
+          set_overflow(true);  // until a whole table that fits is read
+          continue;
+        }
+        routes_[count_++] = route;
+      } else if (it != end) {
+        *it = routes_[--count_];
+      }
+    }
+  }
+}
+
+bool LocalDestinations::load(bool patient) noexcept {
+  // The changes queued so far are older than the table about to be read: dropped, not applied
+  // after it (an address added and gone again would come back).
+  while (::recv(changes_.get(), buffer_.data(), buffer_.size(), MSG_DONTWAIT) > 0 ||
+         errno == ENOBUFS || errno == EINTR) {
+  }
   struct {
     nlmsghdr header;
     rtmsg body;
@@ -44,60 +118,62 @@ bool LocalDestinations::request_dump() noexcept {
   request.header.nlmsg_len = sizeof request;
   request.header.nlmsg_type = RTM_GETROUTE;
   request.header.nlmsg_flags = NLM_F_REQUEST | NLM_F_DUMP;
-  request.header.nlmsg_seq = ++dump_sequence_;
+  request.header.nlmsg_seq = ++sequence_;
   request.body.rtm_family = AF_INET;
+  request.body.rtm_table = RT_TABLE_LOCAL;
   sockaddr_nl kernel{};
   kernel.nl_family = AF_NETLINK;
-  return ::sendto(fd_.get(), &request, sizeof request, 0, reinterpret_cast<sockaddr*>(&kernel),
-                  sizeof kernel) == static_cast<ssize_t>(sizeof request);
-}
-
-void LocalDestinations::refresh() noexcept {
-  read_messages(/*wait_for_dump=*/false);
-}
-
-void LocalDestinations::read_messages(bool wait_for_dump) noexcept {
-  // Start-up only: the kernel answers a dump at once; two seconds is a bound, not a wait.
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(2);
-  bool dump_done = !wait_for_dump;
+  // An answer to an earlier request left unread (one that did not come whole) is not this one's.
+  while (::recv(table_.get(), buffer_.data(), buffer_.size(), MSG_DONTWAIT) > 0) {
+  }
+  if (::sendto(table_.get(), &request, sizeof request, 0, reinterpret_cast<sockaddr*>(&kernel),
+               sizeof kernel) != static_cast<ssize_t>(sizeof request)) {
+    return false;
+  }
+  loading_.count = 0;
+  loading_.overflow = false;
+  // The kernel writes the answer as it is read: it is there at once. The start alone waits for
+  // it (two seconds at most); a reload that finds it late keeps the table it has.
+  const auto give_up = std::chrono::steady_clock::now() +
+                       (patient ? std::chrono::milliseconds(2000) : std::chrono::milliseconds(0));
   for (;;) {
-    const ssize_t n = ::recv(fd_.get(), buffer_.data(), buffer_.size(), MSG_DONTWAIT);
+    const ssize_t n = ::recv(table_.get(), buffer_.data(), buffer_.size(), MSG_DONTWAIT);
     if (n < 0) {
       if (errno == EINTR) continue;
-      if (errno == ENOBUFS) {
-        // Changes were lost: the table can no longer be trusted. It is read whole again, and
-        // until it is, nothing is refused.
-        count_ = 0;
-        overflow_ = true;
-        if (request_dump()) {
-          overflow_ = false;
-          dump_done = false;
-          continue;
-        }
-        return;
+      if ((errno != EAGAIN && errno != EWOULDBLOCK) ||
+          std::chrono::steady_clock::now() >= give_up) {
+        return false;
       }
-      if (dump_done || std::chrono::steady_clock::now() >= give_up) return;
-      pollfd pfd{fd_.get(), POLLIN, 0};
+      pollfd pfd{table_.get(), POLLIN, 0};
       ::poll(&pfd, 1, 100);
       continue;
     }
     auto left = static_cast<unsigned>(n);
     for (auto* h = reinterpret_cast<const nlmsghdr*>(buffer_.data()); NLMSG_OK(h, left);
          h = NLMSG_NEXT(h, left)) {
-      if (h->nlmsg_type == NLMSG_DONE || h->nlmsg_type == NLMSG_ERROR) dump_done = true;
-      if (h->nlmsg_type == RTM_NEWROUTE || h->nlmsg_type == RTM_DELROUTE) apply(h);
+      if (h->nlmsg_seq != sequence_) continue;
+      if (h->nlmsg_type == NLMSG_ERROR) return false;
+      if (h->nlmsg_type == NLMSG_DONE) {
+        std::copy_n(loading_.routes.begin(), loading_.count, routes_.begin());
+        count_ = loading_.count;
+        set_overflow(loading_.overflow);
+        return true;
+      }
+      Route route;
+      if (h->nlmsg_type == RTM_NEWROUTE && parse(h, route)) loading_.add(route);
     }
   }
 }
 
-void LocalDestinations::apply(const void* message) noexcept {
+bool LocalDestinations::parse(const void* message, Route& route) noexcept {
   const auto* header = static_cast<const nlmsghdr*>(message);
-  if (header->nlmsg_len < NLMSG_LENGTH(sizeof(rtmsg))) return;
+  if (header->nlmsg_type != RTM_NEWROUTE && header->nlmsg_type != RTM_DELROUTE) return false;
+  if (header->nlmsg_len < NLMSG_LENGTH(sizeof(rtmsg))) return false;
   const auto* body = static_cast<const rtmsg*>(NLMSG_DATA(header));
-  if (body->rtm_family != AF_INET || body->rtm_dst_len > 32) return;
-  if (body->rtm_type != RTN_LOCAL && body->rtm_type != RTN_BROADCAST) return;
+  if (body->rtm_family != AF_INET || body->rtm_dst_len > 32) return false;
+  if (body->rtm_type != RTN_LOCAL && body->rtm_type != RTN_BROADCAST) return false;
   std::uint32_t table = body->rtm_table;
-  Route route;
+  route = Route{};
   route.prefix = body->rtm_dst_len;
   route.type = body->rtm_type;
   int left = static_cast<int>(RTM_PAYLOAD(header));
@@ -109,38 +185,13 @@ void LocalDestinations::apply(const void* message) noexcept {
     if (a->rta_type == RTA_TABLE) table = value;
     if (a->rta_type == RTA_OIF) route.interface = value;
   }
-  if (table != RT_TABLE_LOCAL) return;
-  if (route.prefix < 32) {
-    route.network = route.prefix == 0 ? 0 : route.network & ~(0xFFFFFFFFu >> route.prefix);
+  if (table != RT_TABLE_LOCAL) return false;
+  if (route.prefix == 0) {
+    route.network = 0;
+  } else if (route.prefix < 32) {
+    route.network &= ~(0xFFFFFFFFu >> route.prefix);
   }
-  if (header->nlmsg_type == RTM_NEWROUTE) {
-    add(route);
-  } else {
-    remove(route);
-  }
-}
-
-void LocalDestinations::add(const Route& route) noexcept {
-  const auto end = routes_.begin() + static_cast<std::ptrdiff_t>(count_);
-  if (std::find(routes_.begin(), end, route) != end) return;
-  if (count_ == routes_.size()) {
-    if (!overflow_) {
-      spdlog::warn(
-          "packet ring: this host's local routing table has more than {} routes: a datagram to "
-          "any address that reaches the interface with its MAC is taken",
-          kMaxRoutes);
-    }
-    overflow_ = true;
-    return;
-  }
-  routes_[count_++] = route;
-}
-
-void LocalDestinations::remove(const Route& route) noexcept {
-  const auto end = routes_.begin() + static_cast<std::ptrdiff_t>(count_);
-  const auto it = std::find(routes_.begin(), end, route);
-  if (it == end) return;
-  *it = routes_[--count_];
+  return true;
 }
 
 }  // namespace pandarcap

@@ -5,11 +5,14 @@
 // local (AnyIP). A frame that reaches the interface with this host's MAC and another destination
 // (traffic routed through the host) is not for it.
 //
-// A NETLINK_ROUTE socket subscribed to the IPv4 route changes, the table dumped once at start.
-// Nothing here waits or allocates after the start: contains() answers from a fixed table, and a
-// caller that finds a destination missing calls refresh(), which reads the changes already queued
-// (the kernel queues a new address's local route before any datagram to it can arrive, so it is
-// found when its first datagram is). refresh() once a second as well takes removed ones out.
+// Two NETLINK_ROUTE sockets: one subscribed to the IPv4 route changes, one that asks for the
+// whole table. Nothing here allocates after the start, and nothing waits but the start's first
+// reading. A caller that finds a destination missing calls read_changes(), which applies the
+// changes already queued (the kernel queues a new address's local route before any datagram to
+// it can arrive, so it is taken from its first datagram). refresh(), once a second, reads the
+// whole table again: the changes alone cannot be trusted (the kernel removes an interface's
+// broadcast route, when it goes down or away, without a message; a queue that overflowed lost
+// some), so whatever they leave wrong lasts a second at most.
 #pragma once
 
 #include <array>
@@ -23,17 +26,23 @@ class LocalDestinations {
  public:
   static constexpr std::size_t kMaxRoutes = 512;
 
-  // Subscribes and reads the local table. Throws std::system_error naming the step.
+  // Subscribes and reads the table. Throws std::system_error naming the step.
   LocalDestinations();
 
   // Whether the kernel delivers `destination` (host order) to this host, as last read; true for
-  // every destination when the local table has more than kMaxRoutes routes (it could not be held:
+  // every destination while the local table has more than kMaxRoutes routes (it cannot be held:
   // nothing is refused then).
   bool contains(std::uint32_t destination) const noexcept;
-  // Reads the changes queued since the last call (without waiting). After an overflow of the
-  // socket's queue (changes lost), reads the whole table again.
-  void refresh() noexcept;
+  // Applies the changes queued since the last call, without waiting. A queue that overflowed
+  // reads the whole table instead.
+  void read_changes() noexcept;
+  // Reads the whole table again, without waiting for more than the kernel's answer (a table that
+  // does not come whole keeps the last one, with the changes applied).
+  void refresh() noexcept {
+    if (!load(/*patient=*/false)) read_changes();
+  }
   std::size_t size() const noexcept { return count_; }
+  bool overflowed() const noexcept { return overflow_; }
 
  private:
   // A route of the local table: a prefix delivered here (an address is a /32).
@@ -44,19 +53,27 @@ class LocalDestinations {
     std::uint32_t interface = 0;
     bool operator==(const Route&) const = default;
   };
-  // Asks for the whole table (an RTM_GETROUTE dump); its answers are read as changes are.
-  bool request_dump() noexcept;
-  // Reads what is queued; `wait_for_dump`: until the dump's end (start-up only, bounded).
-  void read_messages(bool wait_for_dump) noexcept;
-  void apply(const void* message) noexcept;
-  void add(const Route& route) noexcept;
-  void remove(const Route& route) noexcept;
+  struct Table {
+    std::array<Route, kMaxRoutes> routes{};
+    std::size_t count = 0;
+    bool overflow = false;  // more than kMaxRoutes
+    void add(const Route& route) noexcept;
+    void remove(const Route& route) noexcept;
+  };
+  // The whole table into loading_, then in place of the current one. `patient`: the start,
+  // which may wait (two seconds at most) for the answer.
+  bool load(bool patient) noexcept;
+  // The local-table route a message names (RTM_NEWROUTE/RTM_DELROUTE), if it is one.
+  static bool parse(const void* message, Route& route) noexcept;
+  void set_overflow(bool overflow) noexcept;
 
-  io::UniqueFd fd_;
+  io::UniqueFd changes_;  // subscribed to RTMGRP_IPV4_ROUTE
+  io::UniqueFd table_;    // asks for the whole table
   std::array<Route, kMaxRoutes> routes_{};
   std::size_t count_ = 0;
-  bool overflow_ = false;  // more than kMaxRoutes: contains() says yes to every destination
-  std::uint32_t dump_sequence_ = 0;
+  bool overflow_ = false;  // contains() says yes to every destination
+  Table loading_;
+  std::uint32_t sequence_ = 0;
   alignas(4) std::array<std::uint8_t, 32768> buffer_{};
 };
 

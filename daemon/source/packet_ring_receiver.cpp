@@ -418,7 +418,7 @@ bool PacketRingReceiver::for_this_host(std::uint32_t destination,
   // arrive); once a block, so that traffic routed through the host costs no read a frame.
   if (local_read_this_block_) return false;
   local_read_this_block_ = true;
-  local_->refresh();
+  local_->read_changes();
   return local_->contains(destination);
 }
 
@@ -476,7 +476,7 @@ ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool
   ReceiveCounters::add(heartbeat, 1);
   if (now >= next_statistics_ns_) {
     read_statistics(counters);
-    if (local_ != nullptr) local_->refresh();  // an address removed is no longer this host's
+    if (local_ != nullptr) local_->refresh();  // what the changes could not say, set right
     next_statistics_ns_ = now + 1'000'000'000;
   }
   if (tpacket_block_desc* block = ready_block()) {
