@@ -39,4 +39,17 @@ inline std::int64_t realtime_ns() noexcept {
   return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
 }
 
+// A kernel receive timestamp (CLOCK_REALTIME) `received` on the monotonic clock, read at
+// `now_mono` (and `now_real`): its age taken from `now`, bounded by how long ago the source was
+// last found empty (`empty_mono`, plus `slack` for what the kernel held but had not yet handed
+// over), since nothing that waited afterwards had arrived before: a wall clock stepped since
+// the datagram arrived moves it no further than that.
+inline std::int64_t arrival_on_monotonic(std::int64_t received, std::int64_t now_real,
+                                         std::int64_t now_mono, std::int64_t empty_mono,
+                                         std::int64_t slack) noexcept {
+  const std::int64_t bound = now_mono - empty_mono + slack;
+  const std::int64_t age = now_real - received;
+  return now_mono - (age < 0 ? 0 : age > bound ? (bound < 0 ? 0 : bound) : age);
+}
+
 }  // namespace pandarcap

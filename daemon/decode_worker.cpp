@@ -195,24 +195,12 @@ bool DecodeWorker::wait_for_writer(Queue& queue) {
   }
   if (waiting_since_ns_ == 0) {
     waiting_since_ns_ = now;
-    waiting_level_ = up.level;
   } else if (now - waiting_since_ns_ > kLongestWriterWaitNs) {
     return false;  // and at once for every frame and datagram, until the writer returns one
-  } else if (up.level > waiting_level_) {
-    // Packets still arrive while this thread waits: the sensor is not silent, whatever the
-    // time since the last batch taken says. (One that stopped shows as no_data on time.)
-    waiting_level_ = up.level;
-    note_arrival(now);
   }
   ReceiveCounters::add(*heartbeat_, 1);  // alive: the watchdog should not take this for a hang
   queue.wait_for_data(kWriterWaitSlice);
   return true;
-}
-
-void DecodeWorker::note_arrival(std::int64_t monotonic_ns) noexcept {
-  if (monotonic_ns <= last_arrival_ns_) return;
-  last_arrival_ns_ = monotonic_ns;
-  live_->last_packet_monotonic_ns.store(monotonic_ns, std::memory_order_relaxed);
 }
 
 void DecodeWorker::flush_raw(bool notify) {
@@ -283,9 +271,8 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
   // is done (a stop) nothing fills it, and what it holds waits for the writer rather than be
   // dropped (kLongestStopWaitNs).
   const UpstreamRoom room = [&] {
-    const std::size_t size = ring_.size_approx();
-    return Upstream{size < ring_.capacity() / 2, producer_done.load(std::memory_order_relaxed),
-                    size};
+    return Upstream{ring_.size_approx() < ring_.capacity() / 2,
+                    producer_done.load(std::memory_order_relaxed)};
   };
   upstream_room_ = &room;
   loop(heartbeat, live, [&] {
@@ -306,10 +293,8 @@ void DecodeWorker::run_inline(const ReceiveInline& receive, const UpstreamRoom& 
 template <class Wait>
 void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live, Wait&& wait) {
   heartbeat_ = &heartbeat;
-  live_ = &live;
   std::int64_t next_snapshot_ns = coarse_monotonic_ns();
   const std::int64_t warm_ns = next_snapshot_ns + kWarmUpNs;
-  std::int64_t caught_up_ns = next_snapshot_ns;  // when this thread last found nothing to take
   bool hot = false;
   bool ended = false;  // `wait` said nothing more will come: what the ring holds is the last
   for (;;) {
@@ -319,10 +304,7 @@ void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live,
       if (ended) break;
       const ReceiveTurn turn = wait();
       ended = turn == ReceiveTurn::kEnded;
-      if (turn == ReceiveTurn::kWaited) {
-        ReceiveCounters::add(live.wakeups, 1);
-        caught_up_ns = coarse_monotonic_ns();  // nothing was waiting: no backlog older than this
-      }
+      if (turn == ReceiveTurn::kWaited) ReceiveCounters::add(live.wakeups, 1);
     } else {
       // The model's loop, a batch at a time (no packet pays a branch on the model).
       std::size_t taken = 0;
@@ -330,25 +312,18 @@ void DecodeWorker::loop(std::atomic<std::uint64_t>& heartbeat, DecodeLive& live,
         taken = decoder_.visit([&](auto& d) { return process_batch(d, batch, taken); });
         if (pending_model_) choose_model(*std::exchange(pending_model_, std::nullopt));
       }
-      std::int64_t arrived_ns = coarse_monotonic_ns();
       if (options_.measure_latency) {
         // One clock read per batch: "decoded" is when the batch is done.
         const std::int64_t decoded_ns = realtime_ns();
         for (const PacketSlot& slot : batch) {
           if (slot.receive_time_ns > 0) latency_.record(decoded_ns - slot.receive_time_ns);
         }
-        // When the batch's last packet arrived, not when it was taken: a decoder behind its
-        // stream (the backlog a wait for the writer leaves) must not make a sensor that has
-        // gone silent look alive. The packet is on the wall clock, which may have been stepped
-        // since it arrived: it is no older than the backlog, which began after this thread
-        // last found nothing to take.
-        if (const std::int64_t received = batch.back().receive_time_ns; received > 0) {
-          arrived_ns -= std::clamp<std::int64_t>(
-              decoded_ns - received, 0, std::max<std::int64_t>(arrived_ns - caught_up_ns, 0));
-        }
+      } else {
+        // A replay: no receiver notes arrivals (ReceiveCounters::last_arrival_monotonic_ns),
+        // and a packet is as recent as its taking.
+        live.last_packet_monotonic_ns.store(coarse_monotonic_ns(), std::memory_order_relaxed);
       }
       ring_.release(batch.size());
-      note_arrival(arrived_ns);
     }
     const std::int64_t now = coarse_monotonic_ns();
     if (!hot && now >= warm_ns) {

@@ -79,9 +79,8 @@ class DecodeWorker final : public FrameSink {
   using ReceiveInline = std::function<ReceiveTurn(PacketRing&)>;
   // What is upstream, as this thread waits for the writer (see above).
   struct Upstream {
-    bool room = false;        // it can hold more while this thread waits
-    bool stopping = false;    // a stop was asked (or the source is done): what it holds waits
-    std::uint64_t level = 0;  // how much waits there, in a unit that grows as packets arrive
+    bool room = false;      // it can hold more while this thread waits
+    bool stopping = false;  // a stop was asked (or the source is done): what it holds waits
   };
   using UpstreamRoom = std::function<Upstream()>;
   // As run(), reading `receive` for its packets; ends when `receive` has ended and the ring is
@@ -119,13 +118,7 @@ class DecodeWorker final : public FrameSink {
   // Set for the loop's life (live sources): see UpstreamRoom.
   const UpstreamRoom* upstream_room_ = nullptr;
   std::atomic<std::uint64_t>* heartbeat_ = nullptr;
-  DecodeLive* live_ = nullptr;
-  // The latest packet's arrival (CLOCK_MONOTONIC) into live_->last_packet_monotonic_ns, which
-  // never goes back.
-  void note_arrival(std::int64_t monotonic_ns) noexcept;
-  std::int64_t last_arrival_ns_ = 0;
   std::int64_t waiting_since_ns_ = 0;     // 0: not waiting for the writer
-  std::uint64_t waiting_level_ = 0;       // Upstream::level when last looked at in this stretch
   std::int64_t stop_waits_since_ns_ = 0;  // the first wait after a stop (0: none yet)
 
   DecodeWorkerOptions options_;

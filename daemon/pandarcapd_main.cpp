@@ -446,9 +446,10 @@ int run(const CommandLine& command_line) {
       // After a stop what arrives no longer matters: what was taken waits for the writer (its
       // drain's deadline counts what it leaves in the kernel's ring).
       const DecodeWorker::UpstreamRoom room = [&] {
+        source->note_arrivals(pipe.receive);  // the health's last packet, while the decoder waits
         const std::uint32_t waiting = source->blocks_waiting();
         return DecodeWorker::Upstream{waiting < source->block_count() / 2,
-                                      pipe.stop_source.load(std::memory_order_relaxed), waiting};
+                                      pipe.stop_source.load(std::memory_order_relaxed)};
       };
       threads.start(
           "pc-decode",

@@ -119,9 +119,8 @@ struct Heartbeats {
 
 // What the writer reads from the decoder at its own moments rather than from the once-a-second
 // counter snapshot. Written only by the decode thread.
-// - When the latest packet the decoder took arrived (CLOCK_MONOTONIC ns, 0 = never; live: from
-//   its kernel timestamp, so a decoder behind its stream does not make a silence look shorter;
-//   or while it waits for the writer, when more arrives upstream), stored once per batch:
+// - When the decoder last took a packet (CLOCK_MONOTONIC ns, 0 = never; a replay's only: live,
+//   the receiver's ReceiveCounters::last_arrival_monotonic_ns says it), stored once per batch:
 //   the writer reads it at every wake-up (at least every 100 ms), so silence and its end show in
 //   the health within a tenth of a second of the no-data timeout instead of up to a second later.
 // - The decoder's returns from its wait on the ring: read at each health tick, so its wake-ups
@@ -158,6 +157,23 @@ struct ReceiveCounters {
   std::atomic<std::uint64_t> ring_overruns{0};
   std::atomic<std::uint64_t> receive_errors{0};
   std::atomic<std::uint64_t> wakeups{0};  // returns from the receive thread's wait
+  // Live sources: when the newest datagram taken from the kernel arrived (CLOCK_MONOTONIC ns, 0 =
+  // none yet; from its kernel timestamp, see arrival_on_monotonic), for the health's last packet:
+  // the receiver sees arrivals as they come, a decoder working through a backlog would not. And
+  // the receiver's looks at the kernel since the start: after a pause of the whole process the
+  // writer says no_data only once one has been made (what waited in the kernel is then known).
+  std::atomic<std::int64_t> last_arrival_monotonic_ns{0};
+  std::atomic<std::uint64_t> arrival_looks{0};
+  void note_arrival(std::int64_t monotonic_ns) noexcept {
+    if (monotonic_ns > last_arrival_monotonic_ns.load(std::memory_order_relaxed))
+      last_arrival_monotonic_ns.store(monotonic_ns, std::memory_order_relaxed);
+  }
+  // After the arrivals a look found are noted: release, so that a writer that sees the look
+  // (acquire) sees them.
+  void count_arrival_look() noexcept {
+    arrival_looks.store(arrival_looks.load(std::memory_order_relaxed) + 1,
+                        std::memory_order_release);
+  }
   // A replay's damage (daemon/source/replay_source.hpp), for the health: a replay that met any
   // says so in every record from then on, the last one included. Records whose headers are
   // damaged (skipped), MCAP chunks skipped by the chunk index with the packets they held, and

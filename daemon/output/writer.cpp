@@ -250,13 +250,36 @@ void Writer::log_fragments(std::int64_t now) {
 }
 
 double Writer::seconds_since_last_packet(std::int64_t now) const noexcept {
-  const std::int64_t last = live_.last_packet_monotonic_ns.load(std::memory_order_relaxed);
+  // Live, the receiver's note of the newest arrival; a replay's, the decoder's of its taking.
+  const std::int64_t last =
+      std::max(receive_.last_arrival_monotonic_ns.load(std::memory_order_relaxed),
+               live_.last_packet_monotonic_ns.load(std::memory_order_relaxed));
   return last == 0 ? -1.0 : static_cast<double>(std::max<std::int64_t>(now - last, 0)) / 1e9;
 }
 
 bool Writer::silent(std::int64_t now) const noexcept {
   const double since = seconds_since_last_packet(now);
   return since < 0 || since > options_.no_data_timeout_seconds;
+}
+
+bool Writer::after_pause(std::int64_t now) noexcept {
+  // The loop's wait is 250 ms at most: a turn more than a second later than that means the
+  // process (or this thread) did not run in between.
+  if (last_loop_ns_ != 0 && now - last_loop_ns_ > 1'250'000'000) {
+    looks_at_pause_ = receive_.arrival_looks.load(std::memory_order_acquire);
+    pause_seen_ns_ = now;
+  }
+  last_loop_ns_ = now;
+  if (looks_at_pause_ == 0) return false;  // none, or a source that makes no looks (a replay)
+  // Until the receiver has looked at what the kernel took meanwhile (a quarter of a second at
+  // most), the time since the last packet is not known: a record now could say no_data of a
+  // sensor that sent all along, or ok of one that stopped.
+  if (receive_.arrival_looks.load(std::memory_order_acquire) == looks_at_pause_ &&
+      now - pause_seen_ns_ < 250'000'000) {
+    return true;
+  }
+  looks_at_pause_ = 0;
+  return false;
 }
 
 void Writer::stall_while_test_file_exists() const {
@@ -319,8 +342,9 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       // The decoder's snapshots wake this loop ten times a second; the cap only bounds how late
       // a silence (no_data_timeout_seconds) is noticed if they stop. A cap of their own period
       // would add a wake-up out of phase with each of them.
-      const std::int64_t wait =
-          std::clamp<std::int64_t>(next_tick - monotonic_ns(), 0, 250'000'000);
+      // After a pause, the receiver's first look is waited for in short slices.
+      const std::int64_t wait = std::clamp<std::int64_t>(
+          next_tick - monotonic_ns(), 0, looks_at_pause_ != 0 ? 2'000'000 : 250'000'000);
       from_decoder_.wait_for_data(std::chrono::nanoseconds(wait));
       ++wakeups_;
     }
@@ -331,9 +355,10 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       mcap_.rotate();
     }
     const std::int64_t now = monotonic_ns();
+    const bool held = after_pause(now);
     // Packets stopped or started again since the last health: say so now, not at the next tick.
     const bool silence_changed = silent(now) != reported_silent_;
-    if (now >= next_tick || silence_changed) {
+    if (!held && (now >= next_tick || silence_changed)) {
       if (!options_.test_stall_file.empty()) stall_while_test_file_exists();
       write_health();
       StatusLine status;

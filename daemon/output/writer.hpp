@@ -104,6 +104,9 @@ class Writer final : private FinishReceiver {
   // Seconds since the decoder's last packet (-1: none yet), and whether that is silence.
   double seconds_since_last_packet(std::int64_t now_monotonic_ns) const noexcept;
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
+  // At each turn of the loop: whether the health waits, after a pause of the process, for the
+  // receiver to look at what the kernel took meanwhile.
+  bool after_pause(std::int64_t now_monotonic_ns) noexcept;
 
   WriterOptions options_;
   // options_.calibration_csv follows the decoder's model (a live "auto").
@@ -130,6 +133,11 @@ class Writer final : private FinishReceiver {
   SensorStatusChannel& sensor_status_;
   std::optional<SensorStatusSample> latest_sensor_status_;
   bool reported_silent_ = true;  // the last health written said "no data"
+  std::int64_t last_loop_ns_ = 0;
+  // The receiver's looks (ReceiveCounters::arrival_looks) when a pause was noticed (0: none, or
+  // a source that makes none: a replay).
+  std::uint64_t looks_at_pause_ = 0;
+  std::int64_t pause_seen_ns_ = 0;
   std::uint64_t wakeups_ = 0;
   std::int64_t next_sync_ns_ = 0;  // the recordings' and health.jsonl's next sync
   std::uint64_t fragments_logged_ = 0;

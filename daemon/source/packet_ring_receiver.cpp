@@ -129,6 +129,7 @@ PacketRingReceiver::PacketRingReceiver(const UdpReceiverOptions& options)
   }
   open_guard(options);
   open_ring(options);
+  empty_at_ns_ = monotonic_ns();  // the ring is new: nothing waits in it from before
 }
 
 PacketRingReceiver::~PacketRingReceiver() {
@@ -394,6 +395,7 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
     __atomic_store_n(&block.hdr.bh1.block_status, TP_STATUS_KERNEL, __ATOMIC_RELEASE);
     next_block_ = (next_block_ + 1) % block_count_;
     resume_index_ = 0;
+    if (arrivals_seen_ > 0) --arrivals_seen_;  // counted from next_block_
   }
 
   ReceiveCounters::add(counters.datagrams, datagrams);
@@ -474,6 +476,7 @@ ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool
   const bool draining = drain_until_ != 0;
   if (draining && now >= drain_until_) return ReceiveTurn::kEnded;
   ReceiveCounters::add(heartbeat, 1);
+  note_arrivals(counters);
   if (now >= next_statistics_ns_) {
     read_statistics(counters);
     if (local_ != nullptr) local_->refresh();  // what the changes could not say, set right
@@ -517,6 +520,33 @@ std::uint64_t PacketRingReceiver::frames_unread() const noexcept {
     unread += block->hdr.bh1.num_pkts > taken ? block->hdr.bh1.num_pkts - taken : 0;
   }
   return unread;
+}
+
+void PacketRingReceiver::note_arrivals(ReceiveCounters& counters) noexcept {
+  // The blocks handed over since the last look, from where it stopped: each block's last packet
+  // is newer than the one before it, so the newest is the one to note.
+  const std::int64_t before_ns = monotonic_ns();
+  const tpacket_block_desc* newest = nullptr;
+  while (arrivals_seen_ < block_count_) {
+    const auto* block = reinterpret_cast<const tpacket_block_desc*>(
+        static_cast<const std::uint8_t*>(map_) +
+        std::size_t{(next_block_ + arrivals_seen_) % block_count_} * block_bytes_);
+    if ((__atomic_load_n(&block->hdr.bh1.block_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) == 0)
+      break;
+    newest = block;
+    ++arrivals_seen_;
+  }
+  if (newest != nullptr) {
+    const tpacket_bd_ts& last = newest->hdr.bh1.ts_last_pkt;
+    // What the kernel held in the block it was filling when the ring was last found empty
+    // arrived up to a retire period (or two: the timer's) before.
+    counters.note_arrival(arrival_on_monotonic(
+        std::int64_t{last.ts_sec} * 1'000'000'000 + last.ts_nsec, realtime_ns(), monotonic_ns(),
+        empty_at_ns_, 2'000'000LL * retire_ms_));
+  } else if (arrivals_seen_ == 0) {
+    empty_at_ns_ = before_ns;  // nothing handed over and not taken
+  }
+  counters.count_arrival_look();
 }
 
 std::uint32_t PacketRingReceiver::blocks_waiting() const noexcept {

@@ -142,6 +142,10 @@ class PacketRingReceiver {
   // (DecodeWorker); it grows while packets arrive.
   std::uint32_t blocks_waiting() const noexcept;
   std::uint32_t block_count() const noexcept { return block_count_; }
+  // Notes in `counters` when the newest packet of the blocks handed over since the last call
+  // arrived (the health's last packet; receive() calls it each turn, and a reader that waits
+  // for its consumer meanwhile should too), and counts the look.
+  void note_arrivals(ReceiveCounters& counters) noexcept;
 
  private:
   void open_guard(const UdpReceiverOptions& options);
@@ -174,6 +178,8 @@ class PacketRingReceiver {
   std::uint32_t next_block_ = 0;
   std::uint32_t resume_index_ = 0;   // the next frame of next_block_ to take (0: a new block)
   std::uint32_t resume_offset_ = 0;  // its offset in the block
+  std::uint32_t arrivals_seen_ = 0;  // blocks from next_block_ whose arrival is noted
+  std::int64_t empty_at_ns_ = 0;     // CLOCK_MONOTONIC: when no block waited at a look
   std::uint32_t retire_ms_ = 1;
   std::uint16_t port_ = 0;
   std::string interface_;

@@ -56,6 +56,11 @@ class PacketSource {
   // the writer (PacketRingReceiver::blocks_waiting).
   std::uint32_t blocks_waiting() const noexcept { return ring_receiver_->blocks_waiting(); }
   std::uint32_t block_count() const noexcept { return ring_receiver_->block_count(); }
+  // read_by_decoder() only: the arrivals the kernel has handed over, noted for the health while
+  // the decode thread waits for the writer (PacketRingReceiver::note_arrivals).
+  void note_arrivals(ReceiveCounters& counters) noexcept {
+    ring_receiver_->note_arrivals(counters);
+  }
   // The simulator thread (simulated() only): sends until `stop`.
   void run_simulator(const std::atomic<bool>& stop);
 

@@ -59,6 +59,7 @@ UdpReceiver::UdpReceiver(const UdpReceiverOptions& options)
       budget_ns_(std::max<std::int64_t>(options.latency_budget_ns, 0)),
       max_wake_datagrams_(options.max_wake_datagrams),
       buffers_(new Batch) {
+  empty_at_ns_ = monotonic_ns();  // the socket is new: nothing waits in it from before
   fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
   if (fd_ < 0) io::throw_errno("cannot create the UDP socket");
   try {
@@ -271,11 +272,15 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
   }
   // MSG_TRUNC: msg_len is the datagram's real length even when it was longer than the slot,
   // so a cut datagram is recorded with what it had, not as a whole one of the slot's size.
+  const std::int64_t before_ns = monotonic_ns();
   const int received =
       ::recvmmsg(fd_, batch.headers.data(), static_cast<unsigned>(n), flags | MSG_TRUNC, nullptr);
   if (received <= 0) {
+    counters.count_arrival_look();
     if (received < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
       ReceiveCounters::add(counters.receive_errors, 1);
+    } else if (received == 0 || errno == EAGAIN || errno == EWOULDBLOCK) {
+      empty_at_ns_ = before_ns;
     }
     return {0, n, overrun};
   }
@@ -325,6 +330,17 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
     if (kept != static_cast<std::size_t>(i)) slots[kept] = slot;
     ++kept;
   }
+  // When the newest kept datagram arrived (an overrun's, dropped, arrived just now): the
+  // health's last packet. Then, a batch that came back short found the socket empty.
+  const std::int64_t now_mono = monotonic_ns();
+  if (overrun) {
+    counters.note_arrival(now_mono);
+  } else if (kept > 0) {
+    counters.note_arrival(arrival_on_monotonic(slots[kept - 1].receive_time_ns, realtime_ns(),
+                                               now_mono, empty_at_ns_, 0));
+  }
+  if (static_cast<std::size_t>(received) < n) empty_at_ns_ = before_ns;
+  counters.count_arrival_look();
   ReceiveCounters::add(counters.datagrams, static_cast<std::uint64_t>(received));
   ReceiveCounters::add(counters.bytes, bytes);
   if (overrun) {

@@ -113,6 +113,7 @@ class UdpReceiver {
   std::int64_t budget_ns_ = 0;
   std::size_t max_wake_datagrams_ = 0;
   std::uint64_t left_at_stop_ = 0;
+  std::int64_t empty_at_ns_ = 0;  // CLOCK_MONOTONIC: when a receive last found the socket empty
   std::unique_ptr<Batch> buffers_;
 };
 
