@@ -260,6 +260,17 @@ struct RingDaemon {
         20s);
     return stop(SIGTERM);
   }
+  // Waits until the loops' warm-up (kWarmUpNs, 2 s) is over, by the health's uptime: from then
+  // on their allocations are counted.
+  void wait_past_warm_up() {
+    REQUIRE(wait_until(
+        [&] {
+          const auto records = test::health_records(out);
+          return !records.empty() &&
+                 records.back().at("gauges").at("uptime_seconds").get<double>() > 2.2;
+        },
+        10s));
+  }
   // Sends `signal` now, waits for a clean exit, and returns the final health record.
   nlohmann::json stop(int signal) {
     process->signal(signal);
@@ -1241,6 +1252,18 @@ void check_identities(const nlohmann::json& h) {
         c("datagrams_received") - c("foreign_datagrams") - c("ring_overruns"));
 }
 
+// No allocation on the hot path of each of `threads` (a sanitizer build counts none: its own
+// allocator).
+void check_no_hot_path_allocations(const nlohmann::json& h,
+                                   std::initializer_list<const char*> threads) {
+  if (!h.at("counters").contains("hot_path_allocations_by_thread")) return;
+  const nlohmann::json& allocations = h.at("counters").at("hot_path_allocations_by_thread");
+  for (const char* thread : threads) {
+    INFO(thread);
+    CHECK(allocations.at(thread) == 0);
+  }
+}
+
 }  // namespace
 
 // A disk's slow second (the case the wait is for) with a sensor that stops meanwhile: the
@@ -1364,11 +1387,7 @@ TEST_CASE("writer wait: a small receive ring and a stalled writer then a stop du
       check_identities(h);
       // The threads the wait is on (the writer's first frame after its warm-up allocates: see
       // "hot path: a sensor that starts after the warm-up").
-      if (h.at("counters").contains("hot_path_allocations_by_thread")) {
-        const nlohmann::json& allocations = h.at("counters").at("hot_path_allocations_by_thread");
-        CHECK(allocations.at("receive") == 0);
-        CHECK(allocations.at("decode") == 0);
-      }
+      check_no_hot_path_allocations(h, {"receive", "decode"});
     }
   }
 }
@@ -1384,14 +1403,7 @@ TEST_CASE("hot path: a sensor that starts after the warm-up: no allocation in th
   Rig rig("hw", "hot-path-late-sensor");
   auto& [veth, dir, port] = rig;
   RingDaemon daemon(dir, veth, port, "", "socket");
-  // Past the warm-up (kWarmUpNs, 2 s), by the health's uptime.
-  REQUIRE(wait_until(
-      [&] {
-        const auto records = test::health_records(daemon.out);
-        return !records.empty() &&
-               records.back().at("gauges").at("uptime_seconds").get<double>() > 2.2;
-      },
-      10s));
+  daemon.wait_past_warm_up();
   bench::GeneratorOptions traffic;
   traffic.rate_pps = 3600;
   traffic.seconds = 0.3;
@@ -1400,12 +1412,7 @@ TEST_CASE("hot path: a sensor that starts after the warm-up: no allocation in th
   INFO(daemon.process->log());
   INFO(h.dump());
   REQUIRE(test::health_counter(h, "frames_written") >= 1);
-  if (h.at("counters").contains("hot_path_allocations_by_thread")) {
-    const nlohmann::json& allocations = h.at("counters").at("hot_path_allocations_by_thread");
-    CHECK(allocations.at("writer") == 0);
-    CHECK(allocations.at("decode") == 0);
-    CHECK(allocations.at("receive") == 0);
-  }
+  check_no_hot_path_allocations(h, {"writer", "decode", "receive"});
 }
 
 // The socket receiver's count at the stop with a sensor that does not stop: the daemon stopped
@@ -1756,13 +1763,7 @@ TEST_CASE("hot path: a late sensor with every output and rotation: no allocation
                     "mcap_rotate_seconds = 1\nframes_max_files = 2\nframe_decimation = 2\n"
                     "pcd_fields = \"velodyne\"\npcd_compression = \"lzf\"\n",
                     "socket");
-  REQUIRE(wait_until(
-      [&] {
-        const auto records = test::health_records(daemon.out);
-        return !records.empty() &&
-               records.back().at("gauges").at("uptime_seconds").get<double>() > 2.2;
-      },
-      10s));
+  daemon.wait_past_warm_up();
   bench::GeneratorOptions traffic;
   traffic.rate_pps = 3600;
   traffic.seconds = 1.3;
@@ -1772,12 +1773,7 @@ TEST_CASE("hot path: a late sensor with every output and rotation: no allocation
   INFO(h.dump());
   REQUIRE(test::health_counter(h, "frames_written") >= 2);
   CHECK(test::files_ending(daemon.out / "raw", ".pcap").size() >= 2);
-  if (h.at("counters").contains("hot_path_allocations_by_thread")) {
-    const nlohmann::json& allocations = h.at("counters").at("hot_path_allocations_by_thread");
-    CHECK(allocations.at("writer") == 0);
-    CHECK(allocations.at("decode") == 0);
-    CHECK(allocations.at("receive") == 0);
-  }
+  check_no_hot_path_allocations(h, {"writer", "decode", "receive"});
 }
 
 }  // namespace pandarcap
