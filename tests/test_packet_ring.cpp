@@ -1186,7 +1186,8 @@ TEST_CASE("packet_ring: this host's destinations, from the local routing table, 
 
 // host_ip = 0.0.0.0 on the packet ring takes what a UDP socket on 0.0.0.0 would be given: not a
 // datagram routed through this host (it reaches the near end with its MAC, to another address),
-// which it took before; yes once that address is added to the interface while the daemon runs.
+// which it took before, nor one to 127.0.0.0/8 from the wire; yes once that address is added to
+// the interface while the daemon runs.
 TEST_CASE("packet_ring: host_ip 0.0.0.0 takes only this host's destinations, followed",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
@@ -1203,7 +1204,22 @@ TEST_CASE("packet_ring: host_ip 0.0.0.0 takes only this host's destinations, fol
     const auto records = test::health_records(daemon.out);
     return records.empty() ? 0 : test::health_counter(records.back(), "datagrams_received");
   };
-  // In order, each waited for: the routed ones must not count, the others must.
+  // In order, each waited for: the routed ones must not count, the others must. First a frame
+  // to 127.0.0.5 with the near end's MAC, which the kernel drops as a martian (a socket on
+  // 0.0.0.0 never sees it), though 127.0.0.0/8 is in the local table.
+  {
+    test::FarNamespace far(veth.ns());
+    auto martian = tagged_frame(veth, port, 7, sensor_datagram(100), 1);
+    const in_addr_t loopback = htonl(host_order("127.0.0.5"));
+    std::memcpy(martian.data() + 18 + 16, &loopback, 4);
+    martian[18 + 10] = martian[18 + 11] = 0;
+    const std::uint16_t sum = checksum(martian.data() + 18, 20);
+    martian[18 + 10] = static_cast<std::uint8_t>(sum >> 8);
+    martian[18 + 11] = static_cast<std::uint8_t>(sum);
+    const io::UniqueFd raw = frame_sender(veth);
+    REQUIRE(::send(raw.get(), martian.data(), martian.size(), 0) ==
+            static_cast<ssize_t>(martian.size()));
+  }
   send(routed, 0);
   send(veth.near_ip(), 1);
   REQUIRE(wait_until([&] { return received() >= 1; }, 10s));

@@ -5,6 +5,7 @@
 #include <linux/filter.h>
 #include <net/ethernet.h>
 #include <net/if.h>
+#include <net/if_arp.h>
 #include <pcap/pcap.h>
 #include <poll.h>
 #include <spdlog/spdlog.h>
@@ -312,7 +313,9 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
     if (mac_offset + std::uint64_t{header->tp_snaplen} > block_bytes_) continue;  // never
     const std::uint8_t* mac = base + mac_offset;
     const std::optional<WireFrame> f = parse_wire_frame({mac, header->tp_snaplen}, header->tp_len);
-    if (!f || !for_this_host(f->destination_ip, link->sll_pkttype)) continue;
+    if (!f ||
+        !for_this_host(f->destination_ip, link->sll_pkttype, link->sll_hatype == ARPHRD_LOOPBACK))
+      continue;
     if (filled == slots.size()) {
       if (filled > 0) {
         ring.publish(filled);
@@ -408,13 +411,16 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
   if (published > 0) ring.notify();
 }
 
-bool PacketRingReceiver::for_this_host(std::uint32_t destination,
-                                       unsigned char packet_type) noexcept {
+bool PacketRingReceiver::for_this_host(std::uint32_t destination, unsigned char packet_type,
+                                       bool loopback) noexcept {
   // What a UDP socket bound to host_ip (and joined to multicast_ip) would be given: a datagram
   // to host_ip (any address of this host's, with 0.0.0.0), a broadcast, or the group.
   if (packet_type == PACKET_MULTICAST) return multicast_ip_ != 0 && destination == multicast_ip_;
   if (packet_type == PACKET_BROADCAST || destination == 0xFFFFFFFFu) return true;
   if (host_ip_ != 0) return destination == host_ip_;
+  // 127.0.0.0/8 from the wire is a "martian" the kernel drops (unless route_localnet is set),
+  // though the local table holds it.
+  if ((destination >> 24) == 127 && !loopback) return false;
   if (local_ == nullptr || local_->contains(destination)) return true;
   // An address added since the last read (its change is queued before its first datagram can
   // arrive); once a block, so that traffic routed through the host costs no read a frame.

@@ -160,10 +160,11 @@ class PacketRingReceiver {
   // Adds the kernel's drops since the last read to kernel_drops.
   void read_statistics(ReceiveCounters& counters) noexcept;
   // Whether a UDP socket on host_ip (joined to multicast_ip) would have been given a datagram
-  // to `destination` (host order) arriving as `packet_type` (PACKET_HOST, ...). With 0.0.0.0:
+  // to `destination` (host order) arriving as `packet_type` (PACKET_HOST, ...) on a loopback
+  // interface or not. With 0.0.0.0:
   // a destination the kernel delivers here (local_); one not known reads the changes queued
   // since, once a block.
-  bool for_this_host(std::uint32_t destination, unsigned char packet_type) noexcept;
+  bool for_this_host(std::uint32_t destination, unsigned char packet_type, bool loopback) noexcept;
   // The socket's pending error (POLLERR: the interface went down or away), read and cleared.
   void take_socket_error(ReceiveCounters& counters) noexcept;
   // While the interface is away: binds again once it is back (a new interface of the same
