@@ -1397,7 +1397,7 @@ TEST_CASE("writer wait: a small receive ring and a stalled writer then a stop du
       const auto c = [&](const char* name) { return test::health_counter(h, name); };
       CHECK(c("datagrams_received") + c("kernel_drops") == sent.sent);
       CHECK(c("kernel_drops") == 0);
-      CHECK(c("ring_overruns") == 0);
+      test::check_ring_overruns(h);  // a TSan build's decoder may not keep up with 64 slots
       CHECK(c("frames_dropped_no_arena") > 0);
       CHECK(stop_s < 2.0);
       check_identities(h);

@@ -205,10 +205,11 @@ std::uint64_t UdpReceiver::count_left_at_stop() {
   Batch& batch = *buffers_;
   std::span<PacketSlot> slots = batch.scratch;
   const std::int64_t now_ns = realtime_ns();
-  // Bounded whatever the kernel says: a buffer's worth of the smallest datagrams, and then some,
-  // and a fifth of a second (datagrams without a timestamp cannot say they came after the stop).
+  // Bounded whatever the kernel says: a buffer's worth of the smallest datagrams, and then some;
+  // and once a datagram came without a timestamp (which could not say it came after the stop),
+  // a fifth of a second, against a sender that goes on.
   const std::uint64_t most = granted_rcvbuf_ / 32 + slots.size();
-  const std::int64_t until_ns = monotonic_ns() + 200'000'000;
+  std::int64_t until_ns = INT64_MAX;
   std::uint64_t left = 0;
   for (std::uint64_t read = 0; read < most && monotonic_ns() < until_ns;) {
     for (std::size_t i = 0; i < slots.size(); ++i) {
@@ -236,6 +237,7 @@ std::uint64_t UdpReceiver::count_left_at_stop() {
           arrived_ns = ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
         }
       }
+      if (arrived_ns == 0 && until_ns == INT64_MAX) until_ns = monotonic_ns() + 200'000'000;
       // One that arrived after this began is past the stop: a sender that goes on sending must
       // not keep the stop here. (It and the rest of its batch are not counted.)
       if (arrived_ns > now_ns) {
