@@ -1446,6 +1446,7 @@ TEST_CASE("socket receiver: the stop's count with a sender that goes on through 
   daemon.process->signal(SIGSTOP);
   bench::GeneratorResult sent;
   std::atomic<bool> sending{true};
+  const auto sender_started = std::chrono::steady_clock::now();
   std::thread sender([&] {
     test::FarNamespace far(veth.ns());
     bench::GeneratorOptions traffic;
@@ -1456,7 +1457,7 @@ TEST_CASE("socket receiver: the stop's count with a sender that goes on through 
     sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
     sending = false;
   });
-  // A backlog of about 60 000 datagrams (0.6 s of it) in the socket, then the stop.
+  // A backlog of 0.6 s of it in the socket (about 60 000 datagrams), then the stop.
   const auto backlog_at = std::chrono::steady_clock::now() + 600ms;
   while (std::chrono::steady_clock::now() < backlog_at)
     CHECK(daemon.process->wait_exit(50ms) == std::nullopt);
@@ -1478,7 +1479,14 @@ TEST_CASE("socket receiver: the stop's count with a sender that goes on through 
   CHECK(sender_still_going);  // the stop ended while the sender went on
   CHECK(stop_s < 1.5);
   CHECK(c("datagrams_received") + c("kernel_drops") <= sent.sent);
-  CHECK(c("datagrams_received") + c("kernel_drops") >= 50'000);
+  // What was sent before the stop (the generator's own pace: a sanitizer build's is slower than
+  // asked) was received or counted; a fifth of it is left for the pace's unevenness.
+  const double before_stop_s = std::chrono::duration<double>(stopped_at - sender_started).count();
+  const double sent_before_stop =
+      static_cast<double>(sent.sent) * std::min(1.0, before_stop_s / sent.seconds);
+  INFO("about " << sent_before_stop << " sent before the stop");
+  CHECK(sent_before_stop >= 10'000);
+  CHECK(static_cast<double>(c("datagrams_received") + c("kernel_drops")) >= 0.8 * sent_before_stop);
   check_identities(h);
 }
 
