@@ -38,8 +38,8 @@ LocalDestinations::LocalDestinations()
 
 bool LocalDestinations::contains(std::uint32_t destination) const noexcept {
   if (overflow_) return true;
-  const auto end = routes_.begin() + static_cast<std::ptrdiff_t>(count_);
-  return std::any_of(routes_.begin(), end, [&](const Route& r) {
+  const auto end = current_.routes.begin() + static_cast<std::ptrdiff_t>(current_.count);
+  return std::any_of(current_.routes.begin(), end, [&](const Route& r) {
     return r.prefix == 0 || ((destination ^ r.network) >> (32 - r.prefix)) == 0;
   });
 }
@@ -68,7 +68,8 @@ void LocalDestinations::set_overflow(bool overflow) noexcept {
         "any address that reaches the interface with its MAC is taken until it has fewer",
         kMaxRoutes);
   } else if (!overflow && overflow_) {
-    spdlog::info("packet ring: the local routing table has {} routes again: followed", count_);
+    spdlog::info("packet ring: the local routing table has {} routes again: followed",
+                 current_.count);
   }
   overflow_ = overflow;
 }
@@ -89,17 +90,12 @@ void LocalDestinations::read_changes() noexcept {
          h = NLMSG_NEXT(h, left)) {
       Route route;
       if (!parse(h, route)) continue;
-      const auto end = routes_.begin() + static_cast<std::ptrdiff_t>(count_);
-      const auto it = std::find(routes_.begin(), end, route);
       if (h->nlmsg_type == RTM_NEWROUTE) {
-        if (it != end) continue;
-        if (count_ == routes_.size()) {
-          set_overflow(true);  // until a whole table that fits is read
-          continue;
-        }
-        routes_[count_++] = route;
-      } else if (it != end) {
-        *it = routes_[--count_];
+        current_.add(route);
+        // A route past the table's room: every destination until a whole table that fits is read.
+        if (current_.overflow) set_overflow(true);
+      } else {
+        current_.remove(route);
       }
     }
   }
@@ -154,8 +150,9 @@ bool LocalDestinations::load(bool patient) noexcept {
       if (h->nlmsg_seq != sequence_) continue;
       if (h->nlmsg_type == NLMSG_ERROR) return false;
       if (h->nlmsg_type == NLMSG_DONE) {
-        std::copy_n(loading_.routes.begin(), loading_.count, routes_.begin());
-        count_ = loading_.count;
+        std::copy_n(loading_.routes.begin(), loading_.count, current_.routes.begin());
+        current_.count = loading_.count;
+        current_.overflow = loading_.overflow;
         set_overflow(loading_.overflow);
         return true;
       }

@@ -41,7 +41,7 @@ class LocalDestinations {
   void refresh() noexcept {
     if (!load(/*patient=*/false)) read_changes();
   }
-  std::size_t size() const noexcept { return count_; }
+  std::size_t size() const noexcept { return current_.count; }
   bool overflowed() const noexcept { return overflow_; }
 
  private:
@@ -67,11 +67,10 @@ class LocalDestinations {
   static bool parse(const void* message, Route& route) noexcept;
   void set_overflow(bool overflow) noexcept;
 
-  io::UniqueFd changes_;  // subscribed to RTMGRP_IPV4_ROUTE
-  io::UniqueFd table_;    // asks for the whole table
-  std::array<Route, kMaxRoutes> routes_{};
-  std::size_t count_ = 0;
-  bool overflow_ = false;  // contains() says yes to every destination
+  io::UniqueFd changes_;   // subscribed to RTMGRP_IPV4_ROUTE
+  io::UniqueFd table_;     // asks for the whole table
+  Table current_;          // what contains() answers from
+  bool overflow_ = false;  // contains() says yes to every destination (logged when it changes)
   Table loading_;
   std::uint32_t sequence_ = 0;
   alignas(4) std::array<std::uint8_t, 32768> buffer_{};
