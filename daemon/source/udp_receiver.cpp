@@ -34,6 +34,18 @@ constexpr std::size_t kMaxBatch = 1024;
 // count only arrives with the next packet.)
 constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(in_pktinfo));
 
+// The kernel's receive time a control message carries (SO_TIMESTAMPNS), if it is one. The length
+// is the kernel's to set, but it is checked before the copy all the same.
+std::optional<std::int64_t> kernel_time_ns(const cmsghdr& c) noexcept {
+  if (c.cmsg_level != SOL_SOCKET || c.cmsg_type != SCM_TIMESTAMPNS ||
+      c.cmsg_len < CMSG_LEN(sizeof(timespec))) {
+    return std::nullopt;
+  }
+  timespec ts{};
+  std::memcpy(&ts, CMSG_DATA(&c), sizeof ts);
+  return ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+}
+
 // The limit as text for the warning; a sandbox (systemd's ProtectKernelTunables=/ProcSubset=)
 // may hide /proc/sys.
 std::string read_rmem_max() {
@@ -230,12 +242,7 @@ std::uint64_t UdpReceiver::count_left_at_stop() {
       std::int64_t arrived_ns = 0;
       for (const cmsghdr* c = CMSG_FIRSTHDR(&header); c != nullptr;
            c = CMSG_NXTHDR(const_cast<msghdr*>(&header), const_cast<cmsghdr*>(c))) {
-        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS &&
-            c->cmsg_len >= CMSG_LEN(sizeof(timespec))) {
-          timespec ts{};
-          std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
-          arrived_ns = ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
-        }
+        arrived_ns = kernel_time_ns(*c).value_or(arrived_ns);
       }
       if (arrived_ns == 0 && until_ns == INT64_MAX) until_ns = monotonic_ns() + 200'000'000;
       // One that arrived after this began is past the stop: a sender that goes on sending must
@@ -307,12 +314,8 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
     slot.wire_header_length = 0;
     for (cmsghdr* c = CMSG_FIRSTHDR(&message.msg_hdr); c != nullptr;
          c = CMSG_NXTHDR(const_cast<msghdr*>(&message.msg_hdr), c)) {
-      // The length is the kernel's to set, but it is checked before the copy all the same.
-      if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS &&
-          c->cmsg_len >= CMSG_LEN(sizeof(timespec))) {
-        timespec ts{};
-        std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
-        slot.receive_time_ns = ts.tv_sec * 1'000'000'000LL + ts.tv_nsec;
+      if (const std::optional<std::int64_t> time = kernel_time_ns(*c)) {
+        slot.receive_time_ns = *time;
       } else if (c->cmsg_level == IPPROTO_IP && c->cmsg_type == IP_PKTINFO &&
                  c->cmsg_len >= CMSG_LEN(sizeof(in_pktinfo))) {
         in_pktinfo info{};
