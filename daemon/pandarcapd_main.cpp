@@ -445,11 +445,17 @@ int run(const CommandLine& command_line) {
       };
       // After a stop what arrives no longer matters: what was taken waits for the writer (its
       // drain's deadline counts what it leaves in the kernel's ring).
-      const DecodeWorker::UpstreamRoom room = [&] {
+      // Half the kernel's ring and no less than 24 blocks (about 570 of the 40P's datagrams,
+      // 80 ms of a dual-return sensor) stay free while the decoder waits: a sleeping thread
+      // wakes late on a busy machine, and what arrives meanwhile needs the room.
+      const std::uint32_t least_free_blocks =
+          std::max<std::uint32_t>(source->block_count() / 2, 24);
+      const DecodeWorker::UpstreamRoom room = [&, least_free_blocks] {
         source->note_arrivals(pipe.receive);  // the health's last packet, while the decoder waits
         const std::uint32_t waiting = source->blocks_waiting();
-        return DecodeWorker::Upstream{waiting < source->block_count() / 2,
-                                      pipe.stop_source.load(std::memory_order_relaxed)};
+        return DecodeWorker::Upstream{
+            waiting < source->block_count() && source->block_count() - waiting > least_free_blocks,
+            pipe.stop_source.load(std::memory_order_relaxed)};
       };
       threads.start(
           "pc-decode",
