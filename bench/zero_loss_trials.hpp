@@ -27,22 +27,31 @@ std::string trim(std::string s);
 
 class ZeroLossTrials {
  public:
-  // `work`: where each daemon trial's outputs and log go (removed after the trial). `path`: where
-  // the generator sends, where the receivers listen. Throws std::runtime_error when the options
-  // ask for the packet_ring receiver and the daemon has no --receiver option.
+  // `work`: where each daemon trial's outputs and log go (emptied after the trial, removed with
+  // this object). `path`: where the generator sends, where the receivers listen. Throws
+  // std::runtime_error when the options ask for the packet_ring receiver and the daemon has no
+  // --receiver option.
   ZeroLossTrials(const ZeroLossOptions& options, const TrafficSource& source,
                  std::filesystem::path work, TrafficPath path);
+  // Removes the trials' outputs.
+  ~ZeroLossTrials();
+  ZeroLossTrials(const ZeroLossTrials&) = delete;
+  ZeroLossTrials& operator=(const ZeroLossTrials&) = delete;
 
   // The pandarcapd the trials start.
   const std::filesystem::path& daemon() const { return daemon_; }
   // The receive buffer the daemon said it was granted, from its first trial's log.
   std::string daemon_socket_buffer;
 
-  // One trial of the real daemon at `rate`; its outputs are removed afterwards (a fast trial
-  // writes gigabytes of pcap). With `beside_tcpdump`, `tcpdump -i IFACE -w FILE udp dst port P`
-  // records the same packets in the same seconds (key "tcpdump": its CPU, what it captured and
-  // dropped, its file's bytes), for the comparison of what recording costs. `receiver`: the
-  // daemon's ("" = the options'), with --interface the path's when it is packet_ring.
+  // One trial of the real daemon at `rate`; its outputs are emptied afterwards (a fast trial
+  // writes gigabytes of pcap), each file cut to 0 bytes but kept until the run ends: ext4 without
+  // a journal makes every file created near inodes freed in the last minutes dear (it reads past
+  // each; 1 ms a file measured in a /tmp after many removals), so removing one trial's thousand
+  // files would charge the next trial's daemon for them (docs/performance.md). With
+  // `beside_tcpdump`, `tcpdump -i IFACE -w FILE udp dst port P` records the same packets in the
+  // same seconds (key "tcpdump": its CPU, what it captured and dropped, its file's bytes), for the
+  // comparison of what recording costs. `receiver`: the daemon's ("" = the options'), with
+  // --interface the path's when it is packet_ring.
   nlohmann::ordered_json daemon_trial(double rate, double seconds,
                                       std::optional<std::uint32_t> budget_ms = std::nullopt,
                                       const std::vector<std::string>& extra_args = {},
@@ -69,6 +78,7 @@ class ZeroLossTrials {
   // not, and receives with its socket only).
   bool daemon_has_receiver_option_ = false;
   int trials_ = 0;
+  std::vector<std::filesystem::path> emptied_;  // the trials' outputs, removed at the end
 };
 
 }  // namespace pandarcap::bench

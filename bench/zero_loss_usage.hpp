@@ -32,7 +32,8 @@ Options:
   --sensor-rate PPS      rate of the CPU/latency/RSS trial (default 3600: one dual-return sensor)
   --daemon FILE          pandarcapd to run (default: the one beside pandarcap-bench)
   --config FILE          daemon configuration (the harness sets address, port and output dir)
-  --work-dir DIR         keep daemon logs there (default: a temporary directory, removed)
+  --work-dir DIR         keep daemon logs there (default: a temporary directory in $TMPDIR,
+                         else /var/tmp, removed)
   --daemon-only          skip the reference receivers
   --sensor-rate-only     only the trials at the sensor's rate (no rate search)
   --latency-budget-ms N  the daemon's latency.budget_ms in every trial (default: its own, 5);

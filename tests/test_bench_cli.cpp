@@ -1,8 +1,11 @@
 // pandarcap-bench as a user runs it. Only the shape and the correctness of the report are checked
 // here (every key the acceptance checks read, no item out of order, consistent ratios); the
 // figures themselves are performance claims and belong to docs/performance.md, not to a test.
+#include <fcntl.h>
 #include <fmt/format.h>
+#include <linux/fs.h>
 #include <netinet/in.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -11,6 +14,7 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -215,6 +219,19 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness",
   CHECK(s["latency_p99_us"].get<double>() > 0);
   CHECK(s["peak_rss_bytes"].get<std::uint64_t>() > (1u << 20));
   CHECK(report["environment"]["cores"].get<int>() >= 1);
+  // What a file's creation cost the daemon where it wrote (its own health's count), and that
+  // place: $TMPDIR's, else /var/tmp's (not /tmp, a test suite's churn), removed at the end.
+  const json& work = report["environment"]["work_dir"];
+  CHECK(s["files_created"].get<std::uint64_t>() >= 2);  // a frame and a recording at least
+  CHECK(s["file_create_us"].get<double>() > 0);
+  CHECK(work["file_create_us_at_sensor_rate"] == s["file_create_us"]);
+  CHECK(work["removed_at_exit"] == true);
+  const char* tmpdir = std::getenv("TMPDIR");
+  const std::string parent = tmpdir != nullptr && *tmpdir != '\0' ? tmpdir : "/var/tmp";
+  CHECK(std::filesystem::equivalent(
+      std::filesystem::path(work["path"].get<std::string>()).parent_path(), parent));
+  CHECK_FALSE(std::filesystem::exists(work["path"].get<std::string>()));
+  CHECK_THAT(md_text(report_dir), Catch::Contains("where creating one cost it"));
 
   // The report directory: the same JSON, a Markdown summary and an SVG plot.
   CHECK(json::parse(std::ifstream(report_dir / "report.json")) == report);
@@ -281,9 +298,12 @@ TEST_CASE(
 
 TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-return traffic",
           "[bench][cli][threads]") {
+  test::ScratchDir dir("zero-loss-daemon-only");
+  const auto work = dir / "work";
   const auto result = test::run_command(
       bench() + " zero-loss --json --daemon-only --trial-seconds 0.5 --min-rate 1000" +
-      " --max-rate 2000 --steps 0 --sensor-rate 1000 --rpm 1200 --return-mode single 2>&1");
+      " --max-rate 2000 --steps 0 --sensor-rate 1000 --rpm 1200 --return-mode single" +
+      " --work-dir '" + work.string() + "' 2>&1");
   INFO(result.out);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
@@ -299,6 +319,25 @@ TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-
   const json& first = report["trials"]["daemon"][0];
   CHECK(first["sent"].get<std::uint64_t>() == first["accepted"].get<std::uint64_t>());
   CHECK(first["generator_cpu_fraction_of_one_core"].get<double>() > 0);
+  // A work directory given is kept, with each trial's log; the trials' outputs (emptied after
+  // each trial, so that the next does not pay for removing them) are gone at the end.
+  CHECK(report["environment"]["work_dir"]["removed_at_exit"] == false);
+  std::size_t trials = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(work)) {
+    if (entry.path().filename().string().rfind("daemon_", 0) != 0) continue;
+    ++trials;
+    INFO(entry.path());
+    CHECK_FALSE(std::filesystem::exists(entry.path() / "out"));
+  }
+  CHECK(trials == report["trials"]["daemon"].size() + 2);  // + the two at the sensor's rate
+  // On ext4 its subdirectories are spread (chattr +T: each trial away from removals nearby).
+  const int fd = ::open(work.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  REQUIRE(fd >= 0);
+  int flags = 0;
+  const bool has_flags = ::ioctl(fd, FS_IOC_GETFLAGS, &flags) == 0;
+  ::close(fd);
+  if (has_flags && test::run_command("stat -f -c %T '" + work.string() + "'").out == "ext2/ext3\n")
+    CHECK((flags & FS_TOPDIR_FL) != 0);
 }
 
 TEST_CASE(

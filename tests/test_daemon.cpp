@@ -161,6 +161,11 @@ TEST_CASE("replay of the real capture: frames, pcap, health, accounting", "[daem
   check_no_temporary_files(out);
   // A replayed packet's timestamp is its capture time: no latency is recorded.
   CHECK(h.at("latency").at("count") == 0);
+  // The files the run made new count, with the CPU their creation took: the frames, the
+  // recording, and the health's .prom (a new file each second, renamed into place), among others
+  // (tests/test_io_seam.cpp counts them exactly).
+  CHECK(health_counter(h, "files_created") > pcds.size() + pcaps.size());
+  CHECK(health_counter(h, "file_create_cpu_us") > 0);
 }
 
 TEST_CASE("the real capture's sensor clock (2017) is not ok: offset gauge, degraded, journal",

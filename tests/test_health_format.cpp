@@ -38,6 +38,7 @@ HealthSnapshot distinct_snapshot() {
   for (std::size_t i = 0; i < kRejectReasonCount; ++i)
     c.rejects[i] = 10 + i;
   c.packets_rejected = 11 + 12 + 13 + 14;
+  c.file_create_cpu_us = 1'234'567;
   for (std::size_t i = 0; i < kFilterReasonCount; ++i)
     c.filtered_points[i] = 20 + i;
   h.gauges.rpm_tail = 600;
@@ -104,6 +105,10 @@ TEST_CASE("Prometheus text follows the textfile-collector conventions", "[health
   CHECK(s.at("pandarcap_packets_rejected_total{" + sensor + ",reason=\"bad_marker\"}") ==
         std::to_string(h.counters.rejects[static_cast<std::size_t>(RejectReason::kBadMarker)]));
   CHECK(s.count("pandarcap_packets_rejected_total{" + sensor + ",reason=\"none\"}") == 0);
+  // Microseconds in the JSON, seconds (the base unit) in Prometheus.
+  CHECK(s.at("pandarcap_file_create_cpu_seconds_total{" + sensor + "}") == "1.234567");
+  CHECK(s.at("pandarcap_files_created_total{" + sensor + "}") ==
+        std::to_string(h.counters.files_created));
   CHECK(s.at("pandarcap_points_filtered_total{" + sensor + ",reason=\"above_max_range\"}") == "22");
   CHECK(s.at("pandarcap_motor_speed_measured_rpm{" + sensor + "}") == "599.5");
   CHECK(s.at("pandarcap_high_temperature{" + sensor + "}") == "1");
@@ -246,9 +251,11 @@ TEST_CASE("JSON line carries every counter, gauge, state and reason", "[health]"
   CHECK(c.at("output_name_collisions") == h.counters.output_name_collisions);
   CHECK(c.at("receive_wakeups") == h.counters.receive_wakeups);
   CHECK(c.at("writer_wakeups") == h.counters.writer_wakeups);
-  // The scalar counters + packets_rejected + the two reason maps + the hot-path allocation total
-  // and its per-thread map.
-  CHECK(c.size() == kHealthCounterCount + 5);
+  CHECK(c.at("files_created") == h.counters.files_created);
+  CHECK(c.at("file_create_cpu_us") == 1'234'567);
+  // The scalar counters + packets_rejected + file_create_cpu_us + the two reason maps + the
+  // hot-path allocation total and its per-thread map.
+  CHECK(c.size() == kHealthCounterCount + 6);
   const auto& g = j.at("gauges");
   CHECK(g.at("rpm_tail") == 600.0);
   CHECK(g.at("rpm_measured") == 599.5);

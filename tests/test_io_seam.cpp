@@ -16,6 +16,7 @@
 
 #include "daemon/arena_memory.hpp"
 #include "daemon/io/errors.hpp"
+#include "daemon/io/file_creations.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/io/syscalls.hpp"
 #include "daemon/pcap/capture_reader.hpp"
@@ -163,4 +164,22 @@ TEST_CASE("OutputFile O_DIRECT: whole aligned blocks past the page cache, then t
   file.close();
   CHECK(contents(dir / "direct.bin") == std::string(bytes.begin(), bytes.end()));
   INFO("O_DIRECT on the scratch directory's file system: " << direct);
+}
+
+// Each file created counts once in io::file_creations(), with the CPU its open took; a file
+// opened to append, or one that cannot be opened, does not.
+TEST_CASE("OutputFile counts the files it creates and the CPU their creation took", "[io]") {
+  test::ScratchDir dir("io-file-creations");
+  const io::FileCreations& created = io::file_creations();
+  const std::uint64_t files_before = created.files.load();
+  const std::uint64_t cpu_before = created.cpu_ns.load();
+  OutputFile file;
+  for (int i = 0; i < 20; ++i)
+    file.open((dir / ("f" + std::to_string(i))).native(), OutputFile::Mode::kCreate);
+  file.open((dir / "direct").native(), OutputFile::Mode::kCreateDirect);
+  CHECK(created.files.load() - files_before == 21);
+  CHECK(created.cpu_ns.load() > cpu_before);  // an open is microseconds of a thread's CPU
+  file.open((dir / "f0").native(), OutputFile::Mode::kAppend);
+  CHECK(file.try_open((dir / "missing" / "f").native(), OutputFile::Mode::kCreate));
+  CHECK(created.files.load() - files_before == 21);
 }

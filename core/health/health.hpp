@@ -129,6 +129,8 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
     "pcap_packets_not_written + pcap_packets_lost (0 without output.pcap)")                        \
   X(pcap_bytes_written, "pcap_written_bytes", "Bytes written to pcap files")                       \
   X(pcd_bytes_written, "pcd_written_bytes", "Bytes written to PCD files")                          \
+  X(files_created, "files_created",                                                                \
+    "Output files created (frames, recordings, MCAP files), under their temporary names")          \
   X(mcap_messages_written, "mcap_messages_written", "Messages written to MCAP files")             \
   X(mcap_messages_not_written, "mcap_messages_not_written",                                        \
     "Messages lost from MCAP files to failed writes, or not written to keep space for health")    \
@@ -174,6 +176,9 @@ struct HealthCounters {
   std::uint64_t packets_rejected = 0;                               // = sum(rejects)
   std::array<std::uint64_t, kRejectReasonCount> rejects{};          // indexed by RejectReason
   std::array<std::uint64_t, kFilterReasonCount> filtered_points{};  // indexed by FilterReason
+  // The CPU the files_created took to create, in microseconds (JSON); Prometheus has it in
+  // seconds, its base unit.
+  std::uint64_t file_create_cpu_us = 0;
 };
 
 #define PANDARCAP_HEALTH_COUNTER_ONE(field, prometheus_name, help) +1

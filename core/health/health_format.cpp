@@ -315,6 +315,11 @@ void render_prometheus(const HealthSnapshot& h, std::string& out) {
     family(out, f.prometheus, "counter", f.help, "_total");
     append("pandarcap_{}_total{{{}}} {}\n", f.prometheus, sensor, h.counters.*f.member);
   }
+  family(out, "file_create_cpu_seconds_total", "counter",
+         "CPU the creation of the files_created took: the file system's cost, dear on ext4 without "
+         "a journal after many deletions (docs/deploy.md)");
+  append("pandarcap_file_create_cpu_seconds_total{{{}}} {}.{:06}\n", sensor,
+         h.counters.file_create_cpu_us / 1'000'000, h.counters.file_create_cpu_us % 1'000'000);
   family(out, "packets_rejected_total", "counter", "Packets that failed validation, by reason");
   for (std::size_t i = 1; i < kRejectReasonCount; ++i) {  // 0 is kNone
     append("pandarcap_packets_rejected_total{{{},reason=\"{}\"}} {}\n", sensor,
@@ -411,7 +416,8 @@ void render_json_line(const HealthSnapshot& h, std::string& out) {
     append("{}\"{}\":{}", first ? "" : ",", f.json, h.counters.*f.member);
     first = false;
   }
-  append(",\"packets_rejected\":{}", h.counters.packets_rejected);
+  append(",\"packets_rejected\":{},\"file_create_cpu_us\":{}", h.counters.packets_rejected,
+         h.counters.file_create_cpu_us);
   if (const auto& a = h.hot_path_allocations) {
     append(
         ",\"hot_path_allocations\":{},\"hot_path_allocations_by_thread\":"

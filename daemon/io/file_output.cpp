@@ -10,13 +10,37 @@
 #include <ctime>
 
 #include "daemon/io/errors.hpp"
+#include "daemon/io/file_creations.hpp"
 #include "daemon/io/syscalls.hpp"
 
 namespace pandarcap {
 
 using io::throw_errno;
 
+namespace {
+
+std::uint64_t thread_cpu_ns() noexcept {
+  timespec t{};
+  ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<std::uint64_t>(t.tv_sec) * 1'000'000'000u +
+         static_cast<std::uint64_t>(t.tv_nsec);
+}
+
+}  // namespace
+
 io::IoError OutputFile::try_open(std::string_view path, Mode mode) {
+  const bool creating = mode != Mode::kAppend;
+  const std::uint64_t cpu_before = creating ? thread_cpu_ns() : 0;
+  io::IoError error = open_file(path, mode);
+  if (creating && !error) {
+    io::FileCreations& created = io::file_creations();
+    created.files.fetch_add(1, std::memory_order_relaxed);
+    created.cpu_ns.fetch_add(thread_cpu_ns() - cpu_before, std::memory_order_relaxed);
+  }
+  return error;
+}
+
+io::IoError OutputFile::open_file(std::string_view path, Mode mode) {
   if (fd_ >= 0) io::file_syscalls().close(fd_);
   fd_ = -1;
   size_ = 0;

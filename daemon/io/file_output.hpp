@@ -39,7 +39,8 @@ class OutputFile {
     if (const io::IoError error = try_open(path, mode)) io::throw_io_error(error);
   }
   // The same, the failure returned instead of thrown (the writer's loop: no exception, nothing
-  // allocated). After a failure the file is closed.
+  // allocated). After a failure the file is closed. A file created counts, with the CPU its
+  // open() took, in io::file_creations().
   io::IoError try_open(std::string_view path, Mode mode);
   bool is_open() const noexcept { return fd_ >= 0; }
   // Room for a path of `bytes` made now (at start-up): the first open() allocates nothing.
@@ -76,6 +77,7 @@ class OutputFile {
   bool at_its_path() const noexcept;
 
  private:
+  io::IoError open_file(std::string_view path, Mode mode);
   static std::span<const std::uint8_t> as_bytes(std::string_view text) noexcept {
     return {reinterpret_cast<const std::uint8_t*>(text.data()), text.size()};
   }

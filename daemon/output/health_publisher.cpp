@@ -20,6 +20,7 @@
 #include "daemon/allocation_counter.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/errors.hpp"
+#include "daemon/io/file_creations.hpp"
 #include "daemon/output/output_directories.hpp"
 #include "daemon/output/standing_problems.hpp"
 
@@ -156,6 +157,9 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.pcap_bytes_written = sources.pcap.bytes_written();
   count_mcap(sources.mcap);
   c.pcd_bytes_written = sources.frames.bytes_written();
+  const io::FileCreations& created = io::file_creations();
+  c.files_created = created.files.load(std::memory_order_relaxed);
+  c.file_create_cpu_us = created.cpu_ns.load(std::memory_order_relaxed) / 1000;
   c.write_errors = sources.accounting.write_errors();
   c.bytes_not_written = sources.accounting.bytes_not_written();
   c.output_name_collisions = sources.accounting.name_collisions();
