@@ -276,7 +276,7 @@ std::string zero_loss_markdown(const ordered_json& r) {
                     rate(r.at("settings").at("min_rate").get<double>()),
                     rate(r.at("settings").at("max_rate").get<double>()));
   md += path_line(r);
-  if (env.contains("work_dir")) {  // reports from before the probe have none
+  if (env.contains("work_dir")) {  // reports from before the key have none
     md += fmt::format(
         "The daemon's files went to {}, where creating one cost it {:.0f} us of CPU at the "
         "sensor's rate (it creates one a frame; the file system's price, docs/deploy.md).\n\n",

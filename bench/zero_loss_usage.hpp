@@ -33,7 +33,8 @@ Options:
   --daemon FILE          pandarcapd to run (default: the one beside pandarcap-bench)
   --config FILE          daemon configuration (the harness sets address, port and output dir)
   --work-dir DIR         keep daemon logs there (default: a temporary directory in $TMPDIR,
-                         else /var/tmp, removed)
+                         else /var/tmp, removed); on ext4 it gets the top-directory flag
+                         (chattr +T) so that each trial writes away from files removed nearby
   --daemon-only          skip the reference receivers
   --sensor-rate-only     only the trials at the sensor's rate (no rate search)
   --latency-budget-ms N  the daemon's latency.budget_ms in every trial (default: its own, 5);
