@@ -955,3 +955,22 @@ TEST_CASE("FAILS: pandarcap-bench zero-loss stopped by SIGINT: its temporary tri
   CHECK_FALSE(std::filesystem::exists(work / "daemon_000" / "out"));
   CHECK_FALSE(std::filesystem::exists(work));
 }
+
+// $TMPDIR naming no directory: mktemp(1) and std::filesystem::temp_directory_path() refuse it;
+// the bench creates it, every missing parent with it, and leaves them (only its own
+// pandarcap-bench-PID is ever removed). Seen: TMPDIR=<scratch>/missing/deeper and a run that ended
+// at once (a --daemon without --receiver) left missing/, missing/deeper/ and
+// missing/deeper/pandarcap-bench-PID (a failed run does not remove its work directory either).
+TEST_CASE("FAILS: pandarcap-bench zero-loss with a $TMPDIR that does not exist: nothing created",
+          "[bench][cli][threads]") {
+  test::ScratchDir dir("zero-loss-tmpdir-missing");
+  const auto missing = dir / "missing";
+  const auto result = test::run_command(
+      "TMPDIR='" + (missing / "deeper").string() + "' " + bench() +
+      " zero-loss --json --daemon-only --sensor-rate-only --trial-seconds 0.5"
+      " --receiver packet_ring --interface lo --destination 127.0.0.1 --daemon /bin/true 2>&1");
+  INFO(result.out);
+  INFO(listing(dir.path()));
+  CHECK(result.exit_code != 0);
+  CHECK_FALSE(std::filesystem::exists(missing));
+}
