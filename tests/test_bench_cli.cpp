@@ -946,9 +946,15 @@ TEST_CASE("FAILS: pandarcap-bench zero-loss stopped by SIGINT: its temporary tri
                                    "--trial-seconds", "0.5", "--sensor-rate", "1800"},
                                   dir / "bench.log", {"TMPDIR=" + tmpdir.string()});
   const auto work = tmpdir / fmt::format("pandarcap-bench-{}", bench_run.pid());
-  // The second trial has begun: the first is finished, its files emptied.
-  REQUIRE(harness::wait_until([&] { return std::filesystem::exists(work / "daemon_001"); },
-                              std::chrono::seconds(30)));
+  // The second trial's daemon is up (its health written, so the harness has it registered to
+  // stop: a signal between its fork and that registration leaves it running, seen once when
+  // this waited only for daemon_001/: a pandarcapd left running with parent 1): the first trial is
+  // finished, its files emptied.
+  REQUIRE(harness::wait_until(
+      [&] {
+        return std::filesystem::exists(work / "daemon_001" / "out" / "health" / "pandarcap.prom");
+      },
+      std::chrono::seconds(30)));
   bench_run.signal(SIGINT);
   CHECK(bench_run.wait_exit(std::chrono::seconds(20)) == -SIGINT);
   INFO(listing(tmpdir));
