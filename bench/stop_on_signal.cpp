@@ -17,9 +17,10 @@ namespace {
 constexpr int kSlots = 16;
 std::array<std::atomic<int>, kSlots> g_children{};
 std::atomic<bool> g_active{false};
-// The guard: its pid and the pipe's write end (0 and -1: none, or it has been told).
-std::atomic<int> g_guard_pid{0};
-std::atomic<int> g_guard_pipe{-1};
+// The guards: each one's pid and its pipe's write end + 1 (0 and 0: none, or it has been told).
+constexpr int kGuards = 4;
+std::array<std::atomic<int>, kGuards> g_guard_pid{};
+std::array<std::atomic<int>, kGuards> g_guard_pipe{};
 
 void stop_children() {
   for (auto& slot : g_children) {
@@ -46,10 +47,11 @@ void stop_children() {
   }
 }
 
-// Tells the guard `what` ('r' run, 'q' quit) and waits for it to end. Async-signal-safe.
-void tell_guard(char what) noexcept {
-  const int pipe = g_guard_pipe.exchange(-1);
-  const int pid = g_guard_pid.exchange(0);
+// Tells guard `index` `what` ('r' run, 'q' quit) and waits for it to end. Async-signal-safe.
+void tell_guard(int index, char what) noexcept {
+  const auto at = static_cast<std::size_t>(index);
+  const int pipe = g_guard_pipe[at].exchange(0) - 1;
+  const int pid = g_guard_pid[at].exchange(0);
   if (pipe < 0 || pid <= 0) return;
   while (::write(pipe, &what, 1) < 0 && errno == EINTR) {
   }
@@ -59,10 +61,15 @@ void tell_guard(char what) noexcept {
   }
 }
 
+void tell_guards(char what) noexcept {
+  for (int index = 0; index < kGuards; ++index)
+    tell_guard(index, what);
+}
+
 void on_signal(int signal_number) {
   const int saved_errno = errno;  // the interrupted code's, until the signal ends the process
   stop_children();
-  tell_guard('r');
+  tell_guards('r');
   struct sigaction default_action {};
   default_action.sa_handler = SIG_DFL;
   ::sigaction(signal_number, &default_action, nullptr);
@@ -110,10 +117,14 @@ StopOnSignal::~StopOnSignal() {
   ::sigaction(SIGINT, &old_int_, nullptr);
   ::sigaction(SIGTERM, &old_term_, nullptr);
   g_active.store(false);
-  tell_guard('q');
+  tell_guards('q');
 }
 
-void StopOnSignal::guard(std::vector<std::vector<std::string>> commands) {
+int StopOnSignal::guard(std::vector<std::vector<std::string>> commands) {
+  int index = 0;
+  while (index < kGuards && g_guard_pid[static_cast<std::size_t>(index)].load() != 0)
+    ++index;
+  if (index == kGuards) throw std::runtime_error("no room for another guard process");
   int ends[2];
   if (::pipe2(ends, O_CLOEXEC) != 0) throw std::runtime_error("cannot make the guard's pipe");
   const pid_t pid = ::fork();
@@ -139,12 +150,31 @@ void StopOnSignal::guard(std::vector<std::vector<std::string>> commands) {
     ::_exit(0);
   }
   ::close(ends[0]);
-  g_guard_pipe.store(ends[1]);
-  g_guard_pid.store(pid);
+  g_guard_pipe[static_cast<std::size_t>(index)].store(ends[1] + 1);
+  g_guard_pid[static_cast<std::size_t>(index)].store(pid);
+  return index;
 }
 
-void StopOnSignal::run_guarded_now() noexcept {
-  tell_guard('r');
+void StopOnSignal::run_guarded_now(int guard) noexcept {
+  if (guard >= 0 && guard < kGuards) tell_guard(guard, 'r');
+}
+
+StopOnSignal::Held::Held() {
+  sigset_t both;
+  ::sigemptyset(&both);
+  ::sigaddset(&both, SIGINT);
+  ::sigaddset(&both, SIGTERM);
+  ::pthread_sigmask(SIG_BLOCK, &both, &old_);
+}
+
+StopOnSignal::Held::~Held() {
+  release();
+}
+
+void StopOnSignal::Held::release() noexcept {
+  if (!held_) return;
+  held_ = false;
+  ::pthread_sigmask(SIG_SETMASK, &old_, nullptr);  // a signal that came meanwhile arrives now
 }
 
 StopOnSignal::Child::Child(int pid) {

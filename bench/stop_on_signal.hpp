@@ -26,11 +26,28 @@ class StopOnSignal {
   StopOnSignal(const StopOnSignal&) = delete;
   StopOnSignal& operator=(const StopOnSignal&) = delete;
 
-  // Starts the guard with these commands (each argv[0] the program's path; output to /dev/null),
-  // run in order. Once per StopOnSignal. Throws std::runtime_error when it cannot fork.
-  void guard(std::vector<std::vector<std::string>> commands);
-  // Has the guard run its commands now and waits for it (a no-op once it has).
-  void run_guarded_now() noexcept;
+  // Starts a guard with these commands (each argv[0] the program's path; output to /dev/null),
+  // run in order; returns its number for run_guarded_now. Up to four guards (the veth pair, the
+  // work directory), each run when a signal comes. Throws std::runtime_error when it cannot fork.
+  int guard(std::vector<std::vector<std::string>> commands);
+  // Has guard `guard` run its commands now and waits for it (a no-op once it has).
+  void run_guarded_now(int guard) noexcept;
+
+  // SIGINT and SIGTERM held off in this thread while it lives (or until release()): a child
+  // forked meanwhile is registered (Child) before the handler can look for it, or a signal in
+  // between would leave it running. A child's own mask is reset (harness::ChildProcess).
+  class Held {
+   public:
+    Held();
+    ~Held();
+    Held(const Held&) = delete;
+    Held& operator=(const Held&) = delete;
+    void release() noexcept;
+
+   private:
+    sigset_t old_{};
+    bool held_ = true;
+  };
 
   // A child of the harness's, stopped by the handler while this lives (a no-op with no
   // StopOnSignal alive).

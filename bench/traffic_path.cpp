@@ -71,15 +71,11 @@ VethPair::VethPair(StopOnSignal& stop) {
   const std::string program = ip_program();
 
   // Removed at the end, after a failure, and when a signal stops the harness, by the guard.
-  stop.guard({{program, "link", "del", near_}, {program, "netns", "del", namespace_}});
+  guard_ = stop.guard({{program, "link", "del", near_}, {program, "netns", "del", namespace_}});
   stop_ = &stop;
   // A signal waits until the pair is whole (or removed after a failure): the handler removes
   // what the steps made, and cannot know what a step still running would make after it.
-  sigset_t both, old;
-  ::sigemptyset(&both);
-  ::sigaddset(&both, SIGINT);
-  ::sigaddset(&both, SIGTERM);
-  ::pthread_sigmask(SIG_BLOCK, &both, &old);
+  const StopOnSignal::Held held;
   try {
     ip(program, "netns add " + namespace_);
     ip(program, fmt::format("link add {} address {} type veth peer name {} address {}", near_,
@@ -96,10 +92,8 @@ VethPair::VethPair(StopOnSignal& stop) {
        fmt::format("neigh replace {} lladdr {} dev {} nud permanent", far_ip_, mac(1), near_));
   } catch (...) {
     remove();
-    ::pthread_sigmask(SIG_SETMASK, &old, nullptr);
     throw;
   }
-  ::pthread_sigmask(SIG_SETMASK, &old, nullptr);
 }
 
 VethPair::~VethPair() {
@@ -108,7 +102,7 @@ VethPair::~VethPair() {
 
 void VethPair::remove() noexcept {
   // Deleting one end deletes both; the namespace goes with its name once no socket holds it.
-  stop_->run_guarded_now();
+  stop_->run_guarded_now(guard_);
 }
 
 TrafficPath VethPair::path() const {

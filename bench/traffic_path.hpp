@@ -47,6 +47,7 @@ class VethPair {
   void remove() noexcept;
   std::string near_, far_, namespace_, near_ip_, far_ip_;
   StopOnSignal* stop_ = nullptr;  // its guard removes them
+  int guard_ = -1;
 };
 
 }  // namespace pandarcap::bench

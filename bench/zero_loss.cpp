@@ -13,7 +13,9 @@
 #include <filesystem>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
 #include <thread>
+#include <utility>
 
 #include "bench/child_process.hpp"
 #include "bench/stop_on_signal.hpp"
@@ -178,8 +180,14 @@ constexpr double kDearFileCreateUs = 300;
 // a minute, and a daemon deployed for real writes to a directory of its own (/var/lib).
 fs::path default_work_parent() {
   const char* tmpdir = std::getenv("TMPDIR");
-  if (tmpdir != nullptr && *tmpdir != '\0') return tmpdir;
   std::error_code ec;
+  if (tmpdir != nullptr && *tmpdir != '\0') {
+    // As mktemp and std::filesystem::temp_directory_path: not made when missing.
+    if (!fs::is_directory(tmpdir, ec)) {
+      throw std::runtime_error(fmt::format("TMPDIR '{}' is not a directory", tmpdir));
+    }
+    return tmpdir;
+  }
   if (fs::is_directory("/var/tmp", ec)) return "/var/tmp";
   return fs::temp_directory_path();
 }
@@ -200,6 +208,35 @@ void spread_subdirectories(const fs::path& dir) {
   ::close(fd);
 }
 
+// Where the trials write, and what is left of it when the run ends, by a return, an exception
+// or a signal: a temporary directory is removed whole; a given one keeps each trial's log, its
+// outputs removed (ZeroLossTrials, and the guard for a signal).
+class WorkDirectory {
+ public:
+  WorkDirectory(fs::path path, bool temporary, StopOnSignal& stop)
+      : path_(std::move(path)), temporary_(temporary) {
+    const StopOnSignal::Held held;  // made and guarded, or neither
+    fs::create_directories(path_);
+    spread_subdirectories(path_);
+    if (temporary_) {
+      stop.guard({{"/bin/rm", "-rf", "--", path_.string()}});
+    } else {
+      stop.guard({{"/bin/sh", "-c", "rm -rf -- \"$1\"/daemon_*/out", "sh", path_.string()}});
+    }
+  }
+  ~WorkDirectory() {
+    if (!temporary_) return;
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  WorkDirectory(const WorkDirectory&) = delete;
+  WorkDirectory& operator=(const WorkDirectory&) = delete;
+
+ private:
+  fs::path path_;
+  bool temporary_;
+};
+
 }  // namespace
 
 std::string other_receiver(const std::string& receiver) {
@@ -213,11 +250,10 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
   const fs::path work = temporary
                             ? default_work_parent() / fmt::format("pandarcap-bench-{}", ::getpid())
                             : fs::path(o.work_dir);
-  fs::create_directories(work);
-  spread_subdirectories(work);
-  // A signal stops the daemon a trial runs and removes the veth pair; both are also stopped and
-  // removed when a trial throws.
+  // A signal stops the daemon a trial runs and removes the veth pair and the trials' files; all
+  // are also stopped and removed when a trial throws.
   StopOnSignal stop;
+  const WorkDirectory work_directory(work, temporary, stop);
   std::optional<VethPair> veth;
   const TrafficPath path = traffic_path(o, veth, stop);
   ZeroLossTrials harness(o, source, work, path);
@@ -522,10 +558,6 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
       trials["beside_tcpdump"].push_back(t);
   }
   report["trials"] = trials;
-  if (temporary) {
-    std::error_code ec;
-    fs::remove_all(work, ec);
-  }
   return report;
 }
 

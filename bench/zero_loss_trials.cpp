@@ -156,6 +156,7 @@ class TcpdumpBeside {
                   std::to_string(port)},
                  dir / "tcpdump.log"),
         stop_(process_.pid()) {
+    held_.release();  // registered: a signal finds it now
     if (!harness::wait_until(
             [&] { return process_.log().find("listening on") != std::string::npos; }, 15s)) {
       throw std::runtime_error("tcpdump did not start listening:\n" + process_.log());
@@ -185,6 +186,7 @@ class TcpdumpBeside {
 
  private:
   fs::path file_;
+  StopOnSignal::Held held_;  // from before the fork to the registration
   harness::ChildProcess process_;
   StopOnSignal::Child stop_;
 };
@@ -312,8 +314,10 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
     args.push_back(a);
   }
   args.insert(args.end(), extra_args.begin(), extra_args.end());
+  StopOnSignal::Held held;  // until the daemon is registered: a signal must find it
   harness::ChildProcess process(daemon_, args, dir / "daemon.log");
   const StopOnSignal::Child stopped_on_signal(process.pid());
+  held.release();
   if (!harness::wait_until([&] { return process.log().find("ready:") != std::string::npos; },
                            15s)) {
     throw std::runtime_error("pandarcapd did not become ready:\n" + process.log());
@@ -449,8 +453,10 @@ ZeroLossTrials::~ZeroLossTrials() {
 
 ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
   const fs::path log = work_ / "other_receiver.log";
+  StopOnSignal::Held held;  // until the receiver is registered: a signal must find it
   harness::ChildProcess process("/bin/sh", {"-c", "exec " + o_.receiver_command}, log);
   const StopOnSignal::Child stopped_on_signal(process.pid());
+  held.release();
   if (!harness::wait_until([&] { return udp_port_queued_bytes(o_.receiver_port).has_value(); },
                            15s)) {
     throw std::runtime_error(fmt::format("'{}' did not bind UDP port {} within 15 s:\n{}",
