@@ -130,7 +130,7 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(pcap_bytes_written, "pcap_written_bytes", "Bytes written to pcap files")                       \
   X(pcd_bytes_written, "pcd_written_bytes", "Bytes written to PCD files")                          \
   X(files_created, "files_created",                                                                \
-    "Output files created (frames, recordings, MCAP files), under their temporary names")          \
+    "Files created (frames, recordings, MCAP files, the health's .prom), under temporary names")          \
   X(mcap_messages_written, "mcap_messages_written", "Messages written to MCAP files")             \
   X(mcap_messages_not_written, "mcap_messages_not_written",                                        \
     "Messages lost from MCAP files to failed writes, or not written to keep space for health")    \
