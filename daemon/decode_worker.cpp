@@ -33,11 +33,6 @@ constexpr std::int64_t kLongestStopWaitNs = 5'000'000'000;
 // Each wait's slice: the writer wakes this thread when it returns an arena or batch; the slice
 // only bounds how late a full upstream is noticed.
 constexpr auto kWriterWaitSlice = std::chrono::milliseconds(1);
-// The least room a waiting decoder leaves in the receive ring, in slots: a thread that sleeps
-// wakes late on a busy machine (5 ms has been seen with two cores shared), and the ring must
-// hold what arrives meanwhile. 512 slots are 70 ms of a dual-return sensor; a smaller ring
-// never waits and drops frames at once, as before the wait.
-constexpr std::size_t kLeastWaitRoomSlots = 512;
 
 }  // namespace
 
@@ -276,10 +271,10 @@ void DecodeWorker::run(const std::atomic<bool>& producer_done,
   // kLeastWaitRoomSlots) is room to wait in. Once the source
   // is done (a stop) nothing fills it, and what it holds waits for the writer rather than be
   // dropped (kLongestStopWaitNs).
-  const std::size_t least_room = std::max(ring_.capacity() / 2, kLeastWaitRoomSlots);
   const UpstreamRoom room = [&] {
-    return Upstream{ring_.capacity() - ring_.size_approx() > least_room,
-                    producer_done.load(std::memory_order_relaxed)};
+    return Upstream{
+        room_to_wait(ring_.capacity() - ring_.size_approx(), ring_.capacity(), kLeastWaitRoomSlots),
+        producer_done.load(std::memory_order_relaxed)};
   };
   upstream_room_ = &room;
   loop(heartbeat, live, [&] {

@@ -14,6 +14,7 @@
 // counted as decimated.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <functional>
@@ -83,6 +84,19 @@ class DecodeWorker final : public FrameSink {
     bool stopping = false;  // a stop was asked (or the source is done): what it holds waits
   };
   using UpstreamRoom = std::function<Upstream()>;
+  // Whether a ring of `capacity` units with `free` of them free has room to wait in: more than
+  // half of it and more than `least` free. A thread that sleeps wakes late on a busy machine, and
+  // what arrives meanwhile needs the room (5 ms late has been seen with two cores shared).
+  static bool room_to_wait(std::uint64_t free, std::uint64_t capacity,
+                           std::uint64_t least) noexcept {
+    return free > std::max(capacity / 2, least);
+  }
+  // `least` for the receive ring, in slots: 70 ms of a dual-return sensor (a ring of this many
+  // or fewer never waits, and drops frames at once, as before the wait).
+  static constexpr std::uint64_t kLeastWaitRoomSlots = 512;
+  // `least` for the packet ring, in its 32 KiB blocks: about 570 of the 40P's datagrams, 80 ms
+  // of a dual-return sensor.
+  static constexpr std::uint64_t kLeastWaitRoomBlocks = 24;
   // As run(), reading `receive` for its packets; ends when `receive` has ended and the ring is
   // empty. `live`'s wake-ups are the returns from the source's wait.
   void run_inline(const ReceiveInline& receive, const UpstreamRoom& room,

@@ -445,16 +445,15 @@ int run(const CommandLine& command_line) {
       };
       // After a stop what arrives no longer matters: what was taken waits for the writer (its
       // drain's deadline counts what it leaves in the kernel's ring).
-      // Half the kernel's ring and no less than 24 blocks (about 570 of the 40P's datagrams,
-      // 80 ms of a dual-return sensor) stay free while the decoder waits: a sleeping thread
-      // wakes late on a busy machine, and what arrives meanwhile needs the room.
-      const std::uint32_t least_free_blocks =
-          std::max<std::uint32_t>(source->block_count() / 2, 24);
-      const DecodeWorker::UpstreamRoom room = [&, least_free_blocks] {
+      // Half the kernel's ring and no less than kLeastWaitRoomBlocks stay free while the
+      // decoder waits.
+      const DecodeWorker::UpstreamRoom room = [&] {
         source->note_arrivals(pipe.receive);  // the health's last packet, while the decoder waits
         const std::uint32_t waiting = source->blocks_waiting();
+        const std::uint32_t blocks = source->block_count();
         return DecodeWorker::Upstream{
-            waiting < source->block_count() && source->block_count() - waiting > least_free_blocks,
+            waiting < blocks && DecodeWorker::room_to_wait(blocks - waiting, blocks,
+                                                           DecodeWorker::kLeastWaitRoomBlocks),
             pipe.stop_source.load(std::memory_order_relaxed)};
       };
       threads.start(
