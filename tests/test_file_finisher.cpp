@@ -3,6 +3,9 @@
 // through it, past the page cache.
 #include <fcntl.h>
 #include <fmt/format.h>
+#include <linux/magic.h>
+#include <sys/mman.h>
+#include <sys/statfs.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -14,6 +17,7 @@
 #include <iterator>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "daemon/arena_memory.hpp"
@@ -265,4 +269,130 @@ TEST_CASE("frames go past the page cache, and through it once a file system refu
       headers += fs::file_size(f) - expected.size();
     return headers;
   }());
+}
+
+namespace {
+
+// Pages of `file` in the page cache (mincore of a mapping that touches none), and how many it has.
+std::pair<std::size_t, std::size_t> resident_pages(const fs::path& file) {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  REQUIRE(fd >= 0);
+  const std::size_t size = fs::file_size(file);
+  const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  const std::size_t pages = (size + page - 1) / page;
+  void* map = ::mmap(nullptr, size, PROT_READ, MAP_SHARED, fd, 0);
+  ::close(fd);
+  REQUIRE(map != MAP_FAILED);
+  std::vector<unsigned char> in_core(pages);
+  const int ok = ::mincore(map, size, in_core.data());
+  ::munmap(map, size);
+  REQUIRE(ok == 0);
+  std::size_t resident = 0;
+  for (const unsigned char flag : in_core)
+    resident += flag & 1u;
+  return {resident, pages};
+}
+
+// What this process has had read from storage (/proc/self/io read_bytes): page-cache misses.
+std::uint64_t storage_bytes_read() {
+  std::ifstream io("/proc/self/io");
+  std::string key;
+  std::uint64_t value = 0;
+  while (io >> key >> value) {
+    if (key == "read_bytes:") return value;
+  }
+  FAIL("no read_bytes in /proc/self/io");
+  return 0;
+}
+
+bool on_tmpfs(const fs::path& dir) {
+  struct statfs info {};
+  return ::statfs(dir.c_str(), &info) == 0 && info.f_type == TMPFS_MAGIC;
+}
+
+}  // namespace
+
+TEST_CASE("once synced the recordings leave the page cache and the health files stay in it",
+          "[io][threads]") {
+  test::ScratchDir dir("finisher-page-cache");
+  // Where the pages are the file (tmpfs) nothing can be dropped: they must all stay.
+  const bool tmpfs = on_tmpfs(dir.path());
+  Collected receiver;
+  const std::string block(1 << 20, 'r');
+  // A recording in progress (synced where it is), one finished (placed), an MCAP file, a frame
+  // through the page cache (a file system without O_DIRECT), and the health's appended lines.
+  // `tail`: bytes past 4 MiB, so the file ends in a partly filled page, which a recording still
+  // being written appends to next: it stays (else the next write reads it back from the disk).
+  struct Case {
+    const char* name;
+    FinishOwner owner;
+    FinishJob::Kind kind;
+    bool dropped;
+    std::size_t tail;
+  };
+  const Case cases[] = {
+      {"rec.pcap.part", FinishOwner::kRecordings, FinishJob::Kind::kSync, true, 100},
+      {".done.pcap.tmp", FinishOwner::kRecordings, FinishJob::Kind::kPlace, true, 0},
+      {"run.mcap.part", FinishOwner::kMcap, FinishJob::Kind::kSync, true, 4095},
+      {".frame.pcd.tmp", FinishOwner::kFrames, FinishJob::Kind::kPlace, true, 1},
+      {"health.jsonl", FinishOwner::kHealth, FinishJob::Kind::kSync, false, 100},
+      {".health.prom.tmp", FinishOwner::kHealth, FinishJob::Kind::kReplace, false, 0},
+  };
+  const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  for (const Case& c : cases) {
+    OutputFile file(dir / c.name, OutputFile::Mode::kCreate);
+    for (int i = 0; i < 4; ++i)
+      file.write(std::string_view(block));
+    file.write(std::string_view(block).substr(0, c.tail));
+    file.close();
+    // Just written through the page cache: there (and dirty) before any sync.
+    const auto [resident, pages] = resident_pages(dir / c.name);
+    INFO(c.name);
+    REQUIRE(pages == (4 * block.size() + c.tail + page - 1) / page);
+    REQUIRE(resident == pages);
+  }
+  {
+    FileFinisher finisher(receiver, 8);
+    for (const Case& c : cases) {
+      FinishJob& job = finisher.take();
+      job.kind = c.kind;
+      job.owner = c.owner;
+      job.from = (dir / c.name).native();
+      if (c.kind != FinishJob::Kind::kSync) {
+        std::string to = c.name;
+        to.erase(0, 1);
+        to.erase(to.size() - 4);  // ".done.pcap.tmp" -> "done.pcap"
+        job.to = (dir / to).native();
+      }
+      finisher.submit(job);
+    }
+    finisher.drain();
+  }
+  REQUIRE(receiver.jobs.size() == std::size(cases));
+  for (std::size_t i = 0; i < std::size(cases); ++i) {
+    const Case& c = cases[i];
+    const FinishJob& job = receiver.jobs[i];
+    INFO(c.name << (tmpfs ? " (tmpfs)" : ""));
+    REQUIRE_FALSE(job.failed);
+    const fs::path now = job.to.empty() ? fs::path(job.from) : fs::path(job.to);
+    const auto [resident, pages] = resident_pages(now);
+    if (c.dropped && !tmpfs) {
+      CHECK(resident == (c.tail > 0 ? 1u : 0u));  // the partly filled last page only
+    } else {
+      CHECK(resident == pages);
+    }
+    // A recording still being written goes on at its partly filled last page: from the cache,
+    // not read back from the disk first (this process's storage reads do not grow).
+    std::size_t appended = 0;
+    if (c.kind == FinishJob::Kind::kSync && c.tail > 0) {
+      const std::uint64_t read_before = storage_bytes_read();
+      OutputFile file(now, OutputFile::Mode::kAppend);
+      file.write(std::string_view(block).substr(0, 10));
+      file.close();
+      appended = 10;
+      CHECK(storage_bytes_read() == read_before);
+    }
+    // Nothing lost, whatever was dropped (read after the look: reading caches it again).
+    CHECK(contents(now) == std::string(4 * block.size() + c.tail + appended, 'r'));
+  }
 }

@@ -122,6 +122,19 @@ void sync_data(int fd, std::string_view path);
 // The same for the file named `path` (opened read-only, never through a link: fdatasync flushes
 // the file, whichever descriptor asks). Throws std::system_error.
 void sync_file(const std::string& path);
+// What sync_file does with the file's pages once they are on the disk.
+enum class AfterSync : std::uint8_t {
+  kKeepCached,
+  // Dropped from the page cache (posix_fadvise POSIX_FADV_DONTNEED, best effort): a recording is
+  // written once and read again rarely, so its pages only crowd out what is read. The kernel drops
+  // clean pages only: what was written after the sync stays until the next one. Freed pages are
+  // what the next writes are given, where fresh ones cost far more than the copy into them on a
+  // virtual machine that backs guest memory lazily (docs/performance.md, "The page cache").
+  kDropCached,
+};
+void sync_file(const std::string& path, AfterSync after);
+// The synced file `fd`'s whole pages dropped from the page cache (kDropCached). No throw.
+void drop_cached_pages(int fd) noexcept;
 // The file named `path`'s dirty pages sent on their way to the disk (sync_file_range: start, do
 // not wait), so that syncing several files one after the other waits for the slowest, not for
 // their sum. Best effort: no throw (the sync that follows reports what fails).

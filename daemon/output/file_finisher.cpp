@@ -192,7 +192,9 @@ void FileFinisher::start(FinishJob& job) noexcept {
 
 void FileFinisher::process(FinishJob& job) noexcept {
   try {
-    sync_file(job.from);
+    // The health files are read by monitoring every scrape: they keep their pages.
+    sync_file(job.from,
+              job.owner == FinishOwner::kHealth ? AfterSync::kKeepCached : AfterSync::kDropCached);
   } catch (const std::exception& error) {
     note_error(job, error);
   }

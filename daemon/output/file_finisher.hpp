@@ -15,6 +15,11 @@
 //   collect()    <------ done (SpscQueue) ---------   the result, in the job
 //   the owner counts it (FinishReceiver)
 //
+// Every synced file but the health's then leaves the page cache (AfterSync::kDropCached): a
+// recording is written once and read again rarely, and on a virtual machine that backs guest memory
+// lazily, the fresh pages an ever-growing cache takes cost the writer more than its copy into them
+// (docs/performance.md, "Seventh round").
+//
 // Why: a power cut must not leave a file under its final name with less in it than it was
 // written with (docs/reliability.md, "Power cut"). The kernel writes a rename to the journal on
 // its own schedule and a file's data on another (ext4's delayed allocation, seconds later), so a
