@@ -1,6 +1,12 @@
 // Recordings left unfinished: PcapWriter::abandon() after a failed write, and
 // finish_interrupted_pcap() for a ".part" a killed run left. Either way the file must end on a
 // whole record, so readers (libpcap, tcpdump) read it to the end, and nothing else is touched.
+#include <fcntl.h>
+#include <linux/magic.h>
+#include <sys/mman.h>
+#include <sys/statfs.h>
+#include <unistd.h>
+
 #include <catch2/catch.hpp>
 #include <cstdint>
 #include <filesystem>
@@ -8,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "daemon/output/output_accounting.hpp"
+#include "daemon/output/output_leftovers.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_recovery.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
@@ -209,4 +217,73 @@ TEST_CASE("finish_interrupted_pcap never follows a symbolic link", "[pcap][recov
   fs::create_symlink(target, link);
   CHECK_THROWS_AS(finish_interrupted_pcap(link.string()), std::system_error);
   CHECK(fs::file_size(target) == size);
+}
+
+namespace {
+
+// Pages of `file` in the page cache (mincore of a mapping that touches none).
+std::size_t resident_pages(const fs::path& file) {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  REQUIRE(fd >= 0);
+  const std::size_t size = fs::file_size(file);
+  const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  void* map = ::mmap(nullptr, size, PROT_READ, MAP_SHARED, fd, 0);
+  ::close(fd);
+  REQUIRE(map != MAP_FAILED);
+  std::vector<unsigned char> in_core((size + page - 1) / page);
+  const int ok = ::mincore(map, size, in_core.data());
+  ::munmap(map, size);
+  REQUIRE(ok == 0);
+  std::size_t resident = 0;
+  for (const unsigned char flag : in_core)
+    resident += flag & 1u;
+  return resident;
+}
+
+}  // namespace
+
+// bb93a9b: once synced, every recording the finisher puts in place leaves the page cache (its
+// last partly filled page aside): "a recording is written once and read again rarely, so the
+// daemon does not leave it in memory" (docs/deploy.md, "The page cache"). The recording an
+// interrupted run left (a crash, a kill, a power cut) is finished at the next start by
+// finish_leftovers(), which reads it whole to find the cut and then syncs it with place_durably()
+// (sync_file(), AfterSync::kKeepCached): all of it stays cached, up to pcap_rotate_bytes (1 GiB)
+// and as much of MCAP, the very growth the change set out to stop.
+TEST_CASE("a recording an interrupted run left leaves the page cache once finished at start",
+          "[pcap][recovery]") {
+  test::ScratchDir dir("recovered-page-cache");
+  struct statfs info {};
+  REQUIRE(::statfs(dir.path().c_str(), &info) == 0);
+  if (info.f_type == TMPFS_MAGIC || info.f_type == RAMFS_MAGIC) {
+    WARN("the scratch directory's pages are the file (tmpfs, ramfs): nothing can leave");
+    return;
+  }
+  const fs::path raw = dir / "raw";
+  fs::create_directories(raw);
+  const fs::path part = raw / "pandarcap_20261129T000000Z_0000.pcap.part";
+  // About 5 MiB of whole records, then a record cut in its data, as a killed run leaves it.
+  const std::uint64_t whole = write_recording(part, 4000);
+  fs::resize_file(part, whole + 700);
+  {
+    // Written and synced long ago (by the run that died): nothing of it in the cache at start.
+    const int fd = ::open(part.c_str(), O_RDONLY | O_CLOEXEC);
+    REQUIRE(fd >= 0);
+    REQUIRE(::fdatasync(fd) == 0);
+    REQUIRE(::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED) == 0);
+    ::close(fd);
+  }
+  REQUIRE(resident_pages(part) == 0);
+
+  OutputAccounting accounting;
+  OutputLeftovers where;
+  where.raw_dir = raw;
+  finish_leftovers(where, accounting);
+
+  const fs::path finished = raw / "pandarcap_20261129T000000Z_0000.pcap";
+  REQUIRE(fs::exists(finished));
+  REQUIRE(fs::file_size(finished) == whole);
+  // As the finisher leaves a recording it placed: its partly filled last page at most.
+  const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  INFO((whole + page - 1) / page << " pages in all");
+  CHECK(resident_pages(finished) <= 1);
 }
