@@ -27,6 +27,7 @@
 #include "daemon/output/health_room.hpp"
 #include "daemon/output/output_accounting.hpp"
 #include "daemon/pipeline_types.hpp"
+#include "support/page_cache.hpp"
 #include "support/test_support.hpp"
 
 using namespace pandarcap;
@@ -270,70 +271,11 @@ TEST_CASE("frames go past the page cache, and through it once a file system refu
   }());
 }
 
-namespace {
-
-// Which pages of `file` are in the page cache (mincore of a mapping that touches none).
-std::vector<bool> cached_pages(const fs::path& file) {
-  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
-  REQUIRE(fd >= 0);
-  const std::size_t size = fs::file_size(file);
-  const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
-  std::vector<unsigned char> in_core((size + page - 1) / page);
-  if (size == 0) {
-    ::close(fd);
-    return {};
-  }
-  void* map = ::mmap(nullptr, size, PROT_READ, MAP_SHARED, fd, 0);
-  ::close(fd);
-  REQUIRE(map != MAP_FAILED);
-  const int ok = ::mincore(map, size, in_core.data());
-  ::munmap(map, size);
-  REQUIRE(ok == 0);
-  std::vector<bool> cached;
-  for (const unsigned char flag : in_core)
-    cached.push_back((flag & 1u) != 0);
-  return cached;
-}
-
-// What this process has had read from storage (/proc/self/io read_bytes): page-cache misses.
-std::uint64_t storage_bytes_read() {
-  std::ifstream io("/proc/self/io");
-  std::string key;
-  std::uint64_t value = 0;
-  while (io >> key >> value) {
-    if (key == "read_bytes:") return value;
-  }
-  FAIL("no read_bytes in /proc/self/io");
-  return 0;
-}
-
-// Whether the file system of `dir` lets clean pages go: not where the pages are the file (tmpfs,
-// ramfs, an overlay over either), whatever its type is called. Found by trying: 16 pages written,
-// synced, dropped.
-bool drops_clean_pages(const fs::path& dir) {
-  const fs::path probe = dir / "probe";
-  const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
-  {
-    OutputFile file(probe, OutputFile::Mode::kCreate);
-    file.write(std::string(16 * page, 'p'));
-    file.sync();
-  }
-  const int fd = ::open(probe.c_str(), O_RDONLY | O_CLOEXEC);
-  REQUIRE(fd >= 0);
-  ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
-  ::close(fd);
-  const std::vector<bool> cached = cached_pages(probe);
-  fs::remove(probe);
-  return std::count(cached.begin(), cached.end(), true) == 0;
-}
-
-}  // namespace
-
 TEST_CASE("once synced the recordings leave the page cache and the health files stay in it",
           "[io][threads]") {
   test::ScratchDir dir("finisher-page-cache");
   // Where the pages are the file (tmpfs, ramfs) nothing can be dropped: they must all stay.
-  const bool drops = drops_clean_pages(dir.path());
+  const bool drops = test::drops_clean_pages(dir.path());
   Collected receiver;
   const std::string block(1 << 20, 'r');
   // A recording in progress (synced where it is), one finished (placed), an MCAP file, a frame
@@ -367,7 +309,7 @@ TEST_CASE("once synced the recordings leave the page cache and the health files 
     file.write(std::string_view(block).substr(0, c.tail));
     file.close();
     // Just written through the page cache: there (and dirty) before any sync.
-    const std::vector<bool> cached = cached_pages(dir / c.name);
+    const std::vector<bool> cached = test::cached_pages(dir / c.name);
     INFO(c.name);
     REQUIRE(cached.size() == (4 * block.size() + c.tail + page - 1) / page);
     REQUIRE(std::count(cached.begin(), cached.begin() + whole_pages, true) == whole_pages);
@@ -397,7 +339,7 @@ TEST_CASE("once synced the recordings leave the page cache and the health files 
     INFO(c.name << (drops ? "" : " (a file system that keeps its pages)"));
     REQUIRE_FALSE(job.failed);
     const fs::path now = job.to.empty() ? fs::path(job.from) : fs::path(job.to);
-    const std::vector<bool> cached = cached_pages(now);
+    const std::vector<bool> cached = test::cached_pages(now);
     const auto whole_cached = std::count(cached.begin(), cached.begin() + whole_pages, true);
     CHECK(whole_cached == (c.dropped && drops ? 0 : whole_pages));
     // The partly filled last page stays, where it could be seen before.
@@ -406,12 +348,12 @@ TEST_CASE("once synced the recordings leave the page cache and the health files 
     // not read back from the disk first (this process's storage reads do not grow).
     std::size_t appended = 0;
     if (c.kind == FinishJob::Kind::kSync && c.tail > 0) {
-      const std::uint64_t read_before = storage_bytes_read();
+      const std::uint64_t read_before = test::storage_bytes_read();
       OutputFile file(now, OutputFile::Mode::kAppend);
       file.write(std::string_view(block).substr(0, 10));
       file.close();
       appended = 10;
-      CHECK(storage_bytes_read() == read_before);
+      CHECK(test::storage_bytes_read() == read_before);
     }
     // Nothing lost, whatever was dropped (read after the look: reading caches it again).
     CHECK(contents(now) == std::string(4 * block.size() + c.tail + appended, 'r'));

@@ -284,7 +284,9 @@ void start_writeback(const std::string& path) noexcept {
 }
 
 bool place_durably(const std::string& from, std::string& to) {
-  sync_file(from);
+  // A recording an interrupted run left, read through to find its cut: out of the page cache
+  // once synced, as the finisher leaves the recordings it places.
+  sync_file(from, AfterSync::kDropCached);
   const bool renamed = place_without_replacing(from, to);
   std::string directory;
   assign_directory_of(directory, to);

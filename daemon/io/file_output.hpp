@@ -148,8 +148,9 @@ void sync_directory(std::string_view directory);
 void assign_directory_of(std::string& out, std::string_view path);
 
 // put_in_place's durable form for start-up (a recording an interrupted run left, finished): the
-// file's data synced, then renamed without replacing (see place_without_replacing), then its
-// directory synced. Returns whether the name had to differ. Throws std::system_error.
+// file's data synced (and its pages dropped: AfterSync::kDropCached), then renamed without
+// replacing (see place_without_replacing), then its directory synced. Returns whether the name had
+// to differ. Throws std::system_error.
 bool place_durably(const std::string& from, std::string& to);
 // The same with the temporary name and the file object given, for a file rewritten every second:
 // nothing is allocated.
