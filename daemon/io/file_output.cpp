@@ -252,10 +252,6 @@ void assign_directory_of(std::string& out, std::string_view path) {
   }
 }
 
-void sync_file(const std::string& path) {
-  sync_file(path, AfterSync::kKeepCached);
-}
-
 void sync_file(const std::string& path, AfterSync after) {
   const io::UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW));
   if (!fd) throw_errno("cannot open", path);

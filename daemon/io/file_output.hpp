@@ -119,9 +119,6 @@ void write_file_durably(const std::filesystem::path& path, std::string_view text
 // fdatasync(2) of `fd` (`path` names it in the error), through the test seam. Throws
 // std::system_error.
 void sync_data(int fd, std::string_view path);
-// The same for the file named `path` (opened read-only, never through a link: fdatasync flushes
-// the file, whichever descriptor asks). Throws std::system_error.
-void sync_file(const std::string& path);
 // What sync_file does with the file's pages once they are on the disk.
 enum class AfterSync : std::uint8_t {
   kKeepCached,
@@ -129,9 +126,11 @@ enum class AfterSync : std::uint8_t {
   // written once and read again rarely, so its pages only crowd out what is read. The kernel drops
   // clean pages only: what was written after the sync stays until the next one. Freed pages are
   // what the next writes are given, where fresh ones cost far more than the copy into them on a
-  // virtual machine that backs guest memory lazily (docs/performance.md, "The page cache").
+  // virtual machine that backs guest memory lazily (docs/performance.md, "Seventh round").
   kDropCached,
 };
+// fdatasync(2) of the file named `path` (opened read-only, never through a link: fdatasync flushes
+// the file, whichever descriptor asks), then `after`. Throws std::system_error.
 void sync_file(const std::string& path, AfterSync after);
 // The synced file `fd`'s whole pages dropped from the page cache (kDropCached). No throw.
 void drop_cached_pages(int fd) noexcept;
