@@ -26,6 +26,19 @@ std::uint64_t thread_cpu_ns() noexcept {
          static_cast<std::uint64_t>(t.tv_nsec);
 }
 
+// The synced file `fd`'s whole pages dropped from the page cache (AfterSync::kDropCached).
+void drop_cached_pages(int fd) noexcept {
+  // Only once synced: the kernel drops clean pages only, so before the sync this would drop next
+  // to nothing. The file's last page, if partly filled, stays: a recording still being written
+  // appends to it next, which would otherwise read it back from the disk in the writer's loop.
+  // Where the pages are the file (tmpfs) they stay: nothing is lost either way.
+  struct stat info {};
+  if (::fstat(fd, &info) != 0 || info.st_size <= 0) return;
+  const auto page = static_cast<off_t>(::sysconf(_SC_PAGESIZE));
+  const off_t whole = info.st_size / page * page;
+  if (whole > 0) (void)::posix_fadvise(fd, 0, whole, POSIX_FADV_DONTNEED);
+}
+
 }  // namespace
 
 io::IoError OutputFile::try_open(std::string_view path, Mode mode) {
@@ -257,18 +270,6 @@ void sync_file(const std::string& path, AfterSync after) {
   if (!fd) throw_errno("cannot open", path);
   sync_data(fd.get(), path);
   if (after == AfterSync::kDropCached) drop_cached_pages(fd.get());
-}
-
-void drop_cached_pages(int fd) noexcept {
-  // Only once synced: the kernel drops clean pages only, so before the sync this would drop next
-  // to nothing. The file's last page, if partly filled, stays: a recording still being written
-  // appends to it next, which would otherwise read it back from the disk in the writer's loop.
-  // Where the pages are the file (tmpfs) they stay: nothing is lost either way.
-  struct stat info {};
-  if (::fstat(fd, &info) != 0 || info.st_size <= 0) return;
-  const auto page = static_cast<off_t>(::sysconf(_SC_PAGESIZE));
-  const off_t whole = info.st_size / page * page;
-  if (whole > 0) (void)::posix_fadvise(fd, 0, whole, POSIX_FADV_DONTNEED);
 }
 
 void start_writeback(const std::string& path) noexcept {

@@ -132,8 +132,6 @@ enum class AfterSync : std::uint8_t {
 // fdatasync(2) of the file named `path` (opened read-only, never through a link: fdatasync flushes
 // the file, whichever descriptor asks), then `after`. Throws std::system_error.
 void sync_file(const std::string& path, AfterSync after);
-// The synced file `fd`'s whole pages dropped from the page cache (kDropCached). No throw.
-void drop_cached_pages(int fd) noexcept;
 // The file named `path`'s dirty pages sent on their way to the disk (sync_file_range: start, do
 // not wait), so that syncing several files one after the other waits for the slowest, not for
 // their sum. Best effort: no throw (the sync that follows reports what fails).
