@@ -1,7 +1,6 @@
 // Recordings left unfinished: PcapWriter::abandon() after a failed write, and
 // finish_interrupted_pcap() for a ".part" a killed run left. Either way the file must end on a
 // whole record, so readers (libpcap, tcpdump) read it to the end, and nothing else is touched.
-#include <fcntl.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -234,14 +233,8 @@ TEST_CASE("a recording an interrupted run left leaves the page cache once finish
   // About 5 MiB of whole records, then a record cut in its data, as a killed run leaves it.
   const std::uint64_t whole = write_recording(part, 4000);
   fs::resize_file(part, whole + 700);
-  {
-    // Written and synced long ago (by the run that died): nothing of it in the cache at start.
-    const int fd = ::open(part.c_str(), O_RDONLY | O_CLOEXEC);
-    REQUIRE(fd >= 0);
-    REQUIRE(::fdatasync(fd) == 0);
-    REQUIRE(::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED) == 0);
-    ::close(fd);
-  }
+  // Written and synced long ago (by the run that died): nothing of it in the cache at start.
+  test::drop_from_page_cache(part);
   const auto cached_count = [](const fs::path& file) {
     const std::vector<bool> cached = test::cached_pages(file);
     return static_cast<std::size_t>(std::count(cached.begin(), cached.end(), true));

@@ -35,6 +35,14 @@ std::vector<bool> cached_pages(const fs::path& file) {
   return cached;
 }
 
+void drop_from_page_cache(const fs::path& file) {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  REQUIRE(fd >= 0);
+  REQUIRE(::fdatasync(fd) == 0);
+  REQUIRE(::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED) == 0);
+  ::close(fd);
+}
+
 bool drops_clean_pages(const fs::path& dir) {
   const fs::path probe = dir / ".page-cache-probe";
   const auto page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
@@ -42,11 +50,7 @@ bool drops_clean_pages(const fs::path& dir) {
     const std::string bytes(16 * page, 'p');
     std::ofstream(probe, std::ios::binary) << bytes;
   }
-  const int fd = ::open(probe.c_str(), O_RDONLY | O_CLOEXEC);
-  REQUIRE(fd >= 0);
-  REQUIRE(::fdatasync(fd) == 0);
-  ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
-  ::close(fd);
+  drop_from_page_cache(probe);
   const std::vector<bool> cached = cached_pages(probe);
   fs::remove(probe);
   return std::count(cached.begin(), cached.end(), true) == 0;

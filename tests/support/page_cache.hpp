@@ -13,6 +13,11 @@ namespace pandarcap::test {
 // cached but not up to date as a whole.
 std::vector<bool> cached_pages(const std::filesystem::path& file);
 
+// `file` synced and its pages dropped from the page cache (posix_fadvise POSIX_FADV_DONTNEED), as
+// a file written long ago and not read since: where the file system lets clean pages go, none
+// stays.
+void drop_from_page_cache(const std::filesystem::path& file);
+
 // Whether the file system of `dir` lets clean pages go: not where the pages are the file (tmpfs,
 // ramfs, an overlay over either), whatever it is called. Found by trying: 16 pages written,
 // synced and dropped.
