@@ -21,6 +21,20 @@ extern char** environ;
 
 namespace pandarcap::harness {
 
+void reset_signals_for_exec() noexcept {
+  for (int signal_number = 1; signal_number < NSIG; ++signal_number) {
+    struct sigaction current {};
+    if (::sigaction(signal_number, nullptr, &current) != 0) continue;  // SIGKILL, SIGSTOP, RT
+    if (current.sa_handler == SIG_DFL || current.sa_handler == SIG_IGN) continue;
+    struct sigaction default_action {};
+    default_action.sa_handler = SIG_DFL;
+    ::sigaction(signal_number, &default_action, nullptr);
+  }
+  sigset_t none;
+  sigemptyset(&none);
+  ::sigprocmask(SIG_SETMASK, &none, nullptr);
+}
+
 ChildProcess::ChildProcess(const std::filesystem::path& program,
                            const std::vector<std::string>& args,
                            const std::filesystem::path& log_path,
@@ -50,9 +64,7 @@ ChildProcess::ChildProcess(const std::filesystem::path& program,
       ::dup2(fd, 2);
     }
     // Signals the test runner blocks must not stay blocked in the daemon.
-    sigset_t none;
-    sigemptyset(&none);
-    ::sigprocmask(SIG_SETMASK, &none, nullptr);
+    reset_signals_for_exec();
     ::execve(argv[0], argv.data(), envp.data());
     ::_exit(127);
   }

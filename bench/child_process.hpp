@@ -16,6 +16,13 @@
 
 namespace pandarcap::harness {
 
+// In a child between fork and exec: every caught signal back to its default action, then
+// nothing blocked. Until exec the child has its parent's handlers, and a signal it gets there
+// (the harness stopping it just after the fork) would run the parent's handler in the child:
+// the zero-loss harness's told its guard to remove the work directory, as if the harness itself
+// had been stopped. Async-signal-safe.
+void reset_signals_for_exec() noexcept;
+
 class ChildProcess {
  public:
   // Starts `program args...` with `env` added to the environment; stdout and stderr go to

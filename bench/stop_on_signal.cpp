@@ -1,6 +1,7 @@
 #include "bench/stop_on_signal.hpp"
 
 #include <fcntl.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
@@ -10,6 +11,8 @@
 #include <cerrno>
 #include <stdexcept>
 
+#include "bench/child_process.hpp"
+
 namespace pandarcap::bench {
 
 namespace {
@@ -17,10 +20,11 @@ namespace {
 constexpr int kSlots = 16;
 std::array<std::atomic<int>, kSlots> g_children{};
 std::atomic<bool> g_active{false};
-// The guards: each one's pid and its pipe's write end + 1 (0 and 0: none, or it has been told).
+// The guards: each one's pid and the harness's end of its socket + 1 (0 and 0: none, or it has
+// been told).
 constexpr int kGuards = 4;
 std::array<std::atomic<int>, kGuards> g_guard_pid{};
-std::array<std::atomic<int>, kGuards> g_guard_pipe{};
+std::array<std::atomic<int>, kGuards> g_guard_socket{};
 
 void stop_children() {
   for (auto& slot : g_children) {
@@ -50,12 +54,14 @@ void stop_children() {
 // Tells guard `index` `what` ('r' run, 'q' quit) and waits for it to end. Async-signal-safe.
 void tell_guard(int index, char what) noexcept {
   const auto at = static_cast<std::size_t>(index);
-  const int pipe = g_guard_pipe[at].exchange(0) - 1;
+  const int socket = g_guard_socket[at].exchange(0) - 1;
   const int pid = g_guard_pid[at].exchange(0);
-  if (pipe < 0 || pid <= 0) return;
-  while (::write(pipe, &what, 1) < 0 && errno == EINTR) {
+  if (socket < 0 || pid <= 0) return;
+  // MSG_NOSIGNAL: a guard killed from outside must not take the harness with it by SIGPIPE
+  // (a pipe would raise it in the middle of the handler's clean-up).
+  while (::send(socket, &what, 1, MSG_NOSIGNAL) < 0 && errno == EINTR) {
   }
-  ::close(pipe);
+  ::close(socket);
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
@@ -86,6 +92,7 @@ void spawn_and_wait(const std::vector<std::string>& args) {
   argv.push_back(nullptr);
   const pid_t pid = ::fork();
   if (pid == 0) {
+    harness::reset_signals_for_exec();  // a guard's SIG_IGN stays: its commands outlive a ^C
     const int null = ::open("/dev/null", O_WRONLY);
     if (null >= 0) {
       ::dup2(null, 1);
@@ -126,7 +133,10 @@ int StopOnSignal::guard(std::vector<std::vector<std::string>> commands) {
     ++index;
   if (index == kGuards) throw std::runtime_error("no room for another guard process");
   int ends[2];
-  if (::pipe2(ends, O_CLOEXEC) != 0) throw std::runtime_error("cannot make the guard's pipe");
+  if (::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, ends) != 0) {
+    throw std::runtime_error("cannot make the guard's socket");
+  }
+  Held held;  // the guard must not run the harness's handler before it ignores the signals
   const pid_t pid = ::fork();
   if (pid < 0) {
     ::close(ends[0]);
@@ -138,6 +148,7 @@ int StopOnSignal::guard(std::vector<std::vector<std::string>> commands) {
     // end.
     ::signal(SIGINT, SIG_IGN);
     ::signal(SIGTERM, SIG_IGN);
+    harness::reset_signals_for_exec();
     ::close(ends[1]);
     char what = 0;
     ssize_t n = 0;
@@ -150,7 +161,7 @@ int StopOnSignal::guard(std::vector<std::vector<std::string>> commands) {
     ::_exit(0);
   }
   ::close(ends[0]);
-  g_guard_pipe[static_cast<std::size_t>(index)].store(ends[1] + 1);
+  g_guard_socket[static_cast<std::size_t>(index)].store(ends[1] + 1);
   g_guard_pid[static_cast<std::size_t>(index)].store(pid);
   return index;
 }

@@ -7,9 +7,14 @@
 // The commands run in a guard process forked when they are given, not in the handler: a handler
 // may only make async-signal-safe calls, and a fork from one is not safe in every runtime (under
 // TSan the child's first allocation is reported and it never runs the command). The guard waits
-// on a pipe only the harness writes: 'r' runs the commands, 'q' ends it without, and the pipe's
-// end (the harness died without a word: SIGKILL, a crash) runs them too. It ignores SIGINT and
-// SIGTERM, which a terminal sends to the whole process group.
+// on a socket only the harness writes: 'r' runs the commands, 'q' ends it without, and the
+// socket's end (the harness died without a word: SIGKILL, a crash) runs them too. It ignores
+// SIGINT and SIGTERM, which a terminal sends to the whole process group.
+//
+// The handler is the harness's alone: every child the harness forks drops it before it can get a
+// signal (harness::reset_signals_for_exec). A daemon stopped between its fork and its exec once
+// ran it, told the guard to remove the work directory, and the harness then died of SIGPIPE
+// telling the guard that was gone.
 #pragma once
 
 #include <signal.h>
