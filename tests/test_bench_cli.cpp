@@ -41,6 +41,20 @@ std::string bench() {
   return "'" + test::binary("pandarcap-bench").string() + "'";
 }
 
+// A zero-loss --json run: the report on standard output, what the harness warned about on
+// standard error, kept apart. Merged, a warning the run may or may not print (a dear work
+// directory in a busy /tmp, which the suite itself makes) broke the report's parse.
+struct ReportRun {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+ReportRun run_report(const test::ScratchDir& dir, const std::string& command) {
+  const auto err = dir / "bench.stderr";
+  const auto result = test::run_command(command + " 2>" + test::quoted(err));
+  return {result.exit_code, result.out, harness::read_file(err)};
+}
+
 }  // namespace
 
 TEST_CASE("pandarcap-bench ring --json reports every figure from one run",
@@ -182,10 +196,12 @@ TEST_CASE("pandarcap-bench zero-loss: a short smoke run of the whole harness",
           "[bench][cli][threads]") {
   test::ScratchDir dir("zero-loss");
   const auto report_dir = dir / "report";
-  const auto result = test::run_command(
+  const auto result = run_report(
+      dir,
       bench() + " zero-loss --json --trial-seconds 0.5 --min-rate 1000 --max-rate 3000 --steps 1" +
-      " --sensor-rate 1800 --sensor-rate-rounds 1 --report-dir '" + report_dir.string() + "' 2>&1");
+          " --sensor-rate 1800 --sensor-rate-rounds 1 --report-dir '" + report_dir.string() + "'");
   INFO(result.out);
+  INFO(result.err);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
   for (const char* key : {"daemon_zero_loss_pps", "bare_recvmmsg_zero_loss_pps",
@@ -300,11 +316,12 @@ TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-
           "[bench][cli][threads]") {
   test::ScratchDir dir("zero-loss-daemon-only");
   const auto work = dir / "work";
-  const auto result = test::run_command(
-      bench() + " zero-loss --json --daemon-only --trial-seconds 0.5 --min-rate 1000" +
-      " --max-rate 2000 --steps 0 --sensor-rate 1000 --rpm 1200 --return-mode single" +
-      " --work-dir '" + work.string() + "' 2>&1");
+  const auto result = run_report(
+      dir, bench() + " zero-loss --json --daemon-only --trial-seconds 0.5 --min-rate 1000" +
+               " --max-rate 2000 --steps 0 --sensor-rate 1000 --rpm 1200 --return-mode single" +
+               " --work-dir '" + work.string() + "'");
   INFO(result.out);
+  INFO(result.err);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
   CHECK(report["trials"]["bare_recvmmsg"].empty());
@@ -375,11 +392,13 @@ TEST_CASE(
                              "    pass\n"
                              "print('received', n, flush=True)\n";
   const std::string port = std::to_string(harness::free_udp_port());
-  const auto result = test::run_command(
-      bench() + " zero-loss --json --sensor-rate-only --trial-seconds 1 --sensor-rate 1800" +
-      " --latency-budget-ms 10 --receiver-command 'python3 " + receiver.string() + " " + port +
-      "' --receiver-port " + port + " --report-dir '" + (dir / "report").string() + "' 2>&1");
+  const auto result = run_report(
+      dir, bench() + " zero-loss --json --sensor-rate-only --trial-seconds 1 --sensor-rate 1800" +
+               " --latency-budget-ms 10 --receiver-command 'python3 " + receiver.string() + " " +
+               port + "' --receiver-port " + port + " --report-dir '" + (dir / "report").string() +
+               "'");
   INFO(result.out);
+  INFO(result.err);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
   CHECK(report["trials"]["daemon"].empty());  // no search
@@ -598,11 +617,12 @@ TEST_CASE(
   test::ScratchDir dir("zero-loss-behind");
   // Far above one sensor's rate, so that stages may fall behind; the keys must be there either
   // way, and agree with the trials' per-stage loss.
-  const auto result = test::run_command(
-      bench() + " zero-loss --json --sensor-rate-only --compare-mcap --sensor-rate 50000" +
-      " --trial-seconds 1 --sensor-rate-rounds 1 --report-dir '" + (dir / "report").string() +
-      "' 2>&1");
+  const auto result = run_report(
+      dir, bench() + " zero-loss --json --sensor-rate-only --compare-mcap --sensor-rate 50000" +
+               " --trial-seconds 1 --sensor-rate-rounds 1 --report-dir '" +
+               (dir / "report").string() + "'");
   INFO(result.out);
+  INFO(result.err);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
   const json& s = report["at_sensor_rate"];
@@ -649,11 +669,12 @@ TEST_CASE(
   test::ScratchDir dir("zero-loss-tcpdump");
   const auto config = dir / "frames-off.toml";
   std::ofstream(config) << "[output]\nframes = false\n";
-  const auto result = test::run_command(
-      bench() + " zero-loss --json --sensor-rate-only --daemon-only --compare-tcpdump 2" +
-      " --trial-seconds 1 --sensor-rate 1800 --config '" + config.string() + "' --report-dir '" +
-      (dir / "report").string() + "' 2>&1");
+  const auto result = run_report(
+      dir, bench() + " zero-loss --json --sensor-rate-only --daemon-only --compare-tcpdump 2" +
+               " --trial-seconds 1 --sensor-rate 1800 --config '" + config.string() +
+               "' --report-dir '" + (dir / "report").string() + "'");
   INFO(result.out);
+  INFO(result.err);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
   const json& c = report["tcpdump_comparison"];
@@ -734,11 +755,12 @@ TEST_CASE("pandarcap-bench zero-loss --veth: sent from a namespace of its own, n
   }
   // Budget 0: the sensor-rate trial is also the budget-0 one, so one daemon trial in all.
   test::ScratchDir dir("zero-loss-veth");
-  const auto result = test::run_command(
-      bench() + " zero-loss --veth --json --sensor-rate-only --daemon-only --trial-seconds 1" +
-      " --latency-budget-ms 0 --sensor-rate 1800 --report-dir '" + (dir / "report").string() +
-      "' 2>&1");
+  const auto result = run_report(
+      dir, bench() + " zero-loss --veth --json --sensor-rate-only --daemon-only --trial-seconds 1" +
+               " --latency-budget-ms 0 --sensor-rate 1800 --report-dir '" +
+               (dir / "report").string() + "'");
   INFO(result.out);
+  INFO(result.err);
   REQUIRE(result.exit_code == 0);
   const json report = json::parse(result.out);
   const json& settings = report["settings"];
@@ -795,12 +817,14 @@ TEST_CASE("pandarcap-bench zero-loss --veth: sent from a namespace of its own, n
 TEST_CASE("pandarcap-bench zero-loss --compare-receivers: socket and packet_ring in one run",
           "[bench][cli][threads][.compare_receivers]") {
   REQUIRE(::geteuid() == 0);
+  test::ScratchDir dir("zero-loss-compare-receivers");
   for (const std::string path : {"", " --veth"}) {
     INFO("path:" << path);
-    const auto result = test::run_command(
-        bench() + " zero-loss --json --sensor-rate-only --daemon-only --trial-seconds 1" +
-        " --latency-budget-ms 0 --sensor-rate 1800 --compare-receivers" + path + " 2>&1");
+    const auto result = run_report(
+        dir, bench() + " zero-loss --json --sensor-rate-only --daemon-only --trial-seconds 1" +
+                 " --latency-budget-ms 0 --sensor-rate 1800 --compare-receivers" + path);
     INFO(result.out);
+    INFO(result.err);
     REQUIRE(result.exit_code == 0);
     const json report = json::parse(result.out);
     const json& s = report["at_sensor_rate"];
@@ -949,7 +973,10 @@ TEST_CASE("pandarcap-bench zero-loss stopped by SIGINT: no trial's files and no 
   REQUIRE(harness::wait_until([&] { return std::filesystem::exists(work / "daemon_001"); },
                               std::chrono::seconds(30)));
   bench_run.signal(SIGINT);
-  CHECK(bench_run.wait_exit(std::chrono::seconds(20)) == -SIGINT);
+  const std::optional<int> status = bench_run.wait_exit(std::chrono::seconds(20));
+  INFO("exit status " << (status ? std::to_string(*status) : "none") << ", log:\n"
+                      << bench_run.log());
+  CHECK(status == -SIGINT);
   INFO(listing(tmpdir));
   CHECK_FALSE(std::filesystem::exists(work));
   // No process of the run's left: none has the work directory on its command line.
