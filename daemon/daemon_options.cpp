@@ -238,6 +238,12 @@ DecodeWorkerOptions decode_worker_options(const DaemonConfig& config, DecoderTar
   return dopt;
 }
 
+std::uint32_t ring_slots(const DaemonConfig& config, const RunSource& source) {
+  const bool staging =
+      source.kind != RunSource::Kind::kReplay && config.input.receiver == "packet_ring";
+  return staging ? std::min(config.ring.slots, kPacketRingStagingSlots) : config.ring.slots;
+}
+
 UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource& source) {
   const bool simulate = source.kind == RunSource::Kind::kSimulated;
   UdpReceiverOptions ro;

@@ -74,6 +74,14 @@ DecodeWorkerOptions decode_worker_options(
 // --port), never a multicast group.
 UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource& source);
 
+// The slots of the ring the decoder reads: ring.slots, except where the packet ring's receiver
+// stages its blocks there (a live or simulated source with input.receiver = "packet_ring"): at most
+// kPacketRingStagingSlots. There the ring only ever holds a part of one kernel block (the decoder
+// empties it before it takes more), and 4096 slots (6 MiB) cycled every datagram through memory
+// the cache had let go since the ring last came round.
+inline constexpr std::uint32_t kPacketRingStagingSlots = 256;
+std::uint32_t ring_slots(const DaemonConfig& config, const RunSource& source);
+
 // The replay's options (source kReplay).
 ReplayOptions replay_options(const DaemonConfig& config, const RunSource& source);
 

@@ -316,12 +316,15 @@ int run(const CommandLine& command_line) {
 
   // All the memory, now: arenas sized for the model (every model's when the packets choose it).
   const std::uint32_t points_per_arena = arena_points(config, options.source.model);
-  Pipeline pipe(config, points_per_arena);
+  const std::uint32_t slots = ring_slots(config, options.source);
+  Pipeline pipe(config, points_per_arena, slots);
   spdlog::info(
-      "memory: ring {} slots x {} B, {} frame arenas x {} points, {} raw batches x {} "
+      "memory: ring {} slots x {} B{}, {} frame arenas x {} points, {} raw batches x {} "
       "packets",
-      config.ring.slots, sizeof(PacketSlot), config.arenas.count, points_per_arena,
-      Pipeline::raw_batches(config), config.arenas.packets_per_frame);
+      slots, sizeof(PacketSlot),
+      slots < config.ring.slots ? " (the packet ring's blocks staged there)" : "",
+      config.arenas.count, points_per_arena, Pipeline::raw_batches(config),
+      config.arenas.packets_per_frame);
   stop_if_requested("allocating memory");
 
   const std::unique_ptr<PacketSource> source = open_source(config, options.source);

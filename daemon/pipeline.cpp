@@ -53,8 +53,9 @@ ArenaMemory arena_memory_for(const DaemonConfig& c, std::uint32_t points_per_fra
 
 // A refused allocation names the keys that size what did not fit: the arenas their own
 // (arena_memory_for), the ring and the raw batches here.
-Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame) try
-    : ring(c.ring.slots),
+Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame,
+                   std::uint32_t ring_slots) try
+    : ring(ring_slots),
       arena_memory(arena_memory_for(c, points_per_frame)),
       free_arenas(power_of_two_at_least(c.arenas.count)),
       free_raw(power_of_two_at_least(raw_batches(c))),
@@ -76,7 +77,7 @@ Pipeline::Pipeline(const DaemonConfig& c, std::uint32_t points_per_frame) try
   throw std::runtime_error(fmt::format(
       "memory: the packet ring ({} slots x {} B, ring.slots) or the raw batches ({} x {} "
       "packets, arenas.count and arenas.packets_per_frame) do not fit: cannot allocate them",
-      c.ring.slots, sizeof(PacketSlot), raw_batches(c), c.arenas.packets_per_frame));
+      ring_slots, sizeof(PacketSlot), raw_batches(c), c.arenas.packets_per_frame));
 }
 
 void PipelineThreads::start(const char* name, std::function<void()> setup,

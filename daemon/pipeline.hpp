@@ -31,8 +31,9 @@
 namespace pandarcap {
 
 struct Pipeline {
-  // `points_per_frame`: each arena's (arena_points(), daemon_options.hpp).
-  Pipeline(const DaemonConfig& config, std::uint32_t points_per_frame);
+  // `points_per_frame`: each arena's (arena_points(), daemon_options.hpp); `ring_slots`: the
+  // ring's (ring_slots(), daemon_options.hpp: ring.slots, fewer for the packet ring).
+  Pipeline(const DaemonConfig& config, std::uint32_t points_per_frame, std::uint32_t ring_slots);
 
   // As many raw batches as arenas: the recording may fall behind as far as the frames can.
   static std::uint32_t raw_batches(const DaemonConfig& config) { return config.arenas.count; }

@@ -118,7 +118,7 @@ TEST_CASE("Pipeline: every arena in the one mapping, aligned for O_DIRECT, none 
     for (const std::uint32_t points : {1000u, 1001u, 180'000u}) {
       CAPTURE(count, points);
       config.arenas.count = count;
-      Pipeline pipeline(config, points);
+      Pipeline pipeline(config, points, config.ring.slots);
       REQUIRE(pipeline.arenas.size() == count);
       const std::uint8_t* const begin = pipeline.arena_memory.data();
       const std::uint8_t* const end = begin + pipeline.arena_memory.size();

@@ -159,6 +159,32 @@ TEST_CASE("the simulated sensor's socket is loopback on a free port unless --por
   CHECK(replay_options(config, replay).destination_port == 2370);
 }
 
+// The packet ring's receiver copies a part of one kernel block at a time into the decoder's ring,
+// emptied first: more slots than kPacketRingStagingSlots there only spread the copies over memory
+// out of the cache. A replay and the socket receiver fill the ring from a thread of their own,
+// and ring.slots is what they may queue.
+TEST_CASE("the decoder's ring: ring.slots except where the packet ring stages its blocks",
+          "[daemon][options]") {
+  for (const std::uint32_t slots : {64u, 128u, 256u, 512u, 4096u, 1u << 20}) {
+    for (const char* receiver : {"socket", "packet_ring"}) {
+      for (const RunSource::Kind kind :
+           {RunSource::Kind::kLive, RunSource::Kind::kSimulated, RunSource::Kind::kReplay}) {
+        CAPTURE(slots, receiver, static_cast<int>(kind));
+        DaemonConfig config;
+        config.ring.slots = slots;
+        config.input.receiver = receiver;
+        RunSource source;
+        source.kind = kind;
+        const bool staged =
+            std::string(receiver) == "packet_ring" && kind != RunSource::Kind::kReplay;
+        CHECK(ring_slots(config, source) ==
+              (staged ? std::min(slots, kPacketRingStagingSlots) : slots));
+      }
+    }
+  }
+  CHECK(kPacketRingStagingSlots == 256);
+}
+
 TEST_CASE("pipeline threads stop and join in the reverse of their start, also on a throw",
           "[daemon][threads]") {
   std::mutex mutex;

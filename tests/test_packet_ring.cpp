@@ -480,6 +480,9 @@ TEST_CASE("packet_ring: the decode thread reads the ring: no receive thread, one
     INFO(log);
     CHECK(log.find("threads.receive_cpu and receive_priority are not used with input.receiver = "
                    "\"packet_ring\"") != std::string::npos);
+    // The ring between the kernel's blocks and the decoder stages them: 256 of ring.slots' 4096.
+    CHECK(log.find("memory: ring 256 slots x") != std::string::npos);
+    CHECK(log.find("(the packet ring's blocks staged there)") != std::string::npos);
     const auto threads = test::threads_of(daemon.process->pid());
     CHECK(threads.count("pc-receive") == 0);
     REQUIRE(threads.count("pc-decode") == 1);
