@@ -1018,3 +1018,67 @@ TEST_CASE("pandarcap-bench zero-loss with a $TMPDIR that does not exist, or a ru
   CHECK(failed.exit_code != 0);
   CHECK(std::filesystem::is_empty(tmpdir));
 }
+
+namespace {
+
+// The pids of the processes whose command line names `path` (a run's daemon, tcpdump, guard).
+std::vector<int> processes_naming(const std::filesystem::path& path) {
+  std::vector<int> pids;
+  for (const auto& entry : std::filesystem::directory_iterator("/proc")) {
+    const std::string name = entry.path().filename().string();
+    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream cmdline(entry.path() / "cmdline");
+    const std::string line((std::istreambuf_iterator<char>(cmdline)), {});
+    if (line.find(path.string()) != std::string::npos) pids.push_back(std::stoi(name));
+  }
+  return pids;
+}
+
+// Whether a file named `name` is anywhere under `dir`.
+bool holds_file_named(const std::filesystem::path& dir, const std::string& name) {
+  std::error_code ec;
+  for (std::filesystem::recursive_directory_iterator it(dir, ec), end; !ec && it != end;
+       it.increment(ec)) {
+    if (it->path().filename() == name) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+// With --work-dir the trials' logs stay and their outputs go, on a signal too (the guard removes
+// daemon_*/out). tcpdump's recording of a --compare-tcpdump round is such an output (a finished
+// round removes it), but it lives in daemon_NNN/, not in out/: a SIGINT during that round leaves
+// it, as big as the round made it. Every time.
+TEST_CASE("zero-loss --work-dir stopped by SIGINT in a tcpdump round keeps no recording",
+          "[bench][cli][signals]") {
+  test::ScratchDir dir("zero-loss-sigint-tcpdump");
+  const auto work = dir / "work";
+  harness::ChildProcess bench_run(
+      test::binary("pandarcap-bench"),
+      {"zero-loss", "--json", "--daemon-only", "--sensor-rate-only", "--trial-seconds", "5",
+       "--sensor-rate", "1800", "--compare-tcpdump", "1", "--work-dir", work.string()},
+      dir / "bench.log");
+  // tcpdump listening and recording the round's traffic.
+  REQUIRE(harness::wait_until(
+      [&] {
+        std::error_code ec;
+        for (const auto& entry : std::filesystem::directory_iterator(work, ec)) {
+          if (harness::read_file(entry.path() / "tcpdump.log").find("listening on") !=
+              std::string::npos) {
+            return true;
+          }
+        }
+        return false;
+      },
+      std::chrono::seconds(60)));
+  bench_run.signal(SIGINT);
+  const std::optional<int> status = bench_run.wait_exit(std::chrono::seconds(20));
+  INFO("exit status " << (status ? std::to_string(*status) : "none") << ", log:\n"
+                      << bench_run.log());
+  CHECK(status == -SIGINT);
+  INFO(listing(work));
+  CHECK(holds_file_named(work, "daemon.log"));  // the logs are kept
+  CHECK_FALSE(holds_file_named(work, "tcpdump.pcap"));
+  CHECK(processes_naming(work).empty());
+}
