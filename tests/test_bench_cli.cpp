@@ -1082,3 +1082,30 @@ TEST_CASE("zero-loss --work-dir stopped by SIGINT in a tcpdump round keeps no re
   CHECK_FALSE(holds_file_named(work, "tcpdump.pcap"));
   CHECK(processes_naming(work).empty());
 }
+
+// A harness started with SIGINT ignored (a background job of a non-interactive shell, `cmd &`,
+// which POSIX shells make immune to the terminal's ^C) must stay immune: the clean-up handler is
+// for a SIGINT that would have stopped it. StopOnSignal installs its handler over the inherited
+// SIG_IGN, so the same SIGINT is ignored during start-up and stops the run once the first trial
+// is under way. Every time.
+TEST_CASE("zero-loss started with SIGINT ignored is not stopped by SIGINT",
+          "[bench][cli][signals]") {
+  test::ScratchDir dir("zero-loss-sigint-ignored");
+  const auto work = dir / "work";
+  const std::string command =
+      "trap '' INT; exec " + bench() +
+      " zero-loss --json --daemon-only --sensor-rate-only --trial-seconds 0.5 --sensor-rate 1800"
+      " --work-dir " +
+      test::quoted(work);
+  harness::ChildProcess bench_run("/bin/sh", {"-c", command}, dir / "bench.log");
+  REQUIRE(harness::wait_until(
+      [&] { return std::filesystem::exists(work / "daemon_000" / "daemon.log"); },
+      std::chrono::seconds(30)));
+  bench_run.signal(SIGINT);
+  const std::optional<int> status = bench_run.wait_exit(std::chrono::seconds(60));
+  INFO("exit status " << (status ? std::to_string(*status) : "none") << ", log:\n"
+                      << bench_run.log());
+  CHECK(status == 0);
+  for (const int pid : processes_naming(work))
+    ::kill(pid, SIGKILL);
+}
