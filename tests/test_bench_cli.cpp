@@ -1109,3 +1109,43 @@ TEST_CASE("zero-loss started with SIGINT ignored is not stopped by SIGINT",
   for (const int pid : processes_naming(work))
     ::kill(pid, SIGKILL);
 }
+
+// A terminal that hangs up (an ssh session dropped during a long run) sends SIGHUP to the job's
+// process group. The harness has no clean-up for it and dies; its guard dies with it (it ignores
+// only SIGINT and SIGTERM) and removes nothing; and pandarcapd takes SIGHUP as "rotate the
+// recordings" and keeps running, orphaned, writing into the work directory left in $TMPDIR (by
+// default /var/tmp). Every time.
+TEST_CASE("zero-loss whose terminal hangs up leaves no daemon and no work directory",
+          "[bench][cli][signals]") {
+  test::ScratchDir dir("zero-loss-sighup-group");
+  const auto tmpdir = dir / "tmp";
+  std::filesystem::create_directories(tmpdir);
+  // In a session and process group of its own (setsid execs it in place: same pid), as a job.
+  harness::ChildProcess bench_run("/usr/bin/setsid",
+                                  {test::binary("pandarcap-bench").string(), "zero-loss", "--json",
+                                   "--daemon-only", "--sensor-rate-only", "--trial-seconds", "5",
+                                   "--sensor-rate", "1800"},
+                                  dir / "bench.log", {"TMPDIR=" + tmpdir.string()});
+  const auto work = tmpdir / fmt::format("pandarcap-bench-{}", bench_run.pid());
+  REQUIRE(harness::wait_until(
+      [&] {
+        return harness::read_file(work / "daemon_000" / "daemon.log").find("ready:") !=
+                   std::string::npos &&
+               ::getpgid(bench_run.pid()) == bench_run.pid();
+      },
+      std::chrono::seconds(30)));
+  ::kill(-bench_run.pid(), SIGHUP);
+  const std::optional<int> status = bench_run.wait_exit(std::chrono::seconds(20));
+  INFO("exit status " << (status ? std::to_string(*status) : "none") << ", log:\n"
+                      << bench_run.log());
+  CHECK(status == -SIGHUP);
+  // The handler's clean-up, had there been one, is done once the work directory is gone.
+  harness::wait_until([&] { return !std::filesystem::exists(work); }, std::chrono::seconds(10));
+  INFO(listing(tmpdir));
+  CHECK_FALSE(std::filesystem::exists(work));
+  const std::vector<int> left = processes_naming(work);
+  INFO("left running: " << left.size());
+  CHECK(left.empty());
+  for (const int pid : left)
+    ::kill(pid, SIGKILL);
+}
