@@ -72,6 +72,18 @@ void tell_guards(char what) noexcept {
     tell_guard(index, what);
 }
 
+// The signals that stop a run: ^C, kill's default, a terminal that hangs up (an ssh session
+// dropped during a long run: pandarcapd takes SIGHUP as "rotate" and would run on, orphaned).
+constexpr std::array<int, 3> kStopSignals{SIGINT, SIGTERM, SIGHUP};
+
+sigset_t stop_signals() {
+  sigset_t set;
+  ::sigemptyset(&set);
+  for (const int signal_number : kStopSignals)
+    ::sigaddset(&set, signal_number);
+  return set;
+}
+
 void on_signal(int signal_number) {
   const int saved_errno = errno;  // the interrupted code's, until the signal ends the process
   stop_children();
@@ -112,17 +124,21 @@ StopOnSignal::StopOnSignal() {
   g_active.store(true);
   struct sigaction action {};
   action.sa_handler = on_signal;
-  ::sigemptyset(&action.sa_mask);
-  // Either signal holds off the other while the handler cleans up.
-  ::sigaddset(&action.sa_mask, SIGINT);
-  ::sigaddset(&action.sa_mask, SIGTERM);
-  ::sigaction(SIGINT, &action, &old_int_);
-  ::sigaction(SIGTERM, &action, &old_term_);
+  action.sa_mask = stop_signals();  // each holds off the others while the handler cleans up
+  for (std::size_t i = 0; i < kStopSignals.size(); ++i) {
+    // One the harness was started ignoring stays ignored: a background job of a script (`cmd &`
+    // ignores SIGINT), nohup (SIGHUP). Its handler would stop a run that was meant to go on.
+    ::sigaction(kStopSignals[i], nullptr, &old_[i]);
+    if (old_[i].sa_handler == SIG_IGN) continue;
+    ::sigaction(kStopSignals[i], &action, nullptr);
+    installed_[i] = true;
+  }
 }
 
 StopOnSignal::~StopOnSignal() {
-  ::sigaction(SIGINT, &old_int_, nullptr);
-  ::sigaction(SIGTERM, &old_term_, nullptr);
+  for (std::size_t i = 0; i < kStopSignals.size(); ++i) {
+    if (installed_[i]) ::sigaction(kStopSignals[i], &old_[i], nullptr);
+  }
   g_active.store(false);
   tell_guards('q');
 }
@@ -144,10 +160,10 @@ int StopOnSignal::guard(std::vector<std::vector<std::string>> commands) {
     throw std::runtime_error("cannot fork the guard process");
   }
   if (pid == 0) {
-    // The guard: outlives a terminal's SIGINT to the group, waits for its word or the harness's
-    // end.
-    ::signal(SIGINT, SIG_IGN);
-    ::signal(SIGTERM, SIG_IGN);
+    // The guard: outlives a terminal's SIGINT or hang-up to the group, waits for its word or the
+    // harness's end.
+    for (const int signal_number : kStopSignals)
+      ::signal(signal_number, SIG_IGN);
     harness::reset_signals_for_exec();
     ::close(ends[1]);
     char what = 0;
@@ -171,11 +187,8 @@ void StopOnSignal::run_guarded_now(int guard) noexcept {
 }
 
 StopOnSignal::Held::Held() {
-  sigset_t both;
-  ::sigemptyset(&both);
-  ::sigaddset(&both, SIGINT);
-  ::sigaddset(&both, SIGTERM);
-  ::pthread_sigmask(SIG_BLOCK, &both, &old_);
+  const sigset_t stopping = stop_signals();
+  ::pthread_sigmask(SIG_BLOCK, &stopping, &old_);
 }
 
 StopOnSignal::Held::~Held() {
@@ -200,7 +213,12 @@ StopOnSignal::Child::Child(int pid) {
 }
 
 StopOnSignal::Child::~Child() {
+  release();
+}
+
+void StopOnSignal::Child::release() noexcept {
   if (slot_ >= 0) g_children[static_cast<std::size_t>(slot_)].store(0);
+  slot_ = -1;
 }
 
 }  // namespace pandarcap::bench

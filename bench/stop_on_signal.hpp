@@ -1,15 +1,17 @@
-// What a zero-loss run leaves behind when SIGINT or SIGTERM stops it: nothing. While a
-// StopOnSignal lives, those signals stop the children the harness registered (the daemon, tcpdump,
-// another receiver: SIGTERM, then SIGKILL after 5 s), have the guard run its commands (the veth
-// pair's removal), and then take their usual course: the harness ends by the signal. Without it a
-// daemon would outlive the harness that started it, and a veth pair and a namespace would stay.
+// What a zero-loss run leaves behind when SIGINT, SIGTERM or SIGHUP stops it: nothing. While a
+// StopOnSignal lives, those signals (each one the harness was not started ignoring: a script's
+// background job ignores SIGINT, nohup SIGHUP) stop the children the harness registered (the
+// daemon, tcpdump, another receiver: SIGTERM, then SIGKILL after 5 s), have the guard run its
+// commands (the veth pair's removal), and then take their usual course: the harness ends by the
+// signal. Without it a daemon would outlive the harness that started it, and a veth pair and a
+// namespace would stay.
 //
 // The commands run in a guard process forked when they are given, not in the handler: a handler
 // may only make async-signal-safe calls, and a fork from one is not safe in every runtime (under
 // TSan the child's first allocation is reported and it never runs the command). The guard waits
 // on a socket only the harness writes: 'r' runs the commands, 'q' ends it without, and the
 // socket's end (the harness died without a word: SIGKILL, a crash) runs them too. It ignores
-// SIGINT and SIGTERM, which a terminal sends to the whole process group.
+// SIGINT, SIGTERM and SIGHUP, which a terminal sends to the whole process group.
 //
 // The handler is the harness's alone: every child the harness forks drops it before it can get a
 // signal (harness::reset_signals_for_exec). A daemon stopped between its fork and its exec once
@@ -19,6 +21,7 @@
 
 #include <signal.h>
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -38,7 +41,7 @@ class StopOnSignal {
   // Has guard `guard` run its commands now and waits for it (a no-op once it has).
   void run_guarded_now(int guard) noexcept;
 
-  // SIGINT and SIGTERM held off in this thread while it lives (or until release()): a child
+  // SIGINT, SIGTERM and SIGHUP held off in this thread while it lives (or until release()): a child
   // forked meanwhile is registered (Child) before the handler can look for it, or a signal in
   // between would leave it running. A child's own mask is reset (harness::ChildProcess).
   class Held {
@@ -55,11 +58,13 @@ class StopOnSignal {
   };
 
   // A child of the harness's, stopped by the handler while this lives (a no-op with no
-  // StopOnSignal alive).
+  // StopOnSignal alive), or until release(): call that once the child is reaped, or a signal
+  // would send SIGTERM to its pid, which the system may have given to another process since.
   class Child {
    public:
     explicit Child(int pid);
     ~Child();
+    void release() noexcept;
     Child(const Child&) = delete;
     Child& operator=(const Child&) = delete;
 
@@ -68,8 +73,8 @@ class StopOnSignal {
   };
 
  private:
-  struct sigaction old_int_ {};
-  struct sigaction old_term_ {};
+  std::array<struct sigaction, 3> old_{};  // SIGINT, SIGTERM, SIGHUP as they were
+  std::array<bool, 3> installed_{};        // the handler put in their place (not ignored)
 };
 
 // Runs `argv` (argv[0] the program's path) with its output to /dev/null and waits for it.

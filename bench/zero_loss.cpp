@@ -221,7 +221,9 @@ class WorkDirectory {
     if (temporary_) {
       stop.guard({{"/bin/rm", "-rf", "--", path_.string()}});
     } else {
-      stop.guard({{"/bin/sh", "-c", "rm -rf -- \"$1\"/daemon_*/out", "sh", path_.string()}});
+      // The outputs: the daemon's, and tcpdump's recording beside it (--compare-tcpdump).
+      stop.guard({{"/bin/sh", "-c", "rm -rf -- \"$1\"/daemon_*/out \"$1\"/daemon_*/tcpdump.pcap",
+                   "sh", path_.string()}});
     }
   }
   ~WorkDirectory() {

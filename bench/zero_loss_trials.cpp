@@ -168,6 +168,7 @@ class TcpdumpBeside {
     const std::uint64_t rss = harness::process_memory_bytes(process_.pid(), "VmHWM");
     process_.signal(SIGTERM);
     const std::optional<int> status = process_.wait_exit(10s);
+    if (status) stop_.release();  // reaped: its pid is no longer its own
     const std::string log = process_.log();
     std::error_code ec;
     const auto bytes = fs::file_size(file_, ec);
@@ -290,6 +291,9 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
   const fs::path dir = work_ / fmt::format("daemon_{:03d}", trials_++);
   fs::create_directories(dir);
   const fs::path out = dir / "out";
+  // Removed when the run ends, also when this trial throws (a daemon that did not start).
+  emptied_.push_back(out);
+  if (beside_tcpdump) emptied_.push_back(dir / "tcpdump.pcap");
   const std::uint16_t port = harness::free_udp_port();
   std::vector<std::string> args;
   if (!o_.daemon_config.empty()) args = {"-c", o_.daemon_config};
@@ -316,7 +320,7 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
   args.insert(args.end(), extra_args.begin(), extra_args.end());
   StopOnSignal::Held held;  // until the daemon is registered: a signal must find it
   harness::ChildProcess process(daemon_, args, dir / "daemon.log");
-  const StopOnSignal::Child stopped_on_signal(process.pid());
+  StopOnSignal::Child stopped_on_signal(process.pid());
   held.release();
   if (!harness::wait_until([&] { return process.log().find("ready:") != std::string::npos; },
                            15s)) {
@@ -370,6 +374,7 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
   }
   process.signal(SIGTERM);
   const std::optional<int> status = process.wait_exit(30s);
+  if (status) stopped_on_signal.release();  // reaped: its pid is no longer its own
   const auto health = last_health(out);
   if (!status || *status != 0 || !health) {
     throw std::runtime_error(
@@ -440,7 +445,6 @@ ordered_json ZeroLossTrials::daemon_trial(double rate, double seconds,
   t["kernel"] = kernel;
   if (tcpdump) t["tcpdump"] = tcpdump_result;
   empty_files(out);
-  emptied_.push_back(out);
   return t;
 }
 
@@ -455,7 +459,7 @@ ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
   const fs::path log = work_ / "other_receiver.log";
   StopOnSignal::Held held;  // until the receiver is registered: a signal must find it
   harness::ChildProcess process("/bin/sh", {"-c", "exec " + o_.receiver_command}, log);
-  const StopOnSignal::Child stopped_on_signal(process.pid());
+  StopOnSignal::Child stopped_on_signal(process.pid());
   held.release();
   if (!harness::wait_until([&] { return udp_port_queued_bytes(o_.receiver_port).has_value(); },
                            15s)) {
@@ -471,6 +475,7 @@ ordered_json ZeroLossTrials::other_receiver_trial(double rate, double seconds) {
   harness::wait_until([&] { return udp_port_queued_bytes(o_.receiver_port).value_or(0) == 0; }, 5s);
   process.signal(SIGTERM);
   const std::optional<int> status = process.wait_exit(10s);
+  if (status) stopped_on_signal.release();  // reaped: its pid is no longer its own
   const std::optional<std::uint64_t> received = last_received_line(process.log());
   ordered_json t = {{"command", o_.receiver_command},
                     {"port", o_.receiver_port},

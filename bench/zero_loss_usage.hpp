@@ -34,7 +34,10 @@ Options:
   --config FILE          daemon configuration (the harness sets address, port and output dir)
   --work-dir DIR         keep daemon logs there (default: a temporary directory in $TMPDIR,
                          else /var/tmp, removed); on ext4 it gets the top-directory flag
-                         (chattr +T) so that each trial writes away from files removed nearby
+                         (chattr +T) so that each trial writes away from files removed nearby.
+                         The trials' outputs go at the end, on an error, and on SIGINT, SIGTERM
+                         or SIGHUP (each one not ignored when the bench started), with the
+                         daemon and tcpdump the bench started
   --daemon-only          skip the reference receivers
   --sensor-rate-only     only the trials at the sensor's rate (no rate search)
   --latency-budget-ms N  the daemon's latency.budget_ms in every trial (default: its own, 5);
@@ -65,7 +68,7 @@ Options:
                          pcb<PID>n with 10.231.X.1/30 here, where the daemon, the reference loops
                          and tcpdump receive; the far end pcb<PID>f (.2) in network namespace
                          pandarcap-bench-<PID>, where the generator sends from. Both removed at
-                         exit, on an error, and on SIGINT/SIGTERM
+                         exit, on an error, and on SIGINT/SIGTERM/SIGHUP
   --interface IFACE      a real interface instead (with --receiver packet_ring or
                          --compare-receivers): the daemon's packet_ring and tcpdump watch IFACE,
                          the daemon and the loops bind 0.0.0.0, and the generator sends to

@@ -1051,7 +1051,7 @@ bool holds_file_named(const std::filesystem::path& dir, const std::string& name)
 // round removes it), but it lives in daemon_NNN/, not in out/: a SIGINT during that round leaves
 // it, as big as the round made it. Every time.
 TEST_CASE("zero-loss --work-dir stopped by SIGINT in a tcpdump round keeps no recording",
-          "[bench][cli][signals]") {
+          "[bench][cli][signals][threads]") {
   test::ScratchDir dir("zero-loss-sigint-tcpdump");
   const auto work = dir / "work";
   harness::ChildProcess bench_run(
@@ -1089,7 +1089,7 @@ TEST_CASE("zero-loss --work-dir stopped by SIGINT in a tcpdump round keeps no re
 // SIG_IGN, so the same SIGINT is ignored during start-up and stops the run once the first trial
 // is under way. Every time.
 TEST_CASE("zero-loss started with SIGINT ignored is not stopped by SIGINT",
-          "[bench][cli][signals]") {
+          "[bench][cli][signals][threads]") {
   test::ScratchDir dir("zero-loss-sigint-ignored");
   const auto work = dir / "work";
   const std::string command =
@@ -1116,16 +1116,16 @@ TEST_CASE("zero-loss started with SIGINT ignored is not stopped by SIGINT",
 // recordings" and keeps running, orphaned, writing into the work directory left in $TMPDIR (by
 // default /var/tmp). Every time.
 TEST_CASE("zero-loss whose terminal hangs up leaves no daemon and no work directory",
-          "[bench][cli][signals]") {
+          "[bench][cli][signals][threads]") {
   test::ScratchDir dir("zero-loss-sighup-group");
   const auto tmpdir = dir / "tmp";
   std::filesystem::create_directories(tmpdir);
   // In a session and process group of its own (setsid execs it in place: same pid), as a job.
-  harness::ChildProcess bench_run("/usr/bin/setsid",
-                                  {test::binary("pandarcap-bench").string(), "zero-loss", "--json",
-                                   "--daemon-only", "--sensor-rate-only", "--trial-seconds", "5",
-                                   "--sensor-rate", "1800"},
-                                  dir / "bench.log", {"TMPDIR=" + tmpdir.string()});
+  harness::ChildProcess bench_run(
+      "/usr/bin/setsid",
+      {test::binary("pandarcap-bench").string(), "zero-loss", "--json", "--daemon-only",
+       "--sensor-rate-only", "--trial-seconds", "5", "--sensor-rate", "1800"},
+      dir / "bench.log", {"TMPDIR=" + tmpdir.string()});
   const auto work = tmpdir / fmt::format("pandarcap-bench-{}", bench_run.pid());
   REQUIRE(harness::wait_until(
       [&] {

@@ -120,3 +120,39 @@ TEST_CASE("a guard killed from outside leaves the harness and the other guards w
   stop.reset();  // tells no guard twice
   CHECK(forked_children().empty());
 }
+
+// A signal the harness was started ignoring stays ignored (a script's `cmd &` ignores SIGINT,
+// nohup SIGHUP); the others get the handler while it lives and what they had back after.
+TEST_CASE("the stop handler leaves an ignored signal ignored and restores the others",
+          "[bench][signals]") {
+  const auto handler_of = [](int signal_number) {
+    struct sigaction current {};
+    ::sigaction(signal_number, nullptr, &current);
+    return current.sa_handler;
+  };
+  for (const int ignored : {SIGINT, SIGTERM, SIGHUP}) {
+    CAPTURE(ignored);
+    struct sigaction before[3]{};
+    const int stopping[3] = {SIGINT, SIGTERM, SIGHUP};
+    for (int i = 0; i < 3; ++i)
+      ::sigaction(stopping[i], nullptr, &before[i]);
+    ::signal(ignored, SIG_IGN);
+    {
+      const StopOnSignal stop;
+      for (int i = 0; i < 3; ++i) {
+        CAPTURE(stopping[i]);
+        if (stopping[i] == ignored) {
+          CHECK(handler_of(stopping[i]) == SIG_IGN);
+        } else {
+          CHECK(handler_of(stopping[i]) != SIG_IGN);
+          CHECK(handler_of(stopping[i]) != before[i].sa_handler);
+        }
+      }
+    }
+    CHECK(handler_of(ignored) == SIG_IGN);
+    for (int i = 0; i < 3; ++i) {
+      if (stopping[i] != ignored) CHECK(handler_of(stopping[i]) == before[i].sa_handler);
+      ::sigaction(stopping[i], &before[i], nullptr);
+    }
+  }
+}
