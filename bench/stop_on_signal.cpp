@@ -125,6 +125,7 @@ StopOnSignal::StopOnSignal() {
   struct sigaction action {};
   action.sa_handler = on_signal;
   action.sa_mask = stop_signals();  // each holds off the others while the handler cleans up
+  static_assert(std::tuple_size_v<decltype(old_)> == kStopSignals.size());
   for (std::size_t i = 0; i < kStopSignals.size(); ++i) {
     // One the harness was started ignoring stays ignored: a background job of a script (`cmd &`
     // ignores SIGINT), nohup (SIGHUP). Its handler would stop a run that was meant to go on.
