@@ -951,15 +951,18 @@ std::string listing(const std::filesystem::path& dir) {
   return out;
 }
 
+// How a run ended, and what it printed: what a failing check on its exit status shows.
+std::string ended(const std::optional<int>& status, const harness::ChildProcess& run) {
+  return "exit status " + (status ? std::to_string(*status) : std::string("none")) + ", log:\n" +
+         run.log();
+}
+
 // The pids of the processes whose command line names `path` (a run's daemon, tcpdump, guard).
 std::vector<int> processes_naming(const std::filesystem::path& path) {
   std::vector<int> pids;
-  for (const auto& entry : std::filesystem::directory_iterator("/proc")) {
-    const std::string name = entry.path().filename().string();
-    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
-    std::ifstream cmdline(entry.path() / "cmdline");
-    const std::string line((std::istreambuf_iterator<char>(cmdline)), {});
-    if (line.find(path.string()) != std::string::npos) pids.push_back(std::stoi(name));
+  for (const int pid : test::process_ids()) {
+    const std::string line = harness::read_file("/proc/" + std::to_string(pid) + "/cmdline");
+    if (line.find(path.string()) != std::string::npos) pids.push_back(pid);
   }
   return pids;
 }
@@ -987,8 +990,7 @@ TEST_CASE("pandarcap-bench zero-loss stopped by SIGINT: no trial's files and no 
                               std::chrono::seconds(30)));
   bench_run.signal(SIGINT);
   const std::optional<int> status = bench_run.wait_exit(std::chrono::seconds(20));
-  INFO("exit status " << (status ? std::to_string(*status) : "none") << ", log:\n"
-                      << bench_run.log());
+  INFO(ended(status, bench_run));
   CHECK(status == -SIGINT);
   INFO(listing(tmpdir));
   CHECK_FALSE(std::filesystem::exists(work));
@@ -1055,8 +1057,7 @@ TEST_CASE("zero-loss --work-dir stopped by SIGINT in a tcpdump round keeps no re
       std::chrono::seconds(60)));
   bench_run.signal(SIGINT);
   const std::optional<int> status = bench_run.wait_exit(std::chrono::seconds(20));
-  INFO("exit status " << (status ? std::to_string(*status) : "none") << ", log:\n"
-                      << bench_run.log());
+  INFO(ended(status, bench_run));
   CHECK(status == -SIGINT);
   CHECK_THAT(listing(work), Catch::Contains("/daemon.log\n"));  // the logs are kept
   CHECK_THAT(listing(work), !Catch::Contains("/tcpdump.pcap\n"));
@@ -1083,8 +1084,7 @@ TEST_CASE("zero-loss started with SIGINT ignored is not stopped by SIGINT",
       std::chrono::seconds(30)));
   bench_run.signal(SIGINT);
   const std::optional<int> status = bench_run.wait_exit(std::chrono::seconds(60));
-  INFO("exit status " << (status ? std::to_string(*status) : "none") << ", log:\n"
-                      << bench_run.log());
+  INFO(ended(status, bench_run));
   CHECK(status == 0);
   for (const int pid : processes_naming(work))
     ::kill(pid, SIGKILL);
@@ -1116,8 +1116,7 @@ TEST_CASE("zero-loss whose terminal hangs up leaves no daemon and no work direct
       std::chrono::seconds(30)));
   ::kill(-bench_run.pid(), SIGHUP);
   const std::optional<int> status = bench_run.wait_exit(std::chrono::seconds(20));
-  INFO("exit status " << (status ? std::to_string(*status) : "none") << ", log:\n"
-                      << bench_run.log());
+  INFO(ended(status, bench_run));
   CHECK(status == -SIGHUP);
   // The handler's clean-up, had there been one, is done once the work directory is gone.
   harness::wait_until([&] { return !std::filesystem::exists(work); }, std::chrono::seconds(10));

@@ -14,6 +14,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "bench/child_process.hpp"
@@ -31,27 +32,27 @@ std::vector<std::vector<std::string>> append_to(const std::filesystem::path& mar
   return {{"/bin/sh", "-c", "echo ran >> \"$1\"", "sh", marker.string()}};
 }
 
+// Process `pid`'s state and parent (/proc/PID/stat, after the name, which may hold spaces); an
+// empty state when it is gone.
+std::pair<std::string, int> state_and_parent(int pid) {
+  const std::string line = harness::read_file("/proc/" + std::to_string(pid) + "/stat");
+  const auto close = line.rfind(')');
+  if (close == std::string::npos) return {"", 0};
+  std::istringstream fields(line.substr(close + 2));
+  std::pair<std::string, int> result;
+  fields >> result.first >> result.second;
+  return result;
+}
+
 // The pids of this process's children that are still this program (forked, never exec'd): the
 // guards.
 std::vector<int> forked_children() {
   std::vector<int> pids;
   const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
-  for (const auto& entry : std::filesystem::directory_iterator("/proc")) {
-    const std::string name = entry.path().filename().string();
-    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
-    std::ifstream stat(entry.path() / "stat");
-    std::string line;
-    std::getline(stat, line);
-    const auto close = line.rfind(')');
-    if (close == std::string::npos) continue;
-    std::istringstream fields(line.substr(close + 2));
-    std::string state;
-    int parent = 0;
-    fields >> state >> parent;
+  for (const int pid : test::process_ids()) {
     std::error_code ec;
-    if (parent == ::getpid() && std::filesystem::read_symlink(entry.path() / "exe", ec) == self) {
-      pids.push_back(std::stoi(name));
-    }
+    const auto exe = std::filesystem::read_symlink("/proc/" + std::to_string(pid) + "/exe", ec);
+    if (state_and_parent(pid).second == ::getpid() && exe == self) pids.push_back(pid);
   }
   return pids;
 }
@@ -104,15 +105,8 @@ TEST_CASE("a guard killed from outside leaves the harness and the other guards w
   const int second_guard = stop->guard(append_to(second));
   ::kill(before.front(), SIGKILL);
   // The killed guard's end is what the harness then writes to; waits for the kill to land.
-  REQUIRE(harness::wait_until(
-      [&] {
-        std::ifstream stat("/proc/" + std::to_string(before.front()) + "/stat");
-        std::string line;
-        std::getline(stat, line);
-        const auto close = line.rfind(')');
-        return close != std::string::npos && line.substr(close + 2, 1) == "Z";
-      },
-      std::chrono::seconds(10)));
+  REQUIRE(harness::wait_until([&] { return state_and_parent(before.front()).first == "Z"; },
+                              std::chrono::seconds(10)));
   stop->run_guarded_now(first_guard);  // a dead guard: nothing runs, the harness lives on
   CHECK_FALSE(std::filesystem::exists(first));
   stop->run_guarded_now(second_guard);

@@ -273,6 +273,16 @@ std::filesystem::path tmpfs_view(int pid, const std::filesystem::path& mount_poi
          mount_point.relative_path();
 }
 
+std::vector<int> process_ids() {
+  std::vector<int> pids;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator("/proc", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.find_first_not_of("0123456789") == std::string::npos) pids.push_back(std::stoi(name));
+  }
+  return pids;
+}
+
 std::map<std::string, ThreadState> threads_of(int pid) {
   std::map<std::string, ThreadState> threads;
   for (const auto& task : std::filesystem::directory_iterator(std::filesystem::path("/proc") /

@@ -106,6 +106,9 @@ struct ThreadState {
   int policy = -1;
 };
 std::map<std::string, ThreadState> threads_of(int pid);
+// Every process's pid (the numeric entries of /proc): what a test looks through for what a run
+// left running.
+std::vector<int> process_ids();
 
 std::string pandarcapd_command();
 
