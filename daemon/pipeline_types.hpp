@@ -164,6 +164,15 @@ struct ReceiveCounters {
   // writer says no_data only once one has been made (what waited in the kernel is then known).
   std::atomic<std::int64_t> last_arrival_monotonic_ns{0};
   std::atomic<std::uint64_t> arrival_looks{0};
+  // Every datagram that arrived before this (CLOCK_MONOTONIC ns, 0 = none yet) has been seen by a
+  // look: set when one finds nothing waiting in the kernel, less what the kernel may still hold
+  // unseen (the packet ring's block being filled). A queue that filled during a pause holds only
+  // what arrived until it was full: the newest arrival seen is the backlog's age, not the
+  // sensor's silence, until this passes the pause.
+  std::atomic<std::int64_t> seen_until_monotonic_ns{0};
+  void note_seen_until(std::int64_t monotonic_ns) noexcept {
+    seen_until_monotonic_ns.store(monotonic_ns, std::memory_order_relaxed);
+  }
   void note_arrival(std::int64_t monotonic_ns) noexcept {
     if (monotonic_ns > last_arrival_monotonic_ns.load(std::memory_order_relaxed))
       last_arrival_monotonic_ns.store(monotonic_ns, std::memory_order_relaxed);

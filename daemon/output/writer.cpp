@@ -20,6 +20,11 @@
 namespace pandarcap {
 namespace {
 
+// How long, after a pause of the process, the health waits for the receiver to know what the
+// kernel took meanwhile (Writer::after_pause): working through a full queue of the default size
+// takes well under this, and the record is at most this much later than its second.
+constexpr std::int64_t kPauseHoldNs = 1'000'000'000;
+
 // Proves `dir` takes a new file (permissions, a read-only mount, a full inode table) by creating
 // and removing one: READY=1 promises writable outputs. Throws std::system_error.
 void probe_writable(const std::filesystem::path& dir) {
@@ -271,13 +276,19 @@ bool Writer::after_pause(std::int64_t now) noexcept {
   }
   last_loop_ns_ = now;
   if (looks_at_pause_ == 0) return false;  // none, or a source that makes no looks (a replay)
-  // Until the receiver has looked at what the kernel took meanwhile (a quarter of a second at
-  // most), the time since the last packet is not known: a record now could say no_data of a
-  // sensor that sent all along, or ok of one that stopped.
-  if (receive_.arrival_looks.load(std::memory_order_acquire) == looks_at_pause_ &&
-      now - pause_seen_ns_ < 250'000'000) {
-    return true;
-  }
+  // The time since the last packet is not known until the receiver has looked at what the kernel
+  // took meanwhile: a record now could say no_data of a sensor that sent all along, or ok of one
+  // that stopped. Nor, when that look finds only old packets, until it has taken the backlog: a
+  // queue that filled during the pause (the ring's blocks all handed over, a full socket buffer)
+  // held what arrived until then and the kernel dropped the rest (counted), so the newest
+  // arrival seen is when it filled. A silence is the sensor's once newer packets are seen or
+  // every one that arrived before the pause was noticed has been (the queue found empty, and the
+  // packet ring's block then being filled handed over). Waited for up to kPauseHoldNs: past that
+  // the receiver itself is behind, and the record goes out with what is known.
+  const bool looked = receive_.arrival_looks.load(std::memory_order_acquire) != looks_at_pause_;
+  const bool known = looked && (!silent(now) || receive_.seen_until_monotonic_ns.load(
+                                                    std::memory_order_relaxed) >= pause_seen_ns_);
+  if (!known && now - pause_seen_ns_ < kPauseHoldNs) return true;
   looks_at_pause_ = 0;
   return false;
 }

@@ -105,7 +105,7 @@ class Writer final : private FinishReceiver {
   double seconds_since_last_packet(std::int64_t now_monotonic_ns) const noexcept;
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
   // At each turn of the loop: whether the health waits, after a pause of the process, for the
-  // receiver to look at what the kernel took meanwhile.
+  // receiver to know what the kernel took meanwhile (its backlog's age is not a silence).
   bool after_pause(std::int64_t now_monotonic_ns) noexcept;
 
   WriterOptions options_;

@@ -551,6 +551,8 @@ void PacketRingReceiver::note_arrivals(ReceiveCounters& counters) noexcept {
         empty_at_ns_, 2'000'000LL * retire_ms_));
   } else if (arrivals_seen_ == 0) {
     empty_at_ns_ = before_ns;  // nothing handed over and not taken
+    // What arrived since is in the block being filled, handed over by its timer at the latest.
+    counters.note_seen_until(before_ns - 2'000'000LL * retire_ms_);
   }
   counters.count_arrival_look();
 }

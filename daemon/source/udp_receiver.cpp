@@ -290,6 +290,7 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
       ReceiveCounters::add(counters.receive_errors, 1);
     } else if (received == 0 || errno == EAGAIN || errno == EWOULDBLOCK) {
       empty_at_ns_ = before_ns;
+      counters.note_seen_until(before_ns);
     }
     return {0, n, overrun};
   }
@@ -344,7 +345,10 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
     counters.note_arrival(arrival_on_monotonic(slots[kept - 1].receive_time_ns, realtime_ns(),
                                                now_mono, empty_at_ns_, 0));
   }
-  if (static_cast<std::size_t>(received) < n) empty_at_ns_ = before_ns;
+  if (static_cast<std::size_t>(received) < n) {
+    empty_at_ns_ = before_ns;
+    counters.note_seen_until(before_ns);
+  }
   counters.count_arrival_look();
   ReceiveCounters::add(counters.datagrams, static_cast<std::uint64_t>(received));
   ReceiveCounters::add(counters.bytes, bytes);
