@@ -1,0 +1,213 @@
+// The hostile tester's tests of the health after a pause of the whole daemon (11afba7 and the
+// pause handling around it: Writer::after_pause). The real pandarcapd on a veth pair, the
+// simulated sensor sending from the far end's namespace, the daemon paused by SIGSTOP for a
+// set time.
+#include <fmt/format.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench/child_process.hpp"
+#include "bench/udp_traffic.hpp"
+#include "support/test_support.hpp"
+#include "support/veth_pair.hpp"
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using pandarcap::harness::ChildProcess;
+using pandarcap::harness::wait_until;
+
+namespace pandarcap {
+namespace {
+
+bool can_make_links() {
+  if (::geteuid() == 0) return true;
+  if (std::getenv("CI") != nullptr) FAIL("these tests need root (CAP_NET_ADMIN)");
+  WARN("not root: these tests need CAP_NET_ADMIN for the veth pair: not run");
+  return false;
+}
+
+std::int64_t unix_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// The daemon on the near end of a veth pair (as tests/test_packet_ring.cpp's RingDaemon).
+struct Daemon {
+  Daemon(const test::ScratchDir& dir, const test::VethPair& veth, std::uint16_t port,
+         const std::string& extra_toml, const std::string& receiver)
+      : out(dir / "out") {
+    const fs::path config = dir / "daemon.toml";
+    std::ofstream(config) << "[sensor]\nsensor_ip = \"" << veth.far_ip() << "\"\n" << extra_toml;
+    std::vector<std::string> args{"-c",         config.string(),      "--receiver",
+                                  receiver,     "--interface",        veth.near(),
+                                  "--port",     std::to_string(port), "--output-dir",
+                                  out.string(), "--max-clock-offset", "0"};
+    if (receiver == "socket") args.emplace_back("--allow-root");
+    process.emplace(test::binary("pandarcapd"), args, dir / "daemon.log");
+    const bool ready =
+        wait_until([&] { return process->log().find("ready:") != std::string::npos; }, 20s);
+    INFO(process->log());
+    REQUIRE(ready);
+  }
+  fs::path out;
+  std::optional<ChildProcess> process;
+};
+
+struct PauseCase {
+  const char* receiver = "packet_ring";
+  std::string toml;  // lines of [sensor], then any other section
+  std::chrono::milliseconds pause{2200};
+  double sensor_seconds = 6;      // how long the sensor sends, from before the pause
+  bool sigterm_in_pause = false;  // SIGTERM sent while stopped, then SIGCONT
+  int batch = 32;                 // datagrams per sendmmsg (1: evenly, as a sensor sends)
+  // Set: the pause ends this long after the sensor's last packet (it stops in the pause).
+  std::optional<std::chrono::milliseconds> resume_after_sensor_stop;
+};
+
+struct PauseResult {
+  std::vector<nlohmann::json> after;  // every record from the pause on
+  std::int64_t resumed_ns = 0;
+  std::string said;  // the records after the pause, for a failure's message
+  std::string log;
+  nlohmann::json last;
+  bool sending_at_resume = false;
+  bool sending_at_end = false;
+  std::int64_t silent_from_ns = 0;  // the sensor's last packet (Unix ns), when it stopped
+};
+
+PauseResult run_pause(const PauseCase& c) {
+  test::VethPair veth("ph");
+  REQUIRE(veth.ok());
+  test::ScratchDir dir("pause-hostile");
+  const std::uint16_t port = harness::free_udp_port();
+  Daemon daemon(dir, veth, port, c.toml, c.receiver);
+  std::atomic<bool> sending{true};
+  std::atomic<std::int64_t> silent_from_ns{0};
+  bench::GeneratorResult sent;
+  std::thread sender([&] {
+    test::FarNamespace far(veth.ns());
+    bench::GeneratorOptions traffic;
+    traffic.destination_ip = veth.near_ip();
+    traffic.port = port;
+    traffic.rate_pps = 3600;
+    traffic.seconds = c.sensor_seconds;
+    traffic.batch = c.batch;
+    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    silent_from_ns = unix_now_ns();
+    sending = false;
+  });
+  const auto received = [&] {
+    const auto records = test::health_records(daemon.out);
+    return records.empty() ? 0 : test::health_counter(records.back(), "datagrams_received");
+  };
+  REQUIRE(wait_until([&] { return received() > 0; }, 5s));
+  // Past the first records (a sensor just found), at ok.
+  REQUIRE(wait_until(
+      [&] {
+        const auto records = test::health_records(daemon.out);
+        return !records.empty() && records.back().value("state", "") == "ok";
+      },
+      5s));
+  const std::size_t records_before = test::health_records(daemon.out).size();
+  daemon.process->signal(SIGSTOP);
+  if (c.resume_after_sensor_stop) {
+    REQUIRE(wait_until([&] { return !sending.load(); }, 30s));
+    std::this_thread::sleep_for(*c.resume_after_sensor_stop);  // the fault: its length
+  } else {
+    const auto resume_at = std::chrono::steady_clock::now() + c.pause;  // the fault: its length
+    std::this_thread::sleep_until(resume_at);
+  }
+  if (c.sigterm_in_pause) daemon.process->signal(SIGTERM);
+  PauseResult r;
+  r.sending_at_resume = sending.load();
+  daemon.process->signal(SIGCONT);
+  r.resumed_ns = unix_now_ns();
+  if (c.sigterm_in_pause) {
+    REQUIRE(daemon.process->wait_exit(30s) == 0);
+  } else {
+    REQUIRE(wait_until(
+        [&] { return test::health_records(daemon.out).size() >= records_before + 3; }, 10s));
+    daemon.process->signal(SIGTERM);
+    REQUIRE(daemon.process->wait_exit(30s) == 0);
+  }
+  r.sending_at_end = sending.load();
+  sender.join();
+  r.silent_from_ns = silent_from_ns.load();
+  const auto records = test::health_records(daemon.out);
+  r.after.assign(
+      records.begin() + static_cast<std::ptrdiff_t>(std::min(records_before, records.size())),
+      records.end());
+  r.last = records.empty() ? nlohmann::json() : records.back();
+  for (const auto& rec : r.after) {
+    r.said += fmt::format(
+        "{:+.3f} s from the resume: {} {:.3f} (received {}, kernel drops {})\n",
+        static_cast<double>(rec.at("unix_time_ns").get<std::int64_t>() - r.resumed_ns) / 1e9,
+        rec.value("state", ""), rec.at("gauges").at("seconds_since_last_packet").get<double>(),
+        test::health_counter(rec, "datagrams_received"), test::health_counter(rec, "kernel_drops"));
+  }
+  r.log = daemon.process->log();
+  return r;
+}
+
+// With the sensor sending all along: no record from the pause on says no_data.
+void check_no_no_data(const PauseResult& r) {
+  INFO(r.log);
+  INFO(r.said);
+  CHECK(r.sending_at_resume);
+  for (const auto& rec : r.after) {
+    INFO("record " << static_cast<double>(rec.at("unix_time_ns").get<std::int64_t>() -
+                                          r.resumed_ns) /
+                          1e9
+                   << " s after the resume");
+    CHECK(rec.value("state", "") != "no_data");
+  }
+}
+
+}  // namespace
+
+// A pause longer than the no-data timeout but under the writer's fixed 1.25 s threshold
+// (Writer::after_pause) is not noticed as one: the writer's first turn after the resume, before
+// the receiver has looked, takes the last arrival from before the pause and writes no_data of a
+// sensor that sent all along (an ok follows milliseconds later). The defaults (1 s timeout, 8 MiB
+// ring), a small socket buffer, and a 0.5 s timeout (every pause of 0.5 to 1.25 s).
+TEST_CASE("pause hostile: 1.15 s with a socket buffer that fills: no no_data said",
+          "[pause_hostile][daemon][threads]") {
+  if (!can_make_links()) return;
+  PauseCase c;
+  c.receiver = "socket";
+  c.toml = "udp_socket_receive_buffer_size_bytes = 262144\n";
+  c.pause = 1150ms;
+  check_no_no_data(run_pause(c));
+}
+
+TEST_CASE("pause hostile: 1.15 s with a packet ring that fills and a 0.5 s timeout",
+          "[pause_hostile][daemon][threads]") {
+  if (!can_make_links()) return;
+  PauseCase c;
+  c.toml =
+      "udp_socket_receive_buffer_size_bytes = 1048576\n[health]\nno_data_timeout_seconds = 0.5\n";
+  c.pause = 1150ms;
+  check_no_no_data(run_pause(c));
+}
+
+TEST_CASE("pause hostile: 1.2 s with the defaults: no no_data said",
+          "[pause_hostile][daemon][threads]") {
+  if (!can_make_links()) return;
+  PauseCase c;
+  c.pause = 1200ms;
+  check_no_no_data(run_pause(c));
+}
+
+}  // namespace pandarcap
