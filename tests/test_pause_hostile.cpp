@@ -175,6 +175,24 @@ void check_no_no_data(const PauseResult& r) {
   }
 }
 
+// The sensor stops 0.4 s before the resume: until 1 s after its last packet no record may say
+// no_data, nor a silence longer than the real one.
+void check_silence_said(const PauseResult& r) {
+  INFO(r.log);
+  INFO(r.said);
+  CHECK(!r.sending_at_resume);
+  for (const auto& rec : r.after) {
+    const std::int64_t at = rec.at("unix_time_ns").get<std::int64_t>();
+    if (at < r.resumed_ns) continue;
+    const double silence = static_cast<double>(at - r.silent_from_ns) / 1e9;
+    const double said = rec.at("gauges").at("seconds_since_last_packet").get<double>();
+    INFO("record " << static_cast<double>(at - r.resumed_ns) / 1e9
+                   << " s after the resume, real silence " << silence << " s, said " << said);
+    CHECK(said <= silence + 0.25);
+    if (silence < 0.9) CHECK(rec.value("state", "") != "no_data");
+  }
+}
+
 }  // namespace
 
 // A pause longer than the no-data timeout but under the writer's fixed 1.25 s threshold
@@ -208,6 +226,34 @@ TEST_CASE("pause hostile: 1.2 s with the defaults: no no_data said",
   PauseCase c;
   c.pause = 1200ms;
   check_no_no_data(run_pause(c));
+}
+
+// A queue that filled in the pause (the kernel dropped the rest, counted) and a sensor that
+// stopped 0.4 s before the resume: the queue's newest packet is from when it filled, ~3 s
+// before the resume; once it is taken and the queue found empty (seen_until past the pause) the
+// record says no_data 3.3 s of a sensor silent 0.4 s, and every record of the silence after it
+// says it about 3 s longer than it is. The drops say packets came after the newest one seen.
+TEST_CASE("pause hostile: the sensor stops 0.4 s before the resume and the ring had filled",
+          "[pause_hostile][daemon][threads]") {
+  if (!can_make_links()) return;
+  PauseCase c;
+  c.toml = "udp_socket_receive_buffer_size_bytes = 1048576\n";
+  c.sensor_seconds = 3;
+  c.resume_after_sensor_stop = 400ms;
+  check_silence_said(run_pause(c));
+}
+
+TEST_CASE(
+    "pause hostile: the sensor stops 0.4 s before the resume and the socket buffer had filled",
+    "[pause_hostile][daemon][threads]") {
+  if (!can_make_links()) return;
+  PauseCase c;
+  c.receiver = "socket";
+  c.toml = "udp_socket_receive_buffer_size_bytes = 262144\n";
+  c.sensor_seconds = 3;
+  c.batch = 1;
+  c.resume_after_sensor_stop = 400ms;
+  check_silence_said(run_pause(c));
 }
 
 }  // namespace pandarcap
