@@ -228,6 +228,25 @@ TEST_CASE("pause hostile: 1.2 s with the defaults: no no_data said",
   check_no_no_data(run_pause(c));
 }
 
+// systemctl stop of a frozen unit: SIGTERM sent in a 2.2 s pause, then SIGCONT. The socket
+// receiver's stop drain takes the old backlog of a buffer that filled in the pause and stops at
+// the first short batch; the final record (written after the loop, without the pause's hold)
+// says no_data of a sensor that sent all along (evenly, 3600/s, as a real one).
+TEST_CASE(
+    "pause hostile: SIGTERM in a 2.2 s pause with a socket buffer that filled and an even sensor",
+    "[pause_hostile][daemon][threads]") {
+  if (!can_make_links()) return;
+  PauseCase c;
+  c.receiver = "socket";
+  c.toml = "udp_socket_receive_buffer_size_bytes = 262144\n";
+  c.sigterm_in_pause = true;
+  c.batch = 1;
+  const PauseResult r = run_pause(c);
+  INFO(r.last.dump());
+  CHECK(r.sending_at_end);
+  check_no_no_data(r);
+}
+
 // A queue that filled in the pause (the kernel dropped the rest, counted) and a sensor that
 // stopped 0.4 s before the resume: the queue's newest packet is from when it filled, ~3 s
 // before the resume; once it is taken and the queue found empty (seen_until past the pause) the
