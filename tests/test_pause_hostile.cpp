@@ -2,8 +2,10 @@
 // pause handling around it: Writer::after_pause). The real pandarcapd on a veth pair, the
 // simulated sensor sending from the far end's namespace, the daemon paused by SIGSTOP for a
 // set time.
+#include <arpa/inet.h>
 #include <fmt/format.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -19,6 +21,7 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
+#include "daemon/io/unique_fd.hpp"
 #include "support/test_support.hpp"
 #include "support/veth_pair.hpp"
 
@@ -275,4 +278,95 @@ TEST_CASE(
   check_silence_said(run_pause(c));
 }
 
+}  // namespace pandarcap
+
+namespace pandarcap {
+namespace {
+// The sensor sends 1 s and stops while a second host on its segment sends 100-byte datagrams to
+// the port (every 20 ms for 4 s, counted as foreign); with `pause`, the daemon is paused 2.2 s
+// across the sensor's stop. From 1.3 s after the sensor's last packet every record must say
+// no_data.
+void foreign_after_stop(const char* receiver, bool pause) {
+  test::VethPair veth("pf");
+  REQUIRE(veth.ok());
+  test::ScratchDir dir("pause-foreign");
+  const std::uint16_t port = harness::free_udp_port();
+  Daemon daemon(dir, veth, port, "", receiver);
+  std::atomic<std::int64_t> silent_from_ns{0};
+  std::thread sender([&] {
+    test::FarNamespace far(veth.ns());
+    bench::GeneratorOptions traffic;
+    traffic.destination_ip = veth.near_ip();
+    traffic.port = port;
+    traffic.rate_pps = 3600;
+    traffic.seconds = 1.0;
+    bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    silent_from_ns = unix_now_ns();
+  });
+  REQUIRE(wait_until(
+      [&] {
+        const auto records = test::health_records(daemon.out);
+        return !records.empty() && test::health_counter(records.back(), "datagrams_received") > 0;
+      },
+      5s));
+  std::thread foreign([&] {
+    test::FarNamespace far(veth.ns());
+    io::UniqueFd fd(::socket(AF_INET, SOCK_DGRAM, 0));
+    sockaddr_in local{};
+    local.sin_family = AF_INET;
+    inet_pton(AF_INET, veth.second_far_ip().c_str(), &local.sin_addr);
+    ::bind(fd.get(), reinterpret_cast<sockaddr*>(&local), sizeof local);
+    sockaddr_in to{};
+    to.sin_family = AF_INET;
+    to.sin_port = htons(port);
+    inet_pton(AF_INET, veth.near_ip().c_str(), &to.sin_addr);
+    const char junk[100] = "not a sensor";
+    for (int i = 0; i < 200; ++i) {
+      ::sendto(fd.get(), junk, sizeof junk, 0, reinterpret_cast<sockaddr*>(&to), sizeof to);
+      std::this_thread::sleep_for(20ms);  // the foreign sender's pace
+    }
+  });
+  if (pause) {
+    std::this_thread::sleep_for(300ms);
+    daemon.process->signal(SIGSTOP);
+    std::this_thread::sleep_for(2200ms);
+    daemon.process->signal(SIGCONT);
+  }
+  foreign.join();
+  sender.join();
+  daemon.process->signal(SIGTERM);
+  REQUIRE(daemon.process->wait_exit(30s) == 0);
+  std::string said;
+  bool bad = false;
+  for (const auto& rec : test::health_records(daemon.out)) {
+    const std::int64_t at = rec.at("unix_time_ns").get<std::int64_t>();
+    const double silence = static_cast<double>(at - silent_from_ns.load()) / 1e9;
+    said += fmt::format("{:+.3f} s from the sensor's stop: {} {:.3f} foreign {}\n", silence,
+                        rec.value("state", ""),
+                        rec.at("gauges").at("seconds_since_last_packet").get<double>(),
+                        test::health_counter(rec, "foreign_datagrams"));
+    if (silence > 1.3 && rec.value("state", "") != "no_data") bad = true;
+  }
+  INFO(daemon.process->log());
+  INFO(said);
+  CHECK(test::health_counter(test::last_health_record(daemon.out), "foreign_datagrams") >= 150);
+  CHECK(!bad);
+}
+}  // namespace
+
+// The packet ring notes the newest arrival from its blocks (ts_last_pkt), whichever host sent
+// it: a second host's datagrams on the port, counted as foreign, keep the health ok (the last
+// packet 0.01 s ago) of a sensor that stopped, with or without a pause. The socket receiver
+// notes only the sensor's datagrams, and says no_data.
+TEST_CASE("pause hostile: a second host on the port after the sensor stops: the ring says ok",
+          "[pause_hostile][daemon][threads]") {
+  if (!can_make_links()) return;
+  foreign_after_stop("packet_ring", false);
+}
+
+TEST_CASE("pause hostile: a second host on the port and the sensor stopping in a pause",
+          "[pause_hostile][daemon][threads]") {
+  if (!can_make_links()) return;
+  foreign_after_stop("packet_ring", true);
+}
 }  // namespace pandarcap
