@@ -164,14 +164,19 @@ struct ReceiveCounters {
   // writer says no_data only once one has been made (what waited in the kernel is then known).
   std::atomic<std::int64_t> last_arrival_monotonic_ns{0};
   std::atomic<std::uint64_t> arrival_looks{0};
-  // Every datagram that arrived before this (CLOCK_MONOTONIC ns, 0 = none yet) has been seen by a
-  // look: set when one finds nothing waiting in the kernel, less what the kernel may still hold
-  // unseen (the packet ring's block being filled). A queue that filled during a pause holds only
-  // what arrived until it was full: the newest arrival seen is the backlog's age, not the
-  // sensor's silence, until this passes the pause.
+  // Every datagram that arrived before `seen_until` (CLOCK_MONOTONIC ns, 0 = none yet) has been
+  // seen by a look, or its arrival noted from the kernel's drop count (a queue that filled holds
+  // only what arrived until then). Set at each look that leaves nothing unseen behind it, less
+  // what the kernel may still hold unseen (the packet ring's block being filled); the receiver
+  // looks again within `look_interval_ns` while it runs. The writer says no_data only while
+  // this is that current (Writer::silence_unconfirmed): after a pause of the process, or a
+  // receiver that fell behind, the newest arrival seen is not the sensor's last packet.
   std::atomic<std::int64_t> seen_until_monotonic_ns{0};
-  void note_seen_until(std::int64_t monotonic_ns) noexcept {
-    seen_until_monotonic_ns.store(monotonic_ns, std::memory_order_relaxed);
+  std::atomic<std::int64_t> look_interval_ns{0};
+  // Release: a writer that sees it (acquire) sees the arrivals noted before it.
+  void note_seen_until(std::int64_t monotonic_ns, std::int64_t interval_ns) noexcept {
+    look_interval_ns.store(interval_ns, std::memory_order_relaxed);
+    seen_until_monotonic_ns.store(monotonic_ns, std::memory_order_release);
   }
   void note_arrival(std::int64_t monotonic_ns) noexcept {
     if (monotonic_ns > last_arrival_monotonic_ns.load(std::memory_order_relaxed))

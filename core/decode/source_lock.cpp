@@ -10,6 +10,11 @@ void SourceLock::lock(std::uint32_t ip, std::uint16_t port, std::int64_t receive
   sensor_seen_ns_ = receive_ns;
 }
 
+bool SourceLock::is_sensor_address(std::uint32_t ip) const noexcept {
+  if (sensor_ip_) return ip == *sensor_ip_;
+  return sensor_ == 0 || ip == packed_ipv4(sensor_);
+}
+
 SourceLock::Verdict SourceLock::judge(std::uint32_t ip, std::uint16_t port,
                                       std::span<const std::uint8_t> payload,
                                       std::int64_t receive_ns) noexcept {

@@ -43,6 +43,11 @@ class SourceLock {
   Verdict judge(std::uint32_t ip, std::uint16_t port, std::span<const std::uint8_t> payload,
                 std::int64_t receive_ns) noexcept;
 
+  // Whether a datagram from `ip` is the sensor's as things stand (before any lock: anyone's),
+  // without judging it: for a look ahead of the judging (the packet ring's arrival times). A
+  // relock that judging would make is not foreseen.
+  bool is_sensor_address(std::uint32_t ip) const noexcept;
+
   // Packed sources (core/ipv4.hpp's pack_ipv4_source; 0: none yet).
   std::uint64_t sensor_source() const noexcept { return sensor_; }
   std::uint64_t other_source() const noexcept { return other_; }

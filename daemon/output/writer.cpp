@@ -20,10 +20,12 @@
 namespace pandarcap {
 namespace {
 
-// How long, after a pause of the process, the health waits for the receiver to know what the
-// kernel took meanwhile (Writer::after_pause): working through a full queue of the default size
-// takes well under this, and the record is at most this much later than its second.
-constexpr std::int64_t kPauseHoldNs = 1'000'000'000;
+// How long a record that would say no_data waits for the receiver's looks to be current
+// (Writer::silence_unconfirmed): working through a full queue of the default size after a pause
+// takes well under this, and the record is at most this much later than its second. And how
+// late a look may be (past the receiver's own interval) on a busy machine and still count.
+constexpr std::int64_t kSilenceHoldNs = 1'000'000'000;
+constexpr std::int64_t kLookSlackNs = 150'000'000;
 
 // Proves `dir` takes a new file (permissions, a read-only mount, a full inode table) by creating
 // and removing one: READY=1 promises writable outputs. Throws std::system_error.
@@ -267,30 +269,26 @@ bool Writer::silent(std::int64_t now) const noexcept {
   return since < 0 || since > options_.no_data_timeout_seconds;
 }
 
-bool Writer::after_pause(std::int64_t now) noexcept {
-  // The loop's wait is 250 ms at most: a turn more than a second later than that means the
-  // process (or this thread) did not run in between.
-  if (last_loop_ns_ != 0 && now - last_loop_ns_ > 1'250'000'000) {
-    looks_at_pause_ = receive_.arrival_looks.load(std::memory_order_acquire);
-    pause_seen_ns_ = now;
+bool Writer::silence_unconfirmed(std::int64_t now) noexcept {
+  // A silence is the sensor's only while the receiver's looks are current: every packet that
+  // arrived until a moment no further back than its own interval between looks has been seen
+  // (ReceiveCounters::seen_until_monotonic_ns). Not so after a pause of the process (of any
+  // length: the writer's first turn can come before the receiver's first look), nor while it
+  // works through a queue that filled (its packets are from before it filled; the kernel
+  // dropped the later ones, and their count is noted as an arrival when read). Then the record
+  // waits, kSilenceHoldNs at most: past that the receiver itself is behind, and the record goes
+  // out with what is known. A source that makes no looks (a replay) is not waited for.
+  const std::int64_t seen_until = receive_.seen_until_monotonic_ns.load(std::memory_order_acquire);
+  const std::int64_t interval = receive_.look_interval_ns.load(std::memory_order_relaxed);
+  if (receive_.arrival_looks.load(std::memory_order_relaxed) == 0 || !silent(now) ||
+      now - seen_until <= interval + kLookSlackNs) {
+    unconfirmed_since_ns_ = 0;
+    holding_ = false;
+    return false;
   }
-  last_loop_ns_ = now;
-  if (looks_at_pause_ == 0) return false;  // none, or a source that makes no looks (a replay)
-  // The time since the last packet is not known until the receiver has looked at what the kernel
-  // took meanwhile: a record now could say no_data of a sensor that sent all along, or ok of one
-  // that stopped. Nor, when that look finds only old packets, until it has taken the backlog: a
-  // queue that filled during the pause (the ring's blocks all handed over, a full socket buffer)
-  // held what arrived until then and the kernel dropped the rest (counted), so the newest
-  // arrival seen is when it filled. A silence is the sensor's once newer packets are seen or
-  // every one that arrived before the pause was noticed has been (the queue found empty, and the
-  // packet ring's block then being filled handed over). Waited for up to kPauseHoldNs: past that
-  // the receiver itself is behind, and the record goes out with what is known.
-  const bool looked = receive_.arrival_looks.load(std::memory_order_acquire) != looks_at_pause_;
-  const bool known = looked && (!silent(now) || receive_.seen_until_monotonic_ns.load(
-                                                    std::memory_order_relaxed) >= pause_seen_ns_);
-  if (!known && now - pause_seen_ns_ < kPauseHoldNs) return true;
-  looks_at_pause_ = 0;
-  return false;
+  if (unconfirmed_since_ns_ == 0) unconfirmed_since_ns_ = now;
+  holding_ = now - unconfirmed_since_ns_ < kSilenceHoldNs;
+  return holding_;
 }
 
 void Writer::stall_while_test_file_exists() const {
@@ -354,8 +352,8 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       // a silence (no_data_timeout_seconds) is noticed if they stop. A cap of their own period
       // would add a wake-up out of phase with each of them.
       // After a pause, the receiver's first look is waited for in short slices.
-      const std::int64_t wait = std::clamp<std::int64_t>(
-          next_tick - monotonic_ns(), 0, looks_at_pause_ != 0 ? 2'000'000 : 250'000'000);
+      const std::int64_t wait = std::clamp<std::int64_t>(next_tick - monotonic_ns(), 0,
+                                                         holding_ ? 2'000'000 : 250'000'000);
       from_decoder_.wait_for_data(std::chrono::nanoseconds(wait));
       ++wakeups_;
     }
@@ -366,7 +364,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       mcap_.rotate();
     }
     const std::int64_t now = monotonic_ns();
-    const bool held = after_pause(now);
+    const bool held = silence_unconfirmed(now);
     // Packets stopped or started again since the last health: say so now, not at the next tick.
     const bool silence_changed = silent(now) != reported_silent_;
     if (!held && (now >= next_tick || silence_changed)) {

@@ -104,9 +104,9 @@ class Writer final : private FinishReceiver {
   // Seconds since the decoder's last packet (-1: none yet), and whether that is silence.
   double seconds_since_last_packet(std::int64_t now_monotonic_ns) const noexcept;
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
-  // At each turn of the loop: whether the health waits, after a pause of the process, for the
-  // receiver to know what the kernel took meanwhile (its backlog's age is not a silence).
-  bool after_pause(std::int64_t now_monotonic_ns) noexcept;
+  // At each turn of the loop: whether the health waits because it would say no_data and the
+  // receiver's looks are not current (a pause of the process, a backlog).
+  bool silence_unconfirmed(std::int64_t now_monotonic_ns) noexcept;
 
   WriterOptions options_;
   // options_.calibration_csv follows the decoder's model (a live "auto").
@@ -132,12 +132,9 @@ class Writer final : private FinishReceiver {
   DecodeSnapshot decode_;  // the latest counters from the decoder
   SensorStatusChannel& sensor_status_;
   std::optional<SensorStatusSample> latest_sensor_status_;
-  bool reported_silent_ = true;  // the last health written said "no data"
-  std::int64_t last_loop_ns_ = 0;
-  // The receiver's looks (ReceiveCounters::arrival_looks) when a pause was noticed (0: none, or
-  // a source that makes none: a replay).
-  std::uint64_t looks_at_pause_ = 0;
-  std::int64_t pause_seen_ns_ = 0;
+  bool reported_silent_ = true;            // the last health written said "no data"
+  std::int64_t unconfirmed_since_ns_ = 0;  // since when silence_unconfirmed says so (0: not)
+  bool holding_ = false;                   // the health waits for the receiver's looks
   std::uint64_t wakeups_ = 0;
   std::int64_t next_sync_ns_ = 0;  // the recordings' and health.jsonl's next sync
   std::uint64_t fragments_logged_ = 0;

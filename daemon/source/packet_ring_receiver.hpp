@@ -142,9 +142,10 @@ class PacketRingReceiver {
   // (DecodeWorker); it grows while packets arrive.
   std::uint32_t blocks_waiting() const noexcept;
   std::uint32_t block_count() const noexcept { return block_count_; }
-  // Notes in `counters` when the newest packet of the blocks handed over since the last call
-  // arrived (the health's last packet; receive() calls it each turn, and a reader that waits
-  // for its consumer meanwhile should too), and counts the look.
+  // Notes in `counters` when the sensor's newest packet of the blocks handed over since the
+  // last call arrived (the health's last packet; receive() calls it each turn, and a reader that
+  // waits for its consumer meanwhile should too), how far that is complete (seen_until: not
+  // while every block is handed over, when the kernel drops what arrives), and counts the look.
   void note_arrivals(ReceiveCounters& counters) noexcept;
 
  private:
@@ -159,6 +160,10 @@ class PacketRingReceiver {
   std::uint64_t frames_unread() const noexcept;
   // Adds the kernel's drops since the last read to kernel_drops.
   void read_statistics(ReceiveCounters& counters) noexcept;
+  // When the newest of a handed-over block's datagrams from the sensor (sources_, as it stands)
+  // arrived (CLOCK_REALTIME ns), or 0: none. Other hosts' datagrams on the port say nothing of
+  // the sensor.
+  std::int64_t newest_sensor_arrival(const tpacket_block_desc& block) const noexcept;
   // Whether a UDP socket on host_ip (joined to multicast_ip) would have been given a datagram
   // to `destination` (host order) arriving as `packet_type` (PACKET_HOST, ...) on a loopback
   // interface or not. With 0.0.0.0:
@@ -177,10 +182,12 @@ class PacketRingReceiver {
   std::uint32_t block_bytes_ = kMinBlockBytes;
   std::uint32_t block_count_ = 0;
   std::uint32_t next_block_ = 0;
-  std::uint32_t resume_index_ = 0;   // the next frame of next_block_ to take (0: a new block)
-  std::uint32_t resume_offset_ = 0;  // its offset in the block
-  std::uint32_t arrivals_seen_ = 0;  // blocks from next_block_ whose arrival is noted
-  std::int64_t empty_at_ns_ = 0;     // CLOCK_MONOTONIC: when no block waited at a look
+  std::uint32_t resume_index_ = 0;      // the next frame of next_block_ to take (0: a new block)
+  std::uint32_t resume_offset_ = 0;     // its offset in the block
+  std::uint32_t arrivals_seen_ = 0;     // blocks from next_block_ whose arrival is noted
+  std::int64_t empty_at_ns_ = 0;        // CLOCK_MONOTONIC: when no block waited at a look
+  std::int64_t next_drop_read_ns_ = 0;  // note_arrivals reads the drops again from then
+  std::uint64_t drops_noted_ = 0;       // kernel_drops_ when their arrival was last noted
   std::uint32_t retire_ms_ = 1;
   std::uint16_t port_ = 0;
   std::string interface_;

@@ -208,6 +208,12 @@ double UdpReceiver::read_socket_memory(ReceiveCounters& counters) {
     return 0.0;
   }
   counters.kernel_drops.store(info[SK_MEMINFO_DROPS] + left_at_stop_, std::memory_order_relaxed);
+  if (info[SK_MEMINFO_DROPS] != meminfo_drops_) {
+    // Dropped while the buffer was full: they arrived after everything it held, before this
+    // read. A packet now, for all this side can tell (the sensor may have stopped since).
+    meminfo_drops_ = info[SK_MEMINFO_DROPS];
+    counters.note_arrival(monotonic_ns());
+  }
   return info[SK_MEMINFO_RCVBUF] == 0 ? 0.0
                                       : static_cast<double>(info[SK_MEMINFO_RMEM_ALLOC]) /
                                             static_cast<double>(info[SK_MEMINFO_RCVBUF]);
@@ -290,7 +296,7 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
       ReceiveCounters::add(counters.receive_errors, 1);
     } else if (received == 0 || errno == EAGAIN || errno == EWOULDBLOCK) {
       empty_at_ns_ = before_ns;
-      counters.note_seen_until(before_ns);
+      counters.note_seen_until(before_ns, look_interval_ns());
     }
     return {0, n, overrun};
   }
@@ -347,7 +353,13 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
   }
   if (static_cast<std::size_t>(received) < n) {
     empty_at_ns_ = before_ns;
-    counters.note_seen_until(before_ns);
+    // Drained: everything that arrived before is seen, but for what the kernel dropped while the
+    // buffer was full (read here, every 10 ms at most: the drops' arrival is noted).
+    if (now_mono >= next_drop_look_ns_) {
+      read_socket_memory(counters);
+      next_drop_look_ns_ = now_mono + 10'000'000;
+    }
+    counters.note_seen_until(before_ns, look_interval_ns());
   }
   counters.count_arrival_look();
   ReceiveCounters::add(counters.datagrams, static_cast<std::uint64_t>(received));

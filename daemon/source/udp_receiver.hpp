@@ -92,9 +92,15 @@ class UdpReceiver {
   static constexpr std::int64_t kMinSleepNs = 100'000;
 
   void configure(const UdpReceiverOptions& options);
-  // Reads SO_MEMINFO: stores the kernel's drop count (plus left_at_stop_), returns the
-  // buffer's fill (0..1).
+  // Reads SO_MEMINFO: stores the kernel's drop count (plus left_at_stop_), notes an arrival now
+  // when it grew (what was dropped came after what the buffer held), returns the buffer's fill
+  // (0..1).
   double read_socket_memory(ReceiveCounters& counters);
+  // The longest a running receiver goes between receives: SO_RCVTIMEO's 100 ms, or a coalesced
+  // sleep (the latency budget at most).
+  std::int64_t look_interval_ns() const noexcept {
+    return budget_ns_ == 0 ? 100'000'000 : budget_ns_;
+  }
   // After the stop's drain: receives, without keeping them, the datagrams the socket still holds
   // that arrived before this call, and adds them to left_at_stop_ (counted as kernel drops: the
   // socket's close would drop them). Returns how many.
@@ -113,7 +119,9 @@ class UdpReceiver {
   std::int64_t budget_ns_ = 0;
   std::size_t max_wake_datagrams_ = 0;
   std::uint64_t left_at_stop_ = 0;
-  std::int64_t empty_at_ns_ = 0;  // CLOCK_MONOTONIC: when a receive last found the socket empty
+  std::int64_t empty_at_ns_ = 0;     // CLOCK_MONOTONIC: when a receive last found the socket empty
+  std::uint32_t meminfo_drops_ = 0;  // SO_MEMINFO's drop count at the last read
+  std::int64_t next_drop_look_ns_ = 0;  // a drained socket's drops are read again from then
   std::unique_ptr<Batch> buffers_;
 };
 
