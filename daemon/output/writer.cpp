@@ -351,7 +351,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
       // The decoder's snapshots wake this loop ten times a second; the cap only bounds how late
       // a silence (no_data_timeout_seconds) is noticed if they stop. A cap of their own period
       // would add a wake-up out of phase with each of them.
-      // After a pause, the receiver's first look is waited for in short slices.
+      // While a record waits for the receiver's looks (silence_unconfirmed), in short slices.
       const std::int64_t wait = std::clamp<std::int64_t>(next_tick - monotonic_ns(), 0,
                                                          holding_ ? 2'000'000 : 250'000'000);
       from_decoder_.wait_for_data(std::chrono::nanoseconds(wait));
