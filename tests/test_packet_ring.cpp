@@ -35,6 +35,7 @@
 #include "daemon/io/unique_fd.hpp"
 #include "daemon/source/packet_ring_receiver.hpp"
 #include "support/test_support.hpp"
+#include "support/veth_daemon.hpp"
 #include "support/veth_pair.hpp"
 
 namespace fs = std::filesystem;
@@ -45,13 +46,8 @@ using pandarcap::harness::wait_until;
 namespace pandarcap {
 namespace {
 
-bool can_make_links() {
-  if (::geteuid() == 0) return true;
-  // CI runs as root: there a test that cannot run is a failure, not a skip.
-  if (std::getenv("CI") != nullptr) FAIL("the packet_ring tests need root (CAP_NET_ADMIN)");
-  WARN("not root: the packet_ring tests need CAP_NET_ADMIN for the veth pair: not run");
-  return false;
-}
+using test::can_make_links;
+using RingDaemon = test::VethDaemon;
 
 // One pcap record: its header's time and lengths, and its bytes.
 struct Record {
@@ -226,60 +222,6 @@ struct Rig {
   test::VethPair veth;
   test::ScratchDir dir;
   std::uint16_t port;
-};
-
-struct RingDaemon {
-  RingDaemon(const test::ScratchDir& dir, const test::VethPair& veth, std::uint16_t port,
-             const std::string& extra_toml = "", const std::string& receiver = "packet_ring",
-             const std::vector<std::string>& env = {})
-      : out(dir / "out") {
-    const fs::path config = dir / "daemon.toml";
-    std::ofstream(config) << "[sensor]\nsensor_ip = \"" << veth.far_ip() << "\"\n" << extra_toml;
-    std::vector<std::string> args{"-c",         config.string(),      "--receiver",
-                                  receiver,     "--interface",        veth.near(),
-                                  "--port",     std::to_string(port), "--output-dir",
-                                  out.string(), "--max-clock-offset", "0"};
-    // The socket receiver needs no privilege, so as root (the tests' links need it) it must be
-    // told that root is meant.
-    if (receiver == "socket") args.emplace_back("--allow-root");
-    process.emplace(test::binary("pandarcapd"), args, dir / "daemon.log", env);
-    const bool ready =
-        wait_until([&] { return process->log().find("ready:") != std::string::npos; }, 20s);
-    INFO(process->log());
-    REQUIRE(ready);
-  }
-  // Waits until `total` datagrams are received or dropped by the kernel, stops the daemon, and
-  // returns its final health record.
-  nlohmann::json stop_after(std::uint64_t total) {
-    wait_until(
-        [&] {
-          const auto records = test::health_records(out);
-          return !records.empty() && test::health_counter(records.back(), "datagrams_received") +
-                                             test::health_counter(records.back(), "kernel_drops") >=
-                                         total;
-        },
-        20s);
-    return stop(SIGTERM);
-  }
-  // Waits until the loops' warm-up (kWarmUpNs, 2 s) is over, by the health's uptime: from then
-  // on their allocations are counted.
-  void wait_past_warm_up() {
-    REQUIRE(wait_until(
-        [&] {
-          const auto records = test::health_records(out);
-          return !records.empty() &&
-                 records.back().at("gauges").at("uptime_seconds").get<double>() > 2.2;
-        },
-        10s));
-  }
-  // Sends `signal` now, waits for a clean exit, and returns the final health record.
-  nlohmann::json stop(int signal) {
-    process->signal(signal);
-    REQUIRE(process->wait_exit(30s) == 0);
-    return test::last_health_record(out);
-  }
-  fs::path out;
-  std::optional<ChildProcess> process;
 };
 
 // The simulated sensor's traffic as `traffic` says (rate, length, bursts), sent from the far

@@ -24,6 +24,7 @@
 #include "bench/udp_traffic.hpp"
 #include "daemon/io/unique_fd.hpp"
 #include "support/test_support.hpp"
+#include "support/veth_daemon.hpp"
 #include "support/veth_pair.hpp"
 
 namespace fs = std::filesystem;
@@ -34,40 +35,14 @@ using pandarcap::harness::wait_until;
 namespace pandarcap {
 namespace {
 
-bool can_make_links() {
-  if (::geteuid() == 0) return true;
-  if (std::getenv("CI") != nullptr) FAIL("these tests need root (CAP_NET_ADMIN)");
-  WARN("not root: these tests need CAP_NET_ADMIN for the veth pair: not run");
-  return false;
-}
+using test::can_make_links;
+using Daemon = test::VethDaemon;
 
 std::int64_t unix_now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
-
-// The daemon on the near end of a veth pair (as tests/test_packet_ring.cpp's RingDaemon).
-struct Daemon {
-  Daemon(const test::ScratchDir& dir, const test::VethPair& veth, std::uint16_t port,
-         const std::string& extra_toml, const std::string& receiver)
-      : out(dir / "out") {
-    const fs::path config = dir / "daemon.toml";
-    std::ofstream(config) << "[sensor]\nsensor_ip = \"" << veth.far_ip() << "\"\n" << extra_toml;
-    std::vector<std::string> args{"-c",         config.string(),      "--receiver",
-                                  receiver,     "--interface",        veth.near(),
-                                  "--port",     std::to_string(port), "--output-dir",
-                                  out.string(), "--max-clock-offset", "0"};
-    if (receiver == "socket") args.emplace_back("--allow-root");
-    process.emplace(test::binary("pandarcapd"), args, dir / "daemon.log");
-    const bool ready =
-        wait_until([&] { return process->log().find("ready:") != std::string::npos; }, 20s);
-    INFO(process->log());
-    REQUIRE(ready);
-  }
-  fs::path out;
-  std::optional<ChildProcess> process;
-};
 
 // The kernel arrival times (Unix ns) of every datagram the daemon recorded (its pcap files in
 // raw/, classic pcap in microseconds), sorted: what the health's no_data is judged against.
@@ -112,6 +87,14 @@ struct PauseResult {
   std::vector<std::int64_t> arrivals;  // recorded_arrivals()
   double timeout_seconds = 1.0;
 };
+
+// The socket receiver with a 256 KiB buffer: full after ~0.2 s of a pause at 3600/s.
+PauseCase socket_with_small_buffer() {
+  PauseCase c;
+  c.receiver = "socket";
+  c.toml = "udp_socket_receive_buffer_size_bytes = 262144\n";
+  return c;
+}
 
 PauseResult run_pause(const PauseCase& c) {
   test::VethPair veth("ph");
@@ -243,9 +226,7 @@ void check_silence_said(const PauseResult& r) {
 TEST_CASE("pause hostile: 1.15 s with a socket buffer that fills: no no_data said",
           "[pause_hostile][daemon][threads]") {
   if (!can_make_links()) return;
-  PauseCase c;
-  c.receiver = "socket";
-  c.toml = "udp_socket_receive_buffer_size_bytes = 262144\n";
+  PauseCase c = socket_with_small_buffer();
   c.pause = 1150ms;
   check_no_no_data(run_pause(c));
 }
@@ -277,9 +258,7 @@ TEST_CASE(
     "pause hostile: SIGTERM in a 2.2 s pause with a socket buffer that filled and an even sensor",
     "[pause_hostile][daemon][threads]") {
   if (!can_make_links()) return;
-  PauseCase c;
-  c.receiver = "socket";
-  c.toml = "udp_socket_receive_buffer_size_bytes = 262144\n";
+  PauseCase c = socket_with_small_buffer();
   c.sigterm_in_pause = true;
   c.batch = 1;
   const PauseResult r = run_pause(c);
@@ -307,9 +286,7 @@ TEST_CASE(
     "pause hostile: the sensor stops 0.4 s before the resume and the socket buffer had filled",
     "[pause_hostile][daemon][threads]") {
   if (!can_make_links()) return;
-  PauseCase c;
-  c.receiver = "socket";
-  c.toml = "udp_socket_receive_buffer_size_bytes = 262144\n";
+  PauseCase c = socket_with_small_buffer();
   c.sensor_seconds = 3;
   c.batch = 1;
   c.resume_after_sensor_stop = 400ms;

@@ -62,14 +62,7 @@ struct LiveDaemon {
   // Waits until the daemon has seen or counted as dropped `total` datagrams, then stops it and
   // returns the final health record.
   nlohmann::json stop_after(std::uint64_t total) {
-    harness::wait_until(
-        [&] {
-          const auto records = health_records(out);
-          return !records.empty() && health_counter(records.back(), "datagrams_received") +
-                                             health_counter(records.back(), "kernel_drops") >=
-                                         total;
-        },
-        std::chrono::seconds(15));
+    wait_until_counted(out, total, std::chrono::seconds(15));
     process->signal(SIGTERM);
     exit_status = process->wait_exit(std::chrono::seconds(30));
     return last_health_record(out);

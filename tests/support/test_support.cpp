@@ -131,6 +131,18 @@ std::uint64_t health_counter(const nlohmann::json& record, std::string_view name
   return record["counters"].value(std::string(name), std::uint64_t{0});
 }
 
+bool wait_until_counted(const std::filesystem::path& output_dir, std::uint64_t total,
+                        std::chrono::milliseconds timeout) {
+  return harness::wait_until(
+      [&] {
+        const auto records = health_records(output_dir);
+        return !records.empty() && health_counter(records.back(), "datagrams_received") +
+                                           health_counter(records.back(), "kernel_drops") >=
+                                       total;
+      },
+      timeout);
+}
+
 void check_record_spacing(const std::vector<nlohmann::json>& records, double min_gap_s) {
   for (std::size_t i = 1; i + 1 < records.size(); ++i) {
     const double gap = records[i]["gauges"]["uptime_seconds"].get<double>() -

@@ -1,6 +1,7 @@
 // Shared helpers for the test suite: locating the real captures and scratch directories.
 #pragma once
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -114,6 +115,11 @@ std::string pandarcapd_command();
 
 // A counter of a health record (its "counters" object); 0 when absent or not a record.
 std::uint64_t health_counter(const nlohmann::json& record, std::string_view name);
+
+// Waits (`timeout` at most) until the newest health record of OUTPUT_DIR counts `total`
+// datagrams received or dropped by the kernel; whether it did.
+bool wait_until_counted(const std::filesystem::path& output_dir, std::uint64_t total,
+                        std::chrono::milliseconds timeout);
 
 // The ring overruns a test that streams in real time allows: none, except under
 // ThreadSanitizer, whose decode thread (every point it encodes is instrumented) may fall behind
