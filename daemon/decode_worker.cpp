@@ -155,26 +155,30 @@ void DecodeWorker::record_raw(const PacketSlot& slot) {
     }
     waiting_since_ns_ = 0;
   }
+  // The batch is read next by the writer, on the other CPU: its lines were that CPU's last, and
+  // an ordinary store would first fetch each one. The header is built here and both parts are
+  // streamed in whole lines instead (daemon/streaming_copy.hpp).
   RawPacket& packet = raw_->packets[raw_->size++];
-  packet.receive_time_ns = slot.receive_time_ns;
-  packet.source = slot.source;
-  packet.destination = slot.destination;
-  packet.length =
+  RawPacketHeader header;
+  header.receive_time_ns = slot.receive_time_ns;
+  header.source = slot.source;
+  header.destination = slot.destination;
+  header.length =
       static_cast<std::uint16_t>(std::min<std::size_t>(slot.length, sizeof packet.payload));
-  packet.wire_header_length = slot.wire_header_length;
-  packet.wire_trailer_length = 0;
+  header.wire_header_length = slot.wire_header_length;
   if (slot.wire_header_length > 0) {
-    std::memcpy(packet.wire_header, slot.wire_header, slot.wire_header_length);
+    std::memcpy(header.wire_header, slot.wire_header, slot.wire_header_length);
     // The frame's trailer follows the payload in the slot (the receiver keeps it in room).
-    packet.wire_trailer_length = static_cast<std::uint16_t>(
-        std::min<std::size_t>(slot.wire_trailer_length, sizeof packet.payload - packet.length));
-    packet.wire_length = slot.wire_length;
+    header.wire_trailer_length = static_cast<std::uint16_t>(
+        std::min<std::size_t>(slot.wire_trailer_length, sizeof packet.payload - header.length));
+    header.wire_length = slot.wire_length;
   }
-  std::memcpy(packet.payload, slot.payload, packet.length + packet.wire_trailer_length);
   // The recording must not claim bytes it does not hold: a cut datagram keeps its real length.
-  packet.original_length = slot.truncated
-                               ? std::max<std::uint32_t>(slot.original_length, packet.length + 1u)
-                               : packet.length;
+  header.original_length = slot.truncated
+                               ? std::max<std::uint32_t>(slot.original_length, header.length + 1u)
+                               : header.length;
+  streaming_copy(static_cast<RawPacketHeader*>(&packet), &header, sizeof header);
+  streaming_copy(packet.payload, slot.payload, header.length + header.wire_trailer_length);
   if (raw_->size == raw_->capacity) flush_raw();
 }
 
@@ -208,6 +212,7 @@ void DecodeWorker::flush_raw(bool notify) {
   WriterMessage message;
   message.kind = WriterMessage::Kind::kRaw;
   message.raw = raw_;
+  streaming_stores_done();  // the payloads' stores before the queue's release of the batch
   if (to_writer_.try_push(message)) {
     if (notify) to_writer_.notify();
     raw_ = nullptr;

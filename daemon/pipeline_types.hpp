@@ -21,6 +21,7 @@
 #include <new>
 #include <optional>
 #include <span>
+#include <type_traits>
 
 #include "core/decode/stream_decoder.hpp"
 #include "core/frames/frame.hpp"
@@ -29,6 +30,7 @@
 #include "core/sensors/packet.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/packet_slot.hpp"
+#include "daemon/streaming_copy.hpp"
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {
@@ -59,7 +61,9 @@ struct FrameArena {
   std::int64_t completed_log_ns = 0;
 };
 
-struct RawPacket {
+// What a recorded datagram carries besides its bytes. Whole lines: the decoder builds it aside
+// and streams it into the batch (daemon/streaming_copy.hpp), as it does the payload.
+struct alignas(ringbuf::kCacheLine) RawPacketHeader {
   std::int64_t receive_time_ns = 0;
   SlotAddress source{};
   SlotAddress destination{};            // as the wire carried it (PacketSlot::destination)
@@ -69,8 +73,15 @@ struct RawPacket {
   std::uint8_t wire_header[kWireHeaderCapacity];
   std::uint16_t wire_trailer_length = 0;  // PacketSlot::wire_trailer_length
   std::uint32_t wire_length = 0;          // PacketSlot::wire_length
-  std::uint8_t payload[PacketSlot::kPayloadCapacity];
 };
+static_assert(std::is_trivially_copyable_v<RawPacketHeader>);
+static_assert(sizeof(RawPacketHeader) % kStreamingGranule == 0);
+
+struct RawPacket : RawPacketHeader {
+  // Line-aligned, of a capacity in whole 16-byte granules: streamed in as they are.
+  alignas(ringbuf::kCacheLine) std::uint8_t payload[PacketSlot::kPayloadCapacity];
+};
+static_assert(PacketSlot::kPayloadCapacity % kStreamingGranule == 0);
 
 struct RawBatch {
   explicit RawBatch(std::size_t capacity_packets)
