@@ -34,6 +34,8 @@
 #include "bench/udp_traffic.hpp"
 #include "daemon/io/unique_fd.hpp"
 #include "daemon/source/packet_ring_receiver.hpp"
+#include "support/hand_frames.hpp"
+#include "support/pcap_records.hpp"
 #include "support/test_support.hpp"
 #include "support/veth_daemon.hpp"
 #include "support/veth_pair.hpp"
@@ -49,102 +51,24 @@ namespace {
 using test::can_make_links;
 using RingDaemon = test::VethDaemon;
 
-// One pcap record: its header's time and lengths, and its bytes.
-struct Record {
-  std::uint32_t seconds, microseconds, original;
-  std::string bytes;
-  bool operator<(const Record& o) const {
-    return std::tie(seconds, microseconds, original, bytes) <
-           std::tie(o.seconds, o.microseconds, o.original, o.bytes);
-  }
-  bool operator==(const Record& o) const = default;
-};
+using test::count_pcap_records;
+using Record = test::PcapRecord;
 
+// The records of a pcap both the daemon and tcpdump wrote: native order, microseconds.
 std::vector<Record> pcap_records(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  const std::string data((std::istreambuf_iterator<char>(in)), {});
-  std::vector<Record> out;
-  REQUIRE(data.size() >= 24);
   std::uint32_t magic = 0;
-  std::memcpy(&magic, data.data(), 4);
-  REQUIRE(magic == 0xA1B2C3D4u);  // native order, microseconds: what both write
-  for (std::size_t at = 24; at + 16 <= data.size();) {
-    std::uint32_t h[4];
-    std::memcpy(h, data.data() + at, 16);
-    REQUIRE(at + 16 + h[2] <= data.size());
-    out.push_back({h[0], h[1], h[3], data.substr(at + 16, h[2])});
-    at += 16 + h[2];
-  }
-  return out;
+  std::vector<Record> records = test::read_pcap_records(file, &magic);
+  CHECK(magic == 0xA1B2C3D4u);
+  return records;
 }
 
-std::size_t count_records(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  std::size_t count = 0;
-  char header[24];
-  if (!in.read(header, 24)) return 0;
-  while (in.read(header, 16)) {
-    std::uint32_t captured = 0;
-    std::memcpy(&captured, header + 8, 4);
-    if (!in.seekg(captured, std::ios::cur)) break;
-    ++count;
-  }
-  return count;
-}
+using test::ip_checksum;
 
-std::uint16_t checksum(const std::uint8_t* p, std::size_t n) {
-  std::uint32_t sum = 0;
-  for (std::size_t i = 0; i + 1 < n; i += 2)
-    sum += static_cast<std::uint32_t>(p[i] << 8 | p[i + 1]);
-  if (n % 2) sum += static_cast<std::uint32_t>(p[n - 1] << 8);
-  while (sum >> 16)
-    sum = (sum & 0xFFFF) + (sum >> 16);
-  return static_cast<std::uint16_t>(~sum);
-}
-
-std::vector<std::uint8_t> parse_mac(const std::string& text) {
-  std::vector<std::uint8_t> mac;
-  for (std::size_t i = 0; i + 1 < text.size(); i += 3)
-    mac.push_back(static_cast<std::uint8_t>(std::stoul(text.substr(i, 2), nullptr, 16)));
-  return mac;
-}
-
-// A VLAN-tagged Ethernet frame carrying `payload` in UDP from `source` to `destination`:port.
+// A VLAN-tagged Ethernet frame carrying `payload` in UDP from the far end to the near end's port.
 std::vector<std::uint8_t> tagged_frame(const test::VethPair& veth, std::uint16_t port,
                                        std::uint16_t tci, const std::vector<std::uint8_t>& payload,
                                        std::uint16_t ip_id) {
-  std::vector<std::uint8_t> f = parse_mac(veth.near_mac());
-  const auto src = parse_mac(veth.far_mac());
-  f.insert(f.end(), src.begin(), src.end());
-  const auto be16 = [&](std::uint16_t v) {
-    f.push_back(static_cast<std::uint8_t>(v >> 8));
-    f.push_back(static_cast<std::uint8_t>(v));
-  };
-  be16(0x8100);
-  be16(tci);
-  be16(0x0800);
-  const std::size_t ip = f.size();
-  const auto udp_length = static_cast<std::uint16_t>(8 + payload.size());
-  be16(0x4500);
-  be16(static_cast<std::uint16_t>(20 + udp_length));
-  be16(ip_id);
-  be16(0x4000);
-  be16(0x4011);
-  be16(0);
-  in_addr a{};
-  inet_pton(AF_INET, veth.far_ip().c_str(), &a);
-  f.insert(f.end(), reinterpret_cast<std::uint8_t*>(&a), reinterpret_cast<std::uint8_t*>(&a) + 4);
-  inet_pton(AF_INET, veth.near_ip().c_str(), &a);
-  f.insert(f.end(), reinterpret_cast<std::uint8_t*>(&a), reinterpret_cast<std::uint8_t*>(&a) + 4);
-  const std::uint16_t sum = checksum(f.data() + ip, 20);
-  f[ip + 10] = static_cast<std::uint8_t>(sum >> 8);
-  f[ip + 11] = static_cast<std::uint8_t>(sum);
-  be16(2368);
-  be16(port);
-  be16(udp_length);
-  be16(0);
-  f.insert(f.end(), payload.begin(), payload.end());
-  return f;
+  return test::hand_frame(veth, port, tci, payload, ip_id);
 }
 
 // A packet socket on the far end (the caller is in its namespace), for frames made by hand.
@@ -170,18 +94,10 @@ std::vector<std::uint8_t> sensor_datagram(std::uint32_t sequence) {
 // Sends `datagrams` from `from_ip` (a far-end address) to `to_ip`:`port` over UDP.
 void send_udp(const std::string& from_ip, const std::string& to_ip, std::uint16_t port,
               const std::vector<std::vector<std::uint8_t>>& datagrams) {
-  io::UniqueFd fd(::socket(AF_INET, SOCK_DGRAM, 0));
-  REQUIRE(fd);
-  sockaddr_in local{};
-  local.sin_family = AF_INET;
-  inet_pton(AF_INET, from_ip.c_str(), &local.sin_addr);
-  REQUIRE(::bind(fd.get(), reinterpret_cast<sockaddr*>(&local), sizeof local) == 0);
-  sockaddr_in to{};
-  to.sin_family = AF_INET;
-  to.sin_port = htons(port);
-  inet_pton(AF_INET, to_ip.c_str(), &to.sin_addr);
+  const io::UniqueFd fd = test::udp_socket_from(from_ip);
+  const sockaddr_in to = test::ipv4_endpoint(to_ip, port);
   for (const auto& d : datagrams) {
-    REQUIRE(::sendto(fd.get(), d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&to),
+    REQUIRE(::sendto(fd.get(), d.data(), d.size(), 0, reinterpret_cast<const sockaddr*>(&to),
                      sizeof to) == static_cast<ssize_t>(d.size()));
   }
 }
@@ -297,7 +213,8 @@ TEST_CASE("packet_ring on a veth pair: filter, VLAN tag, second host, tcpdump's 
   const nlohmann::json h = daemon.stop_after(from_sensor + kSecondHost);
   INFO(daemon.process->log());
   // tcpdump writes each packet as it takes it (-U): stopped once its file holds them all.
-  wait_until([&] { return count_records(dir / "tcpdump.pcap") >= from_sensor + kSecondHost; }, 10s);
+  wait_until([&] { return count_pcap_records(dir / "tcpdump.pcap") >= from_sensor + kSecondHost; },
+             10s);
   tcpdump.signal(SIGINT);
   REQUIRE(tcpdump.wait_exit(10s).has_value());
 
@@ -717,7 +634,7 @@ TEST_CASE(
     }
   }
   const nlohmann::json h = daemon.stop_after(2);
-  wait_until([&] { return count_records(dir / "tcpdump.pcap") >= 2; }, 10s);
+  wait_until([&] { return count_pcap_records(dir / "tcpdump.pcap") >= 2; }, 10s);
   tcpdump.signal(SIGINT);
   REQUIRE(tcpdump.wait_exit(10s).has_value());
   // What arrived: 4 + 100 payload bytes.
@@ -941,7 +858,7 @@ TEST_CASE("packet_ring: a block taken in parts, every kind of frame where the ri
     inet_pton(AF_INET, ip.c_str(), &a);
     std::memcpy(f.data() + 18 + at, &a, 4);
     f[18 + 10] = f[18 + 11] = 0;
-    const std::uint16_t sum = checksum(f.data() + 18, 20);
+    const std::uint16_t sum = ip_checksum(f.data() + 18, 20);
     f[18 + 10] = static_cast<std::uint8_t>(sum >> 8);
     f[18 + 11] = static_cast<std::uint8_t>(sum);
   };
@@ -1177,7 +1094,7 @@ TEST_CASE("packet_ring: host_ip 0.0.0.0 takes only this host's destinations, fol
     const in_addr_t loopback = htonl(host_order("127.0.0.5"));
     std::memcpy(martian.data() + 18 + 16, &loopback, 4);
     martian[18 + 10] = martian[18 + 11] = 0;
-    const std::uint16_t sum = checksum(martian.data() + 18, 20);
+    const std::uint16_t sum = ip_checksum(martian.data() + 18, 20);
     martian[18 + 10] = static_cast<std::uint8_t>(sum >> 8);
     martian[18 + 11] = static_cast<std::uint8_t>(sum);
     const io::UniqueFd raw = frame_sender(veth);

@@ -23,6 +23,7 @@
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
 #include "daemon/io/unique_fd.hpp"
+#include "support/pcap_records.hpp"
 #include "support/test_support.hpp"
 #include "support/veth_daemon.hpp"
 #include "support/veth_pair.hpp"
@@ -49,14 +50,8 @@ std::int64_t unix_now_ns() {
 std::vector<std::int64_t> recorded_arrivals(const fs::path& out) {
   std::vector<std::int64_t> times;
   for (const fs::path& file : test::files_ending(out / "raw", ".pcap")) {
-    std::ifstream in(file, std::ios::binary);
-    const std::string data((std::istreambuf_iterator<char>(in)), {});
-    for (std::size_t at = 24; at + 16 <= data.size();) {
-      std::uint32_t h[4];
-      std::memcpy(h, data.data() + at, 16);
-      times.push_back(std::int64_t{h[0]} * 1'000'000'000 + std::int64_t{h[1]} * 1000);
-      at += 16 + h[2];
-    }
+    for (const test::PcapRecord& r : test::read_pcap_records(file))
+      times.push_back(std::int64_t{r.seconds} * 1'000'000'000 + std::int64_t{r.fraction} * 1000);
   }
   std::sort(times.begin(), times.end());
   return times;
