@@ -131,8 +131,8 @@ void send_all(const std::string& from_ip, const std::string& to_ip, std::uint16_
   const sockaddr_in to = test::ipv4_endpoint(to_ip, port);
   std::size_t i = 0;
   for (const auto& d : datagrams) {
-    const ssize_t n =
-        ::sendto(fd.get(), d.data(), d.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+    const ssize_t n = ::sendto(fd.get(), d.data(), d.size(), 0,
+                               reinterpret_cast<const sockaddr*>(&to), sizeof to);
     INFO("datagram " << i << " of " << d.size() << " bytes");
     REQUIRE(n == static_cast<ssize_t>(d.size()));
     if (++i % 32 == 0) std::this_thread::sleep_for(1ms);  // ~30 000/s: a pace, not a wait
