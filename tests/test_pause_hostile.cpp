@@ -14,7 +14,6 @@
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <filesystem>
-#include <fstream>
 #include <optional>
 #include <string>
 #include <thread>
@@ -30,7 +29,6 @@
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
-using pandarcap::harness::ChildProcess;
 using pandarcap::harness::wait_until;
 
 namespace pandarcap {
