@@ -65,7 +65,7 @@ std::size_t DecodeWorker::process_batch(Decoder& decoder, std::span<const Packet
         detecting_ = false;  // the model is the stream's now
       } else {
         const DetectedModel d = detect_model(std::span<const std::uint8_t>(
-            slot.payload, std::min<std::size_t>(slot.length, sizeof slot.payload)));
+            slot.data(), std::min<std::size_t>(slot.length, sizeof slot.payload)));
         if (d.kind == DetectionKind::kKnown && d.model != Decoder::ModelType::kId) {
           pending_model_ = d.model;
           return i;
@@ -178,7 +178,7 @@ void DecodeWorker::record_raw(const PacketSlot& slot) {
                                ? std::max<std::uint32_t>(slot.original_length, header.length + 1u)
                                : header.length;
   streaming_copy(static_cast<RawPacketHeader*>(&packet), &header, sizeof header);
-  streaming_copy(packet.payload, slot.payload, header.length + header.wire_trailer_length);
+  streaming_copy(packet.payload, slot.data(), header.length + header.wire_trailer_length);
   if (raw_->size == raw_->capacity) flush_raw();
 }
 
@@ -232,7 +232,7 @@ void DecodeWorker::process(Decoder& decoder, const PacketSlot& slot) {
   const std::size_t length =
       slot.truncated ? 0 : std::min<std::size_t>(slot.length, sizeof slot.payload);
   const std::uint64_t accepted_before = decoder.stats().accepted;
-  decoder.process(std::span<const std::uint8_t>(slot.payload, length));
+  decoder.process(std::span<const std::uint8_t>(slot.data(), length));
   // The sensor's clock against this datagram's arrival: for an accepted packet only (a copy
   // arrives later than its original did).
   const StreamStats& stats = decoder.stats();

@@ -55,7 +55,12 @@ struct alignas(ringbuf::kCacheLine) PacketSlot {
   static_assert(kPayloadCapacity >= kMaxAcceptedDatagram);
 
   std::uint8_t payload[kPayloadCapacity];
-  // Bytes kept in `payload` (at most kPayloadCapacity).
+  // Where the datagram's bytes are: null when they are in `payload` (the socket receiver, a
+  // replay); otherwise in the packet ring's block the kernel wrote them into, which is given back
+  // only once the decoder has taken every slot of it (daemon/source/packet_ring_receiver.hpp), so
+  // the packet ring's datagrams are never copied before they are decoded.
+  const std::uint8_t* in_place = nullptr;
+  // Bytes kept (at most kPayloadCapacity).
   std::uint32_t length;
   // Bytes the datagram had (MSG_TRUNC's real length; a capture record's UDP length): equal to
   // `length` unless the datagram was cut. The recording writes it as the record's original length.
@@ -83,6 +88,9 @@ struct alignas(ringbuf::kCacheLine) PacketSlot {
   // or multicast address) and the port the socket is bound to; a replay's record's own. The
   // recording writes it as the packet's destination, as the wire carried it.
   SlotAddress destination;
+
+  // The datagram's bytes (`length` of them, then `wire_trailer_length` of the frame's trailer).
+  const std::uint8_t* data() const noexcept { return in_place != nullptr ? in_place : payload; }
 };
 
 static_assert(sizeof(PacketSlot) % ringbuf::kCacheLine == 0);

@@ -21,18 +21,25 @@
 
 namespace pandarcap {
 
-// The granule the copy works in: `bytes` is rounded up to it, so both `dst` and `src` must have
-// that much room (and `dst` be aligned to it).
+// The granule the copy writes in: `bytes` is rounded up to it in `dst`, which must have that
+// much room (and be aligned to it). `src` is read for exactly `bytes`: it may be a datagram in
+// the packet ring's mapping, whose last block ends where the mapping does.
 inline constexpr std::size_t kStreamingGranule = 16;
 
-// Copies `bytes` (rounded up to kStreamingGranule) from `src` to `dst`. The stores are weakly
+// Copies `bytes` from `src` to `dst` (whose granule after them gets zeros). The stores are weakly
 // ordered: call streaming_stores_done() before the memory is handed to another thread.
 inline void streaming_copy(void* dst, const void* src, std::size_t bytes) noexcept {
 #ifdef PANDARCAP_STREAMING_STORES
   auto* out = static_cast<__m128i*>(dst);
   const auto* in = static_cast<const __m128i*>(src);
-  for (std::size_t i = 0, n = (bytes + kStreamingGranule - 1) / kStreamingGranule; i < n; ++i)
+  const std::size_t whole = bytes / kStreamingGranule;
+  for (std::size_t i = 0; i < whole; ++i)
     _mm_stream_si128(out + i, _mm_loadu_si128(in + i));
+  if (const std::size_t rest = bytes % kStreamingGranule; rest > 0) {
+    alignas(kStreamingGranule) std::uint8_t tail[kStreamingGranule] = {};
+    std::memcpy(tail, in + whole, rest);
+    _mm_stream_si128(out + whole, _mm_load_si128(reinterpret_cast<const __m128i*>(tail)));
+  }
 #else
   std::memcpy(dst, src, bytes);
 #endif

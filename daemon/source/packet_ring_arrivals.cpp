@@ -18,7 +18,7 @@ void PacketRingReceiver::note_arrivals(ReceiveCounters& counters) noexcept {
   // newer than the one's before it, so the newest block with a sensor's packet is the one.
   const std::int64_t before_ns = monotonic_ns();
   std::int64_t newest_ns = 0;
-  while (arrivals_seen_ < block_count_) {
+  while (arrivals_seen_ < blocks_ahead()) {
     const auto* block = reinterpret_cast<const tpacket_block_desc*>(
         static_cast<const std::uint8_t*>(map_) +
         std::size_t{(next_block_ + arrivals_seen_) % block_count_} * block_bytes_);
@@ -37,7 +37,7 @@ void PacketRingReceiver::note_arrivals(ReceiveCounters& counters) noexcept {
   }
   // With every block handed over, what arrives is dropped (counted), after the newest packet the
   // ring holds: nothing is complete until a block is back with the kernel.
-  if (arrivals_seen_ < block_count_) {
+  if (arrivals_seen_ < blocks_ahead()) {
     // A ring that was full held only what arrived until then: the kernel's drops are read (every
     // 10 ms at most, and at the first look after a pause of this thread, whose blocks may have
     // gone back before it), and when there are new ones they arrived before this look: a packet

@@ -341,8 +341,9 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
     // recording; the decoder reads `length` bytes.
     slot.wire_trailer_length =
         static_cast<std::uint16_t>(std::min(f->trailer_bytes, sizeof slot.payload - slot.length));
-    const std::uint8_t* payload = mac + f->header_bytes;
-    std::memcpy(slot.payload, payload, slot.length + std::size_t{slot.wire_trailer_length});
+    // Not copied: the decoder reads the datagram where the kernel wrote it, and the block goes
+    // back only once every slot of it is taken (held_).
+    slot.in_place = mac + f->header_bytes;
     slot.original_length = f->claimed_bytes;
     slot.truncated = f->truncated || slot.length < f->claimed_bytes;
     slot.receive_time_ns =
@@ -380,7 +381,7 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
     }
     truncated += slot.truncated;
     const SourceLock::Verdict verdict = sources_.judge(
-        f->source_ip, f->source_port, std::span<const std::uint8_t>(slot.payload, slot.length),
+        f->source_ip, f->source_port, std::span<const std::uint8_t>(slot.in_place, slot.length),
         slot.receive_time_ns);
     if (verdict != SourceLock::Verdict::kSensor) {
       ++foreign;
@@ -394,8 +395,9 @@ void PacketRingReceiver::take_block(tpacket_block_desc& block, PacketRing& ring,
     published += filled;
   }
   if (whole) {
-    // release: the kernel may write the block again once every read of it is done.
-    __atomic_store_n(&block.hdr.bh1.block_status, TP_STATUS_KERNEL, __ATOMIC_RELEASE);
+    // Its datagrams are read in place by the decoder: it goes back to the kernel at the next
+    // turn, when the ring is empty (give_back_held()).
+    held_ = true;
     next_block_ = (next_block_ + 1) % block_count_;
     resume_index_ = 0;
     if (arrivals_seen_ > 0) --arrivals_seen_;  // counted from next_block_
@@ -480,6 +482,13 @@ ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool
   const std::int64_t now = coarse_monotonic_ns();
   if (drain_until_ == 0 && stop.load(std::memory_order_relaxed)) drain_until_ = now + drain_ns;
   const bool draining = drain_until_ != 0;
+  // The last block's datagrams were read in place; the caller has emptied the ring since (it
+  // turns only then), so nothing reads the block any more. A caller that turns early is told
+  // to take what the ring holds first.
+  if (held_) {
+    if (ring.size_approx() != 0) return ReceiveTurn::kTook;
+    give_back_held();
+  }
   if (draining && now >= drain_until_) return ReceiveTurn::kEnded;
   ReceiveCounters::add(heartbeat, 1);
   note_arrivals(counters);
@@ -514,9 +523,22 @@ ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool
   return ReceiveTurn::kWaited;
 }
 
+void PacketRingReceiver::give_back_held() noexcept {
+  auto* block = reinterpret_cast<tpacket_block_desc*>(
+      static_cast<std::uint8_t*>(map_) +
+      std::size_t{(next_block_ + block_count_ - 1) % block_count_} * block_bytes_);
+  // release: the kernel may write the block again once every read of it is done.
+  __atomic_store_n(&block->hdr.bh1.block_status, TP_STATUS_KERNEL, __ATOMIC_RELEASE);
+  held_ = false;
+}
+
+std::uint32_t PacketRingReceiver::blocks_ahead() const noexcept {
+  return block_count_ - (held_ ? 1u : 0u);
+}
+
 std::uint64_t PacketRingReceiver::frames_unread() const noexcept {
   std::uint64_t unread = 0;
-  for (std::uint32_t n = 0; n < block_count_; ++n) {
+  for (std::uint32_t n = 0; n < blocks_ahead(); ++n) {
     const std::uint32_t index = (next_block_ + n) % block_count_;
     const auto* block = reinterpret_cast<const tpacket_block_desc*>(
         static_cast<const std::uint8_t*>(map_) + std::size_t{index} * block_bytes_);
@@ -530,7 +552,7 @@ std::uint64_t PacketRingReceiver::frames_unread() const noexcept {
 
 std::uint32_t PacketRingReceiver::blocks_waiting() const noexcept {
   std::uint32_t n = 0;
-  for (; n < block_count_; ++n) {
+  for (; n < blocks_ahead(); ++n) {
     const std::uint32_t index = (next_block_ + n) % block_count_;
     const auto* block = reinterpret_cast<const tpacket_block_desc*>(
         static_cast<const std::uint8_t*>(map_) + std::size_t{index} * block_bytes_);
