@@ -192,19 +192,29 @@ TEST_CASE("the simulated sensor of each model: its packets arrive, frames whole,
     CHECK(health.value("sensor", "") == lower);
     const std::uint64_t overruns = check_ring_overruns(health);
     CHECK(health_counter(health, "packets_rejected") == 0);
-    CHECK(health_counter(health, "points_missing") == 0);
     CHECK(health_counter(health, "sequence_gaps") == 0);
     CHECK(health_counter(health, "kernel_drops") == 0);
     CHECK(health_counter(health, "packets_accepted") + overruns > 1000);
-    if (overruns == 0) {
-      CHECK(health_counter(health, "frames_complete") >= 20);
-      CHECK(health_counter(health, "outlier_packets") == 0);
-    }
-    // Whole frames on disk, none partial but the first and the last.
     std::size_t partial = 0;
     for (const auto& f : files_ending(dir / "frames", ".pcd"))
       partial += f.filename().string().find("_partial") != std::string::npos;
-    CHECK(partial <= 2);
+    if (overruns == 0) {
+      CHECK(health_counter(health, "points_missing") == 0);
+      CHECK(health_counter(health, "frames_complete") >= 20);
+      CHECK(health_counter(health, "outlier_packets") == 0);
+      // Whole frames on disk, none partial but the first and the last.
+      CHECK(partial <= 2);
+    } else {
+      // A TSan decoder that fell behind (check_ring_overruns): the frames that lost packets are
+      // counted partial, and each record whose second had overruns does not say ok.
+      CHECK(health_counter(health, "frames_partial") + 2 >= partial);
+      std::uint64_t before = 0;
+      for (const nlohmann::json& r : health_records(dir.path())) {
+        const std::uint64_t overrun = health_counter(r, "ring_overruns");
+        if (overrun > before) CHECK(r.value("state", "") != "ok");
+        before = overrun;
+      }
+    }
   }
 }
 
