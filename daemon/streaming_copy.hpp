@@ -26,8 +26,9 @@ namespace pandarcap {
 // the packet ring's mapping, whose last block ends where the mapping does.
 inline constexpr std::size_t kStreamingGranule = 16;
 
-// Copies `bytes` from `src` to `dst` (whose granule after them gets zeros). The stores are weakly
-// ordered: call streaming_stores_done() before the memory is handed to another thread.
+// Copies `bytes` from `src` to `dst`; the rest of `dst`'s last granule is left undefined. The
+// stores are weakly ordered: call streaming_stores_done() before the memory is handed to another
+// thread.
 inline void streaming_copy(void* dst, const void* src, std::size_t bytes) noexcept {
 #ifdef PANDARCAP_STREAMING_STORES
   auto* out = static_cast<__m128i*>(dst);
@@ -37,7 +38,7 @@ inline void streaming_copy(void* dst, const void* src, std::size_t bytes) noexce
     _mm_stream_si128(out + i, _mm_loadu_si128(in + i));
   if (const std::size_t rest = bytes % kStreamingGranule; rest > 0) {
     alignas(kStreamingGranule) std::uint8_t tail[kStreamingGranule] = {};
-    std::memcpy(tail, in + whole, rest);
+    std::memcpy(tail, static_cast<const std::uint8_t*>(src) + whole * kStreamingGranule, rest);
     _mm_stream_si128(out + whole, _mm_load_si128(reinterpret_cast<const __m128i*>(tail)));
   }
 #else

@@ -322,11 +322,16 @@ TEST_CASE("packet_ring: datagrams read in place are the ones sent while the kern
   traffic.destination_ip = veth.near_ip();
   traffic.port = port;
   bench::GeneratorResult sending;
-  // Not send_sensor(): Catch2's assertions are for the test's own thread.
+  std::string sender_error;
+  // Not send_sensor(): Catch2's assertions are for the test's own thread, and so are its errors.
   std::thread sender([&] {
-    test::FarNamespace far(veth.ns());
-    sending =
-        bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    try {
+      test::FarNamespace far(veth.ns());
+      sending =
+          bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
+    } catch (const std::exception& e) {
+      sender_error = e.what();
+    }
   });
   // Five times while the sensor sends: the daemon stopped until the ring (about 700 frames) is
   // full and the kernel drops, then resumed for 400 frames' time; each block the decoder gives
@@ -341,6 +346,7 @@ TEST_CASE("packet_ring: datagrams read in place are the ones sent while the kern
     wait_until([&] { return frames_in() - from >= 400; }, 10s);
   }
   sender.join();
+  REQUIRE(sender_error.empty());
   REQUIRE(full);
   REQUIRE(sending.send_errors == 0);
   const std::uint64_t sent = sending.sent;

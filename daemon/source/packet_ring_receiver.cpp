@@ -559,7 +559,7 @@ std::uint32_t PacketRingReceiver::blocks_waiting() const noexcept {
     if ((__atomic_load_n(&block->hdr.bh1.block_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) == 0)
       break;
   }
-  return n;
+  return n + (held_ ? 1u : 0u);
 }
 
 void PacketRingReceiver::finish(ReceiveCounters& counters) noexcept {

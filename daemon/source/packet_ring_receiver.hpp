@@ -133,13 +133,16 @@ class PacketRingReceiver {
   // and a backlog waits in the kernel's ring, not in `ring`. Says which it did; kEnded once `stop`
   // was set and every block before it taken (the block being filled is handed over by its retire
   // timer within 3 periods), and then call finish(). `heartbeat` counts the turns, for the
-  // watchdog.
+  // watchdog. Called only by the thread that consumes `ring` too (the decode thread): a turn
+  // gives the block it read in place back to the kernel, so `ring` must be empty then, and
+  // only that thread can know it is (a turn with `ring` not empty takes nothing: kTook).
   ReceiveTurn receive(PacketRing& ring, const std::atomic<bool>& stop, ReceiveCounters& counters,
                       std::atomic<std::uint64_t>& heartbeat);
   // After the last receive(): the last drops read into the counters, with the frames a stop's
   // drain left in the ring (a backlog longer than the drain).
   void finish(ReceiveCounters& counters) noexcept;
-  // The blocks handed over and not taken (a block taken in part counts): while fewer than half,
+  // The blocks the kernel cannot fill: handed over and not taken (a block taken in part counts),
+  // and the one held while the decoder reads it in place. While fewer than half,
   // the reader may wait for its own consumer (the writer) and leave the backlog here
   // (DecodeWorker); it grows while packets arrive.
   std::uint32_t blocks_waiting() const noexcept;
