@@ -9,7 +9,8 @@
 //     frame_reference_time as the message's header.stamp, same DATA bytes); prints one JSON
 //     object and exits 0 (1 on a protocol failure, 2 on a timeout).
 //   node live_client.mjs view URL SECONDS
-//     subscribes to every channel and reads everything for SECONDS, as Foxglove's app would;
+//     subscribes to every channel and reads everything for SECONDS from the connection, as
+//     Foxglove's app would;
 //     prints the messages and bytes received (for docs/live.md's cost measurement).
 //   node live_client.mjs stall URL
 //     subscribes to every channel, then never reads again (the socket paused); prints "stalled"
@@ -77,10 +78,14 @@ if (mode === "stall") {
     messages += 1;
     bytes += data.byteLength;
   });
-  setTimeout(() => {
-    console.log(JSON.stringify({ messages, bytes }));
-    process.exit(0);
-  }, Number(framesDir) * 1000);
+  // SECONDS from the connection, not from node's start (which a busy machine can make last
+  // longer than a short view).
+  ws.on("open", () =>
+    setTimeout(() => {
+      console.log(JSON.stringify({ messages, bytes }));
+      process.exit(0);
+    }, Number(framesDir) * 1000),
+  );
 } else if (mode === "watch") {
   const wanted = Number(cloudsArg);
   let reader;
