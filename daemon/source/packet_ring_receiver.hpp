@@ -43,10 +43,11 @@
 // Each datagram gets a PacketRing slot with its times, addresses and headers, but its bytes stay
 // where the kernel wrote them (PacketSlot::in_place): the decoder and the recording read them in
 // the block, so the accounting and the decoder are the socket receiver's and no datagram is
-// copied before it is decoded (the copy was 12 % of the decode thread's samples at the sensor's
-// rate). A block taken whole is held until the next turn, when the decoder has emptied the ring;
-// then it goes back to the kernel. So one block at most is ours and not the kernel's: the ring's
-// depth is its block count less one.
+// copied before it is decoded. (Less work, not a measured saving: the first read of a line the
+// kernel wrote still pays for fetching it, now in the recording's copy; docs/performance.md,
+// tenth round.) A block taken whole is held until the next turn, when the decoder has emptied
+// the ring; then it goes back to the kernel. So one block at most is ours and not the kernel's:
+// the ring's depth is its block count less one.
 //
 // Drops: PACKET_STATISTICS (tp_drops, the frames the kernel had no free block for) is read once a
 // second and at the end; reading resets it, so it is added up into kernel_drops. A block is
@@ -142,9 +143,9 @@ class PacketRingReceiver {
   // drain left in the ring (a backlog longer than the drain).
   void finish(ReceiveCounters& counters) noexcept;
   // The blocks the kernel cannot fill: handed over and not taken (a block taken in part counts),
-  // and the one held while the decoder reads it in place. While fewer than half,
-  // the reader may wait for its own consumer (the writer) and leave the backlog here
-  // (DecodeWorker); it grows while packets arrive.
+  // and the one held while the decoder reads it in place. While fewer than half, the reader may
+  // wait for its own consumer (the writer) and leave the backlog here (DecodeWorker); it grows
+  // while packets arrive.
   std::uint32_t blocks_waiting() const noexcept;
   std::uint32_t block_count() const noexcept { return block_count_; }
   // Notes in `counters` when the sensor's newest packet of the blocks handed over since the
