@@ -32,6 +32,7 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
+#include "core/sensors/pandar40p.hpp"
 #include "daemon/io/unique_fd.hpp"
 #include "daemon/source/packet_ring_receiver.hpp"
 #include "support/hand_frames.hpp"
@@ -306,7 +307,7 @@ TEST_CASE("packet_ring: a burst the ring cannot hold is counted as kernel drops,
 TEST_CASE("packet_ring: datagrams read in place are the ones sent while the kernel refills it",
           "[packet_ring][daemon][threads]") {
   if (!can_make_links()) return;
-  Rig rig("pi", "packet-ring-in-place");
+  Rig rig("pq", "packet-ring-in-place");
   auto& [veth, dir, port] = rig;
   RingDaemon daemon(dir, veth, port, "udp_socket_receive_buffer_size_bytes = 1048576\n");
   // The frames the near end has taken from the wire, by the interface's own count.
@@ -362,9 +363,9 @@ TEST_CASE("packet_ring: datagrams read in place are the ones sent while the kern
   CHECK(c("sequence_reordered_packets") == 0);
   // What the writer could not keep (a busy machine's stalled writer) is counted, not lost.
   CHECK(c("pcap_packets_written") + c("pcap_packets_not_recorded") == c("datagrams_received"));
-  // The recording holds each datagram once, in the order sent, each whole: its UDP sequence (the
-  // last 4 bytes) only grows, and its bytes are a packet of the sensor's (the decoder accepted
-  // every one).
+  // The recording holds each datagram once, in the order sent, each whole: its UDP sequence
+  // (Pandar40P::sequence) only grows, and its bytes are a packet of the sensor's (the decoder
+  // accepted every one).
   std::vector<fs::path> pcaps = test::files_ending(daemon.out / "raw", ".pcap");
   std::sort(pcaps.begin(), pcaps.end());
   std::uint64_t records = 0;
@@ -374,10 +375,11 @@ TEST_CASE("packet_ring: datagrams read in place are the ones sent while the kern
     for (const Record& r : pcap_records(file)) {
       ++records;
       REQUIRE(r.bytes.size() == 42 + 1266);
-      std::uint32_t sequence = 0;
-      std::memcpy(&sequence, r.bytes.data() + r.bytes.size() - 4, 4);
-      if (std::int64_t{sequence} <= last_sequence) ++out_of_order;
-      last_sequence = sequence;
+      const std::optional<std::uint32_t> sequence =
+          Pandar40P::sequence({reinterpret_cast<const std::uint8_t*>(r.bytes.data()) + 42, 1266});
+      REQUIRE(sequence.has_value());
+      if (std::int64_t{*sequence} <= last_sequence) ++out_of_order;
+      last_sequence = *sequence;
     }
   }
   CHECK(records == c("pcap_packets_written"));
