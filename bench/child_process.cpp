@@ -101,6 +101,12 @@ std::string ChildProcess::log() const {
   return read_file(log_path_);
 }
 
+std::filesystem::path beside_this_binary(const std::string& name) {
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return ec ? std::filesystem::path(name) : self.parent_path() / name;
+}
+
 std::string read_file(const std::filesystem::path& path) {
   std::ifstream in(path);
   std::stringstream s;

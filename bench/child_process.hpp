@@ -53,6 +53,10 @@ struct ShellResult {
 };
 ShellResult run_shell(const std::string& command);
 
+// The binary `name` in this executable's directory (the build's bin/, or /usr/bin installed), or
+// `name` alone, for PATH to find, when /proc/self/exe cannot be read.
+std::filesystem::path beside_this_binary(const std::string& name);
+
 // The whole file as text ("" when it cannot be read): logs, /proc files.
 std::string read_file(const std::filesystem::path& path);
 

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "bench/median.hpp"
 #include "core/decode/calibration.hpp"
 #include "core/decode/packet_decoder.hpp"
 #include "core/decode/simd_decoder.hpp"
@@ -102,12 +103,6 @@ Sample measure(const PacketDecoder& decoder, const Stream& stream, double second
   const double elapsed = std::max(1e-9, thread_cpu_seconds() - start);
   return {static_cast<double>(stream.packets()) * passes / elapsed,
           static_cast<double>(points) / elapsed};
-}
-
-double median(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  const std::size_t n = values.size();
-  return n % 2 == 1 ? values[n / 2] : (values[n / 2 - 1] + values[n / 2]) / 2;
 }
 
 }  // namespace

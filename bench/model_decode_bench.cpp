@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "bench/decode_bench.hpp"
+#include "bench/median.hpp"
 #include "core/decode/calibration.hpp"
 #include "core/decode/stream_decoder.hpp"
 #include "core/frames/frame_collector.hpp"
@@ -95,7 +96,7 @@ double timed_passes(Row& row, int passes) {
   return std::max(1e-9, elapsed);
 }
 
-void measure(Row& row, double seconds) {
+void measure_row(Row& row, double seconds) {
   with_model(row.model, [&]<class M>(std::type_identity<M>) {
     const double one_pass = timed_passes<M>(row, 1);
     const int passes = std::clamp(static_cast<int>(seconds / one_pass), 1, 1'000'000);
@@ -104,12 +105,6 @@ void measure(Row& row, double seconds) {
     row.packets_per_s.push_back(packets / elapsed);
     row.points_per_s.push_back(static_cast<double>(row.stats.points) * passes / elapsed);
   });
-}
-
-double median(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  const std::size_t n = values.size();
-  return n % 2 == 1 ? values[n / 2] : (values[n / 2 - 1] + values[n / 2]) / 2;
 }
 
 }  // namespace
@@ -133,7 +128,7 @@ nlohmann::ordered_json run_model_decode_bench(const DecodeBenchOptions& options)
   }
   for (int round = 0; round < options.rounds; ++round) {
     for (Row& row : rows)
-      measure(row, options.seconds);
+      measure_row(row, options.seconds);
   }
 
   nlohmann::ordered_json report;

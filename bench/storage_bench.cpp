@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "bench/child_process.hpp"
+#include "bench/median.hpp"
 
 namespace pandarcap::bench {
 namespace {
@@ -49,12 +50,6 @@ constexpr Choice kChoices[] = {
     {"vehicle profile: pcap.zst + PCD lzf every 10th", kVehicleProfile},
 };
 constexpr const char* kOutputs[] = {"frames", "raw", "mcap", "health"};
-
-fs::path default_daemon() {
-  std::error_code ec;
-  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? fs::path("pandarcapd") : self.parent_path() / "pandarcapd";
-}
 
 std::uint64_t bytes_under(const fs::path& dir) {
   std::uint64_t total = 0;
@@ -149,16 +144,11 @@ ordered_json run_once(const fs::path& daemon, const fs::path& dir, const Choice&
   return row;
 }
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 == 1 ? v[n / 2] : (v[n / 2 - 1] + v[n / 2]) / 2;
-}
-
 }  // namespace
 
 ordered_json run_storage_bench(const StorageBenchOptions& o) {
-  const fs::path daemon = o.daemon.empty() ? default_daemon() : fs::path(o.daemon);
+  const fs::path daemon =
+      o.daemon.empty() ? harness::beside_this_binary("pandarcapd") : fs::path(o.daemon);
   const bool temporary = o.directory.empty();
   const fs::path work =
       temporary ? fs::temp_directory_path() / fmt::format("pandarcap-storage-{}", ::getpid())

@@ -254,12 +254,6 @@ bool has_receiver_option(const fs::path& daemon) {
              .out.find("--receiver") != std::string::npos;
 }
 
-fs::path default_daemon() {
-  std::error_code ec;
-  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? fs::path("pandarcapd") : self.parent_path() / "pandarcapd";
-}
-
 }  // namespace
 
 ZeroLossTrials::ZeroLossTrials(const ZeroLossOptions& options, const TrafficSource& source,
@@ -268,7 +262,8 @@ ZeroLossTrials::ZeroLossTrials(const ZeroLossOptions& options, const TrafficSour
       source_(source),
       work_(std::move(work)),
       path_(std::move(path)),
-      daemon_(options.daemon.empty() ? default_daemon() : fs::path(options.daemon)),
+      daemon_(options.daemon.empty() ? harness::beside_this_binary("pandarcapd")
+                                     : fs::path(options.daemon)),
       daemon_has_receiver_option_(has_receiver_option(daemon_)) {
   if (!daemon_has_receiver_option_ && (o_.receiver != "socket" || o_.compare_receivers)) {
     throw std::runtime_error(fmt::format(

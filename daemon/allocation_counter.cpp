@@ -24,6 +24,12 @@ std::uint64_t hot_allocations(HotThread thread) noexcept {
   return g_hot_allocations[static_cast<int>(thread)].load(std::memory_order_relaxed);
 }
 
+// Weak: pandarcapd's hooks (allocation_hooks.cpp) define the answer; a binary without them (the
+// tests, the bench), which links the health publisher that asks, counts nothing.
+[[gnu::weak]] bool counting_available() noexcept {
+  return false;
+}
+
 void note_allocation() noexcept {
   if (t_hot >= 0) g_hot_allocations[t_hot].fetch_add(1, std::memory_order_relaxed);
 }

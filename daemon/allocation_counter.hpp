@@ -7,7 +7,7 @@
 //
 // The counting itself lives in allocation_hooks.cpp, which replaces the allocation functions in
 // the pandarcapd executable only. Sanitizer builds keep their own allocator, so there nothing is
-// counted and counting_available() is false.
+// counted and counting_available() is false, as in any binary without the hooks.
 #pragma once
 
 #include <cstdint>

@@ -227,7 +227,7 @@ struct ReadResult {
   CaptureStats stats;
 };
 
-ReadResult read_all(const fs::path& path, CaptureReader::Options options = {}) {
+ReadResult read_capture(const fs::path& path, CaptureReader::Options options = {}) {
   CaptureReader reader(path.string(), options);
   ReadResult result;
   pandarcap::CaptureRecord record;
@@ -327,7 +327,7 @@ TEST_CASE("PcapWriter output reads back identically", "[capture]") {
   }
   REQUIRE(fs::file_size(path) == expected_bytes);
 
-  const ReadResult result = read_all(path);
+  const ReadResult result = read_capture(path);
   REQUIRE(result.status == CaptureStatus::kEnd);
   CHECK(result.error.empty());
   REQUIRE(result.records.size() == sizes.size());
@@ -513,11 +513,11 @@ TEST_CASE("destination-port filter keeps one port and counts the rest", "[captur
                    kLidar, {kHost.ip, ports[i]});
     }
   }
-  const ReadResult all = read_all(path);
+  const ReadResult all = read_capture(path);
   CHECK(all.records.size() == 5);
   CHECK(all.stats.port_filtered == 0);
 
-  const ReadResult kept = read_all(path, {.destination_port = 2368});
+  const ReadResult kept = read_capture(path, {.destination_port = 2368});
   REQUIRE(kept.status == CaptureStatus::kEnd);
   REQUIRE(kept.records.size() == 3);
   CHECK(kept.records[0].payload == pattern(16, 0));
@@ -526,7 +526,7 @@ TEST_CASE("destination-port filter keeps one port and counts the rest", "[captur
   CHECK(kept.stats.records == 5);
   CHECK(kept.stats.port_filtered == 2);
 
-  const ReadResult none = read_all(path, {.destination_port = 1});
+  const ReadResult none = read_capture(path, {.destination_port = 1});
   CHECK(none.records.empty());
   CHECK(none.stats.port_filtered == 5);
 }
@@ -547,7 +547,7 @@ TEST_CASE("a classic pcap cut short yields every complete record, then kTruncate
 
   SECTION("cut in the middle of a record's data") {
     write_bytes(cut, file, third + kRecordHeaderBytes + 500);
-    const ReadResult result = read_all(cut);
+    const ReadResult result = read_capture(cut);
     CHECK(result.records.size() == 2);
     CHECK(result.records[1].payload == pattern(1262, 1));
     CHECK(result.status == CaptureStatus::kTruncated);
@@ -557,7 +557,7 @@ TEST_CASE("a classic pcap cut short yields every complete record, then kTruncate
   }
   SECTION("cut in the middle of a record header") {
     write_bytes(cut, file, third + 5);
-    const ReadResult result = read_all(cut);
+    const ReadResult result = read_capture(cut);
     CHECK(result.records.size() == 2);
     CHECK(result.status == CaptureStatus::kTruncated);
     // libpcap: "truncated dump file; tried to read 16 header bytes, only got 5"
@@ -566,14 +566,14 @@ TEST_CASE("a classic pcap cut short yields every complete record, then kTruncate
   }
   SECTION("cut on a record boundary is a clean end") {
     write_bytes(cut, file, third);
-    const ReadResult result = read_all(cut);
+    const ReadResult result = read_capture(cut);
     CHECK(result.records.size() == 2);
     CHECK(result.status == CaptureStatus::kEnd);
     CHECK(result.error.empty());
   }
   SECTION("a global header and no records is a clean, empty capture") {
     write_bytes(cut, file, kGlobalHeaderBytes);
-    const ReadResult result = read_all(cut);
+    const ReadResult result = read_capture(cut);
     CHECK(result.records.empty());
     CHECK(result.status == CaptureStatus::kEnd);
   }
@@ -598,7 +598,7 @@ TEST_CASE("a corrupt record header ends the read with kError, never a crash", "[
   SECTION("captured length beyond any snaplen") {
     set_captured_length(0xFFFFFF00);
     write_bytes(corrupt, file);
-    const ReadResult result = read_all(corrupt);
+    const ReadResult result = read_capture(corrupt);
     CHECK(result.records.size() == 1);
     // libpcap 1.10.3: "invalid packet capture length 4294967040, bigger than snaplen of 262144"
     CHECK(result.status == CaptureStatus::kError);
@@ -608,7 +608,7 @@ TEST_CASE("a corrupt record header ends the read with kError, never a crash", "[
   SECTION("a plausible captured length that runs past the end reads as truncation") {
     set_captured_length(100'000);  // below the snaplen: libpcap cannot tell it from a cut file
     write_bytes(corrupt, file);
-    const ReadResult result = read_all(corrupt);
+    const ReadResult result = read_capture(corrupt);
     CHECK(result.records.size() == 1);
     // libpcap 1.10.3: "truncated dump file; tried to read 100000 captured bytes, only got 300"
     CHECK(result.status == CaptureStatus::kTruncated);
@@ -654,7 +654,7 @@ TEST_CASE("Ethernet frames with any number of VLAN tags", "[capture]") {
                     kEthertypeIpv6, {0x8100}))
       .add(ethernet(Bytes(28, 0), kEthertypeArp, {0x8100}))
       .save(path);
-  const ReadResult result = read_all(path);
+  const ReadResult result = read_capture(path);
   REQUIRE(result.status == CaptureStatus::kEnd);
   REQUIRE(result.records.size() == 5);
   for (std::size_t i = 0; i < 5; ++i) {
@@ -682,7 +682,7 @@ TEST_CASE("Linux cooked captures v1 (SLL) and v2 (SLL2)", "[capture]") {
         .add(c.frame(ipv4(datagram), kEthertypeArp))
         .save(path);
     CHECK(CaptureReader(path.string()).link_type() == static_cast<int>(c.linktype));
-    const ReadResult result = read_all(path);
+    const ReadResult result = read_capture(path);
     REQUIRE(result.records.size() == 1);
     CHECK(result.records[0].payload == datagram.payload);
     CHECK(result.records[0].source == source);
@@ -706,7 +706,7 @@ TEST_CASE("raw IP link types: LINKTYPE_RAW, LINKTYPE_IPV4/IPV6 and DLT_RAW's val
         .add(ipv6_jumbo)
         .add(Bytes{})
         .save(path);
-    const ReadResult result = read_all(path);
+    const ReadResult result = read_capture(path);
     REQUIRE(result.records.size() == 2);
     CHECK(result.records[0].payload == datagram.payload);
     CHECK(result.records[0].destination == kHost);
@@ -747,7 +747,7 @@ TEST_CASE("IPv6 / UDP: behind extension headers, fragments and other protocols c
       .add(ethernet(Bytes(39, 0x60), kEthertypeIpv6))    // malformed: header cut
       .add(ethernet(ipv4({.payload = d.payload}), kEthertypeIpv6))  // malformed: version 4
       .save(path);
-  const ReadResult result = read_all(path);
+  const ReadResult result = read_capture(path);
   REQUIRE(result.status == CaptureStatus::kEnd);
   REQUIRE(result.records.size() == 2);
   for (const auto& record : result.records) {
@@ -770,7 +770,7 @@ TEST_CASE("IPv6 / UDP: behind extension headers, fragments and other protocols c
         .add(Bytes(chained.begin(), chained.begin() + static_cast<std::ptrdiff_t>(cut)),
              1'700'000'000, 0, chained.size())
         .save(cut_path);
-    const ReadResult cut_result = read_all(cut_path);
+    const ReadResult cut_result = read_capture(cut_path);
     for (const auto& record : cut_result.records) {
       CHECK(record.snapped);
       CHECK(record.payload.size() < d.payload.size());
@@ -789,7 +789,7 @@ TEST_CASE("PcapWriter writes IPv6 datagrams with IPv6 headers and a valid UDP ch
     writer.write(std::span(odd).first(100), odd.size(), 1'700'000'000'000'001'000, kLidar6, kHost6);
     writer.close();
   }
-  const ReadResult result = read_all(path);
+  const ReadResult result = read_capture(path);
   REQUIRE(result.records.size() == 2);
   CHECK(result.records[0].payload == odd);
   CHECK(result.records[0].source == kLidar6);
@@ -865,7 +865,7 @@ TEST_CASE("frames that are not usable UDP datagrams are counted and skipped", "[
       // and reading goes on after all of them
       .add(ethernet(ipv4({.payload = payload})))
       .save(path);
-  const ReadResult result = read_all(path);
+  const ReadResult result = read_capture(path);
   REQUIRE(result.status == CaptureStatus::kEnd);
   REQUIRE(result.records.size() == 1);
   CHECK(result.records[0].payload == payload);
@@ -890,7 +890,7 @@ TEST_CASE("payload length: link padding, short UDP length and snapped records", 
       .add(ethernet(ipv4({.payload = payload, .udp_length_delta = -62})))
       .add(snapped, 1'700'000'000, 0, full.size())
       .save(path);
-  const ReadResult result = read_all(path);
+  const ReadResult result = read_capture(path);
   REQUIRE(result.records.size() == 3);
 
   CHECK(result.records[0].payload == pattern(2, 1));
@@ -918,7 +918,7 @@ TEST_CASE("every cut of a frame stays inside the captured bytes", "[capture]") {
              0, frame.size());
   }
   file.save(path);
-  const ReadResult result = read_all(path);
+  const ReadResult result = read_capture(path);
   CHECK(result.stats.malformed == headers);  // cut inside the headers
   REQUIRE(result.records.size() == payload.size() + 1);
   for (std::size_t i = 0; i < result.records.size(); ++i) {
@@ -969,7 +969,7 @@ TEST_CASE("classic pcap with nanosecond timestamps keeps the nanoseconds", "[cap
   PcapFile(kLinktypeEthernet, /*nanosecond=*/true)
       .add(ethernet(ipv4({.payload = pattern(8, 0)})), 1'700'000'000, 123'456'789)
       .save(path);
-  const ReadResult result = read_all(path);
+  const ReadResult result = read_capture(path);
   REQUIRE(result.records.size() == 1);
   CHECK(result.records[0].timestamp_ns == 1'700'000'000'123'456'789);
 }
@@ -989,7 +989,7 @@ TEST_CASE("pcapng: Ethernet packets, nanosecond timestamps, truncation and corru
 
   SECTION("whole file") {
     write_bytes(path, file);
-    const ReadResult result = read_all(path);
+    const ReadResult result = read_capture(path);
     REQUIRE(result.status == CaptureStatus::kEnd);
     REQUIRE(result.records.size() == 2);
     CHECK(result.records[0].payload == first.payload);
@@ -1006,14 +1006,14 @@ TEST_CASE("pcapng: Ethernet packets, nanosecond timestamps, truncation and corru
       Bytes late = pcapng_header();
       append(late, pcapng_packet(ethernet(ipv4(first)), late_ns));
       write_bytes(path, late);
-      const ReadResult result = read_all(path);
+      const ReadResult result = read_capture(path);
       REQUIRE(result.records.size() == 1);
       CHECK(result.records[0].timestamp_ns == std::numeric_limits<std::int64_t>::max());
     }
   }
   SECTION("cut in the middle of a block body") {
     write_bytes(path, file, second_block + 100);
-    const ReadResult result = read_all(path);
+    const ReadResult result = read_capture(path);
     CHECK(result.records.size() == 1);
     CHECK(result.status == CaptureStatus::kTruncated);
     // libpcap: "truncated pcapng dump file; tried to read 580 bytes, only got 92"
@@ -1021,7 +1021,7 @@ TEST_CASE("pcapng: Ethernet packets, nanosecond timestamps, truncation and corru
   }
   SECTION("cut in the middle of a block header") {
     write_bytes(path, file, second_block + 6);
-    const ReadResult result = read_all(path);
+    const ReadResult result = read_capture(path);
     CHECK(result.records.size() == 1);
     CHECK(result.status == CaptureStatus::kTruncated);
     // libpcap: "truncated pcapng dump file; tried to read 8 bytes, only got 6"
@@ -1034,7 +1034,7 @@ TEST_CASE("pcapng: Ethernet packets, nanosecond timestamps, truncation and corru
     file[first_block + 6] = 0xFF;
     file[first_block + 7] = 0xFF;
     write_bytes(path, file);
-    const ReadResult result = read_all(path);
+    const ReadResult result = read_capture(path);
     CHECK(result.records.empty());
     // libpcap: "pcapng block size 4294967040 > maximum 16777216"
     CHECK(result.status == CaptureStatus::kError);
@@ -1043,7 +1043,7 @@ TEST_CASE("pcapng: Ethernet packets, nanosecond timestamps, truncation and corru
   SECTION("a block whose trailing length disagrees is corruption") {
     file[second_block - 4] ^= 0x40;
     write_bytes(path, file);
-    const ReadResult result = read_all(path);
+    const ReadResult result = read_capture(path);
     CHECK(result.records.empty());
     CHECK(result.status == CaptureStatus::kError);
     CHECK_THAT(result.error, Catch::Contains("don't match"));
@@ -1054,7 +1054,7 @@ TEST_CASE("real pcapng capture: one 1266-byte Pandar40P packet", "[capture]") {
   const auto path =
       pandarcap::test::real_capture("velocityreport_pandar40p_single_packet_1266B.pcapng");
   if (!path) return;
-  const ReadResult result = read_all(*path);
+  const ReadResult result = read_capture(*path);
   REQUIRE(result.status == CaptureStatus::kEnd);
   REQUIRE(result.records.size() == 1);
   const ReadResult::Record& r = result.records[0];
@@ -1069,7 +1069,7 @@ TEST_CASE("real pcapng capture: one 1266-byte Pandar40P packet", "[capture]") {
 TEST_CASE("real classic capture: 1439 dual-return packets of 1262 bytes", "[capture]") {
   const auto path = pandarcap::test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
   if (!path) return;
-  const ReadResult result = read_all(*path);
+  const ReadResult result = read_capture(*path);
   REQUIRE(result.status == CaptureStatus::kEnd);
   REQUIRE(result.records.size() == 1439);
   std::int64_t previous_ns = 0;
@@ -1079,8 +1079,8 @@ TEST_CASE("real classic capture: 1439 dual-return packets of 1262 bytes", "[capt
     REQUIRE(r.timestamp_ns >= previous_ns);
     previous_ns = r.timestamp_ns;
   }
-  CHECK(read_all(*path, {.destination_port = 2368}).records.size() == 1439);
-  const ReadResult none = read_all(*path, {.destination_port = 2369});
+  CHECK(read_capture(*path, {.destination_port = 2368}).records.size() == 1439);
+  const ReadResult none = read_capture(*path, {.destination_port = 2369});
   CHECK(none.records.empty());
   CHECK(none.stats.port_filtered == 1439);
 }

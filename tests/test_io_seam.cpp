@@ -62,7 +62,7 @@ io::FileSyscalls fake_calls() {
   return calls;
 }
 
-std::string contents(const fs::path& file) {
+std::string file_contents(const fs::path& file) {
   std::ifstream in(file, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
@@ -79,7 +79,7 @@ TEST_CASE("OutputFile retries interrupted and short writes until every byte is w
   OutputFile file(dir / "out.txt", OutputFile::Mode::kCreate);
   file.write(text);
   file.close();
-  CHECK(contents(dir / "out.txt") == text);
+  CHECK(file_contents(dir / "out.txt") == text);
   CHECK(file.size() == text.size());
   CHECK(disk.interrupted >= text.size() / 7);  // the interruptions did happen, and were retried
 }
@@ -162,7 +162,7 @@ TEST_CASE("OutputFile O_DIRECT: whole aligned blocks past the page cache, then t
   CHECK_FALSE(file.direct());
   file.write(bytes.subspan(3 * kDirectIoBlock));
   file.close();
-  CHECK(contents(dir / "direct.bin") == std::string(bytes.begin(), bytes.end()));
+  CHECK(file_contents(dir / "direct.bin") == std::string(bytes.begin(), bytes.end()));
   INFO("O_DIRECT on the scratch directory's file system: " << direct);
 }
 

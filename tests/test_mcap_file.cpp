@@ -64,7 +64,7 @@ McapFileOptions small_options(mcap::ChunkCompression compression = mcap::ChunkCo
 
 // Frames of 3000 points (69 kB each: a chunk apiece), packets and health, flushed now and then
 // as the writer's tick does. Returns the messages written.
-std::uint64_t write_file(const fs::path& path, const McapFileOptions& options, int seconds) {
+std::uint64_t write_mcap(const fs::path& path, const McapFileOptions& options, int seconds) {
   McapFile file(options);
   file.open(path.string(), kT0);
   std::vector<std::uint8_t> packet(1262);
@@ -102,7 +102,7 @@ TEST_CASE("an MCAP file is read whole by the MCAP project's reader, messages dec
   test::ScratchDir dir("mcap-file-" + name);
   const fs::path path = dir / "a.mcap";
   const McapFileOptions options = small_options(compression);
-  const std::uint64_t messages = write_file(path, options, 2);
+  const std::uint64_t messages = write_mcap(path, options, 2);
   CHECK(messages == 2 * (3 + 15 + 1));
   const auto read = test::read_mcap_independently(path);
   if (read.reader_missing) return;
@@ -156,7 +156,7 @@ TEST_CASE("a file cut anywhere is finished into one the reader accepts, keeping 
   test::ScratchDir dir("mcap-recovery-" + name);
   const fs::path whole = dir / "whole.mcap";
   const McapFileOptions options = small_options(compression);
-  const std::uint64_t messages = write_file(whole, options, 3);
+  const std::uint64_t messages = write_mcap(whole, options, 3);
   const std::string bytes = read_all(whole);
   std::mt19937 rng(20261125);
   std::vector<std::uint64_t> cuts{9, 40, bytes.size() / 2, bytes.size() - 1, bytes.size() - 30};
@@ -209,7 +209,7 @@ TEST_CASE("an MCAP's packets channel names its model: the replay's word when no 
   test::ScratchDir dir("mcap-named-model");
   McapFileOptions options = small_options();
   // The packets write_file writes start EE 00..04 and are 1262 bytes: no model's.
-  write_file(dir / "named.mcap", options, 1);
+  write_mcap(dir / "named.mcap", options, 1);
   const auto named = recording_model((dir / "named.mcap").string(), std::nullopt);
   REQUIRE(named);
   CHECK(named->from_file);
@@ -221,7 +221,7 @@ TEST_CASE("an MCAP's packets channel names its model: the replay's word when no 
   for (const char* name : {"", "PandarAT128"}) {
     options.sensor_model = name;
     const fs::path path = dir / (std::string("other-") + name + ".mcap");
-    write_file(path, options, 1);
+    write_mcap(path, options, 1);
     CHECK_FALSE(recording_model(path.string(), std::nullopt));
   }
 }
@@ -251,7 +251,7 @@ TEST_CASE("recovery leaves files that are not pandarcap's MCAP alone and refuses
 
   // A link to a file of ours: refused, and its target untouched.
   const fs::path target = dir / "target.mcap";
-  write_file(target, small_options(), 1);
+  write_mcap(target, small_options(), 1);
   const std::string target_bytes = read_all(target);
   const fs::path link = dir / "link.mcap.part";
   fs::create_symlink(target, link);
@@ -263,7 +263,7 @@ TEST_CASE("a damaged chunk ends what is kept: nothing after it is trusted",
           "[mcap][recovery][threads]") {
   test::ScratchDir dir("mcap-damaged");
   const fs::path whole = dir / "whole.mcap";
-  const std::uint64_t messages = write_file(whole, small_options(), 2);
+  const std::uint64_t messages = write_mcap(whole, small_options(), 2);
   std::string bytes = read_all(whole);
   // The second half of the file flipped: its chunks no longer decompress or match their CRC.
   for (std::size_t i = bytes.size() / 2; i < bytes.size(); i += 97)
@@ -294,7 +294,7 @@ TEST_CASE(
   const fs::path whole = dir / "whole.mcap";
   McapFileOptions options = small_options(compression);
   options.chunk_crc = chunk_crc;
-  const std::uint64_t messages = write_file(whole, options, 2);
+  const std::uint64_t messages = write_mcap(whole, options, 2);
   std::string bytes = read_all(whole);
   const std::span<const std::uint8_t> file(reinterpret_cast<const std::uint8_t*>(bytes.data()),
                                            bytes.size());

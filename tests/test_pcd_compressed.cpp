@@ -92,7 +92,7 @@ std::string decode_compressed(const std::string& bytes) {
   return rows;
 }
 
-void write_file(const fs::path& path, const std::string& bytes) {
+void write_pcd_bytes(const fs::path& path, const std::string& bytes) {
   std::ofstream out(path, std::ios::binary);
   out << bytes;
   REQUIRE(out.good());
@@ -239,8 +239,8 @@ TEST_CASE("PCD binary_compressed: PCL and Open3D read the real capture's frame a
     const std::string binary = binary_pcd(frame->points, format, frame->context);
     const std::string compressed =
         compressed_pcd(compressor, frame->points, format, frame->context);
-    write_file(dir / (name + ".pcd"), binary);
-    write_file(dir / (name + "_lzf.pcd"), compressed);
+    write_pcd_bytes(dir / (name + ".pcd"), binary);
+    write_pcd_bytes(dir / (name + "_lzf.pcd"), compressed);
     pairs += " '" + (dir / (name + ".pcd")).string() + "' '" +
              (dir / (name + "_lzf.pcd")).string() + "'";
     // PCL's reader (pcl_convert_pcd_ascii_binary, format 0: ASCII) makes the same text of both.

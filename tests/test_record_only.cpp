@@ -58,7 +58,7 @@ std::string file_bytes(const fs::path& path) {
 }
 
 // A replay of `capture` with `config`; the final health record.
-json replay(const fs::path& capture, const fs::path& config, const fs::path& out) {
+json replay_capture(const fs::path& capture, const fs::path& config, const fs::path& out) {
   const auto r =
       test::run_command(test::pandarcapd_command() + " -c " + quoted(config) + " --replay " +
                         quoted(capture) + " --output-dir " + quoted(out) + " 2>&1");
@@ -67,7 +67,7 @@ json replay(const fs::path& capture, const fs::path& config, const fs::path& out
   return test::last_health_record(out);
 }
 
-void check_identity(const json& h) {
+void check_record_only_identity(const json& h) {
   using test::health_counter;
   CHECK(health_counter(h, "datagrams_received") ==
         health_counter(h, "packets_accepted") + health_counter(h, "packets_rejected") +
@@ -113,7 +113,7 @@ TEST_CASE("recording only: the health counts what it can, leaves out points, the
   REQUIRE(daemon.wait_exit(30s) == 0);
   const json live = test::last_health_record(dir / "live");
   INFO(live.dump());
-  check_identity(live);
+  check_record_only_identity(live);
   CHECK(test::health_counter(live, "duplicate_packets") > 0);
   CHECK(test::health_counter(live, "packets_rejected") > 0);
   CHECK(test::health_counter(live, "outlier_packets") > 0);
@@ -143,10 +143,10 @@ TEST_CASE("recording only: the health counts what it can, leaves out points, the
   // That recording replayed both ways: the same counts, the same pcap.
   const auto recordings = test::files_ending(dir / "live" / "raw", ".pcap");
   REQUIRE(recordings.size() == 1);
-  const json off = replay(recordings.front(), frames_off, dir / "off");
-  const json on = replay(recordings.front(), frames_on, dir / "on");
-  check_identity(off);
-  check_identity(on);
+  const json off = replay_capture(recordings.front(), frames_off, dir / "off");
+  const json on = replay_capture(recordings.front(), frames_on, dir / "on");
+  check_record_only_identity(off);
+  check_record_only_identity(on);
   for (const char* key : kSharedCounters) {
     INFO(key);
     CHECK(test::health_counter(off, key) == test::health_counter(on, key));
@@ -191,7 +191,7 @@ TEST_CASE("recording only: a small ring, raw pool and silence timeout hold as wi
     INFO(last.dump());
     REQUIRE(test::health_counter(last, "datagrams_received") > 3000);
     test::check_ring_overruns(last);
-    check_identity(last);
+    check_record_only_identity(last);
     // Every accepted packet is recorded or counted as not recorded.
     CHECK(test::health_counter(last, "pcap_packets_written") +
               test::health_counter(last, "packets_not_recorded") ==

@@ -40,8 +40,8 @@ std::map<std::string, std::string> complete_frames(const fs::path& out) {
   return frames;
 }
 
-test::CommandResult replay(const fs::path& recording, const fs::path& out,
-                           const std::string& extra = "") {
+test::CommandResult replay_recording(const fs::path& recording, const fs::path& out,
+                                     const std::string& extra = "") {
   return test::run_command(test::pandarcapd_command() + " --replay " + quoted(recording) + " " +
                            extra + " --output-dir " + quoted(out) + " 2>&1");
 }
@@ -102,7 +102,7 @@ void replay_the_three(Recorded& r) {
   for (const fs::path& recording : {r.pcap, r.pcap_zst, r.mcap}) {
     INFO(recording.filename());
     const fs::path out = r.dir / ("replay-" + recording.filename().string());
-    const auto run = replay(recording, out);
+    const auto run = replay_recording(recording, out);
     INFO(run.out);
     REQUIRE(run.exit_code == 0);
     CHECK(run.out.find("calibration: from the recording: ") != std::string::npos);
@@ -173,14 +173,14 @@ void check_hostile_tables(Recorded& r) {
     bigger += std::to_string(laser) + ",1.0,0.0\n";
   for (const std::string& content : {bigger, std::string("\x89PNG\r\n\x1a\n not a table")}) {
     std::ofstream(sidecar, std::ios::trunc) << content;
-    const auto run = replay(pcap, dir / "out-bad");
+    const auto run = replay_recording(pcap, dir / "out-bad");
     INFO(run.out);
     CHECK(run.exit_code == 78);
     CHECK(run.out.find(sidecar.string()) != std::string::npos);
   }
   // None beside it: the nominal table, with a warning naming where it looked.
   fs::remove(sidecar);
-  const auto run = replay(pcap, dir / "out-none");
+  const auto run = replay_recording(pcap, dir / "out-none");
   INFO(run.out);
   CHECK(run.exit_code == 0);
   CHECK(run.out.find("[warning] calibration: the recording carries none (looked for " +
@@ -189,8 +189,9 @@ void check_hostile_tables(Recorded& r) {
         "nominal");
   // --calibration comes first, whatever the recording carries.
   std::ofstream(sidecar) << bigger;
-  const auto given = replay(pcap, dir / "out-given",
-                            "--calibration " + quoted(r.dir / "live" / "raw" / "calibration.csv"));
+  const auto given =
+      replay_recording(pcap, dir / "out-given",
+                       "--calibration " + quoted(r.dir / "live" / "raw" / "calibration.csv"));
   INFO(given.out);
   CHECK(given.exit_code == 0);
   CHECK(test::last_health_record(dir / "out-given")["sensor_info"]["calibration_source"] == "file");
@@ -201,7 +202,7 @@ void check_hostile_tables(Recorded& r) {
   REQUIRE(at != std::string::npos);
   bytes[at + 20] = static_cast<char>(bytes[at + 20] ^ 0x01);
   std::ofstream(dir / "damaged.mcap", std::ios::binary) << bytes;
-  const auto damaged = replay(dir / "damaged.mcap", dir / "out-mcap");
+  const auto damaged = replay_recording(dir / "damaged.mcap", dir / "out-mcap");
   INFO(damaged.out);
   CHECK(damaged.exit_code == 78);
   CHECK(damaged.out.find("(attachment calibration.csv): damaged") != std::string::npos);

@@ -122,7 +122,8 @@ std::vector<Chunk> mcap_chunks(const std::string& bytes) {
   return chunks;
 }
 
-fs::path to_mcap(const fs::path& capture, const fs::path& dir, const std::string& compression) {
+fs::path convert_to_mcap(const fs::path& capture, const fs::path& dir,
+                         const std::string& compression) {
   // Small chunks, so that a damaged one is a small part of the file and several follow it.
   // zstd as by default (no chunk CRC: zstd's checksum finds a flipped bit); lz4 and none have no
   // checksum of their own, so their chunks carry the CRC (output.mcap_chunk_crc, docs/mcap.md).
@@ -252,7 +253,7 @@ TEST_CASE("a damaged MCAP chunk is skipped by the chunk index, the rest read",
   const fs::path pcap =
       test::write_simulated_recording(dir / "whole.pcap", kPackets, kRecordedNs, kLidar, kHost);
   for (const std::string compression : {"zstd", "lz4", "none"}) {
-    const fs::path mcap = to_mcap(pcap, dir / compression, compression);
+    const fs::path mcap = convert_to_mcap(pcap, dir / compression, compression);
     const std::string bytes = harness::read_file(mcap);
     const Outcome whole = read_file(mcap);
     REQUIRE(whole.whole());
@@ -337,7 +338,7 @@ TEST_CASE("a replay that met damage exits 65 and never ends ok, inspect exits 1"
       test::write_simulated_recording(dir / "whole.pcap", kPackets, kRecordedNs, kLidar, kHost);
   const std::string zst = compress_as_recorder(harness::read_file(pcap));
   write_bytes(dir / "flipped.pcap.zst", flip(zst, zst.size() / 2, 16));
-  const fs::path mcap = to_mcap(pcap, dir / "convert", "zstd");
+  const fs::path mcap = convert_to_mcap(pcap, dir / "convert", "zstd");
   const std::string mcap_bytes = harness::read_file(mcap);
   const auto chunks = mcap_chunks(mcap_bytes);
   std::size_t damaged_chunk = 0;

@@ -71,7 +71,7 @@ struct Read {
   std::vector<Record> records;
 };
 
-Read read_all(const fs::path& file) {
+Read read_recording(const fs::path& file) {
   CaptureReader reader(file.string());
   Read r;
   CaptureRecord record;
@@ -113,12 +113,12 @@ void check_round_trip(const fs::path& pcap, const fs::path& dir, const std::stri
   const fs::path mcap_lz4 = to_mcap(pcap, dir / "convert-lz4", extra + " --mcap-compression lz4");
 
   // The readers: the same payloads at the same times, in the same order.
-  const Read from_pcap = read_all(pcap);
+  const Read from_pcap = read_recording(pcap);
   REQUIRE(from_pcap.status == CaptureStatus::kEnd);
   REQUIRE_FALSE(from_pcap.records.empty());
   for (const fs::path& file : {zst, mcap, mcap_lz4}) {
     INFO(file.filename());
-    const Read r = read_all(file);
+    const Read r = read_recording(file);
     CHECK(r.status == CaptureStatus::kEnd);
     CHECK(r.error.empty());
     REQUIRE(r.records.size() == from_pcap.records.size());
@@ -214,7 +214,7 @@ TEST_CASE("a .pcap.zst of concatenated frames reads as one capture", "[capture][
   const std::string joined = harness::read_file(zstd_command(dir / "a", dir / "a.zst")) +
                              harness::read_file(zstd_command(dir / "b", dir / "b.zst"));
   write_bytes(dir / "joined.pcap.zst", joined);
-  const Read r = read_all(dir / "joined.pcap.zst");
+  const Read r = read_recording(dir / "joined.pcap.zst");
   CHECK(r.status == CaptureStatus::kEnd);
   CHECK(r.records.size() == kPackets);
 }
@@ -224,12 +224,12 @@ TEST_CASE("a cut .pcap.zst (a killed run's .part) gives every complete record, t
   test::ScratchDir dir("zstd-cut");
   const fs::path pcap = simulated_capture(dir / "capture.pcap");
   const std::string bytes = harness::read_file(pcap);
-  const Read whole = read_all(pcap);
+  const Read whole = read_recording(pcap);
   REQUIRE(whole.records.size() == kPackets);
 
   SECTION("flushed at a record boundary, the frame never ended") {
     write_bytes(dir / "run.pcap.zst.part", unfinished_zstd(bytes, 1000));
-    const Read r = read_all(dir / "run.pcap.zst.part");
+    const Read r = read_recording(dir / "run.pcap.zst.part");
     CHECK(r.status == CaptureStatus::kTruncated);
     CHECK(r.error.find("run.pcap.zst.part") != std::string::npos);
     CHECK(r.error.find("ends inside a frame") != std::string::npos);
@@ -253,7 +253,7 @@ TEST_CASE("a cut .pcap.zst (a killed run's .part) gives every complete record, t
     for (const std::size_t keep : {zst.size() - 1, zst.size() / 2, zst.size() / 5}) {
       INFO("kept " << keep << " of " << zst.size());
       write_bytes(dir / "cut.pcap.zst", zst.substr(0, keep));
-      const Read r = read_all(dir / "cut.pcap.zst");
+      const Read r = read_recording(dir / "cut.pcap.zst");
       CHECK(r.status == CaptureStatus::kTruncated);
       CHECK(r.error.find("cut.pcap.zst") != std::string::npos);
       // One byte off: only the frame's checksum is cut, every record is there, and still the
@@ -299,7 +299,7 @@ TEST_CASE("corrupt zstd data is an error naming the file", "[capture][zstd][daem
     const std::string zst = harness::read_file(zstd_command(pcap, dir / "capture.pcap.zst"));
     write_bytes(dir / "damaged.pcap.zst",
                 zst + std::string("\x28\xb5\x2f\xfd", 4) + std::string(64, '\xff'));
-    const Read r = read_all(dir / "damaged.pcap.zst");
+    const Read r = read_recording(dir / "damaged.pcap.zst");
     CHECK(r.status == CaptureStatus::kError);
     CHECK(r.records.size() == kPackets);
     CHECK(r.error.find("damaged.pcap.zst") != std::string::npos);
@@ -327,12 +327,12 @@ TEST_CASE("an MCAP file without packets, cut or damaged says so", "[daemon][mcap
 
   const fs::path mcap = to_mcap(pcap, dir / "convert");
   const std::string bytes = harness::read_file(mcap);
-  const Read whole = read_all(mcap);
+  const Read whole = read_recording(mcap);
   REQUIRE(whole.records.size() == kPackets);
 
   SECTION("cut: every packet before the cut, then kTruncated") {
     write_bytes(dir / "cut.mcap", bytes.substr(0, bytes.size() / 2));
-    const Read r = read_all(dir / "cut.mcap");
+    const Read r = read_recording(dir / "cut.mcap");
     CHECK(r.status == CaptureStatus::kTruncated);
     CHECK(r.error.find("cut.mcap") != std::string::npos);
     CHECK(r.records.size() > 0);

@@ -28,7 +28,7 @@ namespace {
 constexpr std::int64_t kNs = 1'000'000'000;
 
 // `bytes` bytes, finished at `mtime_s` seconds after the epoch.
-void make_file(const fs::path& path, std::uint64_t bytes, std::int64_t mtime_s) {
+void make_backlog_file(const fs::path& path, std::uint64_t bytes, std::int64_t mtime_s) {
   std::ofstream(path, std::ios::binary) << std::string(bytes, 'x');
   const timespec times[2] = {{mtime_s, 0}, {mtime_s, 0}};
   REQUIRE(::utimensat(AT_FDCWD, path.c_str(), times, 0) == 0);
@@ -83,28 +83,28 @@ TEST_CASE("Upload: the backlog over the upload directories, read a little at a t
   std::uint64_t bytes = 0, files = 0;
   for (int i = 0; i < 150; ++i) {
     const std::string stem = "pandarcap_20261127T220805Z_" + std::to_string(1000 + i);
-    make_file(raw / (stem + ".pcap.zst"), 100 + i, 1000 + i);
-    make_file(raw / (stem + ".calibration.csv"), 10, 1000 + i);
-    make_file(raw / (stem + ".sensor.json"), 20, 1000 + i);
+    make_backlog_file(raw / (stem + ".pcap.zst"), 100 + i, 1000 + i);
+    make_backlog_file(raw / (stem + ".calibration.csv"), 10, 1000 + i);
+    make_backlog_file(raw / (stem + ".sensor.json"), 20, 1000 + i);
     bytes += 100 + i + 30;
     files += 3;
   }
-  make_file(mcap / "pandarcap_20261127T220805Z_0000.mcap", 5000, 3000);
+  make_backlog_file(mcap / "pandarcap_20261127T220805Z_0000.mcap", 5000, 3000);
   bytes += 5000;
   files += 1;
   // Not waiting for upload: the open files, temporaries, hidden files, raw/'s own calibration
   // and sensor.json, another program's files, a link and a directory named like ours; and
   // frames/, which is not an upload directory here (tests/upload/names.txt has more names).
-  make_file(raw / "pandarcap_20261127T220805Z_2000.pcap.zst.part", 7000, 10);
-  make_file(mcap / "pandarcap_20261127T220805Z_0001.mcap.part", 7000, 10);
-  make_file(raw / ".pandarcap_20261127T220805Z_2001.sensor.json.tmp", 7000, 10);
-  make_file(raw / ".hidden", 7000, 10);
-  make_file(raw / "calibration.csv", 7000, 10);
-  make_file(raw / "sensor.json", 7000, 10);
-  make_file(raw / "notes.txt", 7000, 10);
+  make_backlog_file(raw / "pandarcap_20261127T220805Z_2000.pcap.zst.part", 7000, 10);
+  make_backlog_file(mcap / "pandarcap_20261127T220805Z_0001.mcap.part", 7000, 10);
+  make_backlog_file(raw / ".pandarcap_20261127T220805Z_2001.sensor.json.tmp", 7000, 10);
+  make_backlog_file(raw / ".hidden", 7000, 10);
+  make_backlog_file(raw / "calibration.csv", 7000, 10);
+  make_backlog_file(raw / "sensor.json", 7000, 10);
+  make_backlog_file(raw / "notes.txt", 7000, 10);
   fs::create_symlink(raw / "notes.txt", raw / "pandarcap_20261127T220805Z_2002.pcap");
   fs::create_directories(raw / "pandarcap_20261127T220805Z_2003.pcap");
-  make_file(frames / "frame_000001_20261127T220805.000Z.pcd", 7000, 10);
+  make_backlog_file(frames / "frame_000001_20261127T220805.000Z.pcd", 7000, 10);
 
   UploadBacklog backlog(true);
   backlog.watch(raw);

@@ -3,14 +3,11 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/floor_div.hpp"
+
 namespace pandarcap {
 
 namespace {
-
-std::int64_t floor_div(std::int64_t a, std::int64_t b) noexcept {
-  const std::int64_t q = a / b;
-  return (a % b != 0 && (a < 0) != (b < 0)) ? q - 1 : q;
-}
 
 constexpr std::int64_t kRevolutionCells = 36000 / AzimuthCoverage::kCellCdeg;
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/floor_div.hpp"
 #include "core/sensors/sensor_model.hpp"
 #include "core/sensors/timing.hpp"
 
@@ -14,11 +15,6 @@ constexpr std::int64_t kFullCircle = 36000;
 // An azimuth step larger than this between consecutive blocks is not rotation but a
 // discontinuity (long loss, a restarted sensor, a foreign stream).
 constexpr int kMaxStepCdeg = 9000;
-
-std::int64_t floor_div(std::int64_t a, std::int64_t b) {
-  const std::int64_t q = a / b;
-  return (a % b != 0 && (a < 0) != (b < 0)) ? q - 1 : q;
-}
 
 // a - b on the circle, in [-18000, 18000).
 int signed_step(int a, int b) {

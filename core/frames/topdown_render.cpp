@@ -26,7 +26,7 @@ Rgb scale_colour(double t) noexcept {
           mix(stops[i].b, stops[i + 1].b)};
 }
 
-void put(RgbImage& image, int col, int row, Rgb c) noexcept {
+void put_pixel(RgbImage& image, int col, int row, Rgb c) noexcept {
   if (col < 0 || row < 0 || col >= image.width || row >= image.height) return;
   std::uint8_t* p = image.rgb.data() + (static_cast<std::size_t>(row) * image.width + col) * 3;
   p[0] = c.r;
@@ -60,8 +60,8 @@ RgbImage render_top_down(std::span<const Point> points, const TopDownOptions& o)
     const Rgb c = k == 0 ? Rgb{90, 90, 110} : Rgb{48, 48, 62};
     const int at = static_cast<int>(std::floor((o.half_width_m + k * o.grid_m) * scale));
     for (int i = 0; i < o.size_px; ++i) {
-      put(image, at, i, c);  // x = k * grid
-      put(image, i, at, c);  // y = k * grid
+      put_pixel(image, at, i, c);  // x = k * grid
+      put_pixel(image, i, at, c);  // y = k * grid
     }
   }
   for (const Point& p : points) {
@@ -73,15 +73,15 @@ RgbImage render_top_down(std::span<const Point> points, const TopDownOptions& o)
     const Rgb c = scale_colour(t);
     for (int dr = 0; dr < 2; ++dr)
       for (int dc = 0; dc < 2; ++dc)
-        put(image, col + dc, row + dr, c);
+        put_pixel(image, col + dc, row + dr, c);
   }
   // The sensor's axes, on top: +x red, +y green, 2 m long, 3 pixels wide.
   const int centre = static_cast<int>(std::floor(o.half_width_m * scale));
   const int length = std::max(static_cast<int>(2 * scale), 6);
   for (int i = 0; i <= length; ++i) {
     for (int w = -1; w <= 1; ++w) {
-      put(image, centre + i, centre + w, Rgb{255, 60, 60});
-      put(image, centre + w, centre - i, Rgb{60, 255, 60});
+      put_pixel(image, centre + i, centre + w, Rgb{255, 60, 60});
+      put_pixel(image, centre + w, centre - i, Rgb{60, 255, 60});
     }
   }
   return image;

@@ -15,13 +15,11 @@
 #include "core/mcap/ros2_messages.hpp"
 #include "core/units.hpp"
 #include "daemon/pcap/mcap_packet_reader.hpp"
+#include "daemon/pcap/zstd_magic.hpp"
 #include "daemon/pcap/zstd_read_stream.hpp"
 
 namespace pandarcap {
 namespace {
-
-// A zstd frame's first bytes (RFC 8878: 0xFD2FB528, little-endian).
-constexpr std::uint8_t kZstdMagic[] = {0x28, 0xB5, 0x2F, 0xFD};
 
 constexpr std::uint16_t kEthertypeIpv4 = 0x0800;
 constexpr std::uint16_t kEthertypeIpv6 = 0x86DD;
@@ -235,7 +233,7 @@ CaptureReader::CaptureReader(const std::string& path, Options options)
     return;
   }
   FILE* file = nullptr;
-  if (have >= sizeof kZstdMagic && std::equal(kZstdMagic, kZstdMagic + sizeof kZstdMagic, magic)) {
+  if (have >= kZstdMagic.size() && std::equal(kZstdMagic.begin(), kZstdMagic.end(), magic)) {
     format_ = CaptureFormat::kPcapZstd;
     try {
       file = ZstdReadStream::open(fd, zstd_);  // owns fd from here

@@ -22,7 +22,7 @@ constexpr std::string_view kAttachmentName = "calibration.csv";
 // An attachment larger than this is not a calibration table (40 lines of ~30 bytes).
 constexpr std::uint64_t kMaxCalibrationBytes = 1 << 20;
 
-bool read_at(int fd, std::uint64_t offset, std::uint8_t* out, std::size_t n) {
+bool read_fully_at(int fd, std::uint64_t offset, std::uint8_t* out, std::size_t n) {
   std::size_t done = 0;
   while (done < n) {
     const ssize_t got = ::pread(fd, out + done, n - done, static_cast<off_t>(offset + done));
@@ -43,7 +43,7 @@ std::optional<Calibration> mcap_attachment(int fd, std::uint64_t size, const std
   std::vector<std::uint8_t> record;
   while (size - at >= mcap::kRecordPrefixBytes) {
     std::uint8_t prefix[mcap::kRecordPrefixBytes];
-    if (!read_at(fd, at, prefix, sizeof prefix)) break;
+    if (!read_fully_at(fd, at, prefix, sizeof prefix)) break;
     mcap::ByteReader r(std::span<const std::uint8_t>(prefix, sizeof prefix));
     const auto op = static_cast<mcap::Op>(r.u8());
     const std::uint64_t length = r.u64();
@@ -52,7 +52,7 @@ std::optional<Calibration> mcap_attachment(int fd, std::uint64_t size, const std
     }
     if (op == mcap::Op::kAttachment && length <= kMaxCalibrationBytes + 4096) {
       record.resize(length);
-      if (!read_at(fd, at + sizeof prefix, record.data(), record.size())) break;
+      if (!read_fully_at(fd, at + sizeof prefix, record.data(), record.size())) break;
       mcap::ByteReader a(record);
       a.u64();  // log time
       a.u64();  // create time
@@ -84,7 +84,7 @@ std::optional<Calibration> recording_calibration(const std::string& recording_pa
   struct stat info {};
   std::uint8_t magic[mcap::kMagic.size()] = {};
   if (fd && ::fstat(fd.get(), &info) == 0 && S_ISREG(info.st_mode) &&
-      read_at(fd.get(), 0, magic, sizeof magic) &&
+      read_fully_at(fd.get(), 0, magic, sizeof magic) &&
       std::equal(mcap::kMagic.begin(), mcap::kMagic.end(), magic)) {
     return mcap_attachment(fd.get(), static_cast<std::uint64_t>(info.st_size), recording_path,
                            looked_for, model);

@@ -22,11 +22,10 @@
 #include <span>
 
 #include "daemon/pcap/xxh64.hpp"
+#include "daemon/pcap/zstd_magic.hpp"
 
 namespace pandarcap {
 
-// The zstd frame magic number as it starts a file (RFC 8878 3.1.1).
-inline constexpr std::array<std::uint8_t, 4> kZstdMagic{0x28, 0xB5, 0x2F, 0xFD};
 // A raw block of no bytes marked as the frame's last (RFC 8878 3.1.1.2): what a frame cut back
 // to a block boundary needs to be complete again.
 inline constexpr std::array<std::uint8_t, 3> kZstdEmptyLastBlock{0x01, 0x00, 0x00};
