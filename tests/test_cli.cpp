@@ -14,13 +14,9 @@ using nlohmann::json;
 
 namespace {
 
-std::string quoted(const std::filesystem::path& p) {
-  return "'" + p.string() + "'";
-}
-
 json inspect_json(const std::string& arguments) {
   const auto result =
-      test::run_command(quoted(test::binary("pandarcap-inspect")) + " --json " + arguments);
+      test::run_command(test::quoted(test::binary("pandarcap-inspect")) + " --json " + arguments);
   REQUIRE(result.exit_code == 0);
   return json::parse(result.out);
 }
@@ -31,8 +27,8 @@ TEST_CASE("inspect --json on the real dual capture", "[cli][real]") {
   const auto capture = test::real_capture("pandar40p_nebula_dual_600rpm_1262B.pcap");
   const auto calibration = test::real_capture("nebula_Pandar40P_calibration.csv");
   if (!capture || !calibration) return;
-  const json j =
-      inspect_json("--calibration " + quoted(*calibration) + " --port 2368 " + quoted(*capture));
+  const json j = inspect_json("--calibration " + test::quoted(*calibration) + " --port 2368 " +
+                              test::quoted(*capture));
   const json& s = j.at("summary");
   CHECK(s.at("packets") == 1439);
   CHECK(s.at("accepted") == 1439);
@@ -59,7 +55,7 @@ TEST_CASE("inspect --json on the real dual capture", "[cli][real]") {
   CHECK(s.at("model_source") == "packets");
 
   // The destination-port filter: nothing in this capture goes to 2369.
-  const json other = inspect_json("--port 2369 " + quoted(*capture));
+  const json other = inspect_json("--port 2369 " + test::quoted(*capture));
   CHECK(other.at("summary").at("packets") == 0);
   CHECK(other.at("summary").at("capture").at("port_filtered") == 1439);
 }
@@ -67,7 +63,7 @@ TEST_CASE("inspect --json on the real dual capture", "[cli][real]") {
 TEST_CASE("inspect --json on the real single 1266-byte packet", "[cli][real]") {
   const auto capture = test::real_capture("velocityreport_pandar40p_single_packet_1266B.pcapng");
   if (!capture) return;
-  const json s = inspect_json(quoted(*capture)).at("summary");
+  const json s = inspect_json(test::quoted(*capture)).at("summary");
   CHECK(s.at("packets") == 1);
   CHECK(s.at("return_mode") == "last");
   CHECK(s.at("sequence_present") == true);
@@ -96,7 +92,8 @@ TEST_CASE("inspect on each model's real capture: the model named, every packet, 
     const auto capture = test::real_capture(c.capture);
     const auto calibration = test::real_capture(c.calibration);
     if (!capture || !calibration) continue;
-    const json j = inspect_json("--calibration " + quoted(*calibration) + " " + quoted(*capture));
+    const json j =
+        inspect_json("--calibration " + test::quoted(*calibration) + " " + test::quoted(*capture));
     const json& s = j.at("summary");
     CHECK(s.at("model") == c.model);
     CHECK(s.at("model_source") == "packets");
@@ -142,8 +139,8 @@ TEST_CASE("inspect on each model's real capture: the model named, every packet, 
     // The text: the model named, and a frame drawn as a PNG.
     test::ScratchDir dir("inspect-model");
     const auto text =
-        test::run_command(quoted(test::binary("pandarcap-inspect")) + " --summary --png " +
-                          quoted(dir / "frame.png") + " " + quoted(*capture) + " 2>&1");
+        test::run_command(test::quoted(test::binary("pandarcap-inspect")) + " --summary --png " +
+                          test::quoted(dir / "frame.png") + " " + test::quoted(*capture) + " 2>&1");
     INFO(text.out);
     CHECK(text.exit_code == 0);
     CHECK(text.out.find(std::string("model ") + c.model + " (named by its packets)") !=
@@ -160,12 +157,13 @@ TEST_CASE("inspect on each model's real capture: the model named, every packet, 
   // --sensor-model names another: every packet is that model's wrong_model, nothing decoded.
   const auto xt32 = test::real_capture("pandarxt32_nebula_dual_1080B.pcap");
   if (!xt32) return;
-  const json s = inspect_json("--summary --sensor-model PANDAR64 " + quoted(*xt32)).at("summary");
+  const json s =
+      inspect_json("--summary --sensor-model PANDAR64 " + test::quoted(*xt32)).at("summary");
   CHECK(s.at("model") == "Pandar64");
   CHECK(s.at("model_source") == "sensor-model");
   CHECK(s.at("accepted") == 0);
   CHECK(s.at("rejects").at("wrong_model") == 2000);
-  CHECK(test::run_command(quoted(test::binary("pandarcap-inspect")) +
+  CHECK(test::run_command(test::quoted(test::binary("pandarcap-inspect")) +
                           " --sensor-model pandar20 x.pcap 2>/dev/null")
             .exit_code == 64);
 }
@@ -173,10 +171,10 @@ TEST_CASE("inspect on each model's real capture: the model named, every packet, 
 TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
           "[cli][simulate][realtime][threads]") {
   test::ScratchDir dir("simulate");
-  const auto result = test::run_command(quoted(test::binary("pandarcapd")) + " --allow-root" +
+  const auto result = test::run_command(test::quoted(test::binary("pandarcapd")) + " --allow-root" +
                                         " --simulate --duration 1 --rpm 1200 --return-mode last "
                                         "--udp-sequence --log-level warn --output-dir " +
-                                        quoted(dir.path()) + " 2>&1");
+                                        test::quoted(dir.path()) + " 2>&1");
   INFO(result.out);
   REQUIRE(result.exit_code == 0);
   std::vector<std::filesystem::path> captures;
@@ -194,7 +192,7 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
   REQUIRE_FALSE(last.empty());
   const json counters = json::parse(last).at("counters");
 
-  const json s = inspect_json("--summary " + quoted(captures.front())).at("summary");
+  const json s = inspect_json("--summary " + test::quoted(captures.front())).at("summary");
   // 1800 packets/s in single return whatever the RPM, sent in real time for about a second;
   // the recording holds exactly what the daemon says it received (sanitizer builds: less what
   // it counted as not recorded or dropped, see kSanitizerBuild).
@@ -231,8 +229,8 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
 }
 
 TEST_CASE("bad command lines and bad files give clear errors and exit codes", "[cli][threads]") {
-  const std::string inspect = quoted(test::binary("pandarcap-inspect"));
-  const std::string daemon = quoted(test::binary("pandarcapd"));
+  const std::string inspect = test::quoted(test::binary("pandarcap-inspect"));
+  const std::string daemon = test::quoted(test::binary("pandarcapd"));
   CHECK(test::run_command(inspect + " 2>/dev/null").exit_code == 64);
   CHECK(test::run_command(inspect + " --port 0 x.pcap 2>/dev/null").exit_code == 64);
   CHECK(test::run_command(inspect + " --bogus x.pcap 2>/dev/null").exit_code == 64);
@@ -252,9 +250,9 @@ TEST_CASE("bad command lines and bad files give clear errors and exit codes", "[
     std::ofstream bad(dir / "bad.csv");
     bad << "Laser id,Elevation,Azimuth\n1,15,-1.042\n2,eleven,-1.042\n";
   }
-  const auto calibration =
-      test::run_command(daemon + " --simulate --duration 1 --output-dir " + quoted(dir.path()) +
-                        " --calibration " + quoted(dir / "bad.csv") + " 2>&1");
+  const auto calibration = test::run_command(daemon + " --simulate --duration 1 --output-dir " +
+                                             test::quoted(dir.path()) + " --calibration " +
+                                             test::quoted(dir / "bad.csv") + " 2>&1");
   CHECK(calibration.exit_code == 78);
   CHECK(calibration.out.find("bad.csv:3:3: elevation is not a number") != std::string::npos);
 }

@@ -27,6 +27,7 @@
 #include "core/decode/stream_decoder.hpp"
 #include "core/frames/frame_collector.hpp"
 #include "core/ipv4.hpp"
+#include "core/units.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 #include "daemon/pcap/pcap_writer.hpp"
 #include "support/retimed_capture.hpp"
@@ -41,10 +42,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr std::int64_t kMs = 1'000'000;
 const Endpoint kSensorA{0xC0A801C9, 10000};  // 192.168.1.201:10000
 const Endpoint kSensorB{0xC0A801CA, 10000};  // 192.168.1.202:10000
-const Endpoint kHost{0xC0A8010A, 2368};
+const Endpoint kFaultsHost{0xC0A8010A, 2368};
 // A revolution of the capture is about 56 700 points (dual return, or one of its returns as a
 // single-return stream); a frame never holds more than a revolution and a quarter.
 constexpr std::uint64_t kMostPoints = 57'000 * 5 / 4;
@@ -53,10 +53,10 @@ constexpr std::uint64_t kMostPoints = 57'000 * 5 / 4;
 void glitch(int kind, std::span<std::uint8_t> p, std::int64_t t_ns, std::uint32_t seed) {
   switch (kind % 6) {
     case 0:
-      test::set_time(p, t_ns - 500 * kMs);
+      test::set_time(p, t_ns - 500 * kNsPerMillisecond);
       break;
     case 1:
-      test::set_time(p, t_ns + 500 * kMs);
+      test::set_time(p, t_ns + 500 * kNsPerMillisecond);
       break;
     case 2:
       test::date_second_back(p);
@@ -88,7 +88,7 @@ void record(PcapWriter& pcap, const RetimedCapture& stream, std::uint64_t packet
     if (sequence) number = static_cast<std::uint32_t>(k);
     const auto bytes = std::span(buffer).first(stream.packet(k, buffer, number));
     if (!alter(k, bytes)) continue;
-    pcap.write(bytes, stream.time_ns(k) + 300'000, from, kHost);
+    pcap.write(bytes, stream.time_ns(k) + 300'000, from, kFaultsHost);
   }
 }
 
@@ -134,7 +134,7 @@ std::string all_reasons(const fs::path& out) {
   return reasons;
 }
 
-void check_identity(const json& h) {
+void check_decode_identity(const json& h) {
   INFO(h.dump());
   CHECK(health_counter(h, "datagrams_received") ==
         health_counter(h, "packets_accepted") + health_counter(h, "packets_rejected") +
@@ -146,10 +146,6 @@ void check_identity(const json& h) {
     filtered += n.get<std::uint64_t>();
   CHECK(health_counter(h, "points") + filtered ==
         health_counter(h, "packets_accepted") * kBlocks * kChannels);
-}
-
-std::string quoted(const fs::path& p) {
-  return "'" + p.string() + "'";
 }
 
 }  // namespace
@@ -214,14 +210,14 @@ TEST_CASE(
     const AssemblerStats core = core_frames(capture);
     const fs::path out = dir / "out";
     const auto r =
-        test::run_command(test::pandarcapd_command() + " --replay " + quoted(capture) +
+        test::run_command(test::pandarcapd_command() + " --replay " + test::quoted(capture) +
                           " --top-speed --rpm 600 --return-mode " + std::string(to_string(mode)) +
-                          " --max-clock-offset 0 --output-dir " + quoted(out) + " 2>&1");
+                          " --max-clock-offset 0 --output-dir " + test::quoted(out) + " 2>&1");
     INFO(r.out);
     REQUIRE(r.exit_code == 0);
     const json h = test::last_health_record(out);
     INFO(h.dump());
-    check_identity(h);
+    check_decode_identity(h);
     // The frames: the daemon's are the core's, and they are what the faults leave. 90
     // revolutions: the first and last partial; the two with a loss partial; 20 stood still,
     // and the ones the stop and the start cut; the bursts cost none.
@@ -279,13 +275,13 @@ TEST_CASE("replayed: two sensors on one port: the first kept, the other named, n
     std::uint64_t b_sent = 0;
     for (std::uint64_t k = 0; k < std::max(a_until, b_until); ++k) {
       const auto first = std::span(a).first(stream->packet(k, a));
-      if (k < a_until) pcap.write(first, stream->time_ns(k) + 300'000, kSensorA, kHost);
+      if (k < a_until) pcap.write(first, stream->time_ns(k) + 300'000, kSensorA, kFaultsHost);
       if (k >= 3600 && k < b_until) {
         const auto second = std::span(b).first(stream->packet(k + 700, b));
         test::set_time(second, stream->time_ns(k));
         test::shift_azimuth(second,
                             18000 - (test::first_azimuth(second) - test::first_azimuth(first)));
-        pcap.write(second, stream->time_ns(k) + 310'000, kSensorB, kHost);
+        pcap.write(second, stream->time_ns(k) + 310'000, kSensorB, kFaultsHost);
         ++b_sent;
       }
     }
@@ -299,10 +295,11 @@ TEST_CASE("replayed: two sensors on one port: the first kept, the other named, n
   const AssemblerStats clean = core_frames(alone);
 
   const auto replay = [&](const fs::path& capture, const std::string& extra, const fs::path& out) {
-    const auto r = test::run_command(test::pandarcapd_command() + " --replay " + quoted(capture) +
-                                     " --top-speed --rpm 600 --return-mode dual "
-                                     "--max-clock-offset 0" +
-                                     extra + " --output-dir " + quoted(out) + " 2>&1");
+    const auto r =
+        test::run_command(test::pandarcapd_command() + " --replay " + test::quoted(capture) +
+                          " --top-speed --rpm 600 --return-mode dual "
+                          "--max-clock-offset 0" +
+                          extra + " --output-dir " + test::quoted(out) + " 2>&1");
     INFO(r.out);
     REQUIRE(r.exit_code == 0);
     return std::make_pair(test::last_health_record(out), r.out);
@@ -317,7 +314,7 @@ TEST_CASE("replayed: two sensors on one port: the first kept, the other named, n
     const fs::path out = dir / ("out" + std::to_string(std::hash<std::string>{}(extra)));
     const auto [h, log] = replay(both, extra, out);
     INFO(h.dump());
-    check_identity(h);
+    check_decode_identity(h);
     const std::uint64_t others = a_is_sensor ? b_packets : 3 * 3600;
     CHECK(health_counter(h, "other_sensor_packets") == others);
     CHECK(health_counter(h, "foreign_datagrams") == others);
@@ -338,7 +335,7 @@ TEST_CASE("replayed: two sensors on one port: the first kept, the other named, n
   write(moved, 3600 + 1800, 4 * 3600);
   const auto [h, log] = replay(moved, "", dir / "out-moved");
   INFO(h.dump());
-  check_identity(h);
+  check_decode_identity(h);
   CHECK(health_counter(h, "sensor_source_changes") == 1);
   CHECK(h.at("gauges").at("sensor_source") == "192.168.1.202:10000");
   // B's packets from 1 s (packet 3600) until a second after A's last (packet 5399): packet
@@ -449,7 +446,7 @@ TEST_CASE(
   REQUIRE_FALSE(records.empty());
   const json& h = records.back();
   INFO(h.dump());
-  check_identity(h);
+  check_decode_identity(h);
   const std::uint64_t overruns = test::check_ring_overruns(h);
   CHECK(health_counter(h, "kernel_drops") == 0);
   CHECK(health_counter(h, "datagrams_received") == f.packets + b_sent);

@@ -73,7 +73,7 @@ std::vector<Malformed> malformed_from(const Bytes& good) {
 }
 
 // What a run produced: every frame's points (bytes) and info, and the stream counts.
-struct Run {
+struct MalformedRun {
   std::vector<std::vector<Point>> frames;
   std::vector<FrameInfo> infos;
   StreamStats stats;
@@ -90,7 +90,7 @@ class Decoding {
         decoder_(Calibration::nominal(), config(target), collector_) {}
   RejectReason process(const Bytes& bytes) { return decoder_.process(bytes); }
   const StreamStats& stats() const { return decoder_.stats(); }
-  Run finish() {
+  MalformedRun finish() {
     decoder_.flush();
     run_.stats = decoder_.stats();
     return run_;
@@ -102,7 +102,7 @@ class Decoding {
     c.decoder_target = target;
     return c;
   }
-  Run run_;
+  MalformedRun run_;
   FrameCollector collector_;
   StreamDecoder decoder_;
 };
@@ -144,7 +144,7 @@ TEST_CASE(
     Decoding clean(target);
     for (const Bytes& packet : stream)
       REQUIRE(clean.process(packet) == RejectReason::kNone);
-    const Run expected = clean.finish();
+    const MalformedRun expected = clean.finish();
     REQUIRE(expected.frames.size() >= 3);
 
     Decoding mixed(target);
@@ -163,7 +163,7 @@ TEST_CASE(
       }
       check_untouched(before, after);
     }
-    const Run got = mixed.finish();
+    const MalformedRun got = mixed.finish();
 
     CHECK(got.stats.accepted == expected.stats.accepted);
     for (std::size_t r = 1; r < kRejectReasonCount; ++r) {  // 0 is kNone, not a reject

@@ -37,7 +37,7 @@ namespace {
 using test::can_make_links;
 using Daemon = test::VethDaemon;
 
-std::int64_t unix_now_ns() {
+std::int64_t realtime_now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::system_clock::now().time_since_epoch())
       .count();
@@ -107,7 +107,7 @@ PauseResult run_pause(const PauseCase& c) {
     traffic.seconds = c.sensor_seconds;
     traffic.batch = c.batch;
     sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
-    silent_from_ns = unix_now_ns();
+    silent_from_ns = realtime_now_ns();
     sending = false;
   });
   const auto received = [&] {
@@ -135,7 +135,7 @@ PauseResult run_pause(const PauseCase& c) {
   PauseResult r;
   r.sending_at_resume = sending.load();
   daemon.process->signal(SIGCONT);
-  r.resumed_ns = unix_now_ns();
+  r.resumed_ns = realtime_now_ns();
   if (c.sigterm_in_pause) {
     REQUIRE(daemon.process->wait_exit(30s) == 0);
   } else {
@@ -314,7 +314,7 @@ void foreign_after_stop(const char* receiver, bool pause) {
     traffic.rate_pps = 3600;
     traffic.seconds = 1.0;
     bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
-    silent_from_ns = unix_now_ns();
+    silent_from_ns = realtime_now_ns();
   });
   REQUIRE(wait_until(
       [&] {

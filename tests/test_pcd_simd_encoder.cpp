@@ -19,19 +19,19 @@ using namespace pandarcap;
 
 namespace {
 
-std::vector<DecoderTarget> simd_targets() {
+std::vector<DecoderTarget> encoder_targets() {
   std::vector<DecoderTarget> targets = supported_decoder_targets();
   targets.erase(targets.begin());  // scalar, the reference
   return targets;
 }
 
-constexpr PcdLayout kLayouts[] = {PcdLayout::kPcl, PcdLayout::kPandarcap, PcdLayout::kVelodyne,
-                                  PcdLayout::kAutoware};
+constexpr PcdLayout kSimdLayouts[] = {PcdLayout::kPcl, PcdLayout::kPandarcap, PcdLayout::kVelodyne,
+                                      PcdLayout::kAutoware};
 constexpr std::size_t kCanary = 40;  // bytes after the points that must stay untouched
 
 // Encodes `points` with both and requires the same bytes, and the canary after them intact.
-void require_same(const PcdEncoder& encoder, std::span<const Point> points, PcdFormat format,
-                  PcdFrameContext frame, const std::string& what) {
+void require_same_encoding(const PcdEncoder& encoder, std::span<const Point> points,
+                           PcdFormat format, PcdFrameContext frame, const std::string& what) {
   const std::size_t step = pcd_point_bytes(format.layout);
   const std::size_t bytes = points.size() * step;
   std::vector<std::uint8_t> expected(bytes + kCanary, 0xCD), actual(bytes + kCanary, 0xCD);
@@ -134,7 +134,7 @@ TEST_CASE("PCD SIMD encoder: a kernel for every compiled target, no silent fallb
 
 TEST_CASE("PCD SIMD encoder: the reference's bytes, every layout and axes, edge values and counts",
           "[simd][pcd]") {
-  const std::vector<DecoderTarget> targets = simd_targets();
+  const std::vector<DecoderTarget> targets = encoder_targets();
   if (targets.empty()) WARN("no SIMD target on this CPU: nothing to compare");
   std::mt19937_64 rng(40);
   const std::int64_t t = 1'795'348'800'123'456'789;
@@ -145,25 +145,26 @@ TEST_CASE("PCD SIMD encoder: the reference's bytes, every layout and axes, edge 
   for (const DecoderTarget target : targets) {
     const PcdEncoder encoder(target);
     REQUIRE(encoder.target() == target);
-    for (const PcdLayout layout : kLayouts) {
+    for (const PcdLayout layout : kSimdLayouts) {
       for (const Axes axes : {Axes::kHesai, Axes::kRos}) {
         const PcdFormat format{layout, axes};
         for (const ReturnMode mode :
              {ReturnMode::kDual, ReturnMode::kStrongest, ReturnMode::kLast}) {
           const PcdFrameContext context{t - 2'500'000, mode};
-          require_same(encoder, edges, format, context, "edge values");
+          require_same_encoding(encoder, edges, format, context, "edge values");
         }
         const PcdFrameContext context{t, ReturnMode::kDual};
         // Every count up to four 8-lane vectors and one more, from every start: each partial
         // last vector, and the rows on either side of it.
         for (std::size_t n = 0; n <= 33; ++n) {
           for (std::size_t from = 0; from + n <= edges.size() && from < 9; ++from) {
-            require_same(encoder, std::span(edges).subspan(from, n), format, context, "counts");
+            require_same_encoding(encoder, std::span(edges).subspan(from, n), format, context,
+                                  "counts");
           }
         }
-        require_same(encoder, crossing, format, context, "a second boundary");
-        require_same(encoder, frame, format, {frame.front().timestamp_ns, ReturnMode::kDual},
-                     "a frame");
+        require_same_encoding(encoder, crossing, format, context, "a second boundary");
+        require_same_encoding(encoder, frame, format,
+                              {frame.front().timestamp_ns, ReturnMode::kDual}, "a frame");
       }
     }
   }
@@ -171,7 +172,7 @@ TEST_CASE("PCD SIMD encoder: the reference's bytes, every layout and axes, edge 
 
 TEST_CASE("PCD SIMD encoder: times the kernel leaves to the reference come out the same",
           "[simd][pcd]") {
-  const std::vector<DecoderTarget> targets = simd_targets();
+  const std::vector<DecoderTarget> targets = encoder_targets();
   if (targets.empty()) WARN("no SIMD target on this CPU: nothing to compare");
   std::mt19937_64 rng(41);
   struct Case {
@@ -204,8 +205,9 @@ TEST_CASE("PCD SIMD encoder: times the kernel leaves to the reference come out t
   for (const DecoderTarget target : targets) {
     for (const PcdLayout layout : {PcdLayout::kPcl, PcdLayout::kPandarcap}) {
       for (std::size_t i = 0; i < rounding.size(); ++i) {
-        require_same(PcdEncoder(target), std::span(rounding).subspan(i, 1), {layout, Axes::kHesai},
-                     {}, "a time fused and unfused rounding tell apart");
+        require_same_encoding(PcdEncoder(target), std::span(rounding).subspan(i, 1),
+                              {layout, Axes::kHesai}, {},
+                              "a time fused and unfused rounding tell apart");
       }
     }
   }
@@ -213,10 +215,10 @@ TEST_CASE("PCD SIMD encoder: times the kernel leaves to the reference come out t
     const std::vector<Point> points = random_points(rng, 37, c.t0_ns, c.spread_ns);
     for (const DecoderTarget target : targets) {
       const PcdEncoder encoder(target);
-      for (const PcdLayout layout : kLayouts) {
+      for (const PcdLayout layout : kSimdLayouts) {
         for (const Axes axes : {Axes::kHesai, Axes::kRos}) {
-          require_same(encoder, points, {layout, axes}, {c.reference_ns, ReturnMode::kLast},
-                       c.what);
+          require_same_encoding(encoder, points, {layout, axes},
+                                {c.reference_ns, ReturnMode::kLast}, c.what);
         }
       }
     }

@@ -29,15 +29,15 @@ using test::health_counter;
 namespace {
 
 // 2023-03-01T08:00:00Z: a recording from an earlier day than any the tests run on.
-constexpr std::int64_t kRecordedNs = 1'677'657'600'000'000'000;
-constexpr int kPackets = 7200;  // two seconds of a dual-return sensor at 600 RPM
-constexpr Endpoint kLidar{0xC0A801C9, 2368};
-constexpr Endpoint kHost{0xC0A8010A, 2368};
+constexpr std::int64_t kReplayRecordedNs = 1'677'657'600'000'000'000;
+constexpr int kReplayPackets = 7200;  // two seconds of a dual-return sensor at 600 RPM
+constexpr Endpoint kReplayLidar{0xC0A801C9, 2368};
+constexpr Endpoint kReplayHost{0xC0A8010A, 2368};
 constexpr Endpoint kLidar6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 1}};
 constexpr Endpoint kHost6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x10}};
 
-fs::path write_recording(const fs::path& path, Endpoint from, Endpoint to) {
-  return test::write_simulated_recording(path, kPackets, kRecordedNs, from, to);
+fs::path write_replay_recording(const fs::path& path, Endpoint from, Endpoint to) {
+  return test::write_simulated_recording(path, kReplayPackets, kReplayRecordedNs, from, to);
 }
 
 // The same records in pcapng (nanosecond times), from a classic pcap PcapWriter wrote.
@@ -75,8 +75,8 @@ Replayed replay(const fs::path& capture, const fs::path& out) {
 TEST_CASE("a replay is judged by its capture's clock: an earlier day's recording is not degraded",
           "[daemon][replay][threads]") {
   test::ScratchDir dir("replay-formats");
-  const fs::path v4 = write_recording(dir / "v4.pcap", kLidar, kHost);
-  const fs::path v6 = write_recording(dir / "v6.pcap", kLidar6, kHost6);
+  const fs::path v4 = write_replay_recording(dir / "v4.pcap", kReplayLidar, kReplayHost);
+  const fs::path v6 = write_replay_recording(dir / "v6.pcap", kLidar6, kHost6);
   const fs::path v6ng = to_pcapng(v6, dir / "v6.pcapng");
   std::uint64_t frames_v4 = 0;
   for (const fs::path& capture : {v4, v6, v6ng}) {
@@ -91,15 +91,15 @@ TEST_CASE("a replay is judged by its capture's clock: an earlier day's recording
     CHECK(r.health.at("reason").get<std::string>().find("clock") == std::string::npos);
     CHECK(r.run.out.find("clock off") == std::string::npos);
     // Every packet decoded, whatever the network layer.
-    CHECK(health_counter(r.health, "datagrams_received") == kPackets);
-    CHECK(health_counter(r.health, "packets_accepted") == kPackets);
+    CHECK(health_counter(r.health, "datagrams_received") == kReplayPackets);
+    CHECK(health_counter(r.health, "packets_accepted") == kReplayPackets);
     const std::uint64_t frames = health_counter(r.health, "frames_complete");
     CHECK(frames >= 18);
     if (capture == v4) frames_v4 = frames;
     CHECK(frames == frames_v4);  // IPv6 decodes to the same frames as IPv4
     const bool ipv6 = capture != v4;
-    CHECK(r.run.out.find(fmt::format("{} UDP datagrams ({} IPv6)", kPackets,
-                                     ipv6 ? kPackets : 0)) != std::string::npos);
+    CHECK(r.run.out.find(fmt::format("{} UDP datagrams ({} IPv6)", kReplayPackets,
+                                     ipv6 ? kReplayPackets : 0)) != std::string::npos);
     CHECK(r.run.out.find("0 skipped") != std::string::npos);
     // Recorded again as it came: IPv6 datagrams with IPv6 headers, the same payloads.
     const auto recordings = test::files_ending(out / "raw", ".pcap");
@@ -108,18 +108,19 @@ TEST_CASE("a replay is judged by its capture's clock: an earlier day's recording
     CaptureRecord record;
     std::uint64_t read = 0;
     while (reader.next(record) == CaptureStatus::kRecord) {
-      if (read == 0) CHECK(record.source == (ipv6 ? kLidar6 : kLidar));
+      if (read == 0) CHECK(record.source == (ipv6 ? kLidar6 : kReplayLidar));
       ++read;
     }
-    CHECK(read == kPackets);
-    CHECK(reader.stats().ipv6_datagrams == (ipv6 ? kPackets : 0));
+    CHECK(read == kReplayPackets);
+    CHECK(reader.stats().ipv6_datagrams == (ipv6 ? kReplayPackets : 0));
   }
 }
 
 TEST_CASE("what a replay skips is never silent: the summary, a warning and pandarcap-inspect",
           "[daemon][replay][threads]") {
   test::ScratchDir dir("replay-skipped");
-  const fs::path capture = write_recording(dir / "fragments.pcap", kLidar, kHost);
+  const fs::path capture =
+      write_replay_recording(dir / "fragments.pcap", kReplayLidar, kReplayHost);
   // Three records become IPv4 fragments (more-fragments set), one a TCP segment.
   std::string bytes = harness::read_file(capture);
   const std::size_t record_bytes = kPcapRecordOverheadBytes + kMaxPacketBytes - 4;  // 1262 B
@@ -135,7 +136,7 @@ TEST_CASE("what a replay skips is never silent: the summary, a warning and panda
   const Replayed r = replay(capture, dir / "out");
   INFO(r.run.out);
   REQUIRE(r.run.exit_code == 0);
-  CHECK(health_counter(r.health, "datagrams_received") == kPackets - 4);
+  CHECK(health_counter(r.health, "datagrams_received") == kReplayPackets - 4);
   CHECK(r.run.out.find("4 skipped (0 not IP, 1 not UDP, 3 IP fragments, 0 malformed)") !=
         std::string::npos);
   CHECK(r.run.out.find("4 of 7200 records skipped") != std::string::npos);  // the warning
@@ -152,5 +153,5 @@ TEST_CASE("what a replay skips is never silent: the summary, a warning and panda
   REQUIRE_FALSE(summary.is_discarded());
   CHECK(summary["summary"]["capture"]["skipped"] == 4);
   CHECK(summary["summary"]["capture"]["ip_fragments"] == 3);
-  CHECK(summary["summary"]["packets"] == kPackets - 4);
+  CHECK(summary["summary"]["packets"] == kReplayPackets - 4);
 }

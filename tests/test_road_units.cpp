@@ -51,7 +51,7 @@ SensorStatusGauges status_gauges(const ptc::SensorStatus& s) {
 }
 
 // A sensor streaming as expected (600 RPM, last return), as tests/test_health_policy.cpp drives it.
-HealthGauges streaming() {
+HealthGauges road_streaming() {
   HealthGauges g;
   g.return_mode = "last";
   g.rpm_tail = 600;
@@ -169,8 +169,8 @@ TEST_CASE("Health renderings leave implausible status fields out and name them",
 
   const std::string text = to_json_line(h);
   INFO(text);
-  const auto json = nlohmann::json::parse(text);
-  const auto& st = json.at("sensor_status");
+  const auto record = nlohmann::json::parse(text);
+  const auto& st = record.at("sensor_status");
   CHECK_FALSE(st.contains("motor_rpm"));
   CHECK_FALSE(st.contains("ptp_state"));
   CHECK_FALSE(st.at("temperatures_celsius").contains("laser_rt_l"));
@@ -215,7 +215,7 @@ TEST_CASE("Health renderings leave implausible status fields out and name them",
 TEST_CASE("Health policy: an implausible status degrades, naming the field and nothing else",
           "[road][unit][health][policy][ptc]") {
   const HealthCounters c;
-  HealthGauges g = streaming();
+  HealthGauges g = road_streaming();
   ptc::SensorStatus s = healthy_status();
   s.motor_rpm = 53'029;  // far off 600 too, but not believed: not also a "motor at" problem
   g.sensor_status = status_gauges(s);
@@ -248,7 +248,7 @@ TEST_CASE("Health policy: an implausible status degrades, naming the field and n
 TEST_CASE("Health policy: the status's motor speed is held to 10 % of the expected RPM",
           "[road][unit][health][policy][ptc]") {
   const HealthCounters c;
-  HealthGauges g = streaming();  // the tails say 600: only the status can be off
+  HealthGauges g = road_streaming();  // the tails say 600: only the status can be off
   struct Case {
     std::uint16_t rpm;
     const char* reason;  // "" for ok
@@ -289,7 +289,7 @@ TEST_CASE("Health policy: duplicates, outliers and lost recordings degrade while
     HealthCounters before, now;
     before.*k.counter = 5;
     now.*k.counter = 8;
-    HealthGauges g = streaming();
+    HealthGauges g = road_streaming();
     classify_health(now, before, kLast, false, "", g);
     CHECK(g.state == HealthState::kDegraded);
     CHECK(g.reason == k.reason);

@@ -22,10 +22,6 @@ using namespace std::chrono_literals;
 
 namespace {
 
-std::string quoted(const std::filesystem::path& p) {
-  return "'" + p.string() + "'";
-}
-
 double degrees(double radians) {
   return radians * 180.0 / M_PI;
 }
@@ -106,9 +102,10 @@ TEST_CASE("pandarcapd --simulate decodes with the simulated sensor's own calibra
           "[ptc][daemon][threads]") {
   test::ScratchDir dir("ptc-simulate");
   const std::filesystem::path out = dir / "out";
-  const test::CommandResult run = test::run_command(
-      test::pandarcapd_command() +
-      " --simulate --duration 2.5 --status-interval 0.5 --output-dir " + quoted(out) + " 2>&1");
+  const test::CommandResult run =
+      test::run_command(test::pandarcapd_command() +
+                        " --simulate --duration 2.5 --status-interval 0.5 --output-dir " +
+                        test::quoted(out) + " 2>&1");
   INFO(run.out);
   REQUIRE(run.exit_code == 0);
   CHECK_THAT(run.out, Catch::Contains("calibration: from sensor (serial PCSIM40P00000001, "
@@ -160,8 +157,8 @@ TEST_CASE("calibration_source = nominal and file are used as told, the sensor no
     const std::filesystem::path out = dir / source;
     const test::CommandResult run = test::run_command(
         test::pandarcapd_command() + " --simulate --duration 1 --calibration-source " + source +
-        " --calibration " + quoted(table) + " --status-interval 0 --output-dir " + quoted(out) +
-        " 2>&1");
+        " --calibration " + test::quoted(table) + " --status-interval 0 --output-dir " +
+        test::quoted(out) + " 2>&1");
     INFO(run.out);
     REQUIRE(run.exit_code == 0);
     CHECK(harness::read_file(out / "raw" / "calibration.csv") == expected);
@@ -224,7 +221,7 @@ TEST_CASE("calibration_source = sensor with no answer stops the start (exit 69),
       test::pandarcapd_command() + " --host-ip 127.0.0.1 --port " +
       std::to_string(harness::free_udp_port()) +
       " --sensor-ip 127.0.0.1 --calibration-source sensor --ptc-port " +
-      std::to_string(refusing.port) + " --output-dir " + quoted(dir / "out") + " 2>&1");
+      std::to_string(refusing.port) + " --output-dir " + test::quoted(dir / "out") + " 2>&1");
   INFO(run.out);
   CHECK(run.exit_code == 69);
   CHECK_THAT(run.out, Catch::Contains("calibration_source = \"sensor\": PTC 127.0.0.1:" +
@@ -236,7 +233,7 @@ TEST_CASE("calibration_source = sensor with no answer stops the start (exit 69),
   const test::CommandResult wrong = test::run_command(
       test::pandarcapd_command() +
       " --simulate --duration 1 --calibration-source sensor --ptc-port " +
-      std::to_string(magic.port()) + " --output-dir " + quoted(dir / "out2") + " 2>&1");
+      std::to_string(magic.port()) + " --output-dir " + test::quoted(dir / "out2") + " 2>&1");
   INFO(wrong.out);
   CHECK(wrong.exit_code == 69);
   CHECK_THAT(wrong.out, Catch::Contains("wrong magic bytes 48 54"));
@@ -316,7 +313,7 @@ TEST_CASE("sensor keys in the configuration are checked with their position", "[
   const auto check = [&](const std::string& toml) {
     std::ofstream(dir / "c.toml") << toml;
     return test::run_command(test::pandarcapd_command() + " --check-config -c " +
-                             quoted(dir / "c.toml") + " 2>&1");
+                             test::quoted(dir / "c.toml") + " 2>&1");
   };
   const auto file_without = check("[sensor]\ncalibration_source = \"file\"\n");
   CHECK(file_without.exit_code == 78);
@@ -338,8 +335,8 @@ TEST_CASE("sensor keys in the configuration are checked with their position", "[
 TEST_CASE("pandarcap-ctl reads the sensor's calibration, inventory, config and status",
           "[ptc][ctl][threads]") {
   SimulatedPtcServer sensor(simulated_unit(1200, 0x37, false, 2368));
-  const std::string ctl =
-      quoted(test::binary("pandarcap-ctl")) + " 127.0.0.1 --port " + std::to_string(sensor.port());
+  const std::string ctl = test::quoted(test::binary("pandarcap-ctl")) + " 127.0.0.1 --port " +
+                          std::to_string(sensor.port());
 
   const test::CommandResult calibration = test::run_command(ctl + " calibration");
   CHECK(calibration.exit_code == 0);
@@ -367,7 +364,7 @@ TEST_CASE("pandarcap-ctl reads the sensor's calibration, inventory, config and s
 
 TEST_CASE("pandarcap-ctl fails clearly: usage 64, no answer 69, protocol 76",
           "[ptc][ctl][threads]") {
-  const std::string ctl = quoted(test::binary("pandarcap-ctl"));
+  const std::string ctl = test::quoted(test::binary("pandarcap-ctl"));
   CHECK(test::run_command(ctl + " --help").exit_code == 0);
   CHECK(test::run_command(ctl + " 2>/dev/null").exit_code == 64);
   CHECK(test::run_command(ctl + " 127.0.0.1 reboot 2>/dev/null").exit_code == 64);

@@ -18,6 +18,7 @@
 #include "core/decode/decoder_target.hpp"
 #include "core/decode/stream_decoder.hpp"
 #include "core/sensors/sensor_model.hpp"
+#include "core/units.hpp"
 #include "support/retimed_capture.hpp"
 #include "support/test_support.hpp"
 
@@ -26,7 +27,6 @@ using test::RetimedCapture;
 
 namespace {
 
-constexpr std::int64_t kMs = 1'000'000;
 constexpr std::uint64_t kSlots = std::uint64_t{kBlocks} * kChannels;
 
 // Keeps a few frames and what the test asks of each finished one.
@@ -58,7 +58,7 @@ class FrameTally final : public FrameSink {
   std::size_t free_count_ = kFrames;
 };
 
-struct Outcome {
+struct FaultOutcome {
   StreamStats stats;
   SequenceStats sequence;
   AssemblerStats frames;
@@ -69,8 +69,8 @@ struct Outcome {
 // What a case does to packet k (its bytes, numbered from 0 with `sequence`): false drops it.
 using Alter = std::function<bool(std::uint64_t k, std::span<std::uint8_t> packet)>;
 
-Outcome run(const RetimedCapture& stream, std::uint64_t packets, const Alter& alter,
-            bool sequence = false) {
+FaultOutcome run_faults(const RetimedCapture& stream, std::uint64_t packets, const Alter& alter,
+                        bool sequence = false) {
   static FrameTally tally;  // 17 MB of frames, allocated once for the file
   tally.reset();
   StreamDecoderConfig config;
@@ -90,7 +90,7 @@ Outcome run(const RetimedCapture& stream, std::uint64_t packets, const Alter& al
 
 // Every payload accounted for, every channel slot a point or a filtered count, every point in a
 // frame.
-void check_accounting(const Outcome& o) {
+void check_accounting(const FaultOutcome& o) {
   CHECK(o.stats.packets == o.stats.accepted + o.stats.rejected() + o.stats.duplicates);
   CHECK(o.stats.points + o.stats.filtered.total() == o.stats.accepted * kSlots);
   CHECK(o.points_in_frames + o.frames.points_late + o.frames.points_dropped_full +
@@ -137,10 +137,10 @@ const char* name(Glitch g) {
 void apply(Glitch g, std::span<std::uint8_t> packet, std::int64_t t_ns, std::uint32_t seed) {
   switch (g) {
     case Glitch::kTimeBack:
-      test::set_time(packet, t_ns - 500 * kMs);
+      test::set_time(packet, t_ns - 500 * kNsPerMillisecond);
       break;
     case Glitch::kTimeForward:
-      test::set_time(packet, t_ns + 500 * kMs);
+      test::set_time(packet, t_ns + 500 * kNsPerMillisecond);
       break;
     case Glitch::kDateSecondBack:
       test::date_second_back(packet);
@@ -192,20 +192,21 @@ TEST_CASE(
   const RetimedCapture* stream = stream_in(ReturnMode::kDual);
   if (stream == nullptr) return;
   const std::uint64_t packets = two_seconds(*stream);
-  const Outcome clean = run(*stream, packets, {});
+  const FaultOutcome clean = run_faults(*stream, packets, {});
   for (const std::uint64_t length : kBurstLengths) {
     const auto in_burst = [&](std::uint64_t k) { return k % 500 >= 250 && k % 500 < 250 + length; };
     // The tail's speed: the azimuth and the time say the stream goes on at 600 RPM.
     for (const std::uint16_t rpm : {std::uint16_t{0}, std::uint16_t{300}, std::uint16_t{1200}}) {
       INFO("bursts of " << length << ", tail " << rpm << " RPM");
       std::uint64_t glitched = 0;
-      const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-        if (in_burst(k)) {
-          test::set_rpm(p, rpm);
-          ++glitched;
-        }
-        return true;
-      });
+      const FaultOutcome o =
+          run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+            if (in_burst(k)) {
+              test::set_rpm(p, rpm);
+              ++glitched;
+            }
+            return true;
+          });
       check_accounting(o);
       CHECK(o.frames.discontinuities == 0);
       CHECK(o.stats.stream_changes == 0);
@@ -219,13 +220,14 @@ TEST_CASE(
     // The return-mode byte: the stream is dual; the burst says last return.
     INFO("bursts of " << length << ", return mode byte");
     std::uint64_t glitched = 0;
-    const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-      if (in_burst(k)) {
-        p[kBodyBytes + 14] = static_cast<std::uint8_t>(ReturnMode::kLast);
-        ++glitched;
-      }
-      return true;
-    });
+    const FaultOutcome o =
+        run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+          if (in_burst(k)) {
+            p[kBodyBytes + 14] = static_cast<std::uint8_t>(ReturnMode::kLast);
+            ++glitched;
+          }
+          return true;
+        });
     check_accounting(o);
     // Each decoded in the stream's mode (its byte mended), every point kept.
     CHECK(o.stats.outliers == glitched);
@@ -236,10 +238,11 @@ TEST_CASE(
     CHECK(o.frames.frames_complete == clean.frames.frames_complete);
   }
   // 17 in a row in another mode are a change of mode, taken (and the 16 before it, outliers).
-  const Outcome change = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-    if (k >= 1000) p[kBodyBytes + 14] = static_cast<std::uint8_t>(ReturnMode::kLast);
-    return true;
-  });
+  const FaultOutcome change =
+      run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+        if (k >= 1000) p[kBodyBytes + 14] = static_cast<std::uint8_t>(ReturnMode::kLast);
+        return true;
+      });
   check_accounting(change);
   CHECK(change.stats.return_mode_changes == 1);
   CHECK(change.stats.outliers == kMaxHeldPackets);
@@ -254,7 +257,7 @@ TEST_CASE(
     const RetimedCapture* stream = stream_in(mode);
     if (stream == nullptr) return;
     const std::uint64_t packets = two_seconds(*stream);
-    const Outcome clean = run(*stream, packets, {});
+    const FaultOutcome clean = run_faults(*stream, packets, {});
     REQUIRE(clean.frames.frames_complete >= 18);
     REQUIRE(clean.frames.frames_holed == 0);
     REQUIRE(clean.stats.outliers == 0);
@@ -263,13 +266,14 @@ TEST_CASE(
         if (test::kSanitizerBuild && length != 1 && length != 3 && length != 16) continue;
         INFO(to_string(mode) << ": bursts of " << length << ", " << name(glitch));
         std::uint64_t glitched = 0;
-        const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-          if (k % 500 >= 250 && k % 500 < 250 + length) {
-            apply(glitch, p, stream->time_ns(k), static_cast<std::uint32_t>(k));
-            ++glitched;
-          }
-          return true;
-        });
+        const FaultOutcome o =
+            run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+              if (k % 500 >= 250 && k % 500 < 250 + length) {
+                apply(glitch, p, stream->time_ns(k), static_cast<std::uint32_t>(k));
+                ++glitched;
+              }
+              return true;
+            });
         check_accounting(o);
         CHECK(o.stats.outliers == glitched);
         CHECK(o.frames.discontinuities == 0);
@@ -300,7 +304,7 @@ TEST_CASE(
   const RetimedCapture* stream = stream_in(ReturnMode::kDual);
   if (stream == nullptr) return;
   const std::uint64_t packets = two_seconds(*stream);
-  const Outcome clean = run(*stream, packets, {});
+  const FaultOutcome clean = run_faults(*stream, packets, {});
   const auto crosses_cut = [&](std::uint64_t k) {
     std::array<std::uint8_t, kMaxPacketBytes> a{}, b{};
     const int before = test::first_azimuth(std::span(a).first(stream->packet(k - 1, a)));
@@ -313,15 +317,16 @@ TEST_CASE(
       for (const std::uint64_t length : {1, 3, 16}) {
         INFO(name(glitch) << " x " << length << " starting at each crossing of the cut");
         std::uint64_t left = 0, glitched = 0;
-        const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-          // (Not in the last revolution: a run the stream ends in is placed as it is.)
-          if (k > 0 && k + 360 < packets && crosses_cut(k)) left = length;
-          if (left == 0) return true;
-          --left;
-          ++glitched;
-          apply(glitch, p, stream->time_ns(k), static_cast<std::uint32_t>(k));
-          return true;
-        });
+        const FaultOutcome o =
+            run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+              // (Not in the last revolution: a run the stream ends in is placed as it is.)
+              if (k > 0 && k + 360 < packets && crosses_cut(k)) left = length;
+              if (left == 0) return true;
+              --left;
+              ++glitched;
+              apply(glitch, p, stream->time_ns(k), static_cast<std::uint32_t>(k));
+              return true;
+            });
         check_accounting(o);
         CHECK(glitched >= 19 * length);
         CHECK(o.stats.outliers == glitched);
@@ -334,10 +339,11 @@ TEST_CASE(
     for (const Glitch glitch : {Glitch::kTimeForward, Glitch::kAzimuthBehind}) {
       for (const std::uint64_t length : {1, 5, 16}) {
         INFO(name(glitch) << " x " << length << " first");
-        const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-          if (k < length) apply(glitch, p, stream->time_ns(k), 0);
-          return true;
-        });
+        const FaultOutcome o =
+            run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+              if (k < length) apply(glitch, p, stream->time_ns(k), 0);
+              return true;
+            });
         check_accounting(o);
         CHECK(o.stats.outliers == length);
         CHECK(o.frames.frames_complete == clean.frames.frames_complete);
@@ -347,15 +353,16 @@ TEST_CASE(
   }
   SECTION("a burst, then a loss: only the loss costs the revolution") {
     std::uint64_t bursts = 0, events = 0;
-    const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-      const std::uint64_t at = k % 720;  // two revolutions apart, mid-revolution
-      if (at >= 180 && at < 183) apply(Glitch::kTimeBack, p, stream->time_ns(k), 0);
-      if (at == 183) {
-        ++bursts;
-        if (k > 360) ++events;  // (the first frame is partial anyway: the stream began in it)
-      }
-      return at < 183 || at >= 188;  // 5 lost right after it
-    });
+    const FaultOutcome o =
+        run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+          const std::uint64_t at = k % 720;  // two revolutions apart, mid-revolution
+          if (at >= 180 && at < 183) apply(Glitch::kTimeBack, p, stream->time_ns(k), 0);
+          if (at == 183) {
+            ++bursts;
+            if (k > 360) ++events;  // (the first frame is partial anyway: the stream began in it)
+          }
+          return at < 183 || at >= 188;  // 5 lost right after it
+        });
     check_accounting(o);
     CHECK(o.stats.outliers == 3 * bursts);
     CHECK(o.frames.frames_holed == events);
@@ -366,12 +373,13 @@ TEST_CASE(
     for (const Glitch glitch : {Glitch::kTimeBack, Glitch::kTimeForward, Glitch::kAzimuthAhead}) {
       for (const std::uint64_t length : {17, 20, 40}) {
         INFO(name(glitch) << " x " << length);
-        const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-          if (k % 1000 >= 400 && k % 1000 < 400 + length) {
-            apply(glitch, p, stream->time_ns(k), 0);
-          }
-          return true;
-        });
+        const FaultOutcome o =
+            run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+              if (k % 1000 >= 400 && k % 1000 < 400 + length) {
+                apply(glitch, p, stream->time_ns(k), 0);
+              }
+              return true;
+            });
         check_accounting(o);
         // Each run is a new stream and the old one's return another: two cuts, no outlier.
         CHECK(o.frames.discontinuities == 2 * 7);
@@ -386,14 +394,15 @@ TEST_CASE(
     for (const std::uint64_t length : {17, 30}) {
       INFO("scattered azimuths x " << length);
       std::uint64_t glitched = 0, events = 0;
-      const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-        if (k % 1000 >= 400 && k % 1000 < 400 + length) {
-          test::shift_azimuth(p, 9000 + static_cast<int>(k % 2) * 18000);
-          ++glitched;
-          if (k % 1000 == 400) ++events;
-        }
-        return true;
-      });
+      const FaultOutcome o =
+          run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+            if (k % 1000 >= 400 && k % 1000 < 400 + length) {
+              test::shift_azimuth(p, 9000 + static_cast<int>(k % 2) * 18000);
+              ++glitched;
+              if (k % 1000 == 400) ++events;
+            }
+            return true;
+          });
       check_accounting(o);
       CHECK(o.stats.outliers == glitched);
       CHECK(o.frames.discontinuities == 0);
@@ -415,7 +424,7 @@ TEST_CASE(
     if (stream == nullptr) return;
     const std::uint64_t packets = 3 * stream->packets_per_second();
     const std::uint64_t revolution = stream->packets_per_second() / 10;
-    const Outcome clean = run(*stream, packets, {});
+    const FaultOutcome clean = run_faults(*stream, packets, {});
     for (const std::uint64_t lost : {1, 5, 50}) {
       for (const bool sequence : {false, true}) {
         INFO(to_string(mode) << ": " << lost << " lost every other revolution, mid-revolution"
@@ -426,7 +435,7 @@ TEST_CASE(
         const auto lossy = [&](std::uint64_t k) {
           return k > revolution && k + 3 * revolution < packets;
         };
-        const Outcome o = run(
+        const FaultOutcome o = run_faults(
             *stream, packets,
             [&](std::uint64_t k, std::span<std::uint8_t>) {
               const std::uint64_t at = (k + revolution / 2) % (2 * revolution);
@@ -465,14 +474,14 @@ TEST_CASE(
         return !(k >= revolution * 10 && k < revolution * 10 + 500) &&
                !(k >= revolution * 20 && k < revolution * 20 + 500);
       };
-      const Outcome o = run(*stream, packets, lose);
+      const FaultOutcome o = run_faults(*stream, packets, lose);
       check_accounting(o);
       CHECK(o.frames.discontinuities == 2);
       // Without a sequence, nothing can tell so long a loss from a restart or a clock's step.
       CHECK(packets_missing(o.stats, o.sequence, o.frames) == 0);
-      CHECK(packets_missing(run(*stream, packets, lose, true).stats,
-                            run(*stream, packets, lose, true).sequence,
-                            run(*stream, packets, lose, true).frames) == 1000);
+      CHECK(packets_missing(run_faults(*stream, packets, lose, true).stats,
+                            run_faults(*stream, packets, lose, true).sequence,
+                            run_faults(*stream, packets, lose, true).frames) == 1000);
       // The revolutions the loss spans, and those it cut on either side.
       const std::uint64_t spanned = 2 * (500 / revolution + 2);
       CHECK(o.frames.frames_complete + spanned >= clean.frames.frames_complete);
@@ -482,18 +491,19 @@ TEST_CASE(
       INFO(to_string(mode) << ": " << lost << " lost at each crossing of the cut");
       int previous = -1;
       std::uint64_t left = 0, events = 0;
-      const Outcome o = run(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-        const int azimuth = test::first_azimuth(p);
-        // (Not where the stream ends within the loss: no packet after it says how wide it was.)
-        if (previous >= 0 && azimuth < previous && k + lost < packets) {
-          left = lost;
-          ++events;
-        }
-        previous = azimuth;
-        if (left == 0) return true;
-        --left;
-        return false;
-      });
+      const FaultOutcome o =
+          run_faults(*stream, packets, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+            const int azimuth = test::first_azimuth(p);
+            // (Not where the stream ends within the loss: no packet after it says how wide it was.)
+            if (previous >= 0 && azimuth < previous && k + lost < packets) {
+              left = lost;
+              ++events;
+            }
+            previous = azimuth;
+            if (left == 0) return true;
+            --left;
+            return false;
+          });
       check_accounting(o);
       // Both revolutions lose points: the one it ends (channels reach past the cut) and the
       // one it starts.
@@ -521,8 +531,8 @@ TEST_CASE(
         const auto stand_to =
             stand_from + static_cast<std::uint64_t>(seconds * static_cast<double>(rate));
         int stood_at = 0;
-        const Outcome o =
-            run(*stream, stand_to + rate, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+        const FaultOutcome o =
+            run_faults(*stream, stand_to + rate, [&](std::uint64_t k, std::span<std::uint8_t> p) {
               if (k == stand_from) stood_at = test::first_azimuth(p);
               if (k >= stand_from && k < stand_to) {
                 test::set_azimuth(p, stood_at);
@@ -555,15 +565,17 @@ TEST_CASE(
   SECTION("crawling: the tail says 600, the azimuth turns a tenth of that") {
     const RetimedCapture* stream = stream_in(ReturnMode::kDual);
     if (stream == nullptr) return;
-    const Outcome o = run(*stream, 3600, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-      const int base = static_cast<int>(k * 10 % 36000);  // 0.1° a packet
-      for (int b = 0; b < kBlocks; ++b) {
-        const int azimuth = (base + 2 * (b / 2)) % 36000;
-        p[static_cast<std::size_t>(kBlockBytes * b + 2)] = static_cast<std::uint8_t>(azimuth);
-        p[static_cast<std::size_t>(kBlockBytes * b + 3)] = static_cast<std::uint8_t>(azimuth >> 8);
-      }
-      return true;
-    });
+    const FaultOutcome o =
+        run_faults(*stream, 3600, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+          const int base = static_cast<int>(k * 10 % 36000);  // 0.1° a packet
+          for (int b = 0; b < kBlocks; ++b) {
+            const int azimuth = (base + 2 * (b / 2)) % 36000;
+            p[static_cast<std::size_t>(kBlockBytes * b + 2)] = static_cast<std::uint8_t>(azimuth);
+            p[static_cast<std::size_t>(kBlockBytes * b + 3)] =
+                static_cast<std::uint8_t>(azimuth >> 8);
+          }
+          return true;
+        });
     check_accounting(o);
     // (The tail's slowest, 598 RPM, sets the bound: 451 packets.)
     CHECK(o.most_packets <= 1.25 * packets_per_revolution(ReturnMode::kDual, 598));
@@ -593,19 +605,20 @@ TEST_CASE(
                              << (back_again ? ", forwards again after 1 s" : ""));
         const std::uint64_t until = back_again ? from + rate : 3 * rate;
         int pivot = 0;
-        const Outcome o = run(*stream, 3 * rate, [&](std::uint64_t k, std::span<std::uint8_t> p) {
-          if (k == from) pivot = test::first_azimuth(p);
-          if (k < from || k >= until) return true;
-          // Mirrored about the azimuth where it turned: the rotation runs down.
-          for (int b = 0; b < kBlocks; ++b) {
-            const auto at = static_cast<std::size_t>(kBlockBytes * b + 2);
-            const int azimuth = p[at] | (p[at + 1] << 8);
-            const int mirrored = ((2 * pivot - azimuth) % 36000 + 36000) % 36000;
-            p[at] = static_cast<std::uint8_t>(mirrored);
-            p[at + 1] = static_cast<std::uint8_t>(mirrored >> 8);
-          }
-          return true;
-        });
+        const FaultOutcome o =
+            run_faults(*stream, 3 * rate, [&](std::uint64_t k, std::span<std::uint8_t> p) {
+              if (k == from) pivot = test::first_azimuth(p);
+              if (k < from || k >= until) return true;
+              // Mirrored about the azimuth where it turned: the rotation runs down.
+              for (int b = 0; b < kBlocks; ++b) {
+                const auto at = static_cast<std::size_t>(kBlockBytes * b + 2);
+                const int azimuth = p[at] | (p[at + 1] << 8);
+                const int mirrored = ((2 * pivot - azimuth) % 36000 + 36000) % 36000;
+                p[at] = static_cast<std::uint8_t>(mirrored);
+                p[at + 1] = static_cast<std::uint8_t>(mirrored >> 8);
+              }
+              return true;
+            });
         // Every slot a point or a filtered count, the reversed ones too.
         check_accounting(o);
         const std::uint64_t reversed = until - from;
@@ -646,7 +659,7 @@ TEST_CASE("a sensor that restarts its counter at any moment is a reset: every pa
   };
   for (const Case& c : cases) {
     INFO(c.name);
-    const Outcome o = run(
+    const FaultOutcome o = run_faults(
         *stream, 7200,
         [&](std::uint64_t k, std::span<std::uint8_t> p) {
           std::uint32_t number = c.first + static_cast<std::uint32_t>(k);
@@ -668,7 +681,7 @@ TEST_CASE("a sensor that restarts its counter at any moment is a reset: every pa
     CHECK(o.frames.frames_holed == 0);
   }
   SECTION("a restart in a burst of glitched times: a reset, and the burst outliers") {
-    const Outcome o = run(
+    const FaultOutcome o = run_faults(
         *stream, 7200,
         [&](std::uint64_t k, std::span<std::uint8_t> p) {
           const auto number = static_cast<std::uint32_t>(k < 700 ? k : k - 700);

@@ -16,29 +16,29 @@
 #include "core/sensors/timing.hpp"
 #include "core/sim/packet_builder.hpp"
 #include "core/sim/synthetic_sensor.hpp"
+#include "core/units.hpp"
 
 using namespace pandarcap;
 
 namespace {
 
-constexpr std::int64_t kMs = 1'000'000;
 // 600 RPM: 36000 cdeg per 100 ms, 0.36 cdeg per µs.
-constexpr std::int64_t kRevolutionNs = 100 * kMs;
+constexpr std::int64_t kRevolutionNs = 100 * kNsPerMillisecond;
 
-RotationPoint at(int azimuth_cdeg, std::int64_t t0_ns, bool valid = true, int rpm = 600) {
+RotationPoint packet_at(int azimuth_cdeg, std::int64_t t0_ns, bool valid = true, int rpm = 600) {
   return {static_cast<std::uint16_t>(((azimuth_cdeg % 36000) + 36000) % 36000), t0_ns, valid,
           static_cast<std::uint16_t>(rpm)};
 }
 
 // A stream of the simulated sensor whose packets `alter` may change (their contents) or drop
 // (return false), fed to a StreamDecoder: its counters and whole frames.
-struct Outcome {
+struct GlitchOutcome {
   StreamStats stats;
   AssemblerStats frames;
   std::uint64_t points_in_frames = 0;
 };
-Outcome run(int packets, const std::function<bool(int, PacketContents&)>& alter,
-            SyntheticSensorConfig config = {}) {
+GlitchOutcome run_glitches(int packets, const std::function<bool(int, PacketContents&)>& alter,
+                           SyntheticSensorConfig config = {}) {
   SyntheticSensor sensor(config);
   std::uint64_t points = 0;
   FrameCollector frames(3, kDefaultFrameCapacityPoints,
@@ -77,61 +77,66 @@ TEST_CASE(
     "follows: a packet follows when its azimuth advanced as its time did, within 0.2° + 1 %, "
     "either way round",
     "[stream][glitch]") {
-  const RotationPoint last = at(10000, 0);
+  const RotationPoint last = packet_at(10000, 0);
   // 10 ms at 600 RPM is 36°: 3600 cdeg, tolerance 20 + 36 cdeg.
-  CHECK(follows(last, at(10000 + 3600, 10 * kMs)));
-  CHECK(follows(last, at(10000 + 3600 + 56, 10 * kMs)));
-  CHECK_FALSE(follows(last, at(10000 + 3600 + 57, 10 * kMs)));
-  CHECK(follows(last, at(10000 + 3600 - 56, 10 * kMs)));
-  CHECK_FALSE(follows(last, at(10000 + 3600 - 57, 10 * kMs)));
+  CHECK(follows(last, packet_at(10000 + 3600, 10 * kNsPerMillisecond)));
+  CHECK(follows(last, packet_at(10000 + 3600 + 56, 10 * kNsPerMillisecond)));
+  CHECK_FALSE(follows(last, packet_at(10000 + 3600 + 57, 10 * kNsPerMillisecond)));
+  CHECK(follows(last, packet_at(10000 + 3600 - 56, 10 * kNsPerMillisecond)));
+  CHECK_FALSE(follows(last, packet_at(10000 + 3600 - 57, 10 * kNsPerMillisecond)));
   // One dual packet (277.8 µs, 1°): 0.21° either side; a packet shifted by 0.25° does not.
-  CHECK(follows(last, at(10000 + 100 + 21, 277'800)));
-  CHECK_FALSE(follows(last, at(10000 + 100 + 25, 277'800)));
-  CHECK_FALSE(follows(last, at(10000 + 100 - 25, 277'800)));
-  CHECK_FALSE(follows(last, at(10000 + 100 + 100, 277'800)));  // 1° ahead
+  CHECK(follows(last, packet_at(10000 + 100 + 21, 277'800)));
+  CHECK_FALSE(follows(last, packet_at(10000 + 100 + 25, 277'800)));
+  CHECK_FALSE(follows(last, packet_at(10000 + 100 - 25, 277'800)));
+  CHECK_FALSE(follows(last, packet_at(10000 + 100 + 100, 277'800)));  // 1° ahead
   // A swapped pair: time and azimuth both a packet back.
-  CHECK(follows(last, at(10000 - 100, -277'800)));
+  CHECK(follows(last, packet_at(10000 - 100, -277'800)));
   // Half a revolution of time, even with the azimuth that goes with it, is a gap.
-  CHECK(follows(last, at(10000 + 18000 - 36, kRevolutionNs / 2 - 100'000)));
-  CHECK_FALSE(follows(last, at(10000 + 18000, kRevolutionNs / 2 + 1)));
-  CHECK_FALSE(follows(last, at(10000, kRevolutionNs)));  // a whole revolution lost
+  CHECK(follows(last, packet_at(10000 + 18000 - 36, kRevolutionNs / 2 - 100'000)));
+  CHECK_FALSE(follows(last, packet_at(10000 + 18000, kRevolutionNs / 2 + 1)));
+  CHECK_FALSE(follows(last, packet_at(10000, kRevolutionNs)));  // a whole revolution lost
   // The speed is the last packet's: at 1200 RPM 10 ms is 72°.
-  CHECK(follows(at(0, 0, true, 1200), at(7200, 10 * kMs)));
-  CHECK_FALSE(follows(at(0, 0, true, 600), at(7200, 10 * kMs)));
+  CHECK(follows(packet_at(0, 0, true, 1200), packet_at(7200, 10 * kNsPerMillisecond)));
+  CHECK_FALSE(follows(packet_at(0, 0, true, 600), packet_at(7200, 10 * kNsPerMillisecond)));
   // Backwards: the azimuth goes back as the time goes on.
-  CHECK(follows(last, at(10000 - 100, 277'800), Turning::kBackward));
-  CHECK_FALSE(follows(last, at(10000 - 100, 277'800)));
-  CHECK_FALSE(follows(last, at(10000 + 100, 277'800), Turning::kBackward));
+  CHECK(follows(last, packet_at(10000 - 100, 277'800), Turning::kBackward));
+  CHECK_FALSE(follows(last, packet_at(10000 - 100, 277'800)));
+  CHECK_FALSE(follows(last, packet_at(10000 + 100, 277'800), Turning::kBackward));
 }
 
 TEST_CASE("follows: without usable times, a step of at most 90° either way", "[stream][glitch]") {
-  for (const auto& [last, valid, name] : {std::tuple{at(5000, 0, false), false, "invalid times"},
-                                          std::tuple{at(5000, 0, true, 0), true, "no speed"}}) {
+  for (const auto& [last, valid, name] :
+       {std::tuple{packet_at(5000, 0, false), false, "invalid times"},
+        std::tuple{packet_at(5000, 0, true, 0), true, "no speed"}}) {
     INFO(name);
-    CHECK(follows(last, at(5000 + 9000, kMs, valid)));
-    CHECK_FALSE(follows(last, at(5000 + 9001, kMs, valid)));
-    CHECK(follows(last, at(5000 - 9000, kMs, valid)));
-    CHECK_FALSE(follows(last, at(5000 - 9001, kMs, valid)));
+    CHECK(follows(last, packet_at(5000 + 9000, kNsPerMillisecond, valid)));
+    CHECK_FALSE(follows(last, packet_at(5000 + 9001, kNsPerMillisecond, valid)));
+    CHECK(follows(last, packet_at(5000 - 9000, kNsPerMillisecond, valid)));
+    CHECK_FALSE(follows(last, packet_at(5000 - 9001, kNsPerMillisecond, valid)));
   }
   // A valid time after an invalid one, or the reverse: two clocks, never "follows".
-  CHECK_FALSE(follows(at(5000, 0, true), at(5100, 277'800, false)));
-  CHECK_FALSE(follows(at(5000, 0, false), at(5100, 277'800, true)));
+  CHECK_FALSE(follows(packet_at(5000, 0, true), packet_at(5100, 277'800, false)));
+  CHECK_FALSE(follows(packet_at(5000, 0, false), packet_at(5100, 277'800, true)));
   // A frozen clock (the same time, or a packet whose time stood): the azimuth alone, too.
-  CHECK(follows(at(5000, 7 * kMs), at(5000 + 4000, 7 * kMs)));
-  CHECK_FALSE(follows(at(5000, 7 * kMs), at(5000 + 9500, 7 * kMs)));
-  RotationPoint stood = at(5000, 7 * kMs);
+  CHECK(follows(packet_at(5000, 7 * kNsPerMillisecond),
+                packet_at(5000 + 4000, 7 * kNsPerMillisecond)));
+  CHECK_FALSE(follows(packet_at(5000, 7 * kNsPerMillisecond),
+                      packet_at(5000 + 9500, 7 * kNsPerMillisecond)));
+  RotationPoint stood = packet_at(5000, 7 * kNsPerMillisecond);
   stood.time_stood = true;
-  CHECK(follows(stood, at(5100, 10 * kMs)));
-  CHECK_FALSE(follows(at(5000, 7 * kMs), at(5100, 10 * kMs)));
+  CHECK(follows(stood, packet_at(5100, 10 * kNsPerMillisecond)));
+  CHECK_FALSE(
+      follows(packet_at(5000, 7 * kNsPerMillisecond), packet_at(5100, 10 * kNsPerMillisecond)));
 }
 
 TEST_CASE("an isolated time glitch is placed at its azimuth's time: no frame or point lost",
           "[stream][glitch]") {
-  const Outcome clean = run(7200, kClean);
+  const GlitchOutcome clean = run_glitches(7200, kClean);
   REQUIRE(clean.frames.frames_complete >= 18);
-  for (const std::int64_t shift : {-5 * kMs, -2000 * kMs, 60'000 * kMs, 20 * kMs}) {
-    INFO("packet 3000's time moved by " << shift / kMs << " ms");
-    const Outcome glitch = run(7200, [&](int k, PacketContents& c) {
+  for (const std::int64_t shift : {-5 * kNsPerMillisecond, -2000 * kNsPerMillisecond,
+                                   60'000 * kNsPerMillisecond, 20 * kNsPerMillisecond}) {
+    INFO("packet 3000's time moved by " << shift / kNsPerMillisecond << " ms");
+    const GlitchOutcome glitch = run_glitches(7200, [&](int k, PacketContents& c) {
       if (k == 3000) shift_time(c, shift);
       return true;
     });
@@ -149,10 +154,10 @@ TEST_CASE(
     "an isolated azimuth glitch is repaired from its time: its points kept, the revolution "
     "whole (one wrong in both is left out, its revolution partial)",
     "[stream][glitch]") {
-  const Outcome clean = run(7200, kClean);
+  const GlitchOutcome clean = run_glitches(7200, kClean);
   for (const int shift : {18000, 9500, -12000, 3000, 100, -100, 25}) {
     INFO("packet 3000's azimuths moved by " << shift << " cdeg");
-    const Outcome glitch = run(7200, [&](int k, PacketContents& c) {
+    const GlitchOutcome glitch = run_glitches(7200, [&](int k, PacketContents& c) {
       if (k == 3000) shift_azimuth(c, shift);
       return true;
     });
@@ -166,10 +171,10 @@ TEST_CASE(
   }
   for (const int shift : {18000, 100}) {
     INFO("packet 3000's azimuths moved by " << shift << " cdeg and its time 2 ms back");
-    const Outcome glitch = run(7200, [&](int k, PacketContents& c) {
+    const GlitchOutcome glitch = run_glitches(7200, [&](int k, PacketContents& c) {
       if (k == 3000) {
         shift_azimuth(c, shift);
-        shift_time(c, -2 * kMs);
+        shift_time(c, -2 * kNsPerMillisecond);
       }
       return true;
     });
@@ -188,8 +193,8 @@ TEST_CASE(
 
 TEST_CASE("two glitches in a row are two outliers, and a real change still cuts",
           "[stream][glitch]") {
-  const Outcome clean = run(7200, kClean);
-  const Outcome twice = run(7200, [](int k, PacketContents& c) {
+  const GlitchOutcome clean = run_glitches(7200, kClean);
+  const GlitchOutcome twice = run_glitches(7200, [](int k, PacketContents& c) {
     if (k == 3000) shift_azimuth(c, 18000);
     if (k == 3001) shift_azimuth(c, 9000);
     return true;
@@ -200,10 +205,10 @@ TEST_CASE("two glitches in a row are two outliers, and a real change still cuts"
 
   // A restart: from packet 3000 on, the sensor is 137° and 3 s further on. It cuts once, and
   // nothing is taken for an outlier.
-  const Outcome restart = run(7200, [](int k, PacketContents& c) {
+  const GlitchOutcome restart = run_glitches(7200, [](int k, PacketContents& c) {
     if (k >= 3000) {
       shift_azimuth(c, 13700);
-      shift_time(c, 3000 * kMs);
+      shift_time(c, 3000 * kNsPerMillisecond);
     }
     return true;
   });
@@ -213,7 +218,8 @@ TEST_CASE("two glitches in a row are two outliers, and a real change still cuts"
 
   // A gap: a revolution and a half of packets missing. The azimuth follows the time, but the time
   // is more than half a revolution: it cuts.
-  const Outcome gap = run(7200, [](int k, PacketContents&) { return k < 3000 || k >= 3540; });
+  const GlitchOutcome gap =
+      run_glitches(7200, [](int k, PacketContents&) { return k < 3000 || k >= 3540; });
   CHECK(gap.stats.outliers == 0);
   CHECK(gap.frames.discontinuities == 1);
 
@@ -245,7 +251,7 @@ TEST_CASE("duplicates: a copy of a recent packet, or a repeated sequence, is dec
           "[stream][glitch][duplicate]") {
   SyntheticSensorConfig config;
   config.udp_sequence = true;
-  const Outcome clean = run(3600, kClean, config);
+  const GlitchOutcome clean = run_glitches(3600, kClean, config);
 
   SyntheticSensor sensor(config);
   FrameCollector frames(3, kDefaultFrameCapacityPoints, [](const Frame&) {});
@@ -310,22 +316,24 @@ TEST_CASE("a glitch every few hundred packets leaves at least 95 % of revolution
     SyntheticSensorConfig config;
     config.return_mode = mode;
     const int packets = mode == ReturnMode::kDual ? 14400 : 7200;  // 4 s, 40 revolutions
-    const Outcome clean = run(packets, kClean, config);
+    const GlitchOutcome clean = run_glitches(packets, kClean, config);
     for (const int every : {200, 500}) {
       INFO("one packet in " << every << ", " << to_string(mode));
       std::mt19937 rng(static_cast<unsigned>(every));
       std::uint64_t glitches = 0;
-      const Outcome glitched = run(
+      const GlitchOutcome glitched = run_glitches(
           packets,
           [&](int k, PacketContents& c) {
             if (k % every != every / 2) return true;
             ++glitches;
             switch (rng() % 4) {
               case 0:
-                shift_time(c, -static_cast<std::int64_t>(1 + rng() % 5000) * kMs);  // back
+                shift_time(
+                    c, -static_cast<std::int64_t>(1 + rng() % 5000) * kNsPerMillisecond);  // back
                 break;
               case 1:
-                shift_time(c, static_cast<std::int64_t>(60 + rng() % 5000) * kMs);  // leap
+                shift_time(
+                    c, static_cast<std::int64_t>(60 + rng() % 5000) * kNsPerMillisecond);  // leap
                 break;
               case 2:
                 shift_azimuth(c, static_cast<int>(9100 + rng() % 17800));  // out of order
