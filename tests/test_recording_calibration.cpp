@@ -48,8 +48,8 @@ test::CommandResult replay_recording(const fs::path& recording, const fs::path& 
 
 // One live run of the simulated sensor, recorded (pcap.zst, MCAP with packets), shared by the
 // test cases below.
-struct Recorded {
-  Recorded() : dir("recording-calibration") {
+struct CalibrationRecorded {
+  CalibrationRecorded() : dir("recording-calibration") {
     std::ofstream(dir / "rig.toml") << "[output]\ndevice_name = \"test-rig-7\"\n";
     const std::string args = " -c " + quoted(dir / "rig.toml") +
                              " --pcap-compression zstd --mcap --mcap-packets --output-dir " +
@@ -84,8 +84,8 @@ struct Recorded {
   std::string printed_config;
 };
 
-Recorded& recorded() {
-  static Recorded r;
+CalibrationRecorded& recorded() {
+  static CalibrationRecorded r;
   return r;
 }
 
@@ -93,7 +93,7 @@ Recorded& recorded() {
 
 namespace {
 
-void replay_the_three(Recorded& r) {
+void replay_the_three(CalibrationRecorded& r) {
   const auto live = complete_frames(r.dir / "live");
   REQUIRE(live.size() >= 5);
   const std::string nominal = harness::read_file(r.dir / "live" / "raw" / "calibration.csv");
@@ -128,7 +128,7 @@ void replay_the_three(Recorded& r) {
   }
 }
 
-void check_metadata(Recorded& r) {
+void check_metadata(CalibrationRecorded& r) {
   Xxh64 hash;
   hash.update(
       {reinterpret_cast<const std::uint8_t*>(r.printed_config.data()), r.printed_config.size()});
@@ -158,7 +158,7 @@ void check_metadata(Recorded& r) {
   CHECK(facts["inventory"]["serial"] == p["sensor_serial"]);
 }
 
-void check_hostile_tables(Recorded& r) {
+void check_hostile_tables(CalibrationRecorded& r) {
   const fs::path dir = r.dir / "hostile";
   fs::create_directories(dir);
   const std::string csv = harness::read_file(r.dir / "live" / "raw" / "calibration.csv");
@@ -213,7 +213,7 @@ void check_hostile_tables(Recorded& r) {
 // One TEST_CASE (one live run), in sections.
 TEST_CASE("recordings carry their calibration and where they were made",
           "[daemon][replay][recording][mcap][threads]") {
-  Recorded& r = recorded();
+  CalibrationRecorded& r = recorded();
   SECTION("a replay without --calibration takes the recording's own: frames equal the live run's") {
     replay_the_three(r);
   }

@@ -28,10 +28,10 @@ using test::write_bytes;
 
 namespace {
 
-constexpr std::int64_t kRecordedNs = 1'677'657'600'000'000'000;  // 2023-03-01T08:00:00Z
-constexpr int kPackets = 1800;  // half a second of a dual-return sensor
-constexpr Endpoint kLidar{0xC0A801C9, 2368};
-constexpr Endpoint kHost{0xC0A8010A, 2368};
+constexpr std::int64_t kDamageRecordedNs = 1'677'657'600'000'000'000;  // 2023-03-01T08:00:00Z
+constexpr int kDamagePackets = 1800;  // half a second of a dual-return sensor
+constexpr Endpoint kDamageLidar{0xC0A801C9, 2368};
+constexpr Endpoint kDamageHost{0xC0A8010A, 2368};
 
 struct Outcome {
   bool opened = false;
@@ -145,12 +145,12 @@ fs::path convert_to_mcap(const fs::path& capture, const fs::path& dir,
 
 TEST_CASE("a damaged pcap is caught and named, header by header", "[capture][damage]") {
   test::ScratchDir dir("damage-pcap");
-  const fs::path pcap =
-      test::write_simulated_recording(dir / "whole.pcap", kPackets, kRecordedNs, kLidar, kHost);
+  const fs::path pcap = test::write_simulated_recording(
+      dir / "whole.pcap", kDamagePackets, kDamageRecordedNs, kDamageLidar, kDamageHost);
   const std::string bytes = harness::read_file(pcap);
   const Outcome whole = read_file(pcap);
   REQUIRE(whole.whole());
-  REQUIRE(whole.payloads.size() == kPackets);
+  REQUIRE(whole.payloads.size() == kDamagePackets);
 
   // The global header: magic, version, link type: the file cannot be opened, and says which.
   for (const auto& [field, at] : std::vector<std::pair<const char*, std::size_t>>{
@@ -166,7 +166,7 @@ TEST_CASE("a damaged pcap is caught and named, header by header", "[capture][dam
   // first, a middle and the last record. Uncompressed pcap has no checksum: its packets' bytes
   // are not checked, but every header field that no capture tool writes is.
   for (const std::size_t record :
-       {std::size_t{0}, std::size_t{kPackets / 2}, std::size_t{kPackets - 1}}) {
+       {std::size_t{0}, std::size_t{kDamagePackets / 2}, std::size_t{kDamagePackets - 1}}) {
     const std::size_t header = test::pcap_record_offset(bytes, record);
     for (const auto& [field, offset] :
          std::vector<std::pair<const char*, std::size_t>>{{"ts_usec high byte", 7},
@@ -189,18 +189,18 @@ TEST_CASE("a damaged pcap is caught and named, header by header", "[capture][dam
   }
   // Cut inside a record: kTruncated, "cut off".
   const fs::path cut = dir / "cut.pcap";
-  write_bytes(cut, bytes.substr(0, test::pcap_record_offset(bytes, kPackets / 2) + 100));
+  write_bytes(cut, bytes.substr(0, test::pcap_record_offset(bytes, kDamagePackets / 2) + 100));
   const Outcome o = read_file(cut);
   CHECK(o.status == CaptureStatus::kTruncated);
-  CHECK(o.payloads.size() == kPackets / 2);
+  CHECK(o.payloads.size() == kDamagePackets / 2);
   check_caught(o, cut);
 }
 
 TEST_CASE("a damaged pcap.zst is caught by zstd, its checksum included",
           "[capture][damage][zstd]") {
   test::ScratchDir dir("damage-pcap-zst");
-  const fs::path pcap =
-      test::write_simulated_recording(dir / "whole.pcap", kPackets, kRecordedNs, kLidar, kHost);
+  const fs::path pcap = test::write_simulated_recording(
+      dir / "whole.pcap", kDamagePackets, kDamageRecordedNs, kDamageLidar, kDamageHost);
   const Outcome whole = read_file(pcap);
   const std::string zst = compress_as_recorder(harness::read_file(pcap));
   write_bytes(dir / "whole.pcap.zst", zst);
@@ -250,14 +250,14 @@ TEST_CASE("a damaged pcap.zst is caught by zstd, its checksum included",
 TEST_CASE("a damaged MCAP chunk is skipped by the chunk index, the rest read",
           "[capture][damage][mcap][threads]") {
   test::ScratchDir dir("damage-mcap");
-  const fs::path pcap =
-      test::write_simulated_recording(dir / "whole.pcap", kPackets, kRecordedNs, kLidar, kHost);
+  const fs::path pcap = test::write_simulated_recording(
+      dir / "whole.pcap", kDamagePackets, kDamageRecordedNs, kDamageLidar, kDamageHost);
   for (const std::string compression : {"zstd", "lz4", "none"}) {
     const fs::path mcap = convert_to_mcap(pcap, dir / compression, compression);
     const std::string bytes = harness::read_file(mcap);
     const Outcome whole = read_file(mcap);
     REQUIRE(whole.whole());
-    REQUIRE(whole.payloads.size() == kPackets);
+    REQUIRE(whole.payloads.size() == kDamagePackets);
     const auto chunks = mcap_chunks(bytes);
     REQUIRE(chunks.size() >= 5);
     // The first and a middle chunk that hold packets (others hold a frame's points), and the
@@ -305,7 +305,7 @@ TEST_CASE("a damaged MCAP chunk is skipped by the chunk index, the rest read",
           CHECK(o.status == CaptureStatus::kEnd);
           CHECK(o.stats.chunks_skipped == 1);
           CHECK(o.stats.packets_skipped == chunks[c].packets);
-          CHECK(o.payloads.size() + o.stats.packets_skipped == kPackets);
+          CHECK(o.payloads.size() + o.stats.packets_skipped == kDamagePackets);
           std::size_t i = 0, j = 0;
           while (i < o.payloads.size() && o.payloads[i] == whole.payloads[j])
             ++i, ++j;
@@ -317,7 +317,7 @@ TEST_CASE("a damaged MCAP chunk is skipped by the chunk index, the rest read",
         } else {
           // No chunk after it to go on at: the end, as damage; everything before it read.
           CHECK(o.status == CaptureStatus::kError);
-          CHECK(o.payloads.size() == kPackets - chunks[c].packets);
+          CHECK(o.payloads.size() == kDamagePackets - chunks[c].packets);
         }
       }
     }
@@ -334,8 +334,8 @@ TEST_CASE("a damaged MCAP chunk is skipped by the chunk index, the rest read",
 TEST_CASE("a replay that met damage exits 65 and never ends ok, inspect exits 1",
           "[daemon][replay][damage][threads]") {
   test::ScratchDir dir("damage-replay");
-  const fs::path pcap =
-      test::write_simulated_recording(dir / "whole.pcap", kPackets, kRecordedNs, kLidar, kHost);
+  const fs::path pcap = test::write_simulated_recording(
+      dir / "whole.pcap", kDamagePackets, kDamageRecordedNs, kDamageLidar, kDamageHost);
   const std::string zst = compress_as_recorder(harness::read_file(pcap));
   write_bytes(dir / "flipped.pcap.zst", flip(zst, zst.size() / 2, 16));
   const fs::path mcap = convert_to_mcap(pcap, dir / "convert", "zstd");

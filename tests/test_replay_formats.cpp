@@ -33,8 +33,10 @@ constexpr std::int64_t kReplayRecordedNs = 1'677'657'600'000'000'000;
 constexpr int kReplayPackets = 7200;  // two seconds of a dual-return sensor at 600 RPM
 constexpr Endpoint kReplayLidar{0xC0A801C9, 2368};
 constexpr Endpoint kReplayHost{0xC0A8010A, 2368};
-constexpr Endpoint kLidar6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 1}};
-constexpr Endpoint kHost6{0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x10}};
+constexpr Endpoint kReplayLidar6{
+    0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 1}};
+constexpr Endpoint kReplayHost6{
+    0, 2368, true, {0xFD, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x10}};
 
 fs::path write_replay_recording(const fs::path& path, Endpoint from, Endpoint to) {
   return test::write_simulated_recording(path, kReplayPackets, kReplayRecordedNs, from, to);
@@ -76,7 +78,7 @@ TEST_CASE("a replay is judged by its capture's clock: an earlier day's recording
           "[daemon][replay][threads]") {
   test::ScratchDir dir("replay-formats");
   const fs::path v4 = write_replay_recording(dir / "v4.pcap", kReplayLidar, kReplayHost);
-  const fs::path v6 = write_replay_recording(dir / "v6.pcap", kLidar6, kHost6);
+  const fs::path v6 = write_replay_recording(dir / "v6.pcap", kReplayLidar6, kReplayHost6);
   const fs::path v6ng = to_pcapng(v6, dir / "v6.pcapng");
   std::uint64_t frames_v4 = 0;
   for (const fs::path& capture : {v4, v6, v6ng}) {
@@ -108,7 +110,7 @@ TEST_CASE("a replay is judged by its capture's clock: an earlier day's recording
     CaptureRecord record;
     std::uint64_t read = 0;
     while (reader.next(record) == CaptureStatus::kRecord) {
-      if (read == 0) CHECK(record.source == (ipv6 ? kLidar6 : kReplayLidar));
+      if (read == 0) CHECK(record.source == (ipv6 ? kReplayLidar6 : kReplayLidar));
       ++read;
     }
     CHECK(read == kReplayPackets);

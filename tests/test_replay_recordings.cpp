@@ -33,11 +33,12 @@ namespace {
 
 constexpr std::int64_t kRecordedNs = 1'677'657'600'000'000'000;  // 2023-03-01T08:00:00Z
 constexpr int kPackets = 3600;  // one second of a dual-return sensor at 600 RPM
-constexpr Endpoint kLidar{0xC0A801C9, 2368};
-constexpr Endpoint kHost{0xC0A8010A, 2368};
+constexpr Endpoint kRecordingsLidar{0xC0A801C9, 2368};
+constexpr Endpoint kRecordingsHost{0xC0A8010A, 2368};
 
 fs::path simulated_capture(const fs::path& path) {
-  return test::write_simulated_recording(path, kPackets, kRecordedNs, kLidar, kHost);
+  return test::write_simulated_recording(path, kPackets, kRecordedNs, kRecordingsLidar,
+                                         kRecordingsHost);
 }
 
 // `zstd -1`, as an operator compresses a capture.

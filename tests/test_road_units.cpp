@@ -59,7 +59,7 @@ HealthGauges road_streaming() {
   return g;
 }
 
-const HealthExpectations kLast{"last", 600};
+const HealthExpectations kRoadLastExpectations{"last", 600};
 
 }  // namespace
 
@@ -219,7 +219,7 @@ TEST_CASE("Health policy: an implausible status degrades, naming the field and n
   ptc::SensorStatus s = healthy_status();
   s.motor_rpm = 53'029;  // far off 600 too, but not believed: not also a "motor at" problem
   g.sensor_status = status_gauges(s);
-  classify_health(c, c, kLast, false, "", g);
+  classify_health(c, c, kRoadLastExpectations, false, "", g);
   CHECK(g.state == HealthState::kDegraded);
   CHECK(g.reason == "sensor status implausible: motor speed 53029 RPM (0..1300)");
 
@@ -228,19 +228,19 @@ TEST_CASE("Health policy: an implausible status degrades, naming the field and n
   s.ptp_state = 9;
   g.sensor_status = status_gauges(s);
   g.sensor_status.clock_source_known = g.sensor_status.clock_source_ptp = true;
-  classify_health(c, c, kLast, false, "", g);
+  classify_health(c, c, kRoadLastExpectations, false, "", g);
   CHECK(g.state == HealthState::kDegraded);
   CHECK(g.reason == "sensor status implausible: PTP state 9 (0..3)");
 
   // Stale: its values are not current, so neither is their plausibility.
   g.sensor_status.stale = true;
   g.sensor_status.age_seconds = 16;
-  classify_health(c, c, kLast, false, "", g);
+  classify_health(c, c, kRoadLastExpectations, false, "", g);
   CHECK(g.reason == "sensor status stale: no answer over PTC for 16 s");
 
   // The same status, plausible and consistent with the packets: ok.
   g.sensor_status = status_gauges(healthy_status());
-  classify_health(c, c, kLast, false, "", g);
+  classify_health(c, c, kRoadLastExpectations, false, "", g);
   CHECK(g.state == HealthState::kOk);
   CHECK(g.reason.empty());
 }
@@ -266,7 +266,7 @@ TEST_CASE("Health policy: the status's motor speed is held to 10 % of the expect
     s.motor_rpm = k.rpm;
     g.sensor_status = status_gauges(s);
     REQUIRE(g.sensor_status.implausible == 0);
-    classify_health(c, c, kLast, false, "", g);
+    classify_health(c, c, kRoadLastExpectations, false, "", g);
     CHECK(g.state == (*k.reason == '\0' ? HealthState::kOk : HealthState::kDegraded));
     CHECK(g.reason == k.reason);
   }
@@ -290,10 +290,10 @@ TEST_CASE("Health policy: duplicates, outliers and lost recordings degrade while
     before.*k.counter = 5;
     now.*k.counter = 8;
     HealthGauges g = road_streaming();
-    classify_health(now, before, kLast, false, "", g);
+    classify_health(now, before, kRoadLastExpectations, false, "", g);
     CHECK(g.state == HealthState::kDegraded);
     CHECK(g.reason == k.reason);
-    classify_health(now, now, kLast, false, "", g);
+    classify_health(now, now, kRoadLastExpectations, false, "", g);
     CHECK(g.state == HealthState::kOk);
   }
 }

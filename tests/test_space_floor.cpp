@@ -47,7 +47,7 @@ void make_file(const fs::path& path, int age_s, std::uint64_t bytes = kFileBytes
 
 // A disk of `capacity` bytes holding everything under `root`: its free space is what the files
 // there leave (their blocks).
-struct FakeDisk {
+struct FloorFakeDisk {
   fs::path root;
   std::uint64_t capacity;
   std::optional<FileSystemSpace> operator()(const fs::path&) const {
@@ -64,7 +64,7 @@ struct FakeDisk {
 // The blocks the files under `root` hold.
 std::uint64_t used_blocks(const fs::path& root) {
   constexpr std::uint64_t kBig = 1ull << 50;
-  return kBig - FakeDisk{root, kBig}(root)->free;
+  return kBig - FloorFakeDisk{root, kBig}(root)->free;
 }
 
 // An output directory tree as earlier runs and other programs left it. Ours, oldest first:
@@ -202,7 +202,7 @@ TEST_CASE("Space floor: the oldest of ours go first, across outputs, and nothing
   const Tree tree(dir.path());
   const std::uint64_t used = used_blocks(dir.path());
   // The disk is 4 MiB; the floor asks for what it has free now plus 2.5 files: three must go.
-  const FakeDisk disk{dir.path(), used + 4 * 1024 * 1024};
+  const FloorFakeDisk disk{dir.path(), used + 4 * 1024 * 1024};
   const std::uint64_t floor = 4 * 1024 * 1024 + 5 * kFileBytes / 2;
   SpaceFloor space(floor, 0, 0);  // the configured floor alone (a 4 MiB disk)
   space.ask_space_with(disk);
@@ -265,7 +265,7 @@ TEST_CASE("Space floor: min_free_percent, and no floor at all", "[output][space]
   const Tree tree(dir.path());
   const std::uint64_t used = used_blocks(dir.path());
   // A percentage of the disk's size 1.5 files above its free space: two files go.
-  const FakeDisk disk{dir.path(), used + 10 * kFileBytes - 3 * kFileBytes / 2};
+  const FloorFakeDisk disk{dir.path(), used + 10 * kFileBytes - 3 * kFileBytes / 2};
   {
     SpaceFloor space(0, 100.0 * 10 * kFileBytes / static_cast<double>(disk.capacity), 0);
     space.ask_space_with(disk);
@@ -282,7 +282,7 @@ TEST_CASE("Space floor: min_free_percent, and no floor at all", "[output][space]
   {
     // No floor (and no reserve under it): the free space is reported, nothing is removed.
     SpaceFloor space(0, 0, 0);
-    space.ask_space_with(FakeDisk{dir.path(), used});
+    space.ask_space_with(FloorFakeDisk{dir.path(), used});
     const int raw = space.watch(tree.raw, FloorKind::kRecordings);
     space.prepare();
     CHECK_FALSE(space.enabled());
@@ -569,7 +569,7 @@ TEST_CASE("Space floor: never below the health files' room plus 2 s of writing",
     fs::copy(dir.path(), copy.path(),
              fs::copy_options::recursive | fs::copy_options::copy_symlinks);
     const Tree moved{copy.path(), Tree::kAsItIs};
-    const FakeDisk disk{copy.path(), used + kRoom + 3 * kFileBytes / 2};
+    const FloorFakeDisk disk{copy.path(), used + kRoom + 3 * kFileBytes / 2};
     SpaceFloor space(configured, 0, kRoom);
     space.ask_space_with(disk);
     const int frames = space.watch(moved.frames, FloorKind::kFrames);
@@ -594,7 +594,7 @@ TEST_CASE("Space floor: never below the health files' room plus 2 s of writing",
   }
   // A configured floor above the minimum stays what it is.
   SpaceFloor high(64 << 20, 0, kRoom);
-  high.ask_space_with(FakeDisk{dir.path(), used + (128 << 20)});
+  high.ask_space_with(FloorFakeDisk{dir.path(), used + (128 << 20)});
   const int raw = high.watch(tree.raw, FloorKind::kRecordings);
   high.prepare();
   high.write_rate(kFileBytes, 1);
@@ -617,7 +617,7 @@ TEST_CASE("Space floor: a write the guard would refuse makes room first, sidecar
   constexpr std::uint64_t kRoom = 1 << 20;
   // Just the room free: the floor holds (nothing written yet), but a write of one file does not
   // fit above the room.
-  const FakeDisk disk{dir.path(), used + kRoom};
+  const FloorFakeDisk disk{dir.path(), used + kRoom};
   SpaceFloor space(0, 0, kRoom);
   space.ask_space_with(disk);
   std::vector<Removed> removed;

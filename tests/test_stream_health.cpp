@@ -17,14 +17,14 @@ using namespace pandarcap;
 
 namespace {
 
-struct Run {
+struct HealthRun {
   StreamStats stats;
   SequenceStats sequence;
 };
 
 // Feeds `packets` synthetic packets, skipping those whose index is in `lose`.
-Run run_synthetic(int rpm, ReturnMode mode, bool udp_sequence, int packets,
-                  const std::vector<int>& lose) {
+HealthRun run_synthetic(int rpm, ReturnMode mode, bool udp_sequence, int packets,
+                        const std::vector<int>& lose) {
   SyntheticSensorConfig config;
   config.rpm = rpm;
   config.return_mode = mode;
@@ -52,7 +52,7 @@ TEST_CASE("measured RPM follows the azimuth over packet time", "[stream][health]
   for (int rpm : {600, 1200}) {
     for (ReturnMode mode : {ReturnMode::kDual, ReturnMode::kLast}) {
       INFO(rpm << " RPM, mode " << to_string(mode));
-      const Run run = run_synthetic(rpm, mode, false, 2000, {});
+      const HealthRun run = run_synthetic(rpm, mode, false, 2000, {});
       CHECK(run.stats.azimuth_gaps == 0);
       CHECK(measured_rpm(run.stats) == Approx(rpm).epsilon(0.01));
       CHECK(std::abs(run.stats.last_rpm - rpm) <= 2);
@@ -66,17 +66,17 @@ TEST_CASE("without a sequence, lost packets show as azimuth gaps", "[stream][hea
   std::vector<int> lose = {100, 500, 501};
   for (int k = 900; k < 910; ++k)
     lose.push_back(k);
-  const Run dual = run_synthetic(600, ReturnMode::kDual, false, 1500, lose);
+  const HealthRun dual = run_synthetic(600, ReturnMode::kDual, false, 1500, lose);
   CHECK(dual.stats.azimuth_gaps == 3);
   // The gaps do not distort the measured speed.
   CHECK(measured_rpm(dual.stats) == Approx(600).epsilon(0.01));
-  const Run single = run_synthetic(1200, ReturnMode::kStrongest, false, 1500, lose);
+  const HealthRun single = run_synthetic(1200, ReturnMode::kStrongest, false, 1500, lose);
   CHECK(single.stats.azimuth_gaps == 3);
 }
 
 TEST_CASE("with a sequence, loss is the sequence tracker's, not an azimuth gap",
           "[stream][health]") {
-  const Run run = run_synthetic(600, ReturnMode::kDual, true, 1000, {10, 11, 12});
+  const HealthRun run = run_synthetic(600, ReturnMode::kDual, true, 1000, {10, 11, 12});
   CHECK(run.stats.azimuth_gaps == 0);
   CHECK(run.sequence.gaps == 1);
   CHECK(run.sequence.lost == 3);

@@ -16,7 +16,7 @@ namespace {
 
 // Idle, the thread wakes this often to look again (a notify is never missed; this only bounds
 // the cost of a bug to a delay).
-constexpr auto kIdleWait = std::chrono::seconds(1);
+constexpr auto kChunkIdleWait = std::chrono::seconds(1);
 
 }  // namespace
 
@@ -106,7 +106,7 @@ ChunkBuffer* ChunkPipeline::wait_done() noexcept {
   if (in_flight_ == 0) return nullptr;
   ChunkBuffer* chunk = nullptr;
   while (!done_.try_pop(chunk))
-    done_.wait_for_data(kIdleWait);
+    done_.wait_for_data(kChunkIdleWait);
   --in_flight_;
   return chunk;
 }
@@ -120,7 +120,7 @@ void ChunkPipeline::run() noexcept {
   while (true) {
     ChunkBuffer* chunk = nullptr;
     if (!to_compress_.try_pop(chunk)) {
-      to_compress_.wait_for_data(kIdleWait);
+      to_compress_.wait_for_data(kChunkIdleWait);
       continue;
     }
     if (chunk == nullptr) return;  // the destructor's stop marker

@@ -20,7 +20,7 @@ namespace {
 
 // Idle, the thread wakes this often to look again (a notify is never missed; this only bounds
 // the cost of a bug to a delay).
-constexpr auto kIdleWait = std::chrono::seconds(1);
+constexpr auto kFinisherIdleWait = std::chrono::seconds(1);
 
 void note_error(FinishJob& job, const std::exception& exception) noexcept {
   const auto* system = dynamic_cast<const std::system_error*>(&exception);
@@ -96,7 +96,7 @@ FileFinisher::~FileFinisher() {
 
 FinishJob& FileFinisher::take() noexcept {
   while (free_.empty()) {
-    if (collect() == 0) done_.wait_for_data(kIdleWait);
+    if (collect() == 0) done_.wait_for_data(kFinisherIdleWait);
   }
   FinishJob& job = *free_.back();
   free_.pop_back();
@@ -157,7 +157,7 @@ std::size_t FileFinisher::collect() noexcept {
 
 void FileFinisher::drain() noexcept {
   while (in_flight_ != 0) {
-    if (collect() == 0) done_.wait_for_data(kIdleWait);
+    if (collect() == 0) done_.wait_for_data(kFinisherIdleWait);
   }
 }
 
@@ -166,7 +166,7 @@ void FileFinisher::run() noexcept {
   while (!stopping) {
     FinishJob* job = nullptr;
     if (!to_finish_.try_pop(job)) {
-      to_finish_.wait_for_data(kIdleWait);
+      to_finish_.wait_for_data(kFinisherIdleWait);
       continue;
     }
     // The jobs queued now make one batch (up to kMaxBatch): their writeback started together,
