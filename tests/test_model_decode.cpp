@@ -48,9 +48,9 @@ struct ModelDecoded {
   AssemblerStats assembler;
 };
 
-ModelDecoded decode_capture(const RealCapture& c,
-                            const std::vector<std::vector<std::uint8_t>>& payloads,
-                            const Calibration& calibration) {
+ModelDecoded decode_payloads(const RealCapture& c,
+                             const std::vector<std::vector<std::uint8_t>>& payloads,
+                             const Calibration& calibration) {
   ModelDecoded out;
   FrameCollector sink(3, 300'000, [&](const Frame& f) {
     out.frames.push_back(f.info);
@@ -84,7 +84,7 @@ TEST_CASE("each new model's real capture decodes into whole revolutions, every s
     for (const auto& p : payloads)
       REQUIRE(detect_model(p).model == c.model);
 
-    const ModelDecoded d = decode_capture(c, payloads, calibration);
+    const ModelDecoded d = decode_payloads(c, payloads, calibration);
     CHECK(d.stats.accepted == payloads.size());
     CHECK(d.stats.rejected() == 0);
     CHECK(d.stats.outliers == 0);
@@ -147,7 +147,7 @@ TEST_CASE("dual-return captures keep both echoes only where they differ by the t
     const auto csv = real_capture(c.calibration);
     if (!capture || !csv) continue;
     const auto payloads = capture_payloads(*capture);
-    const ModelDecoded d = decode_capture(c, payloads, load_calibration(csv->string(), c.model));
+    const ModelDecoded d = decode_payloads(c, payloads, load_calibration(csv->string(), c.model));
     // Last + strongest: a channel's two points of one firing are at least 0.1 m apart, and the
     // merged ones are labelled last_strongest.
     std::map<std::pair<std::int64_t, int>, std::vector<const Point*>> by_firing;
@@ -211,7 +211,7 @@ TEST_CASE("a glitched azimuth in a Pandar64 or QT128 stream costs only its packe
     if (!capture || !csv) continue;
     auto payloads = capture_payloads(*capture);
     const Calibration calibration = load_calibration(csv->string(), c.model);
-    const ModelDecoded clean = decode_capture(c, payloads, calibration);
+    const ModelDecoded clean = decode_payloads(c, payloads, calibration);
     // Shift every block azimuth of packets 700, 701 by 30°: the outlier rule repairs them from
     // their time (the model's block offsets in model_access.hpp), the frames stay whole.
     for (const std::size_t k : {std::size_t{700}, std::size_t{701}}) {
@@ -226,7 +226,7 @@ TEST_CASE("a glitched azimuth in a Pandar64 or QT128 stream costs only its packe
         if constexpr (std::same_as<M, PandarQT128>) PandarQT128::write_crcs(p);
       });
     }
-    const ModelDecoded d = decode_capture(c, payloads, calibration);
+    const ModelDecoded d = decode_payloads(c, payloads, calibration);
     CHECK(d.stats.outliers == 2);
     CHECK(d.stats.stream_changes == 0);
     CHECK(d.assembler.frames_complete == clean.assembler.frames_complete);
