@@ -14,6 +14,7 @@
 #include "config/config_loader.hpp"
 #include "core/mcap/ros2_messages.hpp"
 #include "core/sensors/sensor_models.hpp"
+#include "core/units.hpp"
 #include "daemon/live/live_publish.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/pcap/xxh64.hpp"
@@ -286,7 +287,7 @@ UdpReceiverOptions receiver_options(const DaemonConfig& config, const RunSource&
     // The packet ring's retire timer counts whole milliseconds, up to its own longest: the
     // budget said is the one it keeps.
     if (ro.packet_ring) {
-      constexpr std::int64_t kMs = 1'000'000;
+      constexpr std::int64_t kMs = kNsPerMillisecond;
       ro.latency_budget_ns = std::clamp<std::int64_t>(ro.latency_budget_ns / kMs * kMs, kMs,
                                                       PacketRingReceiver::kMaxRetireMs * kMs);
     }

@@ -12,23 +12,21 @@
 #include <string>
 
 #include "daemon/pcap/capture_reader.hpp"
+#include "daemon/pcap/zstd_magic.hpp"
 
 using namespace pandarcap;
-
-namespace {
-
-constexpr std::uint8_t kZstdMagic[] = {0x28, 0xB5, 0x2F, 0xFD};
-
-}  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static const int fd = memfd_create("fuzz-zstd-capture", 0);
   if (fd < 0) std::abort();
   std::size_t at = 0;
   if (ftruncate(fd, 0) != 0) std::abort();
-  if (size < sizeof kZstdMagic || std::memcmp(data, kZstdMagic, sizeof kZstdMagic) != 0) {
-    if (pwrite(fd, kZstdMagic, sizeof kZstdMagic, 0) != sizeof kZstdMagic) std::abort();
-    at = sizeof kZstdMagic;
+  if (size < kZstdMagic.size() || std::memcmp(data, kZstdMagic.data(), kZstdMagic.size()) != 0) {
+    if (pwrite(fd, kZstdMagic.data(), kZstdMagic.size(), 0) !=
+        static_cast<ssize_t>(kZstdMagic.size())) {
+      std::abort();
+    }
+    at = kZstdMagic.size();
   }
   if (pwrite(fd, data, size, static_cast<off_t>(at)) != static_cast<ssize_t>(size)) std::abort();
   const std::string path = "/proc/self/fd/" + std::to_string(fd);
