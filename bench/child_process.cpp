@@ -101,6 +101,10 @@ std::string ChildProcess::log() const {
   return read_file(log_path_);
 }
 
+bool ChildProcess::logged(std::string_view text) const {
+  return log().find(text) != std::string::npos;
+}
+
 std::filesystem::path beside_this_binary(const std::string& name) {
   std::error_code ec;
   const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);

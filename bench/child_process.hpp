@@ -38,6 +38,8 @@ class ChildProcess {
   // The exit status, or nullopt if it did not exit within `timeout` (or died from a signal: -sig).
   std::optional<int> wait_exit(std::chrono::milliseconds timeout);
   std::string log() const;
+  // Whether its log has `text` in it so far.
+  bool logged(std::string_view text) const;
 
  private:
   int pid_ = -1;

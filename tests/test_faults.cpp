@@ -111,10 +111,6 @@ std::uintmax_t bytes_after_last_newline(const fs::path& file) {
   return newline == std::string::npos ? text.size() : text.size() - newline - 1;
 }
 
-bool daemon_logged(const harness::ChildProcess& daemon, const std::string& text) {
-  return daemon.log().find(text) != std::string::npos;
-}
-
 }  // namespace
 
 TEST_CASE(
@@ -156,7 +152,7 @@ TEST_CASE(
         test::binary("pandarcapd"),
         {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
         dir / ("log-" + std::to_string(run) + ".txt"));
-    REQUIRE(harness::wait_until([&] { return daemon_logged(daemon, "ready:"); }, 20s));
+    REQUIRE(harness::wait_until([&] { return daemon.logged("ready:"); }, 20s));
     INFO(daemon.log());
     // What the killed run left is gone by the time the new one is ready: temporary files removed,
     // each .part finished under its final name (or removed when it held no whole record).
@@ -177,8 +173,7 @@ TEST_CASE(
     json_lines(out / "health" / "health.jsonl");
     if (health_cut_bytes > 0) {
       ++health_cuts_seen;
-      CHECK(daemon_logged(daemon,
-                          fmt::format("a line cut short by an interrupted run removed ({} bytes)",
+      CHECK(daemon.logged(fmt::format("a line cut short by an interrupted run removed ({} bytes)",
                                       health_cut_bytes)));
     }
     const std::size_t fds = open_descriptors(daemon.pid());
@@ -319,7 +314,7 @@ TEST_CASE(
     return lines.empty() ? json() : lines.back();
   };
   INFO(daemon.log());
-  REQUIRE(harness::wait_until([&] { return daemon_logged(daemon, "ready:"); }, 20s));
+  REQUIRE(harness::wait_until([&] { return daemon.logged("ready:"); }, 20s));
   REQUIRE(
       harness::wait_until([&] { return health_counter(last_line(), "frames_written") >= 2; }, 10s));
 

@@ -13,12 +13,12 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <string>
 #include <string_view>
 #include <utility>
 #include <vector>
 
+#include "bench/child_process.hpp"
 #include "daemon/arena_memory.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/io/syscalls.hpp"
@@ -63,11 +63,6 @@ struct ToFrames final : FinishReceiver {
   FrameOutput* frames = nullptr;
   void finished(const FinishJob& job) override { frames->finished(job); }
 };
-
-std::string contents(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
 
 // Everything the finisher hands back, kept for the test to read.
 struct Collected final : FinishReceiver {
@@ -166,15 +161,15 @@ TEST_CASE("the finisher syncs, then renames without replacing, and says what it 
     CHECK(job.placed);
     CHECK_FALSE(job.failed);
     CHECK(job.items == static_cast<std::uint64_t>(i));
-    CHECK(contents(job.to) == fmt::format("file {}", i));
+    CHECK(harness::read_file(job.to) == fmt::format("file {}", i));
     CHECK_FALSE(fs::exists(job.from));
   }
   CHECK(receiver.jobs[10].name_taken);
   CHECK(receiver.jobs[10].to == (dir / "taken_dup1.pcap").native());
-  CHECK(contents(dir / "taken.pcap") == "first");
-  CHECK(contents(dir / "taken_dup1.pcap") == "second");
+  CHECK(harness::read_file(dir / "taken.pcap") == "first");
+  CHECK(harness::read_file(dir / "taken_dup1.pcap") == "second");
   CHECK(receiver.jobs[11].placed);
-  CHECK(contents(dir / "health.prom") == "new");
+  CHECK(harness::read_file(dir / "health.prom") == "new");
   CHECK_FALSE(receiver.jobs[12].failed);
   CHECK(receiver.jobs[13].failed);
   CHECK(receiver.jobs[13].error_code == ENOENT);
@@ -257,7 +252,7 @@ TEST_CASE("frames go past the page cache, and through it once a file system refu
     CHECK(output.frames_written() == static_cast<std::uint64_t>(round + 1));
     const auto files = test::files_ending(options.output_dir / "frames", ".pcd");
     REQUIRE(files.size() == static_cast<std::size_t>(round + 1));
-    const std::string file = contents(files.back());
+    const std::string file = harness::read_file(files.back());
     CHECK(pcd_data(file) == expected);  // every point, whichever way it went
     const std::size_t header = file.size() - expected.size();
     if (round == 0 && direct_writes > 0) CHECK(header == kDirectIoBlock);  // padded
@@ -356,7 +351,7 @@ TEST_CASE("once synced the recordings leave the page cache and the health files 
       CHECK(test::storage_bytes_read() == read_before);
     }
     // Nothing lost, whatever was dropped (read after the look: reading caches it again).
-    CHECK(contents(now) == std::string(4 * block.size() + c.tail + appended, 'r'));
+    CHECK(harness::read_file(now) == std::string(4 * block.size() + c.tail + appended, 'r'));
   }
 }
 

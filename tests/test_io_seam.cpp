@@ -9,11 +9,11 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <string>
 #include <system_error>
 #include <vector>
 
+#include "bench/child_process.hpp"
 #include "daemon/arena_memory.hpp"
 #include "daemon/io/errors.hpp"
 #include "daemon/io/file_creations.hpp"
@@ -62,11 +62,6 @@ io::FileSyscalls fake_calls() {
   return calls;
 }
 
-std::string file_contents(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
 }  // namespace
 
 TEST_CASE("OutputFile retries interrupted and short writes until every byte is written", "[io]") {
@@ -79,7 +74,7 @@ TEST_CASE("OutputFile retries interrupted and short writes until every byte is w
   OutputFile file(dir / "out.txt", OutputFile::Mode::kCreate);
   file.write(text);
   file.close();
-  CHECK(file_contents(dir / "out.txt") == text);
+  CHECK(harness::read_file(dir / "out.txt") == text);
   CHECK(file.size() == text.size());
   CHECK(disk.interrupted >= text.size() / 7);  // the interruptions did happen, and were retried
 }
@@ -162,7 +157,7 @@ TEST_CASE("OutputFile O_DIRECT: whole aligned blocks past the page cache, then t
   CHECK_FALSE(file.direct());
   file.write(bytes.subspan(3 * kDirectIoBlock));
   file.close();
-  CHECK(file_contents(dir / "direct.bin") == std::string(bytes.begin(), bytes.end()));
+  CHECK(harness::read_file(dir / "direct.bin") == std::string(bytes.begin(), bytes.end()));
   INFO("O_DIRECT on the scratch directory's file system: " << direct);
 }
 

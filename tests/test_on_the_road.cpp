@@ -32,10 +32,6 @@ using test::health_counter;
 
 namespace {
 
-bool logged(const harness::ChildProcess& daemon, const std::string& text) {
-  return daemon.log().find(text) != std::string::npos;
-}
-
 // Removes a folder the daemon is writing into, as `rm -rf` does: the daemon may put a file in
 // while it is being emptied ("Directory not empty"), so it is emptied again until the removal
 // goes through. (The daemon may make it again at once: that is what is under test.)
@@ -162,7 +158,7 @@ TEST_CASE("health never freezes: the default layout on a small disk, full and fr
   }
   harness::ChildProcess daemon("/usr/bin/unshare", args, dir / "log.txt");
   INFO(daemon.log());
-  REQUIRE(harness::wait_until([&] { return logged(daemon, "ready:"); }, 20s));
+  REQUIRE(harness::wait_until([&] { return daemon.logged("ready:"); }, 20s));
   const int pid = test::tmpfs_program_pid(mount_point);
   REQUIRE(pid > 0);
   const fs::path view = test::tmpfs_view(pid, mount_point);
@@ -212,13 +208,13 @@ TEST_CASE("health never freezes: the default layout on a small disk, full and fr
     CHECK(s.last.at("state") == "degraded");
     last_uptime = uptime(s.last);
   }
-  CHECK(logged(daemon, "of the health reserve given back"));
+  CHECK(daemon.logged("of the health reserve given back"));
 
   // The final record is written at exit, full disk and all (the health folder is copied out of
   // the namespace when the daemon ends).
   REQUIRE(::kill(pid, SIGTERM) == 0);
   REQUIRE(daemon.wait_exit(20s) == 0);
-  CHECK(logged(daemon, "final health: state degraded"));
+  CHECK(daemon.logged("final health: state degraded"));
   const auto records =
       test::json_lines(fs::path(mount_point.string() + ".after") / "health" / "health.jsonl");
   REQUIRE_FALSE(records.empty());
@@ -238,7 +234,7 @@ TEST_CASE("folders removed while running come back, and recorded is what is on d
       {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
       dir / "log.txt");
   INFO(daemon.log());
-  REQUIRE(harness::wait_until([&] { return logged(daemon, "ready:"); }, 20s));
+  REQUIRE(harness::wait_until([&] { return daemon.logged("ready:"); }, 20s));
   REQUIRE(harness::wait_until([&] { return test::files_ending(out / "raw", ".pcap").size() >= 2; },
                               10s));
   // A clean-up script, or a USB disk pulled: recordings (finished and open), frames and health go.
@@ -262,7 +258,7 @@ TEST_CASE("folders removed while running come back, and recorded is what is on d
                        "removed)") != std::string::npos;
   }
   CHECK(said);
-  CHECK(logged(daemon, "was removed while running: made again"));
+  CHECK(daemon.logged("was removed while running: made again"));
 
   daemon.signal(SIGTERM);
   REQUIRE(daemon.wait_exit(20s) == 0);
@@ -323,8 +319,8 @@ TEST_CASE("SIGTERM during the start ends it within a second", "[daemon][road][th
   const auto status = daemon.wait_exit(5s);
   CHECK(std::chrono::steady_clock::now() - asked < 1500ms);
   CHECK(status == 0);
-  CHECK(logged(daemon, "stop requested while starting"));
-  CHECK_FALSE(logged(daemon, "ready:"));
+  CHECK(daemon.logged("stop requested while starting"));
+  CHECK_FALSE(daemon.logged("ready:"));
 }
 
 TEST_CASE("control characters in a configured path are escaped in every line",
@@ -367,15 +363,15 @@ TEST_CASE("check-config checks the free space the start needs, and prints it",
   }
   harness::ChildProcess check("/usr/bin/unshare", args, dir / "check.txt");
   CHECK(check.wait_exit(20s) == 73);
-  CHECK(logged(check, "40 MiB needed"));
-  CHECK(logged(check, "kept for the health files"));
+  CHECK(check.logged("40 MiB needed"));
+  CHECK(check.logged("kept for the health files"));
   // And the start says the same.
   std::vector<std::string> start_args = test::tmpfs_run_args(
       mount_point, "16m", test::binary("pandarcapd"),
       {"--allow-root", "--simulate", "--duration", "1", "--output-dir", mount_point.string()});
   harness::ChildProcess start("/usr/bin/unshare", start_args, dir / "start.txt");
   CHECK(start.wait_exit(20s) == 73);
-  CHECK_FALSE(logged(start, "ready:"));
+  CHECK_FALSE(start.logged("ready:"));
 }
 
 TEST_CASE("a sensor status of impossible values is left out, counted and named",
@@ -416,7 +412,7 @@ TEST_CASE("a sensor status of impossible values is left out, counted and named",
   const std::string prom = harness::read_file(out / "health" / "pandarcap.prom");
   CHECK(prom.find("pandarcap_sensor_motor_speed_rpm") == std::string::npos);
   CHECK(prom.find("pandarcap_sensor_status_implausible_total") != std::string::npos);
-  CHECK(logged(daemon, "sensor status: implausible values left out"));
+  CHECK(daemon.logged("sensor status: implausible values left out"));
   daemon.signal(SIGTERM);
   CHECK(daemon.wait_exit(20s) == 0);
 }
@@ -431,7 +427,7 @@ TEST_CASE("pandarcap-bench send's clock runs: its stream cuts into whole frames"
                                 std::to_string(port), "--output-dir", out.string()},
                                dir / "log.txt");
   INFO(daemon.log());
-  REQUIRE(harness::wait_until([&] { return logged(daemon, "ready:"); }, 20s));
+  REQUIRE(harness::wait_until([&] { return daemon.logged("ready:"); }, 20s));
   const auto sent = test::run_command(test::binary("pandarcap-bench").string() +
                                       " send --json --rate 3600 --seconds 3 --rpm 600 " +
                                       "--return-mode dual --port " + std::to_string(port));
@@ -518,7 +514,7 @@ void vehicle_day(int seconds) {
   }
   harness::ChildProcess daemon("/usr/bin/unshare", args, dir / "daemon.txt");
   INFO(daemon.log());
-  REQUIRE(harness::wait_until([&] { return logged(daemon, "ready:"); }, 30s));
+  REQUIRE(harness::wait_until([&] { return daemon.logged("ready:"); }, 30s));
   const int pid = test::tmpfs_program_pid(mount_point);
   REQUIRE(pid > 0);
   const fs::path view = test::tmpfs_view(pid, mount_point);
@@ -623,7 +619,7 @@ void vehicle_day(int seconds) {
   CHECK(summary_recorded(daemon.log()) == on_disk);
   const std::uint64_t accounted = on_disk + health_counter(h, "packets_not_recorded") + overruns;
   CHECK(health_counter(h, "datagrams_received") == accounted);
-  CHECK(logged(daemon, "was removed while running: made again"));
+  CHECK(daemon.logged("was removed while running: made again"));
 }
 
 }  // namespace

@@ -13,7 +13,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <regex>
 #include <string>
 #include <vector>
@@ -37,11 +36,6 @@ namespace {
 constexpr Endpoint kZstdSource{0x7F000001, 10000};
 constexpr Endpoint kZstdDestination{0x7F000001, 2368};
 constexpr std::int64_t kZstdTime = 1'795'348'800'000'000'000;
-
-std::string zstd_file_contents(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
 
 // A Pandar-sized payload that compresses as real ones do (not all one byte).
 std::vector<std::uint8_t> zstd_payload(int i) {
@@ -124,10 +118,6 @@ void write_packets(PcapWriter& writer, int records, int flush_every) {
   }
 }
 
-bool zstd_daemon_logged(const harness::ChildProcess& daemon, const std::string& text) {
-  return daemon.log().find(text) != std::string::npos;
-}
-
 }  // namespace
 
 TEST_CASE("a compressed recording is the uncompressed one byte for byte, readable at each flush",
@@ -147,17 +137,17 @@ TEST_CASE("a compressed recording is the uncompressed one byte for byte, readabl
     plain.flush();
     zst.flush();
     // Not yet ended, but everything given so far comes out of the file as it stands.
-    const Decompressed so_far = decompress(zstd_file_contents(dir / "r.pcap.zst"));
+    const Decompressed so_far = decompress(harness::read_file(dir / "r.pcap.zst"));
     CHECK_FALSE(so_far.error);
     CHECK_FALSE(so_far.complete);
-    CHECK(so_far.bytes == zstd_file_contents(dir / "r.pcap"));
+    CHECK(so_far.bytes == harness::read_file(dir / "r.pcap"));
     CHECK(zst.flushed_bytes() == fs::file_size(dir / "r.pcap.zst"));
   }
   plain.close();
   zst.close();
-  const Decompressed whole = decompress(zstd_file_contents(dir / "r.pcap.zst"));
+  const Decompressed whole = decompress(harness::read_file(dir / "r.pcap.zst"));
   CHECK(whole.complete);
-  CHECK(whole.bytes == zstd_file_contents(dir / "r.pcap"));
+  CHECK(whole.bytes == harness::read_file(dir / "r.pcap"));
   CHECK(zst.bytes() == fs::file_size(dir / "r.pcap.zst"));
   CHECK(zst.records() == 3000);
   // Smaller: these payloads repeat with a short period, so by far.
@@ -168,7 +158,7 @@ TEST_CASE("a compressed recording is the uncompressed one byte for byte, readabl
   PcapWriter next((dir / "s.pcap.zst").string(), zst_buffer, &compressor);
   write_packets(next, 10, 5);
   next.close();
-  const Decompressed second = decompress(zstd_file_contents(dir / "s.pcap.zst"));
+  const Decompressed second = decompress(harness::read_file(dir / "s.pcap.zst"));
   CHECK(second.complete);
   CHECK(second.bytes.size() == kPcapGlobalHeaderBytes + 10 * (kPcapRecordOverheadBytes + 1262));
 }
@@ -206,7 +196,7 @@ TEST_CASE("a compressed recording the disk filled is a complete frame of its flu
   // its content checksum, of the flushed records: zstd checks it.
   space = SIZE_MAX;
   CHECK(fs::file_size(path) == writer.flushed_bytes() + kZstdEmptyLastBlock.size() + 4);
-  const Decompressed back = decompress(zstd_file_contents(path));
+  const Decompressed back = decompress(harness::read_file(path));
   CHECK(back.complete);
   CHECK(back.bytes.size() == kPcapGlobalHeaderBytes + 40 * (kPcapRecordOverheadBytes + 1262));
   const fs::path finished = dir / "full.pcap.zst";
@@ -238,7 +228,7 @@ TEST_CASE("finish_interrupted_pcap_zst on a disk with no room for a copy: ended 
     }
     writer.close();
   }
-  const std::string bytes = zstd_file_contents(whole);
+  const std::string bytes = harness::read_file(whole);
   const std::string stream = decompress(bytes).bytes;
   const std::size_t record = kPcapRecordOverheadBytes + 1262;
   io::FileSyscalls calls = io::real_file_syscalls();
@@ -263,7 +253,7 @@ TEST_CASE("finish_interrupted_pcap_zst on a disk with no room for a copy: ended 
     CHECK(r.records >= 250 * flushes);
     CHECK(fs::file_size(part) <= cut + 7);  // an empty last block and the checksum at most
     if (r.records > 0) {
-      const Decompressed finished = decompress(zstd_file_contents(part));
+      const Decompressed finished = decompress(harness::read_file(part));
       CHECK(finished.complete);  // ended, and its content checksum right
       CHECK(finished.bytes == stream.substr(0, kPcapGlobalHeaderBytes + r.records * record));
       CHECK(r.kept_bytes == fs::file_size(part));
@@ -295,7 +285,7 @@ TEST_CASE("finish_interrupted_pcap_zst keeps every whole record of a frame cut a
     }
     writer.close();
   }
-  const std::string bytes = zstd_file_contents(whole);
+  const std::string bytes = harness::read_file(whole);
   const std::string stream = decompress(bytes).bytes;
   const std::size_t record = kPcapRecordOverheadBytes + 1262;
   REQUIRE(stream.size() == kPcapGlobalHeaderBytes + 2000 * record);
@@ -313,7 +303,7 @@ TEST_CASE("finish_interrupted_pcap_zst keeps every whole record of a frame cut a
     CHECK(r.ours);
     CHECK(r.records == whole_records);
     if (whole_records > 0) {
-      const Decompressed finished = decompress(zstd_file_contents(part));
+      const Decompressed finished = decompress(harness::read_file(part));
       CHECK(finished.complete);
       CHECK(finished.bytes == stream.substr(0, kPcapGlobalHeaderBytes + whole_records * record));
       CHECK(r.kept_bytes == fs::file_size(part));
@@ -351,7 +341,7 @@ TEST_CASE("finish_interrupted_pcap_zst: empty, a magic cut short, and files not 
   const std::string text = "not a recording of ours\n";
   r = recover("text.pcap.zst.part", text);
   CHECK_FALSE(r.ours);
-  CHECK(zstd_file_contents(dir / "text.pcap.zst.part") == text);
+  CHECK(harness::read_file(dir / "text.pcap.zst.part") == text);
   ZstdStreamCompressor compressor(1024, 1);
   const auto frame = compressor.compress(
       std::span(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()),
@@ -359,7 +349,7 @@ TEST_CASE("finish_interrupted_pcap_zst: empty, a magic cut short, and files not 
   const std::string other(reinterpret_cast<const char*>(frame.data()), frame.size());
   r = recover("other.pcap.zst.part", other);
   CHECK_FALSE(r.ours);
-  CHECK(zstd_file_contents(dir / "other.pcap.zst.part") == other);
+  CHECK(harness::read_file(dir / "other.pcap.zst.part") == other);
   // Never through a link.
   fs::create_symlink(dir / "other.pcap.zst.part", dir / "link.pcap.zst.part");
   CHECK_THROWS_AS(finish_interrupted_pcap_zst((dir / "link.pcap.zst.part").string()),
@@ -377,7 +367,7 @@ TEST_CASE(
       test::binary("pandarcapd"),
       {"--allow-root", "--simulate", "--pcap-compression", "zstd", "--output-dir", out.string()},
       dir / "first.txt");
-  REQUIRE(harness::wait_until([&] { return zstd_daemon_logged(first, "ready:"); }, 20s));
+  REQUIRE(harness::wait_until([&] { return first.logged("ready:"); }, 20s));
   // Killed once a second of packets is on disk (each batch is flushed whole).
   REQUIRE(harness::wait_until(
       [&] {
@@ -389,7 +379,7 @@ TEST_CASE(
   REQUIRE(first.wait_exit(10s) == -SIGKILL);
   const auto parts = test::files_ending(out / "raw", ".pcap.zst.part");
   REQUIRE(parts.size() == 1);
-  const Decompressed left = decompress(zstd_file_contents(parts.front()));
+  const Decompressed left = decompress(harness::read_file(parts.front()));
   CHECK_FALSE(left.error);
   CHECK_FALSE(left.complete);  // the frame was never ended
   const std::size_t at_least = (left.bytes.size() - kPcapGlobalHeaderBytes) / (1262 + 58);
@@ -409,7 +399,7 @@ TEST_CASE(
   REQUIRE(std::regex_search(log, m, std::regex(R"(\((\d+) whole records, )")));
   const std::size_t kept = std::stoul(m[1]);
   CHECK(kept == at_least);  // every record the file held whole
-  CHECK(decompress(zstd_file_contents(finished)).complete);
+  CHECK(decompress(harness::read_file(finished)).complete);
   // Both recordings are numbered on (the earlier one adopted) and read by tshark.
   const auto recordings = test::files_ending(out / "raw", ".pcap.zst");
   REQUIRE(recordings.size() == 2);
@@ -441,7 +431,7 @@ TEST_CASE(
   }
   harness::ChildProcess daemon("/usr/bin/unshare", args, dir / "log.txt");
   INFO(daemon.log());
-  REQUIRE(harness::wait_until([&] { return zstd_daemon_logged(daemon, "ready:"); }, 20s));
+  REQUIRE(harness::wait_until([&] { return daemon.logged("ready:"); }, 20s));
   const int pid = test::tmpfs_program_pid(mount_point);
   REQUIRE(pid > 0);
   const fs::path view = test::tmpfs_view(pid, mount_point);
@@ -466,7 +456,7 @@ TEST_CASE(
   std::uint64_t on_disk = 0;
   for (const fs::path& file : recordings) {
     INFO(file.string());
-    const Decompressed d = decompress(zstd_file_contents(file));
+    const Decompressed d = decompress(harness::read_file(file));
     CHECK(d.complete);
     const std::uint64_t packets = (d.bytes.size() - kPcapGlobalHeaderBytes) / (1262 + 58);
     CHECK(d.bytes.size() == kPcapGlobalHeaderBytes + packets * (1262 + 58));
@@ -501,9 +491,9 @@ TEST_CASE("the real capture recorded compressed: the same pcap stream in under 0
   const auto zst = test::files_ending(dir / "zstd" / "raw", ".pcap.zst");
   REQUIRE(plain.size() == 1);
   REQUIRE(zst.size() == 1);
-  const Decompressed d = decompress(zstd_file_contents(zst.front()));
+  const Decompressed d = decompress(harness::read_file(zst.front()));
   CHECK(d.complete);
-  CHECK(d.bytes == zstd_file_contents(plain.front()));  // byte for byte the uncompressed recording
+  CHECK(d.bytes == harness::read_file(plain.front()));  // byte for byte the uncompressed recording
   const double ratio = static_cast<double>(fs::file_size(zst.front())) /
                        static_cast<double>(fs::file_size(plain.front()));
   INFO("compressed to " << ratio << " of the pcap's bytes");
