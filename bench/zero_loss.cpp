@@ -436,7 +436,8 @@ ordered_json run_zero_loss(const ZeroLossOptions& o) {
         // and MCAP messages (every chunk buffer waiting for compression).
         {"frames_dropped", stages.value("frames_dropped", ordered_json())},
         {"pcap_packets_not_recorded", stages.value("pcap_packets_not_recorded", ordered_json())},
-        {"mcap_messages_not_recorded", stages.value("mcap_messages_not_recorded", ordered_json())}};
+        {"mcap_messages_not_recorded", stages.value("mcap_messages_not_recorded", ordered_json())},
+        {"mcap_chunks_uncompressed", t.value("mcap_chunks_uncompressed", ordered_json())}};
   };
   ordered_json sensor = sensor_summary(at_sensor);
   sensor["rounds"] = sensor_rounds;

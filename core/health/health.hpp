@@ -136,6 +136,8 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
     "Messages lost from MCAP files to failed writes, or not written to keep space for health")    \
   X(mcap_messages_not_recorded, "mcap_messages_not_recorded",                                      \
     "Messages left out of MCAP files because every chunk buffer waited for compression")          \
+  X(mcap_chunks_uncompressed, "mcap_chunks_uncompressed",                                          \
+    "MCAP chunks stored uncompressed because compression was a chunk behind")                     \
   X(mcap_messages_lost, "mcap_messages_lost",                                                      \
     "Messages written to an MCAP file that vanished (removed while running)")                     \
   X(mcap_bytes_written, "mcap_written_bytes", "Bytes written to MCAP files")                       \

@@ -27,15 +27,17 @@ void ChunkBuffer::clear() noexcept {
   start_time = end_time = messages = 0;
   compressed_bytes = 0;
   crc = 0;
+  uncompressed = false;
   failed = false;
   error[0] = '\0';
 }
 
 ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
                              std::size_t index_entries, mcap::ChunkCompression compression,
-                             int level, bool chunk_crc)
+                             int level, bool chunk_crc, bool uncompressed_when_behind)
     : compression_(compression),
       chunk_crc_(chunk_crc),
+      uncompressed_when_behind_(uncompressed_when_behind),
       // Room for every buffer and the stop marker.
       to_compress_(std::bit_ceil(buffers + 1)),
       done_(std::bit_ceil(buffers + 1)) {
@@ -124,15 +126,21 @@ void ChunkPipeline::run() noexcept {
       continue;
     }
     if (chunk == nullptr) return;  // the destructor's stop marker
-    compress(*chunk);
+    // Another chunk already queued behind this one (not the stop marker): a chunk behind.
+    ChunkBuffer* const* next = to_compress_.front();
+    compress(*chunk, next != nullptr && *next != nullptr);
     done_.try_push(chunk);  // never full: room for every buffer
     done_.notify();
   }
 }
 
-void ChunkPipeline::compress(ChunkBuffer& chunk) noexcept {
+void ChunkPipeline::compress(ChunkBuffer& chunk, bool behind) noexcept {
   chunk.crc = chunk_crc_ ? mcap::crc32(chunk.records) : 0;  // 0: "not computed"
   if (!compressor_) return;
+  if (behind && uncompressed_when_behind_) {
+    chunk.uncompressed = true;
+    return;
+  }
   try {
     chunk.compressed_bytes = compressor_->compress(
         chunk.records, std::span(chunk.compressed.get(), chunk.compressed_capacity));

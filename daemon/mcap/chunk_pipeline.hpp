@@ -52,13 +52,17 @@ struct ChunkBuffer {
   std::unique_ptr<std::uint8_t[]> compressed;
   std::size_t compressed_capacity = 0, compressed_bytes = 0;
   std::uint32_t crc = 0;  // of `records`
-  bool failed = false;    // the compressor threw (never expected): `error` says why
+  // Stored as they are, not compressed: the compression thread was a whole chunk behind
+  // (ChunkPipeline's `uncompressed_when_behind`). The chunk's compression is then "".
+  bool uncompressed = false;
+  bool failed = false;  // the compressor threw (never expected): `error` says why
   std::array<char, 160> error{};
 
   // What goes into the file: the compressed records, or the records as they are.
   std::span<const std::uint8_t> stored() const noexcept {
-    return compressed ? std::span<const std::uint8_t>(compressed.get(), compressed_bytes)
-                      : std::span<const std::uint8_t>(records);
+    return compressed && !uncompressed
+               ? std::span<const std::uint8_t>(compressed.get(), compressed_bytes)
+               : std::span<const std::uint8_t>(records);
   }
   // Empty again (capacity kept).
   void clear() noexcept;
@@ -72,8 +76,19 @@ class ChunkPipeline {
   // 0.17 ms per 4 MiB chunk against the CRC's 0.6 here). lz4 and uncompressed chunks then have
   // no checksum: damage shows only where it breaks the codec or the records (lz4's content
   // checksum, XXH32 in liblz4, measured 2.2 ms per 4 MiB: dearer than the CRC it would replace).
+  //
+  // `uncompressed_when_behind` (live recording): a chunk the compression thread takes while
+  // another already waits behind it is stored as it is, not compressed. Behind by a whole chunk,
+  // the pool is one chunk from full, where the writer would leave messages out
+  // (take_free() nullptr): the file grows by what compression would have saved instead, and
+  // the thread catches up at the cost of a copy. At one sensor's rate no chunk ever waits
+  // behind another; past what the compressor keeps up with (issue 40's 50 000 packets/s with
+  // lz4 on 2 shared cores), every other chunk or so is stored, as many as the CPU leaves. Off
+  // for a replay, whose writer waits for a free buffer instead (wait_for_free_chunk) and wants
+  // every chunk compressed.
   ChunkPipeline(std::size_t buffers, std::size_t record_capacity, std::size_t index_entries,
-                mcap::ChunkCompression compression, int level, bool chunk_crc = true);
+                mcap::ChunkCompression compression, int level, bool chunk_crc = true,
+                bool uncompressed_when_behind = false);
   ~ChunkPipeline();
   ChunkPipeline(const ChunkPipeline&) = delete;
   ChunkPipeline& operator=(const ChunkPipeline&) = delete;
@@ -94,13 +109,18 @@ class ChunkPipeline {
   void give_back(ChunkBuffer* chunk) noexcept;
   // Submitted and not yet taken back.
   std::size_t in_flight() const noexcept { return in_flight_; }
+  // Submitted and not yet taken up by the compression thread (a moment's figure: that thread
+  // takes them as it goes).
+  std::size_t waiting() const noexcept { return to_compress_.size_approx(); }
 
  private:
   void run() noexcept;  // the compression thread
-  void compress(ChunkBuffer& chunk) noexcept;
+  // `behind`: another chunk waits after this one (stored uncompressed when so configured).
+  void compress(ChunkBuffer& chunk, bool behind) noexcept;
 
   mcap::ChunkCompression compression_;
   bool chunk_crc_;
+  bool uncompressed_when_behind_;
   std::unique_ptr<mcap::ChunkCompressor> compressor_;  // null without compression
   std::vector<std::unique_ptr<ChunkBuffer>> buffers_;
   std::vector<ChunkBuffer*> free_;  // the writer's; capacity for every buffer

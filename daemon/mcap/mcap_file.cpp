@@ -37,7 +37,7 @@ McapFile::McapFile(const McapFileOptions& options)
       pipeline_(std::max<std::size_t>(options.chunk_buffers, 1),
                 options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_,
                 max_index_entries_, options.compression, options.compression_level,
-                options.chunk_crc) {
+                options.chunk_crc, !options.wait_for_free_chunk) {
   // out_ holds the opening records (the calibration among them), a chunk's fields and message
   // indexes (its records go to the file from its chunk buffer), or the tail.
   const std::size_t index_bytes =
@@ -219,7 +219,8 @@ void McapFile::write_chunk(ChunkBuffer& chunk) {
   if (chunk.failed) throw std::runtime_error(chunk.error.data());
   const std::uint64_t chunk_start = file_.size();
   const std::span<const std::uint8_t> stored = chunk.stored();
-  const std::string_view compression = mcap::compression_name(pipeline_.compression());
+  const std::string_view compression = mcap::compression_name(
+      chunk.uncompressed ? mcap::ChunkCompression::kNone : pipeline_.compression());
   // The chunk's fields, its stored records straight from where they are, then its indexes.
   out_.clear();
   mcap::ByteWriter w(out_);
@@ -250,6 +251,7 @@ void McapFile::write_chunk(ChunkBuffer& chunk) {
   }
   messages_in_flight_ -= chunk.messages;
   bytes_in_flight_ -= chunk.records.size();
+  if (chunk.uncompressed) ++chunks_uncompressed_;
 }
 
 void McapFile::write_out(std::initializer_list<std::span<const std::uint8_t>> parts) {

@@ -86,6 +86,9 @@ class McapFile {
   std::uint64_t bytes_in_flight() const noexcept { return bytes_in_flight_; }
   // Left out because every chunk buffer was in flight; for the McapFile's life (monotonic).
   std::uint64_t messages_not_recorded() const noexcept { return not_recorded_; }
+  // Chunks written uncompressed because compression was a chunk behind (chunk_pipeline.hpp);
+  // for the McapFile's life (monotonic).
+  std::uint64_t chunks_uncompressed() const noexcept { return chunks_uncompressed_; }
 
  private:
   // Room in the open chunk for a message of `data_bytes`: the chunk handed over first when
@@ -112,6 +115,7 @@ class McapFile {
   std::uint64_t messages_in_flight_ = 0;  // in chunks handed over and not yet written
   std::uint64_t bytes_in_flight_ = 0;     // their records, uncompressed
   std::uint64_t not_recorded_ = 0;
+  std::uint64_t chunks_uncompressed_ = 0;
   std::uint32_t sequence_[mcap::kMaxChannels + 1]{};
   std::uint64_t whole_bytes_ = 0;  // the file's length after its last whole chunk
 };

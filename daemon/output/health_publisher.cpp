@@ -535,6 +535,7 @@ void HealthPublisher::count_mcap(const McapRecorder& mcap) noexcept {
   c.mcap_messages_written = mcap.messages_written();
   c.mcap_messages_not_written = mcap.messages_not_written();
   c.mcap_messages_not_recorded = mcap.messages_not_recorded();
+  c.mcap_chunks_uncompressed = mcap.chunks_uncompressed();
   c.mcap_messages_lost = mcap.messages_lost();
   c.mcap_bytes_written = mcap.bytes_written();
 }

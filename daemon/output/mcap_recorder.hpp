@@ -97,6 +97,10 @@ class McapRecorder {
     return file_ ? file_->messages_not_recorded() : 0;
   }
   std::uint64_t bytes_written() const noexcept;
+  // Chunks stored uncompressed because the compression thread was a chunk behind.
+  std::uint64_t chunks_uncompressed() const noexcept {
+    return file_ ? file_->chunks_uncompressed() : 0;
+  }
 
  private:
   // The file to write a message of `log_time` and about `bytes` to: rotated when due, opened when

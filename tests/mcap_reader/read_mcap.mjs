@@ -185,6 +185,8 @@ async function main() {
                   message_start_time: stats.messageStartTime.toString(),
                   message_end_time: stats.messageEndTime.toString() },
     chunk_compression: [...new Set(reader.chunkIndexes.map((c) => c.compression))],
+    // Each chunk's, in the chunk index's order ("" for a chunk stored as it is).
+    chunk_compressions: reader.chunkIndexes.map((c) => c.compression),
     schemas: [...reader.schemasById.values()].map((s) => ({ id: s.id, name: s.name, encoding: s.encoding })),
     channels: [...reader.channelsById.values()].map((c) => ({
       id: c.id,
