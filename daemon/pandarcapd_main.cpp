@@ -117,9 +117,13 @@ void print_summary(const WriterOptions& wo, const HealthSnapshot& h) {
     if (!faults.empty()) fmt::print("{}\n", faults);
   }
   if (wo.mcap) {
-    fmt::print("mcap: {} messages written, {} not written, {} not recorded, {} bytes{}\n",
+    fmt::print("mcap: {} messages written, {} not written, {} not recorded, {} bytes{}{}\n",
                c.mcap_messages_written - c.mcap_messages_lost, c.mcap_messages_not_written,
                c.mcap_messages_not_recorded, c.mcap_bytes_written,
+               c.mcap_chunks_uncompressed > 0
+                   ? fmt::format("; {} chunks stored uncompressed (compression behind)",
+                                 c.mcap_chunks_uncompressed)
+                   : std::string(),
                c.mcap_messages_lost > 0
                    ? fmt::format("; {} more lost with their file", c.mcap_messages_lost)
                    : std::string());

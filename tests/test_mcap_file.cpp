@@ -2,16 +2,12 @@
 // thread, so every test that makes one is tagged [threads]), and finish_interrupted_mcap() for a
 // ".part" a killed run left, cut anywhere. Every finished or recovered file is read back by the
 // MCAP project's own reader (support/mcap_reader.hpp), which must accept it whole.
-#include <algorithm>
 #include <catch2/catch.hpp>
-#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <random>
-#include <span>
 #include <string>
-#include <string_view>
 #include <vector>
 
 #include "bench/child_process.hpp"
@@ -465,130 +461,4 @@ TEST_CASE("a replay waits for a chunk buffer instead: every message is written",
   CHECK(file.messages() == 6);
   CHECK(file.messages_not_recorded() == 0);
   CHECK(finish_interrupted_mcap(path.string()).messages == 6);
-}
-
-namespace {
-
-// Records a compressor takes its time over: words from a small vocabulary in a random order.
-// zstd at level 19 spends most of a second on 1 MiB of them here, where handing a chunk over
-// takes microseconds.
-std::vector<std::uint8_t> wordy_bytes(std::size_t bytes, unsigned seed) {
-  static constexpr std::string_view kWords[] = {"lidar ",   "frame ",  "packet ", "chunk ",
-                                                "azimuth ", "return ", "block ",  "channel "};
-  std::mt19937 random(seed);
-  std::vector<std::uint8_t> out;
-  out.reserve(bytes + 16);
-  while (out.size() < bytes) {
-    const std::string_view word = kWords[random() % std::size(kWords)];
-    out.insert(out.end(), word.begin(), word.end());
-  }
-  out.resize(bytes);
-  return out;
-}
-
-// The compression of each Chunk record in an MCAP file, in file order (our own parser).
-std::vector<std::string> chunk_compressions(const fs::path& path) {
-  const std::string bytes = harness::read_file(path);
-  const auto all = std::span(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size());
-  std::vector<std::string> out;
-  for (std::size_t at = mcap::kMagic.size(); at < all.size();) {
-    const auto record = mcap::record_at(all.subspan(at));
-    if (!record || record->op == mcap::Op::kDataEnd) break;
-    if (record->op == mcap::Op::kChunk) {
-      const auto chunk = mcap::parse_chunk(record->content);
-      out.emplace_back(chunk ? std::string(chunk->compression) : "(unparsed)");
-    }
-    at += mcap::kRecordPrefixBytes + record->content.size();
-  }
-  return out;
-}
-
-}  // namespace
-
-TEST_CASE("a chunk the compression thread takes with another behind it is stored uncompressed",
-          "[mcap][threads]") {
-  using namespace std::chrono_literals;
-  const bool when_behind = GENERATE(true, false);
-  INFO("uncompressed_when_behind " << when_behind);
-  constexpr std::size_t kBytes = 1u << 20;
-  ChunkPipeline pipeline(4, kBytes, 16, mcap::ChunkCompression::kZstd, 19, false, when_behind);
-  std::vector<ChunkBuffer*> chunks;
-  for (unsigned i = 0; i < 4; ++i) {
-    ChunkBuffer* chunk = pipeline.take_free();
-    REQUIRE(chunk != nullptr);
-    const auto records = wordy_bytes(kBytes, i);
-    chunk->records.assign(records.begin(), records.end());
-    chunk->messages = 1;
-    chunks.push_back(chunk);
-  }
-  // The first alone, until the thread has taken it up: nothing waits behind it, so it is
-  // compressed, which takes long enough for the other three to queue behind it.
-  pipeline.submit(chunks[0]);
-  REQUIRE(harness::wait_until([&] { return pipeline.waiting() == 0; }, 10s));
-  for (unsigned i = 1; i < 4; ++i)
-    pipeline.submit(chunks[i]);
-  std::vector<bool> uncompressed;
-  for (unsigned i = 0; i < 4; ++i) {
-    ChunkBuffer* chunk = pipeline.wait_done();
-    REQUIRE(chunk == chunks[i]);  // back in the order handed over
-    INFO("chunk " << i);
-    REQUIRE_FALSE(chunk->failed);
-    uncompressed.push_back(chunk->uncompressed);
-    const auto expected = wordy_bytes(kBytes, i);
-    if (chunk->uncompressed) {
-      CHECK(std::ranges::equal(chunk->stored(), expected));
-    } else {
-      CHECK(chunk->stored().size() < expected.size() / 2);
-      std::vector<std::uint8_t> out(expected.size());
-      CHECK(mcap::decompress_chunk("zstd", chunk->stored(), out));
-      CHECK(out == expected);
-    }
-    pipeline.give_back(chunk);
-    CHECK_FALSE(chunk->uncompressed);  // cleared for its next use
-  }
-  // The first had none behind it when taken, nor the last; the two between had one each.
-  CHECK(uncompressed == std::vector<bool>{false, when_behind, when_behind, false});
-}
-
-TEST_CASE("live: compression a chunk behind stores chunks as they are and the file reads whole",
-          "[mcap][threads]") {
-  // zstd at level 19 on 64 kB chunks of packets, with the writer handing them over as fast as
-  // it makes them: the compression thread is behind from the second chunk on.
-  test::ScratchDir dir("mcap-behind");
-  const fs::path path = dir / "a.mcap";
-  McapFileOptions options = small_options(mcap::ChunkCompression::kZstd);
-  options.compression_level = 19;
-  options.wait_for_free_chunk = false;  // live
-  options.max_chunks = 4096;
-  McapFile file(options);
-  file.open(path.string(), kT0);
-  const auto payloads = wordy_bytes(1262 * 64, 3);
-  constexpr int kPackets = 4000;
-  std::uint64_t in_file = 0;
-  for (int i = 0; i < kPackets; ++i) {
-    const std::uint64_t t = kT0 + static_cast<std::uint64_t>(i) * 1000;
-    const auto payload = std::span(payloads).subspan(static_cast<std::size_t>(i % 64) * 1262, 1262);
-    in_file += file.add_packet(payload, static_cast<std::int64_t>(t), t);
-  }
-  file.close();
-  CHECK(file.messages() == in_file);
-  CHECK(in_file + file.messages_not_recorded() == kPackets);
-  const std::vector<std::string> compressions = chunk_compressions(path);
-  INFO(compressions.size() << " chunks");
-  const auto stored = static_cast<std::uint64_t>(std::ranges::count(compressions, ""));
-  CHECK(file.chunks_uncompressed() > 0);
-  CHECK(stored == file.chunks_uncompressed());
-  CHECK(std::ranges::count(compressions, "zstd") + stored == compressions.size());
-  CHECK(compressions.back() == "zstd");  // the last chunk had none behind it
-  // The next start's recovery reads the stored chunks as the compressed ones: every message.
-  CHECK(finish_interrupted_mcap(path.string()).messages == in_file);
-  const auto read = test::read_mcap_independently(path);
-  if (read.reader_missing) return;
-  INFO(read.error);
-  REQUIRE(read.file);
-  CHECK((*read.file)["statistics"]["message_count"] == in_file);
-  CHECK((*read.file)["topics"]["/pandar/packets"]["count"] == in_file);
-  auto kinds = (*read.file)["chunk_compression"].get<std::vector<std::string>>();
-  std::ranges::sort(kinds);
-  CHECK(kinds == std::vector<std::string>{"", "zstd"});
 }

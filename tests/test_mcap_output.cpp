@@ -429,6 +429,8 @@ TEST_CASE("live MCAP with a compressor slower than the sensor: chunks stored as 
   INFO(h.dump());
   const std::uint64_t stored = test::health_counter(h, "mcap_chunks_uncompressed");
   CHECK(stored > 0);
+  CHECK(r.out.find(fmt::format("; {} chunks stored uncompressed (compression behind)", stored)) !=
+        std::string::npos);
   const auto files = test::files_ending(out / "mcap", ".mcap");
   REQUIRE(files.size() == 1);
   const json file = read_or_fail(files[0]);

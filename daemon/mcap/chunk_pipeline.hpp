@@ -28,6 +28,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -46,6 +47,9 @@ struct ChunkBuffer {
   std::vector<std::uint8_t> records;  // the chunk's Message records, uncompressed
   std::array<std::vector<mcap::MessageIndexEntry>, mcap::kMaxChannels> index;
   std::uint64_t start_time = 0, end_time = 0, messages = 0;
+  // Handed over because it was full, not by a flush or a file's close: only a full chunk
+  // waiting behind another says that compression is behind.
+  bool full = false;
   // Filled by the compression thread before it hands the chunk back.
   // The codec's bound, left uninitialised (its pages count only once used); none without
   // compression.
@@ -53,7 +57,8 @@ struct ChunkBuffer {
   std::size_t compressed_capacity = 0, compressed_bytes = 0;
   std::uint32_t crc = 0;  // of `records`
   // Stored as they are, not compressed: the compression thread was a whole chunk behind
-  // (ChunkPipeline's `uncompressed_when_behind`). The chunk's compression is then "".
+  // (ChunkPipeline's `uncompressed_when_behind`). The chunk's compression is then "", and its
+  // CRC is always computed (no codec checks it otherwise).
   bool uncompressed = false;
   bool failed = false;  // the compressor threw (never expected): `error` says why
   std::array<char, 160> error{};
@@ -77,15 +82,17 @@ class ChunkPipeline {
   // no checksum: damage shows only where it breaks the codec or the records (lz4's content
   // checksum, XXH32 in liblz4, measured 2.2 ms per 4 MiB: dearer than the CRC it would replace).
   //
-  // `uncompressed_when_behind` (live recording): a chunk the compression thread takes while
-  // another already waits behind it is stored as it is, not compressed. Behind by a whole chunk,
-  // the pool is one chunk from full, where the writer would leave messages out
-  // (take_free() nullptr): the file grows by what compression would have saved instead, and
-  // the thread catches up at the cost of a copy. At one sensor's rate no chunk ever waits
-  // behind another; past what the compressor keeps up with (issue 40's 50 000 packets/s with
-  // lz4 on 2 shared cores), every other chunk or so is stored, as many as the CPU leaves. Off
-  // for a replay, whose writer waits for a free buffer instead (wait_for_free_chunk) and wants
-  // every chunk compressed.
+  // `uncompressed_when_behind` (live recording): a chunk the compression thread takes while a
+  // full chunk already waits behind it is stored as it is, not compressed. Behind by a whole
+  // chunk, the pool is one chunk from full, where the writer would leave messages out
+  // (take_free() nullptr): the file grows by what compression would have saved instead, and the
+  // thread catches up at once (the stored chunk costs it only its CRC). At one sensor's rate a
+  // full chunk never waits behind another (a 4 MiB chunk fills in about 170 ms, lz4 takes
+  // about 5); a chunk handed over by a flush or a file's close (rotation, SIGHUP, the end) is
+  // not full and does not count. Past what the compressor keeps up with (issue 40's 50 000
+  // packets/s on 2 shared cores), some chunks are stored, as many as the CPU leaves. Off for a
+  // replay, whose writer waits for a free buffer instead (wait_for_free_chunk) and wants every
+  // chunk compressed.
   ChunkPipeline(std::size_t buffers, std::size_t record_capacity, std::size_t index_entries,
                 mcap::ChunkCompression compression, int level, bool chunk_crc = true,
                 bool uncompressed_when_behind = false);
@@ -109,13 +116,13 @@ class ChunkPipeline {
   void give_back(ChunkBuffer* chunk) noexcept;
   // Submitted and not yet taken back.
   std::size_t in_flight() const noexcept { return in_flight_; }
-  // Submitted and not yet taken up by the compression thread (a moment's figure: that thread
-  // takes them as it goes).
-  std::size_t waiting() const noexcept { return to_compress_.size_approx(); }
+  // Chunks the compression thread has taken up and decided how to store (monotonic; a
+  // moment's figure from the writer's side).
+  std::size_t taken() const noexcept { return taken_.load(std::memory_order_acquire); }
 
  private:
   void run() noexcept;  // the compression thread
-  // `behind`: another chunk waits after this one (stored uncompressed when so configured).
+  // `behind`: a full chunk waits after this one (stored uncompressed when so configured).
   void compress(ChunkBuffer& chunk, bool behind) noexcept;
 
   mcap::ChunkCompression compression_;
@@ -127,6 +134,7 @@ class ChunkPipeline {
   std::size_t in_flight_ = 0;
   // nullptr in to_compress_ tells the thread to stop.
   ringbuf::SpscQueue<ChunkBuffer*> to_compress_, done_;
+  std::atomic<std::size_t> taken_{0};
   std::thread thread_;
 };
 

@@ -124,7 +124,10 @@ bool McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
     const bool too_big =
         open_->records.size() + mcap::kMessagePrefixBytes + data_bytes > open_->records.capacity();
     const bool over = open_->records.size() >= options_.chunk_bytes;
-    if (too_big || over || open_->index[channel - 1].size() >= max_index_entries_) submit_open();
+    if (too_big || over || open_->index[channel - 1].size() >= max_index_entries_) {
+      open_->full = true;
+      submit_open();
+    }
   }
   if (open_ == nullptr) open_ = pipeline_.take_free();
   if (open_ == nullptr && options_.wait_for_free_chunk) {
