@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
 #include <random>
 #include <span>
 #include <string>
@@ -68,6 +69,8 @@ struct StoredChunk {
   std::string compression;
   std::uint32_t crc = 0;
   bool crc_matches = false;  // the CRC said, of the records as stored (uncompressed chunks)
+  std::size_t offset = 0;    // of the Chunk record in the file
+  std::size_t records_offset = 0, records_bytes = 0;  // its records as stored, in the file
 };
 
 // Each Chunk record of an MCAP file, in file order (our own parser).
@@ -82,11 +85,55 @@ std::vector<StoredChunk> chunks_in(const fs::path& path) {
       const auto chunk = mcap::parse_chunk(record->content);
       REQUIRE(chunk);
       out.push_back({std::string(chunk->compression), chunk->uncompressed_crc,
-                     chunk->uncompressed_crc == mcap::crc32(chunk->records)});
+                     chunk->uncompressed_crc == mcap::crc32(chunk->records), at,
+                     static_cast<std::size_t>(chunk->records.data() - all.data()),
+                     chunk->records.size()});
     }
     at += mcap::kRecordPrefixBytes + record->content.size();
   }
   return out;
+}
+
+// What a live file written as fast as the loop goes held, once closed.
+struct WrittenFast {
+  std::uint64_t in_file = 0;       // packets add_packet() took
+  std::uint64_t messages = 0;      // in the file's chunks
+  std::uint64_t not_recorded = 0;  // left out: no free chunk buffer
+  std::uint64_t stored = 0;        // chunks stored as they are
+};
+
+// A live file at `path` with zstd at level 19 and 64 kB chunks, given `count` packets (words, so
+// that they compress) as fast as the loop goes, then closed: the compression thread is behind
+// from the second chunk on.
+WrittenFast write_fast(const fs::path& path, int count, unsigned seed) {
+  McapFile file(live_options(mcap::ChunkCompression::kZstd, 19));
+  file.open(path.string(), kBehindT0);
+  const auto payloads = wordy_bytes(1262 * 64, seed);
+  WrittenFast w;
+  for (int i = 0; i < count; ++i) {
+    const std::uint64_t t = kBehindT0 + static_cast<std::uint64_t>(i) * 1000;
+    const auto payload = std::span(payloads).subspan(static_cast<std::size_t>(i % 64) * 1262, 1262);
+    w.in_file += file.add_packet(payload, static_cast<std::int64_t>(t), t);
+  }
+  file.close();
+  w.messages = file.messages();
+  w.not_recorded = file.messages_not_recorded();
+  w.stored = file.chunks_uncompressed();
+  return w;
+}
+
+// Where the DataEnd record begins: the data section's end.
+std::size_t data_end_offset(const std::string& bytes) {
+  const auto all = std::span(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size());
+  std::size_t at = mcap::kMagic.size();
+  while (at < all.size()) {
+    const auto record = mcap::record_at(all.subspan(at));
+    REQUIRE(record);
+    if (record->op == mcap::Op::kDataEnd) return at;
+    at += mcap::kRecordPrefixBytes + record->content.size();
+  }
+  FAIL("no DataEnd record");
+  return at;
 }
 
 }  // namespace
@@ -144,23 +191,13 @@ TEST_CASE("a chunk taken while a full chunk waits behind it is stored uncompress
 
 TEST_CASE("live: compression a chunk behind stores chunks as they are and the file reads whole",
           "[mcap][threads]") {
-  // zstd at level 19 on 64 kB chunks of packets, with the writer handing them over as fast as
-  // it makes them: the compression thread is behind from the second chunk on.
   test::ScratchDir dir("mcap-behind");
   const fs::path path = dir / "a.mcap";
-  McapFile file(live_options(mcap::ChunkCompression::kZstd, 19));
-  file.open(path.string(), kBehindT0);
-  const auto payloads = wordy_bytes(1262 * 64, 3);
   constexpr int kPackets = 4000;
-  std::uint64_t in_file = 0;
-  for (int i = 0; i < kPackets; ++i) {
-    const std::uint64_t t = kBehindT0 + static_cast<std::uint64_t>(i) * 1000;
-    const auto payload = std::span(payloads).subspan(static_cast<std::size_t>(i % 64) * 1262, 1262);
-    in_file += file.add_packet(payload, static_cast<std::int64_t>(t), t);
-  }
-  file.close();
-  CHECK(file.messages() == in_file);
-  CHECK(in_file + file.messages_not_recorded() == kPackets);
+  const WrittenFast w = write_fast(path, kPackets, 3);
+  const std::uint64_t in_file = w.in_file;
+  CHECK(w.messages == in_file);
+  CHECK(in_file + w.not_recorded == kPackets);
   const std::vector<StoredChunk> chunks = chunks_in(path);
   INFO(chunks.size() << " chunks");
   std::uint64_t stored = 0;
@@ -175,8 +212,8 @@ TEST_CASE("live: compression a chunk behind stores chunks as they are and the fi
       CHECK(chunk.crc == 0);  // mcap_chunk_crc's default: zstd's checksum instead
     }
   }
-  CHECK(file.chunks_uncompressed() > 0);
-  CHECK(stored == file.chunks_uncompressed());
+  CHECK(w.stored > 0);
+  CHECK(stored == w.stored);
   CHECK(chunks.back().compression == "zstd");  // the last chunk had none behind it
   // The next start's recovery reads the stored chunks as the compressed ones: every message.
   CHECK(finish_interrupted_mcap(path.string()).messages == in_file);
@@ -188,6 +225,43 @@ TEST_CASE("live: compression a chunk behind stores chunks as they are and the fi
   CHECK((*read.file)["topics"]["/pandar/packets"]["count"] == in_file);
   const auto kinds = (*read.file)["chunk_compressions"].get<std::vector<std::string>>();
   CHECK(static_cast<std::uint64_t>(std::ranges::count(kinds, "")) == stored);
+}
+
+TEST_CASE("damage inside a chunk stored as it is: its CRC finds it and the recovery cuts there",
+          "[mcap][threads]") {
+  // mcap_chunk_crc is off (the default): compressed chunks say CRC 0, but a stored one always
+  // has its CRC, since no codec's checksum would see a zeroed payload in it.
+  test::ScratchDir dir("mcap-behind-damage");
+  const fs::path path = dir / "a.mcap";
+  const std::uint64_t in_file = write_fast(path, 4000, 7).in_file;
+  const std::vector<StoredChunk> chunks = chunks_in(path);
+  // A stored chunk after the first if there is one (so that the cut keeps some messages).
+  const auto stored_chunk = [](const StoredChunk& c) {
+    return c.compression.empty() && c.records_bytes > 4096;
+  };
+  auto damaged =
+      std::find_if(chunks.begin() + (chunks.size() > 1 ? 1 : 0), chunks.end(), stored_chunk);
+  if (damaged == chunks.end()) damaged = std::ranges::find_if(chunks, stored_chunk);
+  REQUIRE(damaged != chunks.end());
+  // 200 zero bytes in the middle of its records, and the file cut where its data ends (a killed
+  // run's .part has no tail: with one, it would be a file finished but not yet renamed).
+  std::string bytes = harness::read_file(path);
+  bytes.resize(data_end_offset(bytes));
+  const std::size_t at = damaged->records_offset + damaged->records_bytes / 2;
+  REQUIRE(bytes.substr(at, 200) != std::string(200, '\0'));
+  bytes.replace(at, 200, std::string(200, '\0'));
+  const fs::path part = dir / "damaged.mcap.part";
+  std::ofstream(part, std::ios::binary) << bytes;
+  const McapRecovery r = finish_interrupted_mcap(part.string());
+  CHECK(r.ours);
+  CHECK(r.kept_bytes <= damaged->offset);  // cut before the damaged chunk, nothing after it kept
+  CHECK(r.messages < in_file);
+  if (r.messages == 0) return;  // nothing before it: the daemon removes such a file
+  const auto read = test::read_mcap_independently(part);
+  if (read.reader_missing) return;
+  INFO(read.error);
+  REQUIRE(read.file);
+  CHECK((*read.file)["statistics"]["message_count"] == r.messages);
 }
 
 TEST_CASE("a file's close hands over its last chunk: never a chunk behind", "[mcap][threads]") {
