@@ -76,7 +76,8 @@ struct ChunkBuffer {
 class ChunkPipeline {
  public:
   // `chunk_crc`: each chunk's CRC-32 computed. When false (output.mcap_chunk_crc's default, as
-  // rosbag2 writes), every chunk's CRC is 0 ("not computed", as the MCAP spec allows); a zstd
+  // rosbag2 writes), every chunk's CRC is 0 ("not computed", as the MCAP spec allows; not a
+  // chunk stored as it is, below, which always has its CRC); a zstd
   // frame then carries zstd's checksum instead (XXH64, which the decompressor checks: about
   // 0.17 ms per 4 MiB chunk against the CRC's 0.6 here). lz4 and uncompressed chunks then have
   // no checksum: damage shows only where it breaks the codec or the records (lz4's content

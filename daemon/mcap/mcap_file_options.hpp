@@ -15,8 +15,8 @@ namespace pandarcap {
 struct McapFileOptions {
   mcap::ChunkCompression compression = mcap::ChunkCompression::kZstd;
   int compression_level = 1;  // zstd's: -7 (fastest) .. 19 (lz4: chunk_codec.hpp)
-  // output.mcap_chunk_crc: each chunk's CRC-32 of its records. Off, every chunk says 0 ("not
-  // computed", as the MCAP spec allows); zstd's frame checksum still finds damage in a zstd
+  // output.mcap_chunk_crc: each chunk's CRC-32 of its records. Off, every compressed chunk says 0
+  // ("not computed", as the MCAP spec allows); zstd's frame checksum still finds damage in a zstd
   // chunk (chunk_pipeline.hpp).
   bool chunk_crc = false;
   std::size_t chunk_bytes = 4u << 20;  // uncompressed messages per chunk, about
