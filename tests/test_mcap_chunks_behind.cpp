@@ -73,25 +73,39 @@ struct StoredChunk {
   std::size_t records_offset = 0, records_bytes = 0;  // its records as stored, in the file
 };
 
-// Each Chunk record of an MCAP file, in file order (our own parser).
-std::vector<StoredChunk> chunks_in(const fs::path& path) {
-  const std::string bytes = harness::read_file(path);
+// An MCAP file's data section as our own parser reads it: each Chunk record in file order, and
+// where the DataEnd record begins (the data section's end).
+struct DataSection {
+  std::vector<StoredChunk> chunks;
+  std::size_t end = 0;
+};
+DataSection data_section(const std::string& bytes) {
   const auto all = std::span(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size());
-  std::vector<StoredChunk> out;
+  DataSection out;
   for (std::size_t at = mcap::kMagic.size(); at < all.size();) {
     const auto record = mcap::record_at(all.subspan(at));
-    if (!record || record->op == mcap::Op::kDataEnd) break;
+    REQUIRE(record);
+    if (record->op == mcap::Op::kDataEnd) {
+      out.end = at;
+      return out;
+    }
     if (record->op == mcap::Op::kChunk) {
       const auto chunk = mcap::parse_chunk(record->content);
       REQUIRE(chunk);
-      out.push_back({std::string(chunk->compression), chunk->uncompressed_crc,
-                     chunk->uncompressed_crc == mcap::crc32(chunk->records), at,
-                     static_cast<std::size_t>(chunk->records.data() - all.data()),
-                     chunk->records.size()});
+      out.chunks.push_back({std::string(chunk->compression), chunk->uncompressed_crc,
+                            chunk->uncompressed_crc == mcap::crc32(chunk->records), at,
+                            static_cast<std::size_t>(chunk->records.data() - all.data()),
+                            chunk->records.size()});
     }
     at += mcap::kRecordPrefixBytes + record->content.size();
   }
+  FAIL("no DataEnd record");
   return out;
+}
+
+// Each Chunk record of the MCAP file at `path`, in file order.
+std::vector<StoredChunk> chunks_in(const fs::path& path) {
+  return data_section(harness::read_file(path)).chunks;
 }
 
 // What a live file written as fast as the loop goes held, once closed.
@@ -120,20 +134,6 @@ WrittenFast write_fast(const fs::path& path, int count, unsigned seed) {
   w.not_recorded = file.messages_not_recorded();
   w.stored = file.chunks_uncompressed();
   return w;
-}
-
-// Where the DataEnd record begins: the data section's end.
-std::size_t data_end_offset(const std::string& bytes) {
-  const auto all = std::span(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size());
-  std::size_t at = mcap::kMagic.size();
-  while (at < all.size()) {
-    const auto record = mcap::record_at(all.subspan(at));
-    REQUIRE(record);
-    if (record->op == mcap::Op::kDataEnd) return at;
-    at += mcap::kRecordPrefixBytes + record->content.size();
-  }
-  FAIL("no DataEnd record");
-  return at;
 }
 
 }  // namespace
@@ -234,7 +234,9 @@ TEST_CASE("damage inside a chunk stored as it is: its CRC finds it and the recov
   test::ScratchDir dir("mcap-behind-damage");
   const fs::path path = dir / "a.mcap";
   const std::uint64_t in_file = write_fast(path, 4000, 7).in_file;
-  const std::vector<StoredChunk> chunks = chunks_in(path);
+  std::string bytes = harness::read_file(path);
+  const DataSection data = data_section(bytes);
+  const std::vector<StoredChunk>& chunks = data.chunks;
   // A stored chunk after the first if there is one (so that the cut keeps some messages).
   const auto stored_chunk = [](const StoredChunk& c) {
     return c.compression.empty() && c.records_bytes > 4096;
@@ -245,8 +247,7 @@ TEST_CASE("damage inside a chunk stored as it is: its CRC finds it and the recov
   REQUIRE(damaged != chunks.end());
   // 200 zero bytes in the middle of its records, and the file cut where its data ends (a killed
   // run's .part has no tail: with one, it would be a file finished but not yet renamed).
-  std::string bytes = harness::read_file(path);
-  bytes.resize(data_end_offset(bytes));
+  bytes.resize(data.end);
   const std::size_t at = damaged->records_offset + damaged->records_bytes / 2;
   REQUIRE(bytes.substr(at, 200) != std::string(200, '\0'));
   bytes.replace(at, 200, std::string(200, '\0'));
