@@ -173,6 +173,14 @@ void write_chunk(ByteWriter& w, std::uint64_t message_start_time, std::uint64_t 
   w.bytes(stored);
 }
 
+void write_padding(std::span<std::uint8_t> out) noexcept {
+  const std::uint64_t content = out.size() - kRecordPrefixBytes;
+  out[0] = static_cast<std::uint8_t>(Op::kPadding);
+  for (std::size_t i = 0; i < 8; ++i)
+    out[1 + i] = static_cast<std::uint8_t>(content >> (8 * i));
+  std::memset(out.data() + kRecordPrefixBytes, 0, content);
+}
+
 void write_message_index(ByteWriter& w, std::uint16_t channel,
                          std::span<const MessageIndexEntry> entries) {
   const std::size_t r = w.begin_record(Op::kMessageIndex);

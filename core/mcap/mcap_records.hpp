@@ -8,7 +8,7 @@
 //
 // pandarcap's files, in order:
 //   magic, Header (profile "ros2"), Schema*, Channel*, Metadata, Attachment (calibration.csv),
-//   { Chunk (compressed Message records), MessageIndex per channel in it }*,
+//   Padding, { Chunk (compressed Message records), MessageIndex per channel in it, Padding }*,
 //   DataEnd, summary (Schema*, Channel*, Statistics, ChunkIndex*, AttachmentIndex*,
 //   MetadataIndex*), SummaryOffset per group, Footer, magic.
 // Schemas and channels come before the first chunk, outside chunks, so a streaming reader knows
@@ -45,6 +45,11 @@ enum class Op : std::uint8_t {
   kMetadataIndex = 0x0D,
   kSummaryOffset = 0x0E,
   kDataEnd = 0x0F,
+  // pandarcap's own record (the spec leaves 0x80-0xFF to applications, and its readers skip an
+  // opcode they do not know): zeros that end what the writer hands to the file on a 4096-byte
+  // boundary, so that each chunk goes to the disk with O_DIRECT, past the page cache
+  // (daemon/mcap/mcap_file.hpp). Its content means nothing.
+  kPadding = 0x80,
 };
 
 // opcode + uint64 length.
@@ -192,6 +197,18 @@ void write_chunk_header(ByteWriter& w, std::uint64_t message_start_time,
                         std::uint64_t message_end_time, std::uint64_t uncompressed_bytes,
                         std::uint32_t uncompressed_crc, std::string_view compression,
                         std::uint64_t stored_bytes);
+// The bytes write_chunk_header() writes for a chunk compressed as `compression`.
+constexpr std::size_t chunk_header_bytes(std::string_view compression) noexcept {
+  return 1 + 8 + 8 + 8 + 8 + 4 + 4 + compression.size() + 8;
+}
+// The length of the Padding record that takes `end` to the next multiple of `block`: at least
+// its 9-byte prefix, so a whole block more when fewer bytes are left to it.
+constexpr std::size_t padding_bytes(std::size_t end, std::size_t block) noexcept {
+  const std::size_t to_block = (block - end % block) % block;
+  return to_block >= kRecordPrefixBytes ? to_block : to_block + block;
+}
+// A Padding record of exactly `out.size()` bytes (at least kRecordPrefixBytes) in `out`.
+void write_padding(std::span<std::uint8_t> out) noexcept;
 // A MessageIndex record: (log_time, offset in the chunk's uncompressed records) pairs.
 struct MessageIndexEntry {
   std::uint64_t log_time = 0, offset = 0;

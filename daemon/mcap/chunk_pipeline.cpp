@@ -8,8 +8,11 @@
 #include <chrono>
 #include <cstring>
 #include <exception>
+#include <new>
 #include <stdexcept>
 #include <system_error>
+
+#include "daemon/io/file_output.hpp"
 
 namespace pandarcap {
 namespace {
@@ -18,7 +21,18 @@ namespace {
 // the cost of a bug to a delay).
 constexpr auto kChunkIdleWait = std::chrono::seconds(1);
 
+// The longest Chunk record fields: those of a "zstd" chunk (lz4's and stored chunks' are shorter).
+constexpr std::size_t kChunkFieldsMax = mcap::chunk_header_bytes("zstd");
+
+constexpr std::size_t round_up(std::size_t bytes, std::size_t block) noexcept {
+  return (bytes + block - 1) / block * block;
+}
+
 }  // namespace
+
+void AlignedFree::operator()(std::uint8_t* bytes) const noexcept {
+  ::operator delete (bytes, std::align_val_t{kDirectIoBlock});
+}
 
 void ChunkBuffer::clear() noexcept {
   records.clear();
@@ -26,7 +40,8 @@ void ChunkBuffer::clear() noexcept {
     entries.clear();
   start_time = end_time = messages = 0;
   full = false;
-  compressed_bytes = 0;
+  record_bytes = stored_bytes = index_bytes = written_bytes = 0;
+  index_at.fill(0);
   crc = 0;
   uncompressed = false;
   failed = false;
@@ -49,15 +64,24 @@ ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
     compressor_ =
         std::make_unique<mcap::ChunkCompressor>(compression, record_capacity, level, !chunk_crc_);
   }
+  // Every channel's MessageIndex record, full.
+  const std::size_t index_bytes =
+      mcap::kMaxChannels * (mcap::kRecordPrefixBytes + 2 + 4 + index_entries * 16);
+  fields_.reserve(kChunkFieldsMax + index_bytes);
+  // The fields, the stored records (compressed: the codec's bound; as they are: the records),
+  // the indexes, and the padding's at most a block and its prefix.
+  const std::size_t stored_max = std::max(record_capacity, compressor_ ? compressor_->bound() : 0);
+  const std::size_t framed_capacity = round_up(
+      kChunkFieldsMax + stored_max + index_bytes + kDirectIoBlock + mcap::kRecordPrefixBytes,
+      kDirectIoBlock);
   buffers_.reserve(buffers);
   free_.reserve(buffers);
   for (std::size_t i = 0; i < buffers; ++i) {
     auto chunk = std::make_unique<ChunkBuffer>();
     chunk->records.reserve(record_capacity);
-    if (compressor_) {
-      chunk->compressed_capacity = compressor_->bound();
-      chunk->compressed = std::make_unique_for_overwrite<std::uint8_t[]>(compressor_->bound());
-    }
+    chunk->framed.reset(static_cast<std::uint8_t*>(
+        ::operator new (framed_capacity, std::align_val_t{kDirectIoBlock})));
+    chunk->framed_capacity = framed_capacity;
     for (auto& entries : chunk->index)
       entries.reserve(index_entries);
     free_.push_back(chunk.get());
@@ -139,24 +163,54 @@ void ChunkPipeline::run() noexcept {
 }
 
 void ChunkPipeline::compress(ChunkBuffer& chunk, bool behind) noexcept {
-  if (compressor_ && behind && uncompressed_when_behind_) {
-    // Stored as it is: no codec's checksum would find damage in it, so its CRC always
-    // (0.6 ms per 4 MiB, against lz4's 4.4 for the compression it saves).
-    chunk.uncompressed = true;
-    chunk.crc = mcap::crc32(chunk.records);
-    return;
+  chunk.uncompressed = compressor_ && behind && uncompressed_when_behind_;
+  // Stored as it is when behind: no codec's checksum would find damage in it, so its CRC always
+  // (0.6 ms per 4 MiB, against lz4's 4.4 for the compression it saves).
+  chunk.crc =
+      chunk_crc_ || chunk.uncompressed ? mcap::crc32(chunk.records) : 0;  // 0: "not computed"
+  const std::string_view compression = mcap::compression_name(
+      compressor_ && !chunk.uncompressed ? compression_ : mcap::ChunkCompression::kNone);
+  std::uint8_t* const stored = chunk.framed.get() + mcap::chunk_header_bytes(compression);
+  if (!compressor_ || chunk.uncompressed) {
+    if (!chunk.records.empty()) std::memcpy(stored, chunk.records.data(), chunk.records.size());
+    chunk.stored_bytes = chunk.records.size();
+  } else {
+    try {
+      chunk.stored_bytes =
+          compressor_->compress(chunk.records, std::span(stored, compressor_->bound()));
+    } catch (const std::exception& error) {
+      chunk.failed = true;
+      const std::size_t n = std::min(std::strlen(error.what()), chunk.error.size() - 1);
+      std::memcpy(chunk.error.data(), error.what(), n);
+      chunk.error[n] = '\0';
+      return;
+    }
   }
-  chunk.crc = chunk_crc_ ? mcap::crc32(chunk.records) : 0;  // 0: "not computed"
-  if (!compressor_) return;
-  try {
-    chunk.compressed_bytes = compressor_->compress(
-        chunk.records, std::span(chunk.compressed.get(), chunk.compressed_capacity));
-  } catch (const std::exception& error) {
-    chunk.failed = true;
-    const std::size_t n = std::min(std::strlen(error.what()), chunk.error.size() - 1);
-    std::memcpy(chunk.error.data(), error.what(), n);
-    chunk.error[n] = '\0';
+  frame(chunk, compression);
+}
+
+void ChunkPipeline::frame(ChunkBuffer& chunk, std::string_view compression) noexcept {
+  // Within fields_'s reserved capacity and the framed buffer's (sized for the longest fields,
+  // the codec's bound and every index full): nothing allocates, nothing overflows.
+  fields_.clear();
+  mcap::ByteWriter w(fields_);
+  mcap::write_chunk_header(w, chunk.start_time, chunk.end_time, chunk.records.size(), chunk.crc,
+                           compression, chunk.stored_bytes);
+  std::memcpy(chunk.framed.get(), fields_.data(), fields_.size());
+  chunk.record_bytes = fields_.size() + chunk.stored_bytes;
+  fields_.clear();
+  for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
+    if (chunk.index[c].empty()) continue;
+    chunk.index_at[c] = chunk.record_bytes + w.size();
+    mcap::write_message_index(w, static_cast<std::uint16_t>(c + 1), chunk.index[c]);
   }
+  chunk.index_bytes = fields_.size();
+  std::uint8_t* const end = chunk.framed.get() + chunk.record_bytes;
+  if (!fields_.empty()) std::memcpy(end, fields_.data(), fields_.size());
+  const std::size_t used = chunk.record_bytes + chunk.index_bytes;
+  const std::size_t padding = mcap::padding_bytes(used, kDirectIoBlock);
+  mcap::write_padding(std::span(chunk.framed.get() + used, padding));
+  chunk.written_bytes = used + padding;
 }
 
 }  // namespace pandarcap

@@ -3,16 +3,23 @@
 //
 //   writer thread (McapFile)                      compression thread ("pc-mcap-chunks")
 //   take_free(): a buffer, filled with messages
-//   submit(chunk)  ------- to_compress (SpscQueue) ------>  CRC-32 of the records, then
-//                                                           compressed into chunk.compressed
+//   submit(chunk)  ------- to_compress (SpscQueue) ------>  CRC-32 of the records, compressed
+//                                                           into chunk.framed between the Chunk
+//                                                           record's fields and its indexes
 //   take_done() / wait_done()  <------ done (SpscQueue) ---
-//   writes the chunk and its indexes, give_back(chunk)
+//   writes chunk.written() in one write, give_back(chunk)
 //
-// Who writes: the writer thread, always. It picks compressed chunks up without blocking as it
-// adds messages and at every flush, in the order it submitted them (one compression thread,
-// FIFO queues), so the file's offsets, its chunk index and its summary stay the writer's alone,
-// as when it compressed chunks itself. Only close() and abandon() wait (the drain: every chunk
-// handed over comes back), on the done queue's futex (SpscQueue::wait_for_data), never a sleep.
+// What comes back is the chunk as the file holds it: the Chunk record, its MessageIndex records
+// and a Padding record that ends it on a 4096-byte boundary, in one block-aligned buffer, so the
+// writer hands it to the kernel with O_DIRECT as it is, past the page cache
+// (daemon/mcap/mcap_file.hpp says why). The compression thread does all of the framing: the
+// writer only sums offsets.
+//
+// Who writes: the writer thread, always. It picks chunks up without blocking as it adds
+// messages and at every flush, in the order it submitted them (one compression thread, FIFO
+// queues), so the file's offsets, its chunk index and its summary stay the writer's alone. Only
+// close() and abandon() wait (the drain: every chunk handed over comes back), on the done
+// queue's futex (SpscQueue::wait_for_data), never a sleep.
 //
 // A buffer belongs to exactly one side at a time: the writer from take_free() to submit() and
 // from take_done() to give_back(), the compression thread in between; the queues' acquire and
@@ -21,10 +28,11 @@
 // (McapFile::messages_not_recorded), as the packet ring drops the newest when full.
 //
 // Everything is allocated here, at construction: `buffers` chunks of `record_capacity` bytes, a
-// compressed copy of each (the codec's bound; none without compression), `index_entries` index
-// entries per channel, and the compressor. The thread starts with every signal blocked (the
-// daemon's supervisor takes them with sigwait) and stops in the destructor, after compressing
-// whatever was still queued.
+// framed copy of each (block-aligned: the fields, the codec's bound or the records as they are,
+// every index, the padding; its pages are touched only as used), `index_entries` index entries
+// per channel, and the compressor. The thread starts with every signal blocked (the daemon's
+// supervisor takes them with sigwait) and stops in the destructor, after compressing whatever
+// was still queued.
 #pragma once
 
 #include <array>
@@ -33,6 +41,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -41,6 +50,11 @@
 #include "ringbuf/spsc_queue.hpp"
 
 namespace pandarcap {
+
+// Frees what operator new(size, align_val_t{kDirectIoBlock}) gave.
+struct AlignedFree {
+  void operator()(std::uint8_t* bytes) const noexcept;
+};
 
 struct ChunkBuffer {
   // Filled by the writer thread before submit().
@@ -51,10 +65,16 @@ struct ChunkBuffer {
   // waiting behind another says that compression is behind.
   bool full = false;
   // Filled by the compression thread before it hands the chunk back.
-  // The codec's bound, left uninitialised (its pages count only once used); none without
-  // compression.
-  std::unique_ptr<std::uint8_t[]> compressed;
-  std::size_t compressed_capacity = 0, compressed_bytes = 0;
+  // The chunk as the file holds it: [Chunk record][MessageIndex per channel][Padding], from a
+  // 4096-aligned address, left uninitialised (its pages count only once used).
+  std::unique_ptr<std::uint8_t[], AlignedFree> framed;
+  std::size_t framed_capacity = 0;
+  std::size_t record_bytes = 0;   // the Chunk record, its fields and stored records
+  std::size_t stored_bytes = 0;   // its records as stored (compressed, or as they are)
+  std::size_t index_bytes = 0;    // the MessageIndex records after it
+  std::size_t written_bytes = 0;  // all of it with the padding: a multiple of 4096
+  // Where each channel's MessageIndex record starts, from the chunk's start; 0 = none.
+  std::array<std::uint64_t, mcap::kMaxChannels> index_at{};
   std::uint32_t crc = 0;  // of `records`
   // Stored as they are, not compressed: the compression thread was a whole chunk behind
   // (ChunkPipeline's `uncompressed_when_behind`). The chunk's compression is then "", and its
@@ -63,12 +83,12 @@ struct ChunkBuffer {
   bool failed = false;  // the compressor threw (never expected): `error` says why
   std::array<char, 160> error{};
 
-  // What goes into the file: the compressed records, or the records as they are.
+  // The chunk's records as the file holds them: compressed, or as they are.
   std::span<const std::uint8_t> stored() const noexcept {
-    return compressed && !uncompressed
-               ? std::span<const std::uint8_t>(compressed.get(), compressed_bytes)
-               : std::span<const std::uint8_t>(records);
+    return {framed.get() + (record_bytes - stored_bytes), stored_bytes};
   }
+  // What goes to the file, in one write.
+  std::span<const std::uint8_t> written() const noexcept { return {framed.get(), written_bytes}; }
   // Empty again (capacity kept).
   void clear() noexcept;
 };
@@ -125,6 +145,8 @@ class ChunkPipeline {
   void run() noexcept;  // the compression thread
   // `behind`: a full chunk waits after this one (stored uncompressed when so configured).
   void compress(ChunkBuffer& chunk, bool behind) noexcept;
+  // The Chunk record's fields before the stored records, the indexes and the padding after.
+  void frame(ChunkBuffer& chunk, std::string_view compression) noexcept;
 
   mcap::ChunkCompression compression_;
   bool chunk_crc_;
@@ -136,6 +158,7 @@ class ChunkPipeline {
   // nullptr in to_compress_ tells the thread to stop.
   ringbuf::SpscQueue<ChunkBuffer*> to_compress_, done_;
   std::atomic<std::size_t> taken_{0};
+  std::vector<std::uint8_t> fields_;  // the compression thread's: a chunk's fields and indexes
   std::thread thread_;
 };
 

@@ -1,6 +1,8 @@
 #include "daemon/mcap/mcap_file.hpp"
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <stdexcept>
 #include <utility>
 
@@ -38,14 +40,12 @@ McapFile::McapFile(const McapFileOptions& options)
                 options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_,
                 max_index_entries_, options.compression, options.compression_level,
                 options.chunk_crc, !options.wait_for_free_chunk) {
-  // out_ holds the opening records (the calibration among them), a chunk's fields and message
-  // indexes (its records go to the file from its chunk buffer), or the tail.
-  const std::size_t index_bytes =
-      mcap::kMaxChannels * (mcap::kRecordPrefixBytes + 2 + 4 + max_index_entries_ * 16);
+  // out_ holds the opening records (the calibration among them) and their padding, or the tail
+  // (the chunks go to the file framed by the compression thread).
   std::size_t metadata_bytes = options.device_name.size();
   for (const auto& [key, value] : options.metadata)
     metadata_bytes += key.size() + value.size();
-  out_.reserve(kRecordSlack + options.calibration_csv.size() + metadata_bytes + index_bytes +
+  out_.reserve(kRecordSlack + options.calibration_csv.size() + metadata_bytes + kDirectIoBlock +
                options.max_chunks * kTailBytesPerChunk);
   // What open() records, made here so that starting a file (a rotation) allocates nothing.
   for (const auto& [key, value] : options_.metadata)
@@ -69,7 +69,7 @@ McapFile::McapFile(const McapFileOptions& options)
 }
 
 void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
-  file_.open(path, OutputFile::Mode::kCreate);
+  file_.open(path, direct_works_ ? OutputFile::Mode::kCreateDirect : OutputFile::Mode::kCreate);
   summary_.chunks.clear();
   summary_.attachments.clear();
   summary_.metadata.clear();
@@ -111,8 +111,24 @@ void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
     summary_.attachments.push_back({at, w.size() - at, create_time_ns, create_time_ns, csv.size(),
                                     "calibration.csv", "text/csv"});
   }
+  // Padded to a whole block, so every chunk after it starts on one.
+  const std::size_t padding = mcap::padding_bytes(w.size(), kDirectIoBlock);
+  out_.resize(out_.size() + padding);  // within the reserved capacity: no allocation
+  mcap::write_padding(std::span(out_).last(padding));
   whole_bytes_ = 0;
-  write_out({out_});
+  // Past the page cache too, from block-aligned memory (the open chunk's framed buffer, free
+  // until its chunk is handed over): were they in the page cache behind chunks on the disk, a
+  // power cut could leave a file whose chunks are there and whose header is not.
+  if (open_ == nullptr) open_ = pipeline_.take_free();
+  if (file_.direct() && (open_ == nullptr || out_.size() > open_->framed_capacity)) {
+    file_.end_direct();  // never expected (opening records larger than a chunk): not direct
+  }
+  if (file_.direct()) {
+    std::memcpy(open_->framed.get(), out_.data(), out_.size());
+    write_out(std::span<const std::uint8_t>(open_->framed.get(), out_.size()));
+  } else {
+    write_out(out_);
+  }
 }
 
 bool McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
@@ -220,33 +236,22 @@ void McapFile::write_chunk(ChunkBuffer& chunk) {
     ~GiveBack() { pipeline.give_back(&chunk); }
   } give_back{pipeline_, chunk};
   if (chunk.failed) throw std::runtime_error(chunk.error.data());
+  // The compression thread framed the chunk: its record, its indexes, the padding.
   const std::uint64_t chunk_start = file_.size();
-  const std::span<const std::uint8_t> stored = chunk.stored();
-  const std::string_view compression = mcap::compression_name(
-      chunk.uncompressed ? mcap::ChunkCompression::kNone : pipeline_.compression());
-  // The chunk's fields, its stored records straight from where they are, then its indexes.
-  out_.clear();
-  mcap::ByteWriter w(out_);
-  mcap::write_chunk_header(w, chunk.start_time, chunk.end_time, chunk.records.size(), chunk.crc,
-                           compression, stored.size());
-  const std::size_t header_bytes = w.size();
   mcap::ChunkInfo info;
   info.message_start_time = chunk.start_time;
   info.message_end_time = chunk.end_time;
   info.chunk_start_offset = chunk_start;
-  info.chunk_length = header_bytes + stored.size();
-  info.compression = compression;
-  info.compressed_size = stored.size();
+  info.chunk_length = chunk.record_bytes;
+  info.compression = mcap::compression_name(chunk.uncompressed ? mcap::ChunkCompression::kNone
+                                                               : pipeline_.compression());
+  info.compressed_size = chunk.stored_bytes;
   info.uncompressed_size = chunk.records.size();
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
-    if (chunk.index[c].empty()) continue;
-    info.message_index_offset[c] = chunk_start + info.chunk_length + (w.size() - header_bytes);
-    mcap::write_message_index(w, static_cast<std::uint16_t>(c + 1), chunk.index[c]);
+    if (chunk.index_at[c] != 0) info.message_index_offset[c] = chunk_start + chunk.index_at[c];
   }
-  info.message_index_length = w.size() - header_bytes;
-  const std::span<const std::uint8_t> out(out_);
-  // Throws: the chunk stays unwritten and uncounted.
-  write_out({out.first(header_bytes), stored, out.subspan(header_bytes)});
+  info.message_index_length = chunk.index_bytes;
+  write_out(chunk.written());  // throws: the chunk stays unwritten and uncounted
   summary_.chunks.push_back(info);
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
     for (const auto& entry : chunk.index[c])
@@ -257,13 +262,19 @@ void McapFile::write_chunk(ChunkBuffer& chunk) {
   if (chunk.uncompressed) ++chunks_uncompressed_;
 }
 
-void McapFile::write_out(std::initializer_list<std::span<const std::uint8_t>> parts) {
-  try {
-    for (const auto part : parts)
-      file_.write(part);
-  } catch (...) {
+void McapFile::write_out(std::span<const std::uint8_t> bytes) {
+  io::IoError error = file_.try_write(bytes);
+  if (error && error.code == EINVAL && file_.direct()) {
+    // A file system that opens with O_DIRECT but refuses the writes: the page cache, for this
+    // file and every one after it.
+    direct_works_ = false;
+    file_.end_direct();
     file_.truncate(whole_bytes_);
-    throw;
+    error = file_.try_write(bytes);
+  }
+  if (error) {
+    file_.truncate(whole_bytes_);
+    io::throw_io_error(error);
   }
   whole_bytes_ = file_.size();
 }
@@ -287,7 +298,8 @@ void McapFile::close() {
   out_.clear();
   mcap::ByteWriter w(out_);
   mcap::write_tail(w, file_.size(), summary_);
-  write_out({out_});
+  file_.end_direct();  // the tail ends where it ends: through the page cache
+  write_out(out_);
   file_.close();
 }
 

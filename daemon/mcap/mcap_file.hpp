@@ -16,6 +16,16 @@
 // oldest chunk in flight is waited for; otherwise the writer thread never waits for the
 // compression thread except in drain(), close() and abandon().
 //
+// Past the page cache: each chunk goes to the file in one write with O_DIRECT, framed by the
+// compression thread (its record, its indexes and a Padding record, mcap_records.hpp, ending it
+// on a 4096-byte boundary), after opening records padded the same way; the tail goes through
+// the page cache. Why: a recording is written once and read rarely, and its trip through the page
+// cache was the writer's largest cost at high rates (the kernel's copy, on a virtual machine
+// whose fresh pages are dear) and the source of its longest stalls (the dirty pages' writeback):
+// docs/performance.md, "Twelfth round". Where the file system has no O_DIRECT (tmpfs before
+// Linux 6.6), or takes it at open and refuses the writes, the same bytes go through the page
+// cache. What is on the disk is the same either way, and ends on a whole chunk as before.
+//
 // Every buffer is allocated when the McapFile is made, sized from the options; writing messages,
 // chunks and the summary then allocates nothing. A file holds at most max_chunks chunks (the
 // summary's index is preallocated): full() says when the recorder must start the next file.
@@ -26,7 +36,6 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <initializer_list>
 #include <span>
 #include <string>
 #include <string_view>
@@ -99,9 +108,9 @@ class McapFile {
   // Writes the chunks back from the compression thread (never waits).
   void write_done_chunks();
   void write_chunk(ChunkBuffer& chunk);
-  // `parts` to the file, one after the other; on a failure the file is cut back to its last
-  // whole chunk and the error rethrown.
-  void write_out(std::initializer_list<std::span<const std::uint8_t>> parts);
+  // `bytes` to the file; on a failure the file is cut back to its last whole chunk and the error
+  // thrown (std::system_error).
+  void write_out(std::span<const std::uint8_t> bytes);
 
   McapFileOptions options_;
   std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_
@@ -118,6 +127,9 @@ class McapFile {
   std::uint64_t chunks_uncompressed_ = 0;
   std::uint32_t sequence_[mcap::kMaxChannels + 1]{};
   std::uint64_t whole_bytes_ = 0;  // the file's length after its last whole chunk
+  // False once a file system took O_DIRECT at open but refused its writes (EINVAL): the files
+  // after it go through the page cache.
+  bool direct_works_ = true;
 };
 
 }  // namespace pandarcap

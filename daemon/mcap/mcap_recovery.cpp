@@ -224,6 +224,8 @@ McapRecovery finish_interrupted_mcap(const std::string& path) {
         kept = at;
         continue;
       }
+      case mcap::Op::kPadding:
+        break;  // whole (scan.read gave all of it): the writer's block alignment, kept
       default:
         whole = false;  // DataEnd (an old tail, rewritten) or anything unexpected: cut here
         break;

@@ -6,8 +6,9 @@
 // finish_interrupted_mcap() reads the records from the start, checking each (a chunk must
 // decompress to its stated size with its stated CRC, and be followed by one whole MessageIndex
 // record per channel in it), cuts the file after the last whole record or chunk with its
-// indexes, and writes DataEnd, the summary rebuilt from what is kept, the summary offsets and the
-// footer, so that every MCAP reader accepts it.
+// indexes (the writer's Padding records are whole records, kept), and writes DataEnd, the summary
+// rebuilt from what is kept, the summary offsets and the footer, so that every MCAP reader accepts
+// it.
 //
 // Only a file that begins with the MCAP magic and a Header whose library is pandarcap's is
 // touched (`ours`); anything else is left as it is. A file cut within its first records (no
