@@ -43,6 +43,7 @@ void ChunkBuffer::clear() noexcept {
   record_bytes = stored_bytes = index_bytes = written_bytes = 0;
   index_at.fill(0);
   crc = 0;
+  compression = {};
   uncompressed = false;
   failed = false;
   error[0] = '\0';
@@ -168,9 +169,9 @@ void ChunkPipeline::compress(ChunkBuffer& chunk, bool behind) noexcept {
   // (0.6 ms per 4 MiB, against lz4's 4.4 for the compression it saves).
   chunk.crc =
       chunk_crc_ || chunk.uncompressed ? mcap::crc32(chunk.records) : 0;  // 0: "not computed"
-  const std::string_view compression = mcap::compression_name(
+  chunk.compression = mcap::compression_name(
       compressor_ && !chunk.uncompressed ? compression_ : mcap::ChunkCompression::kNone);
-  std::uint8_t* const stored = chunk.framed.get() + mcap::chunk_header_bytes(compression);
+  std::uint8_t* const stored = chunk.framed.get() + mcap::chunk_header_bytes(chunk.compression);
   if (!compressor_ || chunk.uncompressed) {
     if (!chunk.records.empty()) std::memcpy(stored, chunk.records.data(), chunk.records.size());
     chunk.stored_bytes = chunk.records.size();
@@ -186,16 +187,16 @@ void ChunkPipeline::compress(ChunkBuffer& chunk, bool behind) noexcept {
       return;
     }
   }
-  frame(chunk, compression);
+  frame(chunk);
 }
 
-void ChunkPipeline::frame(ChunkBuffer& chunk, std::string_view compression) noexcept {
+void ChunkPipeline::frame(ChunkBuffer& chunk) noexcept {
   // Within fields_'s reserved capacity and the framed buffer's (sized for the longest fields,
   // the codec's bound and every index full): nothing allocates, nothing overflows.
   fields_.clear();
   mcap::ByteWriter w(fields_);
   mcap::write_chunk_header(w, chunk.start_time, chunk.end_time, chunk.records.size(), chunk.crc,
-                           compression, chunk.stored_bytes);
+                           chunk.compression, chunk.stored_bytes);
   std::memcpy(chunk.framed.get(), fields_.data(), fields_.size());
   chunk.record_bytes = fields_.size() + chunk.stored_bytes;
   fields_.clear();

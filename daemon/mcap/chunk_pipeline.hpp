@@ -75,7 +75,8 @@ struct ChunkBuffer {
   std::size_t written_bytes = 0;  // all of it with the padding: a multiple of 4096
   // Where each channel's MessageIndex record starts, from the chunk's start; 0 = none.
   std::array<std::uint64_t, mcap::kMaxChannels> index_at{};
-  std::uint32_t crc = 0;  // of `records`
+  std::uint32_t crc = 0;         // of `records`
+  std::string_view compression;  // as the Chunk record names it (a literal: "lz4", "zstd", "")
   // Stored as they are, not compressed: the compression thread was a whole chunk behind
   // (ChunkPipeline's `uncompressed_when_behind`). The chunk's compression is then "", and its
   // CRC is always computed (no codec checks it otherwise).
@@ -146,7 +147,7 @@ class ChunkPipeline {
   // `behind`: a full chunk waits after this one (stored uncompressed when so configured).
   void compress(ChunkBuffer& chunk, bool behind) noexcept;
   // The Chunk record's fields before the stored records, the indexes and the padding after.
-  void frame(ChunkBuffer& chunk, std::string_view compression) noexcept;
+  void frame(ChunkBuffer& chunk) noexcept;
 
   mcap::ChunkCompression compression_;
   bool chunk_crc_;

@@ -243,8 +243,7 @@ void McapFile::write_chunk(ChunkBuffer& chunk) {
   info.message_end_time = chunk.end_time;
   info.chunk_start_offset = chunk_start;
   info.chunk_length = chunk.record_bytes;
-  info.compression = mcap::compression_name(chunk.uncompressed ? mcap::ChunkCompression::kNone
-                                                               : pipeline_.compression());
+  info.compression = chunk.compression;
   info.compressed_size = chunk.stored_bytes;
   info.uncompressed_size = chunk.records.size();
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
