@@ -40,8 +40,7 @@ struct FrameArena {
   // after another in one ArenaMemory (Pipeline) all start aligned to them, and the writer hands
   // the points to the kernel without a copy.
   static std::size_t bytes_for(std::size_t capacity_points, PcdFormat format) noexcept {
-    const std::size_t bytes = capacity_points * pcd_point_bytes(format.layout);
-    return (bytes + kDirectIoBlock - 1) / kDirectIoBlock * kDirectIoBlock;
+    return whole_direct_blocks(capacity_points * pcd_point_bytes(format.layout));
   }
   // `memory`: bytes_for() bytes, aligned to kDirectIoBlock, zero-filled (ArenaMemory's), not
   // owned.

@@ -91,6 +91,10 @@ class OutputFile {
 // The block size and alignment O_DIRECT writes are made in (the page size: every file system's
 // logical block size divides it).
 inline constexpr std::size_t kDirectIoBlock = 4096;
+// `bytes` rounded up to whole kDirectIoBlock blocks.
+constexpr std::size_t whole_direct_blocks(std::size_t bytes) noexcept {
+  return (bytes + kDirectIoBlock - 1) / kDirectIoBlock * kDirectIoBlock;
+}
 
 // Gives `from` the name `to` unless a file of that name exists: renameat2(RENAME_NOREPLACE), or,
 // on a file system without it, link + unlink (which refuse an existing name just the same).

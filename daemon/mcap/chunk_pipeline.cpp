@@ -24,10 +24,6 @@ constexpr auto kChunkIdleWait = std::chrono::seconds(1);
 // The longest Chunk record fields: those of a "zstd" chunk (lz4's and stored chunks' are shorter).
 constexpr std::size_t kChunkFieldsMax = mcap::chunk_header_bytes("zstd");
 
-constexpr std::size_t round_up(std::size_t bytes, std::size_t block) noexcept {
-  return (bytes + block - 1) / block * block;
-}
-
 }  // namespace
 
 void AlignedFree::operator()(std::uint8_t* bytes) const noexcept {
@@ -72,9 +68,8 @@ ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
   // The fields, the stored records (compressed: the codec's bound; as they are: the records),
   // the indexes, and the padding's at most a block and its prefix.
   const std::size_t stored_max = std::max(record_capacity, compressor_ ? compressor_->bound() : 0);
-  const std::size_t framed_capacity = round_up(
-      kChunkFieldsMax + stored_max + index_bytes + kDirectIoBlock + mcap::kRecordPrefixBytes,
-      kDirectIoBlock);
+  const std::size_t framed_capacity = whole_direct_blocks(
+      kChunkFieldsMax + stored_max + index_bytes + kDirectIoBlock + mcap::kRecordPrefixBytes);
   buffers_.reserve(buffers);
   free_.reserve(buffers);
   for (std::size_t i = 0; i < buffers; ++i) {
