@@ -156,7 +156,7 @@ void write_chunk_header(ByteWriter& w, std::uint64_t message_start_time,
                         std::uint64_t stored_bytes) {
   // The length is known before the records follow: the fields below, then the records.
   w.u8(static_cast<std::uint8_t>(Op::kChunk));
-  w.u64(8 + 8 + 8 + 4 + 4 + compression.size() + 8 + stored_bytes);
+  w.u64(chunk_header_bytes(compression) - kRecordPrefixBytes + stored_bytes);
   w.u64(message_start_time);
   w.u64(message_end_time);
   w.u64(uncompressed_bytes);

@@ -197,9 +197,11 @@ void write_chunk_header(ByteWriter& w, std::uint64_t message_start_time,
                         std::uint64_t message_end_time, std::uint64_t uncompressed_bytes,
                         std::uint32_t uncompressed_crc, std::string_view compression,
                         std::uint64_t stored_bytes);
-// The bytes write_chunk_header() writes for a chunk compressed as `compression`.
+// The bytes write_chunk_header() writes for a chunk compressed as `compression`: the record's
+// prefix, its times (2 x 8), the uncompressed size (8), the CRC (4), the compression as a string
+// (4 + its length) and the stored records' length (8).
 constexpr std::size_t chunk_header_bytes(std::string_view compression) noexcept {
-  return 1 + 8 + 8 + 8 + 8 + 4 + 4 + compression.size() + 8;
+  return kRecordPrefixBytes + 8 + 8 + 8 + 4 + 4 + compression.size() + 8;
 }
 // The length of the Padding record that takes `end` to the next multiple of `block`: at least
 // its 9-byte prefix, so a whole block more when fewer bytes are left to it.

@@ -122,7 +122,6 @@ class ChunkPipeline {
   ChunkPipeline(const ChunkPipeline&) = delete;
   ChunkPipeline& operator=(const ChunkPipeline&) = delete;
 
-  mcap::ChunkCompression compression() const noexcept { return compression_; }
   std::size_t buffers() const noexcept { return buffers_.size(); }
 
   // ---- The writer thread only -------------------------------------------------------------
