@@ -21,6 +21,7 @@
 #include "daemon/mcap/chunk_pipeline.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
+#include "support/mcap_data_records.hpp"
 #include "support/mcap_reader.hpp"
 #include "support/test_support.hpp"
 
@@ -80,26 +81,19 @@ struct DataSection {
   std::size_t end = 0;
 };
 DataSection data_section(const std::string& bytes) {
-  const auto all = std::span(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size());
   DataSection out;
-  for (std::size_t at = mcap::kMagic.size(); at < all.size();) {
-    const auto record = mcap::record_at(all.subspan(at));
-    REQUIRE(record);
-    if (record->op == mcap::Op::kDataEnd) {
-      out.end = at;
-      return out;
-    }
-    if (record->op == mcap::Op::kChunk) {
-      const auto chunk = mcap::parse_chunk(record->content);
-      REQUIRE(chunk);
-      out.chunks.push_back({std::string(chunk->compression), chunk->uncompressed_crc,
-                            chunk->uncompressed_crc == mcap::crc32(chunk->records), at,
-                            static_cast<std::size_t>(chunk->records.data() - all.data()),
-                            chunk->records.size()});
-    }
-    at += mcap::kRecordPrefixBytes + record->content.size();
+  for (const test::DataRecord& record : test::data_records(bytes)) {
+    if (record.op == mcap::Op::kDataEnd) out.end = record.at;
+    if (record.op != mcap::Op::kChunk) continue;
+    const auto chunk = mcap::parse_chunk(record.content);
+    REQUIRE(chunk);
+    out.chunks.push_back(
+        {std::string(chunk->compression), chunk->uncompressed_crc,
+         chunk->uncompressed_crc == mcap::crc32(chunk->records), record.at,
+         static_cast<std::size_t>(chunk->records.data() -
+                                  reinterpret_cast<const std::uint8_t*>(bytes.data())),
+         chunk->records.size()});
   }
-  FAIL("no DataEnd record");
   return out;
 }
 

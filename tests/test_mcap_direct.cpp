@@ -32,6 +32,7 @@
 #include "daemon/io/syscalls.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
+#include "support/mcap_data_records.hpp"
 #include "support/mcap_reader.hpp"
 #include "support/page_cache.hpp"
 #include "support/test_support.hpp"
@@ -77,41 +78,34 @@ std::uint64_t write_direct_packets(McapFile& file, const fs::path& path, int pac
 
 struct Layout {
   std::size_t chunks = 0, paddings = 0;
-  std::uint64_t data_end = 0;             // where DataEnd starts
-  std::vector<std::uint64_t> chunk_ends;  // after each chunk's indexes and padding
+  std::uint64_t data_end = 0;                    // where DataEnd starts
+  std::vector<test::DataRecord> chunk_paddings;  // the padding after each chunk's indexes
 };
 
 // Walks the data section: every record parses, a chunk starts on a block, each padding is zeros
 // and ends on one, and a chunk's indexes are followed by a padding.
 Layout walk_blocks(const std::string& bytes) {
-  const std::span<const std::uint8_t> all(reinterpret_cast<const std::uint8_t*>(bytes.data()),
-                                          bytes.size());
   Layout layout;
-  std::uint64_t at = mcap::kMagic.size();
   mcap::Op last{};
-  while (true) {
-    const auto record = mcap::record_at(all.subspan(at));
-    INFO("record at " << at);
-    REQUIRE(record.has_value());
-    const std::uint64_t end = at + mcap::kRecordPrefixBytes + record->content.size();
-    if (record->op == mcap::Op::kChunk) {
-      CHECK(at % kDirectIoBlock == 0);
+  for (const test::DataRecord& record : test::data_records(bytes)) {
+    INFO("record at " << record.at);
+    if (record.op == mcap::Op::kChunk) {
+      CHECK(record.at % kDirectIoBlock == 0);
       // The first chunk follows the opening records' padding; each next one its chunk's.
       CHECK(last == mcap::Op::kPadding);
       ++layout.chunks;
-    } else if (record->op == mcap::Op::kPadding) {
-      CHECK(end % kDirectIoBlock == 0);
-      CHECK(std::ranges::all_of(record->content, [](std::uint8_t b) { return b == 0; }));
+    } else if (record.op == mcap::Op::kPadding) {
+      CHECK(record.end() % kDirectIoBlock == 0);
+      CHECK(std::ranges::all_of(record.content, [](std::uint8_t b) { return b == 0; }));
       ++layout.paddings;
-      if (layout.chunks > 0) layout.chunk_ends.push_back(end);
-    } else if (record->op == mcap::Op::kDataEnd) {
+      if (layout.chunks > 0) layout.chunk_paddings.push_back(record);
+    } else if (record.op == mcap::Op::kDataEnd) {
       CHECK(last == mcap::Op::kPadding);
-      layout.data_end = at;
-      return layout;
+      layout.data_end = record.at;
     }
-    last = record->op;
-    at = end;
+    last = record.op;
   }
+  return layout;
 }
 
 // Whether `dir`'s file system takes O_DIRECT writes (tmpfs before Linux 6.6 does not).
@@ -210,20 +204,16 @@ TEST_CASE("a .part cut before inside or after a padding record keeps every chunk
   REQUIRE(write_direct_packets(file, whole, 600) == 600);
   const std::string bytes = harness::read_file(whole);
   const Layout layout = walk_blocks(bytes);
-  REQUIRE(layout.chunk_ends.size() >= 4);
-  const std::span<const std::uint8_t> all(reinterpret_cast<const std::uint8_t*>(bytes.data()),
-                                          bytes.size());
+  REQUIRE(layout.chunk_paddings.size() >= 4);
   // The third chunk starts where the second one's padding ended; its own padding follows its
   // indexes and ends on a block.
-  const std::uint64_t third = layout.chunk_ends[1], padding_end = layout.chunk_ends[2];
-  REQUIRE(mcap::record_at(all.subspan(third))->op == mcap::Op::kChunk);
-  std::uint64_t padding_start = third;
-  while (true) {
-    const auto record = mcap::record_at(all.subspan(padding_start));
-    REQUIRE(record.has_value());
-    if (record->op == mcap::Op::kPadding) break;
-    padding_start += mcap::kRecordPrefixBytes + record->content.size();
-  }
+  const std::uint64_t third = layout.chunk_paddings[1].end();
+  const std::uint64_t padding_start = layout.chunk_paddings[2].at;
+  const std::uint64_t padding_end = layout.chunk_paddings[2].end();
+  REQUIRE(
+      mcap::record_at(std::span(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size())
+                          .subspan(third))
+          ->op == mcap::Op::kChunk);
   struct Cut {
     const char* where;
     std::uint64_t at;

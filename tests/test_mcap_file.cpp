@@ -16,6 +16,7 @@
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
 #include "daemon/pcap/recording_model.hpp"
+#include "support/mcap_data_records.hpp"
 #include "support/mcap_reader.hpp"
 #include "support/test_support.hpp"
 
@@ -300,17 +301,13 @@ TEST_CASE(
                                            bytes.size());
   // The chunks' CRCs as asked: computed with the key on, 0 ("not computed") with it off.
   std::vector<std::pair<std::size_t, std::size_t>> stored;  // each chunk's records: at, size
-  for (std::size_t at = 8; at < file.size();) {
-    const auto record = mcap::record_at(file.subspan(at));
-    if (!record || record->op == mcap::Op::kFooter) break;
-    if (record->op == mcap::Op::kChunk) {
-      const auto chunk = mcap::parse_chunk(record->content);
-      REQUIRE(chunk);
-      CHECK((chunk->uncompressed_crc != 0) == chunk_crc);
-      stored.emplace_back(static_cast<std::size_t>(chunk->records.data() - file.data()),
-                          chunk->records.size());
-    }
-    at = static_cast<std::size_t>(record->content.data() - file.data()) + record->content.size();
+  for (const test::DataRecord& record : test::data_records(file)) {
+    if (record.op != mcap::Op::kChunk) continue;
+    const auto chunk = mcap::parse_chunk(record.content);
+    REQUIRE(chunk);
+    CHECK((chunk->uncompressed_crc != 0) == chunk_crc);
+    stored.emplace_back(static_cast<std::size_t>(chunk->records.data() - file.data()),
+                        chunk->records.size());
   }
   REQUIRE(stored.size() >= 4);
   // One bit in the middle of the third chunk's stored records: a literal that still decodes
