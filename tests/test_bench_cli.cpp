@@ -313,7 +313,7 @@ TEST_CASE(
 }
 
 TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-return traffic",
-          "[bench][cli][threads]") {
+          "[bench][cli][threads][measures]") {
   test::ScratchDir dir("zero-loss-daemon-only");
   const auto work = dir / "work";
   const auto result = run_report(
@@ -360,7 +360,7 @@ TEST_CASE("pandarcap-bench zero-loss --daemon-only: the daemon alone, on single-
 TEST_CASE(
     "pandarcap-bench zero-loss at the sensor's rate: both budgets, the bare loop and "
     "another receiver in one run",
-    "[bench][cli][threads]") {
+    "[bench][cli][threads][measures]") {
   test::ScratchDir dir("zero-loss-budget");
   // Any receiver a user wants to compare: here a few lines of Python that count datagrams and
   // print "received N" when stopped, the line the harness reads for loss. SIGTERM only sets a
@@ -613,7 +613,7 @@ TEST_CASE("pandarcap-bench write --json: PCD and pcap rates from one run", "[ben
 
 TEST_CASE(
     "pandarcap-bench zero-loss: every sensor-rate summary shows what fell behind, and it adds up",
-    "[bench][cli][threads]") {
+    "[bench][cli][threads][measures]") {
   test::ScratchDir dir("zero-loss-behind");
   // Far above one sensor's rate, so that stages may fall behind; the keys must be there either
   // way, and agree with the trials' per-stage loss.
@@ -660,7 +660,7 @@ TEST_CASE(
 
 TEST_CASE(
     "pandarcap-bench zero-loss --compare-tcpdump: the daemon and tcpdump -w in the same trials",
-    "[bench][cli][threads]") {
+    "[bench][cli][threads][measures]") {
   if (::geteuid() != 0 || (!std::filesystem::exists("/usr/bin/tcpdump") &&
                            !std::filesystem::exists("/usr/sbin/tcpdump"))) {
     WARN("tcpdump needs root and /usr/bin/tcpdump: skipped");
