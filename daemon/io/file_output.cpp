@@ -86,8 +86,25 @@ void OutputFile::sync() {
 
 void OutputFile::end_direct() noexcept {
   if (fd_ < 0 || !direct_) return;
-  const int flags = ::fcntl(fd_, F_GETFL);
-  if (flags >= 0 && ::fcntl(fd_, F_SETFL, flags & ~O_DIRECT) == 0) direct_ = false;
+  if (end_direct_io(fd_)) direct_ = false;
+}
+
+bool end_direct_io(int fd) noexcept {
+  const int flags = ::fcntl(fd, F_GETFL);
+  if (flags < 0) return false;
+  return (flags & O_DIRECT) == 0 || ::fcntl(fd, F_SETFL, flags & ~O_DIRECT) == 0;
+}
+
+bool direct_io_on(int fd) noexcept {
+  const int flags = ::fcntl(fd, F_GETFL);
+  return flags >= 0 && (flags & O_DIRECT) != 0;
+}
+
+bool cut_back(int fd, std::uint64_t size) noexcept {
+  if (io::file_syscalls().ftruncate(fd, static_cast<off_t>(size)) != 0) return false;
+  // A write after the cut continues at the cut, not past it (which would leave a hole).
+  ::lseek(fd, static_cast<off_t>(size), SEEK_SET);
+  return true;
 }
 
 OutputFile::~OutputFile() {
@@ -95,16 +112,21 @@ OutputFile::~OutputFile() {
 }
 
 io::IoError OutputFile::try_write(std::span<const std::uint8_t> bytes) noexcept {
+  if (const int error = write_fully(fd_, bytes, size_)) return {error, "cannot write", path_};
+  return {};
+}
+
+int write_fully(int fd, std::span<const std::uint8_t> bytes, std::uint64_t& written) noexcept {
   while (!bytes.empty()) {
-    const ssize_t n = io::file_syscalls().write(fd_, bytes.data(), bytes.size());
+    const ssize_t n = io::file_syscalls().write(fd, bytes.data(), bytes.size());
     if (n < 0) {
       if (errno == EINTR) continue;
-      return {errno != 0 ? errno : EIO, "cannot write", path_};
+      return errno != 0 ? errno : EIO;
     }
     bytes = bytes.subspan(static_cast<std::size_t>(n));
-    size_ += static_cast<std::uint64_t>(n);
+    written += static_cast<std::uint64_t>(n);
   }
-  return {};
+  return 0;
 }
 
 bool OutputFile::at_its_path() const noexcept {
@@ -118,11 +140,7 @@ bool OutputFile::at_its_path() const noexcept {
 }
 
 void OutputFile::truncate(std::uint64_t size) noexcept {
-  if (fd_ >= 0 && io::file_syscalls().ftruncate(fd_, static_cast<off_t>(size)) == 0) {
-    size_ = size;
-    // A write after the cut continues at the cut, not past it (which would leave a hole).
-    ::lseek(fd_, static_cast<off_t>(size), SEEK_SET);
-  }
+  if (fd_ >= 0 && cut_back(fd_, size)) size_ = size;
 }
 
 io::IoError OutputFile::try_close() noexcept {

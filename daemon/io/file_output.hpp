@@ -56,6 +56,11 @@ class OutputFile {
   io::IoError try_write(std::span<const std::uint8_t> bytes) noexcept;
   io::IoError try_write(std::string_view text) noexcept { return try_write(as_bytes(text)); }
   bool direct() const noexcept { return direct_; }
+  // The descriptor, for a thread that appends through it while this object's owner writes
+  // nothing (an MCAP file's chunks, daemon/mcap/chunk_pipeline.hpp); -1 when closed. What that
+  // thread wrote is counted into size() with count_written() once its owner learns of it.
+  int fd() const noexcept { return fd_; }
+  void count_written(std::uint64_t bytes) noexcept { size_ += bytes; }
   // fdatasync(2): what was written is on the disk (at start-up; the writer's loop leaves this to
   // the finisher thread). Throws std::system_error.
   void sync();
@@ -87,6 +92,20 @@ class OutputFile {
   std::uint64_t size_ = 0;  // for kAppend: the size at open plus what was written
   bool direct_ = false;
 };
+
+// Writes all of `bytes` to `fd` at its position through the test seam (io::file_syscalls),
+// retrying EINTR and short writes, and adds what was written to `written`. Returns 0, or the
+// errno of the write that failed (the bytes before it stay written). OutputFile::try_write's
+// loop, for a thread that writes through an OutputFile's descriptor.
+int write_fully(int fd, std::span<const std::uint8_t> bytes, std::uint64_t& written) noexcept;
+// Whether `fd` writes past the page cache (O_DIRECT) now.
+bool direct_io_on(int fd) noexcept;
+// `fd`'s writes through the page cache from now on (OutputFile::end_direct's call); false when
+// the kernel refused.
+bool end_direct_io(int fd) noexcept;
+// `fd` cut back to `size` bytes (the seam's ftruncate), its next write at the cut
+// (OutputFile::truncate's calls); false when the cut failed.
+bool cut_back(int fd, std::uint64_t size) noexcept;
 
 // The block size and alignment O_DIRECT writes are made in (the page size: every file system's
 // logical block size divides it).

@@ -2,9 +2,11 @@
 
 #include <pthread.h>
 #include <signal.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <bit>
+#include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <exception>
@@ -43,6 +45,10 @@ void ChunkBuffer::clear() noexcept {
   uncompressed = false;
   failed = false;
   error[0] = '\0';
+  fd = -1;
+  file = 0;
+  write_error = 0;
+  direct_refused = false;
 }
 
 ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
@@ -53,6 +59,7 @@ ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
       uncompressed_when_behind_(uncompressed_when_behind),
       // Room for every buffer and the stop marker.
       to_compress_(std::bit_ceil(buffers + 1)),
+      to_write_(std::bit_ceil(buffers + 1)),
       done_(std::bit_ceil(buffers + 1)) {
   if (buffers == 0) throw std::invalid_argument("an MCAP chunk pipeline needs a buffer");
   if (compression != mcap::ChunkCompression::kNone) {
@@ -83,15 +90,27 @@ ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
     free_.push_back(chunk.get());
     buffers_.push_back(std::move(chunk));
   }
-  // Every signal blocked while the thread is made, so it starts with them all blocked.
+  // Every signal blocked while the threads are made, so they start with them all blocked. The
+  // write thread first: were the compression thread not made, the stop marker ends it.
   sigset_t all, before;
   sigfillset(&all);
   pthread_sigmask(SIG_SETMASK, &all, &before);
   try {
-    thread_ = std::thread([this] {
-      pthread_setname_np(pthread_self(), "pc-mcap-chunks");
-      run();
+    write_thread_ = std::thread([this] {
+      pthread_setname_np(pthread_self(), "pc-mcap-write");
+      run_writes();
     });
+    try {
+      thread_ = std::thread([this] {
+        pthread_setname_np(pthread_self(), "pc-mcap-chunks");
+        run();
+      });
+    } catch (...) {
+      to_write_.try_push(nullptr);
+      to_write_.notify();
+      write_thread_.join();
+      throw;
+    }
   } catch (...) {
     pthread_sigmask(SIG_SETMASK, &before, nullptr);
     throw;
@@ -102,7 +121,8 @@ ChunkPipeline::ChunkPipeline(std::size_t buffers, std::size_t record_capacity,
 ChunkPipeline::~ChunkPipeline() {
   to_compress_.try_push(nullptr);  // never full: it has room for every buffer and the marker
   to_compress_.notify();
-  thread_.join();
+  thread_.join();  // which passes the marker on to the write thread
+  write_thread_.join();
 }
 
 ChunkBuffer* ChunkPipeline::take_free() noexcept {
@@ -146,15 +166,57 @@ void ChunkPipeline::run() noexcept {
       to_compress_.wait_for_data(kChunkIdleWait);
       continue;
     }
-    if (chunk == nullptr) return;  // the destructor's stop marker
+    if (chunk == nullptr) {  // the destructor's stop marker: the write thread's too
+      to_write_.try_push(nullptr);
+      to_write_.notify();
+      return;
+    }
     // A full chunk already queued behind this one (not the stop marker, nor a chunk a flush or
     // a close handed over): a chunk behind.
     ChunkBuffer* const* next = to_compress_.front();
     const bool behind = next != nullptr && *next != nullptr && (*next)->full;
     taken_.fetch_add(1, std::memory_order_release);
     compress(*chunk, behind);
+    to_write_.try_push(chunk);  // never full: room for every buffer and the marker
+    to_write_.notify();
+  }
+}
+
+void ChunkPipeline::run_writes() noexcept {
+  while (true) {
+    ChunkBuffer* chunk = nullptr;
+    if (!to_write_.try_pop(chunk)) {
+      to_write_.wait_for_data(kChunkIdleWait);
+      continue;
+    }
+    if (chunk == nullptr) return;  // the stop marker, after every chunk before it
+    write(*chunk);
     done_.try_push(chunk);  // never full: room for every buffer
     done_.notify();
+  }
+}
+
+void ChunkPipeline::write(ChunkBuffer& chunk) noexcept {
+  if (chunk.fd < 0 || chunk.failed) return;  // a failed chunk: the writer abandons the file
+  if (chunk.file == failed_file_) {
+    chunk.write_error = failed_error_;  // after a failed write, nothing more of that file
+    return;
+  }
+  // Where the chunk starts: the end of the chunk before it, or of the opening records.
+  const off_t start = ::lseek(chunk.fd, 0, SEEK_CUR);
+  std::uint64_t written = 0;
+  int error = write_fully(chunk.fd, chunk.written(), written);
+  if (error == EINVAL && start >= 0 && direct_io_on(chunk.fd)) {
+    // Took O_DIRECT at open, refuses the writes: the page cache, from the chunk's start.
+    if (end_direct_io(chunk.fd) && cut_back(chunk.fd, static_cast<std::uint64_t>(start))) {
+      chunk.direct_refused = true;
+      error = write_fully(chunk.fd, chunk.written(), written);
+    }
+  }
+  if (error != 0) {
+    chunk.write_error = error;
+    failed_file_ = chunk.file;
+    failed_error_ = error;
   }
 }
 

@@ -70,6 +70,7 @@ McapFile::McapFile(const McapFileOptions& options)
 
 void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
   file_.open(path, direct_works_ ? OutputFile::Mode::kCreateDirect : OutputFile::Mode::kCreate);
+  ++file_number_;
   summary_.chunks.clear();
   summary_.attachments.clear();
   summary_.metadata.clear();
@@ -135,7 +136,7 @@ bool McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
   if (data_bytes > max_message_bytes_) {
     throw std::length_error("MCAP message larger than the configured frame capacity");
   }
-  write_done_chunks();
+  count_done_chunks();
   if (open_ != nullptr && open_->messages != 0) {
     const bool too_big =
         open_->records.size() + mcap::kMessagePrefixBytes + data_bytes > open_->records.capacity();
@@ -147,7 +148,7 @@ bool McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
   }
   if (open_ == nullptr) open_ = pipeline_.take_free();
   if (open_ == nullptr && options_.wait_for_free_chunk) {
-    if (ChunkBuffer* oldest = pipeline_.wait_done()) write_chunk(*oldest);
+    if (ChunkBuffer* oldest = pipeline_.wait_done()) count_chunk(*oldest);
     open_ = pipeline_.take_free();
   }
   if (open_ != nullptr) return true;
@@ -171,6 +172,8 @@ bool McapFile::begin_message(std::uint16_t channel, std::uint64_t log_time,
 void McapFile::submit_open() {
   messages_in_flight_ += open_->messages;
   bytes_in_flight_ += open_->records.size();
+  open_->fd = file_.fd();
+  open_->file = file_number_;
   pipeline_.submit(open_);
   open_ = nullptr;
 }
@@ -222,21 +225,34 @@ bool McapFile::add_health(std::string_view json, std::uint64_t log_time) {
   return true;
 }
 
-void McapFile::write_done_chunks() {
+void McapFile::count_done_chunks() {
   while (ChunkBuffer* chunk = pipeline_.take_done())
-    write_chunk(*chunk);
+    count_chunk(*chunk);
 }
 
-void McapFile::write_chunk(ChunkBuffer& chunk) {
+void McapFile::count_chunk(ChunkBuffer& chunk) {
   // Whatever happens, the buffer is free again; its messages stay in messages_in_flight_ until
-  // written, so a failure's abandon() counts them as lost.
+  // counted as written, so a failure's abandon() counts them as lost.
   struct GiveBack {
     ChunkPipeline& pipeline;
     ChunkBuffer& chunk;
     ~GiveBack() { pipeline.give_back(&chunk); }
   } give_back{pipeline_, chunk};
-  if (chunk.failed) throw std::runtime_error(chunk.error.data());
-  // The compression thread framed the chunk: its record, its indexes, the padding.
+  if (chunk.failed) throw std::runtime_error(chunk.error.data());  // not written
+  if (chunk.write_error != 0) {
+    // What the write thread wrote of it, if anything, is cut off: the file ends on the chunk
+    // before, the last one counted (the write thread writes nothing of this file after it).
+    file_.truncate(whole_bytes_);
+    io::throw_io_error({chunk.write_error, "cannot write", file_.path()});
+  }
+  if (chunk.direct_refused) {
+    // Through the page cache from this chunk on (the write thread ended O_DIRECT on the
+    // descriptor), and every later file from its start.
+    direct_works_ = false;
+    file_.end_direct();
+  }
+  // The compression thread framed the chunk (its record, its indexes, the padding) and the write
+  // thread appended it: it starts where the chunks before it, in the order submitted, ended.
   const std::uint64_t chunk_start = file_.size();
   mcap::ChunkInfo info;
   info.message_start_time = chunk.start_time;
@@ -250,7 +266,8 @@ void McapFile::write_chunk(ChunkBuffer& chunk) {
     if (chunk.index_at[c] != 0) info.message_index_offset[c] = chunk_start + chunk.index_at[c];
   }
   info.message_index_length = chunk.index_bytes;
-  write_out(chunk.written());  // throws: the chunk stays unwritten and uncounted
+  file_.count_written(chunk.written_bytes);
+  whole_bytes_ = file_.size();
   summary_.chunks.push_back(info);
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
     for (const auto& entry : chunk.index[c])
@@ -280,14 +297,14 @@ void McapFile::write_out(std::span<const std::uint8_t> bytes) {
 
 void McapFile::flush() {
   if (!file_.is_open()) return;
-  write_done_chunks();
+  count_done_chunks();
   if (open_ != nullptr && open_->messages != 0) submit_open();
 }
 
 void McapFile::drain() {
   if (!file_.is_open()) return;
   while (ChunkBuffer* chunk = pipeline_.wait_done())
-    write_chunk(*chunk);
+    count_chunk(*chunk);
 }
 
 void McapFile::close() {

@@ -1,14 +1,15 @@
 // One MCAP file being written (https://mcap.dev/spec; the records are core/mcap/).
 //
 // Messages collect in an uncompressed chunk in memory, one of a small pool of chunk buffers
-// (chunk_pipeline.hpp). A chunk is handed to the compression thread when it would outgrow
-// chunk_bytes, when its message index is full, and at every flush() (the writer's
-// once-a-second tick); the writer thread picks it up compressed, without waiting, as it adds the
-// next messages or at the next flush, and writes it with one MessageIndex record per channel in
-// it. So a killed run loses about the last second, and what is on disk always ends on a whole
-// chunk and its indexes: the recovery (mcap_recovery.hpp) cuts back to that point and writes the
-// summary. close() hands the last chunk over, waits for every chunk in flight and writes it (the
-// drain), then DataEnd, the summary (schemas, channels, statistics, chunk, attachment and
+// (chunk_pipeline.hpp). A chunk is handed to the pipeline when it would outgrow chunk_bytes, when
+// its message index is full, and at every flush() (the writer's once-a-second tick): its
+// compression thread compresses it, its write thread appends it to the file with one
+// MessageIndex record per channel in it, and the writer thread takes it back, without waiting,
+// as it adds the next messages or at the next flush, and counts it into the file's chunk index
+// and summary. So a killed run loses about the last second, and what is on disk always ends on a
+// whole chunk and its indexes: the recovery (mcap_recovery.hpp) cuts back to that point and
+// writes the summary. close() hands the last chunk over, waits for every chunk in flight (the
+// drain), then writes DataEnd, the summary (schemas, channels, statistics, chunk, attachment and
 // metadata indexes), the summary offsets and the footer.
 //
 // When every chunk buffer is in flight (the compression thread is behind), a message is left
@@ -16,22 +17,22 @@
 // oldest chunk in flight is waited for; otherwise the writer thread never waits for the
 // compression thread except in drain(), close() and abandon().
 //
-// Past the page cache: each chunk goes to the file in one write with O_DIRECT, framed by the
-// compression thread (its record, its indexes and a Padding record, mcap_records.hpp, ending it
-// on a 4096-byte boundary), after opening records padded the same way; the tail goes through
-// the page cache. Why: a recording is written once and read rarely, and its trip through the page
-// cache was the writer's largest cost at high rates (the kernel's copy, on a virtual machine
-// whose fresh pages are dear) and the source of its longest stalls (the dirty pages' writeback):
-// docs/performance.md, "Twelfth round". Where the file system has no O_DIRECT (tmpfs before
-// Linux 6.6), or takes it at open and refuses the writes, the same bytes go through the page
-// cache. What is on the disk is the same either way, and ends on a whole chunk as before.
+// Past the page cache: each chunk goes to the file in one write with O_DIRECT (the pipeline's
+// write thread), framed by the compression thread (its record, its indexes and a Padding record,
+// mcap_records.hpp, ending it on a 4096-byte boundary), after opening records padded the same
+// way; the tail goes through the page cache. Why: a recording is written once and read rarely, and
+// its trip through the page cache was the writer's largest cost at high rates (the kernel's copy,
+// on a virtual machine whose fresh pages are dear) and the source of its longest stalls (the dirty
+// pages' writeback): docs/performance.md, "Twelfth round". Where the file system has no O_DIRECT
+// (tmpfs before Linux 6.6), or takes it at open and refuses the writes, the same bytes go through
+// the page cache. What is on the disk is the same either way, and ends on a whole chunk as before.
 //
 // Every buffer is allocated when the McapFile is made, sized from the options; writing messages,
 // chunks and the summary then allocates nothing. A file holds at most max_chunks chunks (the
 // summary's index is preallocated): full() says when the recorder must start the next file.
 // Failures throw (std::system_error from the file, std::length_error for a message larger than
 // the options allow); the file is then left as it was after its last whole chunk.
-// Not thread-safe: one thread (the writer) calls everything; the compression thread is internal.
+// Not thread-safe: one thread (the writer) calls everything; the pipeline's threads are internal.
 #pragma once
 
 #include <cstddef>
@@ -75,10 +76,10 @@ class McapFile {
                   std::uint64_t log_time);
   bool add_health(std::string_view json, std::uint64_t log_time);
 
-  // Hands the open chunk (if any) to the compression thread and writes the chunks that came
-  // back compressed; never waits.
+  // Hands the open chunk (if any) to the pipeline and counts the chunks that came back written;
+  // never waits.
   void flush();
-  // Waits for every chunk in flight and writes it: the file then ends on all that was flushed.
+  // Waits for every chunk in flight to be written: the file then ends on all that was flushed.
   void drain();
   // Writes the open chunk, every chunk in flight and the tail, and closes the file.
   void close();
@@ -105,11 +106,13 @@ class McapFile {
   bool make_room(std::size_t data_bytes, std::uint16_t channel);
   bool begin_message(std::uint16_t channel, std::uint64_t log_time, std::size_t data_bytes);
   void submit_open();
-  // Writes the chunks back from the compression thread (never waits).
-  void write_done_chunks();
-  void write_chunk(ChunkBuffer& chunk);
-  // `bytes` to the file; on a failure the file is cut back to its last whole chunk and the error
-  // thrown (std::system_error).
+  // Counts the chunks back from the pipeline, written, into the file's summary (never waits).
+  void count_done_chunks();
+  // One chunk back: counted, or its failure thrown (std::system_error for a write, the file cut
+  // back to its last whole chunk).
+  void count_chunk(ChunkBuffer& chunk);
+  // `bytes` to the file (the opening records, the tail); on a failure the file is cut back to its
+  // last whole chunk and the error thrown (std::system_error).
   void write_out(std::span<const std::uint8_t> bytes);
 
   McapFileOptions options_;
@@ -127,6 +130,7 @@ class McapFile {
   std::uint64_t chunks_uncompressed_ = 0;
   std::uint32_t sequence_[mcap::kMaxChannels + 1]{};
   std::uint64_t whole_bytes_ = 0;  // the file's length after its last whole chunk
+  std::uint64_t file_number_ = 0;  // the files opened: the pipeline's name for the open one
   // False once a file system took O_DIRECT at open but refused its writes (EINVAL): the files
   // after it go through the page cache.
   bool direct_works_ = true;

@@ -20,11 +20,17 @@ struct DataRecord {
   std::size_t end() const noexcept { return at + mcap::kRecordPrefixBytes + content.size(); }
 };
 
-// Every record of `file` from after its leading magic up to and including DataEnd. Each must
-// parse and DataEnd must be there (REQUIRE): the files walked are whole.
-inline std::vector<DataRecord> data_records(std::span<const std::uint8_t> file) {
+// What a walk expects at the end: a finished file's DataEnd, or (an unfinished .part) the file's
+// last byte, where its last record must end.
+enum class WalkTo { kDataEnd, kFileEnd };
+
+// Every record of `file` from after its leading magic up to and including DataEnd (or up to the
+// file's end). Each must parse, and DataEnd must be there (REQUIRE): the files walked are whole.
+inline std::vector<DataRecord> data_records(std::span<const std::uint8_t> file,
+                                            WalkTo to = WalkTo::kDataEnd) {
   std::vector<DataRecord> records;
-  for (std::size_t at = mcap::kMagic.size(); at < file.size();) {
+  std::size_t at = mcap::kMagic.size();
+  while (at < file.size()) {
     INFO("record at " << at);
     const auto record = mcap::record_at(file.subspan(at));
     REQUIRE(record.has_value());
@@ -32,12 +38,14 @@ inline std::vector<DataRecord> data_records(std::span<const std::uint8_t> file) 
     if (record->op == mcap::Op::kDataEnd) return records;
     at = records.back().end();
   }
-  FAIL("no DataEnd record");
+  if (to == WalkTo::kDataEnd) FAIL("no DataEnd record");
+  CHECK(at == file.size());
   return records;
 }
 
-inline std::vector<DataRecord> data_records(const std::string& file) {
-  return data_records(std::span(reinterpret_cast<const std::uint8_t*>(file.data()), file.size()));
+inline std::vector<DataRecord> data_records(const std::string& file, WalkTo to = WalkTo::kDataEnd) {
+  return data_records(std::span(reinterpret_cast<const std::uint8_t*>(file.data()), file.size()),
+                      to);
 }
 
 }  // namespace pandarcap::test

@@ -1,0 +1,249 @@
+// daemon/mcap's write thread ("pc-mcap-write", chunk_pipeline.hpp): the chunks reach the file on
+// a thread of their own, so a slow or stalled MCAP disk never holds the writer thread, which
+// writes the frames and the pcap too. What the tests hold it to:
+//   - a stalled write: the writer's every call returns while the write thread is held inside the
+//     file's write(); what no chunk buffer could take is left out and counted; once the disk
+//     moves, the file holds every message the writer was told was taken, and only those;
+//   - a failed write (ENOSPC on the Nth chunk): the writer is told (std::system_error with the
+//     errno), nothing of that file is written after it, abandon() leaves the chunks before it,
+//     whole, and the next file is written in full;
+//   - every chunk's bytes are written by that thread, none by the writer's.
+// The stall is the test seam's write (daemon/io/syscalls.hpp) holding the calls made for the
+// MCAP file (known by its inode) until the test lets them go, waited for on a condition with a
+// timeout: a writer that wrote the chunks itself would wait there, and fail the test, not hang it.
+#include <pthread.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <cerrno>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <filesystem>
+#include <mutex>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include "bench/child_process.hpp"
+#include "daemon/io/syscalls.hpp"
+#include "daemon/mcap/mcap_file.hpp"
+#include "daemon/mcap/mcap_recovery.hpp"
+#include "support/mcap_data_records.hpp"
+#include "support/mcap_reader.hpp"
+#include "support/test_support.hpp"
+
+using namespace pandarcap;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr std::uint64_t kWriteT0 = 1'795'348'800'000'000'000;  // 2026-11-20, ns
+
+// The seam's view of the MCAP file's writes: which file, whether they are held, and what came.
+struct McapWrites {
+  std::mutex mutex;
+  std::condition_variable changed;
+  ino_t inode = 0;             // the MCAP file's (0: none watched)
+  bool hold = false;           // writes wait while set
+  int fail_at = 0;             // the Nth write fails with ENOSPC (0: none)
+  int writes = 0;              // calls for the file, held ones included
+  int held = 0;                // waiting in the seam now
+  int from_other_threads = 0;  // calls not made by "pc-mcap-write" (after the opening records)
+  int after_failure = 0;       // calls after the failed one
+  bool timed_out = false;      // a held write waited past the test's patience
+};
+McapWrites mcap_writes;
+
+bool is_watched(int fd) {
+  struct stat st {};
+  return ::fstat(fd, &st) == 0 && st.st_ino == mcap_writes.inode;
+}
+
+ssize_t watching_write(int fd, const void* data, std::size_t size) {
+  {
+    std::unique_lock lock(mcap_writes.mutex);
+    if (mcap_writes.inode != 0 && is_watched(fd)) {
+      char name[16] = {};
+      pthread_getname_np(pthread_self(), name, sizeof name);
+      if (std::string(name) != "pc-mcap-write") ++mcap_writes.from_other_threads;
+      const int n = ++mcap_writes.writes;
+      if (mcap_writes.fail_at != 0 && n > mcap_writes.fail_at) ++mcap_writes.after_failure;
+      if (n == mcap_writes.fail_at) {
+        errno = ENOSPC;
+        return -1;
+      }
+      ++mcap_writes.held;
+      mcap_writes.changed.notify_all();
+      // Long enough for any machine. A writer thread waiting here ends the hold for good: the
+      // test fails on timed_out instead of waiting once per chunk.
+      if (!mcap_writes.timed_out &&
+          !mcap_writes.changed.wait_for(lock, std::chrono::seconds(30),
+                                        [] { return !mcap_writes.hold; })) {
+        mcap_writes.timed_out = true;
+      }
+      --mcap_writes.held;
+    }
+  }
+  return ::write(fd, data, size);
+}
+
+// Starts watching `path`'s writes (made after its opening records).
+void watch(const fs::path& path, bool hold, int fail_at) {
+  std::lock_guard lock(mcap_writes.mutex);
+  struct stat st {};
+  REQUIRE(::stat(path.c_str(), &st) == 0);
+  mcap_writes.inode = st.st_ino;
+  mcap_writes.hold = hold;
+  mcap_writes.fail_at = fail_at;
+  mcap_writes.writes = mcap_writes.held = mcap_writes.from_other_threads = 0;
+  mcap_writes.after_failure = 0;
+  mcap_writes.timed_out = false;
+}
+
+void release_writes() {
+  std::lock_guard lock(mcap_writes.mutex);
+  mcap_writes.hold = false;
+  mcap_writes.changed.notify_all();
+}
+
+McapFileOptions write_thread_options() {
+  McapFileOptions o;
+  o.compression = mcap::ChunkCompression::kLz4;
+  o.chunk_bytes = 64 * 1024;  // a chunk every ~50 packets
+  o.chunk_buffers = 3;        // the daemon's default pool
+  o.max_frame_points = 1000;
+  o.max_chunks = 512;
+  o.packets = true;
+  o.library = "pandarcap test";
+  o.calibration_csv = "Channel,Elevation,Azimuth\n1,15,0\n";
+  o.wait_for_free_chunk = false;  // live: never wait for a buffer
+  return o;
+}
+
+// A datagram whose bytes differ from the last one's (chunks compress to odd sizes).
+const std::vector<std::uint8_t>& next_payload() {
+  static std::vector<std::uint8_t> payload(1262);
+  static std::uint32_t state = 12345;
+  for (auto& byte : payload) {
+    state = state * 1103515245u + 12345u;
+    byte = static_cast<std::uint8_t>(state >> 27);
+  }
+  return payload;
+}
+
+// `packets` datagrams into the open file, a flush every 300 as the writer's tick does. Returns
+// how many were taken (add_packet said so).
+std::uint64_t add_packets(McapFile& file, int packets, int first) {
+  std::uint64_t taken = 0;
+  for (int p = first; p < first + packets; ++p) {
+    const std::uint64_t t = kWriteT0 + static_cast<std::uint64_t>(p) * 277'000;
+    taken += file.add_packet(next_payload(), static_cast<std::int64_t>(t), t) ? 1 : 0;
+    if (p % 300 == 299) file.flush();
+  }
+  return taken;
+}
+
+}  // namespace
+
+TEST_CASE("a stalled MCAP disk holds only MCAP: the writer never waits and counts what it left out",
+          "[mcap][threads]") {
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = watching_write;
+  const io::ScopedFileSyscalls seam(calls);
+  test::ScratchDir dir("mcap-write-stall");
+  const fs::path path = dir / "a.mcap";
+  McapFile file(write_thread_options());
+  file.open(path.string(), kWriteT0);
+  const auto opening_bytes = fs::file_size(path);
+  watch(path, /*hold=*/true, /*fail_at=*/0);
+
+  // 3000 packets (~60 chunks) while the disk takes nothing: the first chunk's write is held, the
+  // pool's other buffers fill behind it, and then every message is left out at once.
+  const std::uint64_t taken_while_held = add_packets(file, 3000, 0);
+  {
+    std::unique_lock lock(mcap_writes.mutex);
+    REQUIRE(mcap_writes.changed.wait_for(lock, std::chrono::seconds(30),
+                                         [] { return mcap_writes.held == 1; }));
+    CHECK(mcap_writes.writes == 1);  // the rest wait behind it, unwritten
+  }
+  CHECK(fs::file_size(path) == opening_bytes);
+  CHECK(taken_while_held > 0);
+  CHECK(taken_while_held < 3000 / 4);  // three buffers' worth, not the 3000
+  CHECK(file.messages_not_recorded() == 3000 - taken_while_held);
+  CHECK(file.messages() == 0);  // none back yet: none counted as in the file
+
+  // The disk moves again: the chunks held come back written, and new messages are taken.
+  release_writes();
+  const std::uint64_t taken_after = add_packets(file, 600, 3000);
+  file.close();
+  const std::uint64_t taken = taken_while_held + taken_after;
+  CHECK(file.messages() == taken);
+  CHECK(file.messages_not_recorded() + taken == 3600);
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK_FALSE(mcap_writes.timed_out);
+    CHECK(mcap_writes.from_other_threads == 1);  // the tail, close()'s: every chunk was not
+    mcap_writes.inode = 0;
+  }
+  CHECK(finish_interrupted_mcap(path.string()).messages == taken);  // a finished file, all kept
+  const auto read = test::read_mcap_independently(path);
+  if (read.reader_missing) return;
+  INFO(read.error);
+  REQUIRE(read.file);
+  CHECK((*read.file)["statistics"]["message_count"].get<std::uint64_t>() == taken);
+}
+
+TEST_CASE(
+    "a chunk write that fails: the writer told, nothing after it written, the next file whole",
+    "[mcap][threads]") {
+  const int fail_at = GENERATE(1, 2, 5);
+  INFO("the chunk write that fails: #" << fail_at);
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = watching_write;
+  const io::ScopedFileSyscalls seam(calls);
+  test::ScratchDir dir("mcap-write-fails");
+  const fs::path path = dir / "a.mcap.part";
+  McapFileOptions options = write_thread_options();
+  options.wait_for_free_chunk = true;  // every message handed over: the failure must come
+  McapFile file(options);
+  file.open(path.string(), kWriteT0);
+  watch(path, /*hold=*/false, fail_at);
+
+  int code = 0;
+  try {
+    add_packets(file, 3000, 0);
+    file.close();
+  } catch (const std::system_error& error) {
+    code = error.code().value();
+  }
+  CHECK(code == ENOSPC);
+  const std::uint64_t lost = file.abandon();
+  CHECK(lost > 0);
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK(mcap_writes.after_failure == 0);  // no chunk of the file written after the failure
+    CHECK(mcap_writes.from_other_threads == 0);
+    mcap_writes.inode = 0;
+  }
+  // The file ends on the chunks written before the failure, each whole with its indexes.
+  std::size_t chunks = 0;
+  for (const test::DataRecord& record :
+       test::data_records(harness::read_file(path), test::WalkTo::kFileEnd))
+    chunks += record.op == mcap::Op::kChunk ? 1 : 0;
+  CHECK(chunks == static_cast<std::size_t>(fail_at - 1));
+  CHECK(fs::file_size(path) % kDirectIoBlock == 0);  // on a chunk's padding, or the opening's
+  const McapRecovery recovered = finish_interrupted_mcap(path.string());
+  CHECK(recovered.cut_bytes == 0);
+  CHECK(recovered.messages == file.messages());  // the messages of the chunks written
+
+  // The same McapFile's next file: its writes are its own, written in full.
+  const fs::path next = dir / "b.mcap";
+  file.open(next.string(), kWriteT0);
+  const std::uint64_t taken = add_packets(file, 1000, 0);
+  file.close();
+  CHECK(taken == 1000);
+  CHECK(file.messages() == 1000);
+  CHECK(finish_interrupted_mcap(next.string()).messages == 1000);
+}
