@@ -7,7 +7,10 @@
 //   - a failed write (ENOSPC on the Nth chunk): the writer is told (std::system_error with the
 //     errno), nothing of that file is written after it, abandon() leaves the chunks before it,
 //     whole, and the next file is written in full;
-//   - every chunk's bytes are written by that thread, none by the writer's.
+//   - every chunk's bytes are written by that thread, none by the writer's;
+//   - the recorder, when a chunk write fails and the disk stays full so that the file cannot be
+//     finished either: the .part's messages still count as written (the next start finishes
+//     it), never falling back, and the bytes lost count as not written.
 // The stall is the test seam's write (daemon/io/syscalls.hpp) holding the calls made for the
 // MCAP file (known by its inode) until the test lets them go, waited for on a condition with a
 // timeout: a writer that wrote the chunks itself would wait there, and fail the test, not hang it.
@@ -30,6 +33,11 @@
 #include "daemon/io/syscalls.hpp"
 #include "daemon/mcap/mcap_file.hpp"
 #include "daemon/mcap/mcap_recovery.hpp"
+#include "daemon/output/file_finisher.hpp"
+#include "daemon/output/health_room.hpp"
+#include "daemon/output/mcap_recorder.hpp"
+#include "daemon/output/output_accounting.hpp"
+#include "daemon/output/writer_options.hpp"
 #include "support/mcap_data_records.hpp"
 #include "support/mcap_reader.hpp"
 #include "support/test_support.hpp"
@@ -48,6 +56,7 @@ struct McapWrites {
   ino_t inode = 0;             // the MCAP file's (0: none watched)
   bool hold = false;           // writes wait while set
   int fail_at = 0;             // the Nth write fails with ENOSPC (0: none)
+  bool stays_full = false;     // and every one after it (the disk stays full)
   int writes = 0;              // calls for the file, held ones included
   int held = 0;                // waiting in the seam now
   int from_other_threads = 0;  // calls not made by "pc-mcap-write" (after the opening records)
@@ -70,7 +79,8 @@ ssize_t watching_write(int fd, const void* data, std::size_t size) {
       if (std::string(name) != "pc-mcap-write") ++mcap_writes.from_other_threads;
       const int n = ++mcap_writes.writes;
       if (mcap_writes.fail_at != 0 && n > mcap_writes.fail_at) ++mcap_writes.after_failure;
-      if (n == mcap_writes.fail_at) {
+      if (n == mcap_writes.fail_at ||
+          (mcap_writes.stays_full && n > mcap_writes.fail_at && mcap_writes.fail_at != 0)) {
         errno = ENOSPC;
         return -1;
       }
@@ -90,13 +100,14 @@ ssize_t watching_write(int fd, const void* data, std::size_t size) {
 }
 
 // Starts watching `path`'s writes (made after its opening records).
-void watch(const fs::path& path, bool hold, int fail_at) {
+void watch(const fs::path& path, bool hold, int fail_at, bool stays_full = false) {
   std::lock_guard lock(mcap_writes.mutex);
   struct stat st {};
   REQUIRE(::stat(path.c_str(), &st) == 0);
   mcap_writes.inode = st.st_ino;
   mcap_writes.hold = hold;
   mcap_writes.fail_at = fail_at;
+  mcap_writes.stays_full = stays_full;
   mcap_writes.writes = mcap_writes.held = mcap_writes.from_other_threads = 0;
   mcap_writes.after_failure = 0;
   mcap_writes.timed_out = false;
@@ -246,4 +257,79 @@ TEST_CASE(
   CHECK(taken == 1000);
   CHECK(file.messages() == 1000);
   CHECK(finish_interrupted_mcap(next.string()).messages == 1000);
+}
+
+namespace {
+
+// The finisher's word, to the recorder (as the writer passes it on).
+struct ToRecorder final : FinishReceiver {
+  McapRecorder* recorder = nullptr;
+  void finished(const FinishJob& job) override { recorder->finished(job); }
+};
+
+}  // namespace
+
+TEST_CASE("a chunk write fails and the disk stays full: the .part's messages still written",
+          "[mcap][outputs][threads]") {
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = watching_write;
+  const io::ScopedFileSyscalls seam(calls);
+  test::ScratchDir dir("mcap-stays-full");
+  WriterOptions options;
+  options.output_dir = dir / "out";
+  options.mcap = true;
+  options.mcap_file = write_thread_options();
+  fs::create_directories(options.output_dir / "mcap");
+  fs::create_directories(options.output_dir / "health");
+  OutputAccounting accounting;
+  HealthRoom space(options.output_dir / "health");
+  ToRecorder receiver;
+  FileFinisher finisher(receiver);
+  McapRecorder recorder(options, accounting, space, finisher);
+  receiver.recorder = &recorder;
+  recorder.adopt_earlier_files();
+  recorder.prepare();
+
+  RawBatch batch(100);
+  int sent = 0;
+  const auto send_batch = [&] {
+    batch.size = batch.capacity;
+    for (std::size_t i = 0; i < batch.size; ++i) {
+      RawPacket& packet = batch.packets[i];
+      const auto& payload = next_payload();
+      std::copy(payload.begin(), payload.end(), packet.payload);
+      packet.length = static_cast<std::uint16_t>(payload.size());
+      packet.receive_time_ns = static_cast<std::int64_t>(kWriteT0) + sent++ * 277'000;
+    }
+    recorder.write_packets(batch);
+    recorder.flush();
+  };
+  send_batch();
+  const auto parts = test::files_ending(options.output_dir / "mcap", ".mcap.part");
+  REQUIRE(parts.size() == 1);
+  const fs::path part = parts.front();
+  // The 4th chunk write fails, and so does every write to the file after it: the recovery's
+  // tail too, so the file stays a .part.
+  watch(part, /*hold=*/false, /*fail_at=*/4, /*stays_full=*/true);
+  std::uint64_t written_before = 0;
+  for (int round = 0; round < 100 && accounting.write_errors() == 0; ++round) {
+    send_batch();
+    CHECK(recorder.messages_written() >= written_before);
+    written_before = recorder.messages_written();
+  }
+  REQUIRE(accounting.write_errors() > 0);
+  CHECK(recorder.messages_written() >= written_before);  // never back, at the failure either
+  CHECK(accounting.bytes_not_written() > 0);             // the chunks lost, in bytes
+  CHECK(recorder.messages_not_written() > 0);
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    mcap_writes.inode = 0;  // the disk has room again
+  }
+  REQUIRE(fs::exists(part));  // not finished: the disk was full
+  // What the next start finishes is what was counted as written: the three chunks before it.
+  const McapRecovery recovered = finish_interrupted_mcap(part.string());
+  CHECK(recovered.messages > 0);
+  CHECK(recorder.messages_written() == recovered.messages);
+  recorder.close();
+  finisher.drain();
 }

@@ -135,7 +135,8 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(mcap_messages_not_written, "mcap_messages_not_written",                                        \
     "Messages lost from MCAP files to failed writes, or not written to keep space for health")    \
   X(mcap_messages_not_recorded, "mcap_messages_not_recorded",                                      \
-    "Messages left out of MCAP files because every chunk buffer waited for compression")          \
+    "Messages left out of MCAP files because every chunk buffer was in flight (compression or "  \
+    "the MCAP disk behind)")                                                                       \
   X(mcap_chunks_uncompressed, "mcap_chunks_uncompressed",                                          \
     "MCAP chunks stored uncompressed because compression was a chunk behind")                     \
   X(mcap_messages_lost, "mcap_messages_lost",                                                      \

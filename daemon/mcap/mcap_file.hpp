@@ -94,6 +94,11 @@ class McapFile {
   // The chunks handed over and not yet written, uncompressed (an upper bound of what they add
   // to bytes(); rotation by size counts them).
   std::uint64_t bytes_in_flight() const noexcept { return bytes_in_flight_; }
+  // The records of the open chunk and of the chunks in flight, uncompressed: what abandon()
+  // would lose, in bytes.
+  std::uint64_t bytes_not_in_file() const noexcept {
+    return bytes_in_flight_ + (open_ != nullptr ? open_->records.size() : 0);
+  }
   // Left out because every chunk buffer was in flight; for the McapFile's life (monotonic).
   std::uint64_t messages_not_recorded() const noexcept { return not_recorded_; }
   // Chunks written uncompressed because compression was a chunk behind (chunk_pipeline.hpp);

@@ -244,13 +244,14 @@ McapRecovery finish_interrupted_mcap(const std::string& path) {
   std::vector<std::uint8_t> tail;
   mcap::ByteWriter w(tail);
   mcap::write_tail(w, kept, summary);
-  std::size_t done = 0;
-  while (done < tail.size()) {
-    const ssize_t n =
-        ::pwrite(fd.get(), tail.data() + done, tail.size() - done, static_cast<off_t>(kept + done));
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) io::throw_errno("cannot write", path);
-    done += static_cast<std::size_t>(n);
+  // Through the test seam (io::file_syscalls), as the daemon's other writes: a disk that stays
+  // full fails this one too.
+  if (::lseek(fd.get(), static_cast<off_t>(kept), SEEK_SET) < 0) {
+    io::throw_errno("cannot seek", path);
+  }
+  std::uint64_t written = 0;
+  if (const int error = write_fully(fd.get(), tail, written)) {
+    io::throw_error(error, "cannot write", path);
   }
   if (::fsync(fd.get()) != 0) io::throw_errno("cannot sync", path);
   return result;

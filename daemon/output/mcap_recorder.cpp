@@ -122,15 +122,27 @@ bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
 }
 
 void McapRecorder::failed(const std::exception& error) {
-  // The messages of the chunk being written are lost (counted); what the file holds up to its
-  // last whole chunk is finished as a file readers accept, as a killed run's would be.
+  // The messages of the chunk being written are lost (counted, with their bytes as recorded);
+  // what the file holds up to its last whole chunk is finished as a file readers accept, as a
+  // killed run's would be.
+  const std::uint64_t kept = file_->messages();  // in whole chunks, on the disk
+  const std::uint64_t lost_bytes = file_->bytes_not_in_file();
   const std::uint64_t lost = file_->abandon();
   messages_not_written_ += lost;
-  accounting_.write_failed(error, 0);
+  accounting_.write_failed(error, lost_bytes);
+  const std::uint64_t closed_before = messages_closed_;
   try {
     place_finished(finish_interrupted_mcap(part_path_).messages);
   } catch (const std::exception& again) {
-    // The disk is still full: the .part stays, and the next start finishes it.
+    // The disk is still full: the .part stays, and the next start finishes it. Its messages
+    // are written all the same: messages_written must neither fall back nor leave them out.
+    if (messages_closed_ == closed_before) {
+      struct stat part {};
+      messages_closed_ += kept;
+      if (::stat(part_path_.c_str(), &part) == 0) {
+        bytes_closed_ += static_cast<std::uint64_t>(part.st_size);
+      }
+    }
     spdlog::warn("{}: left unfinished after a failed write ({}); the next start finishes it",
                  part_path_, again.what());
   }
