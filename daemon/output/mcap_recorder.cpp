@@ -137,11 +137,8 @@ void McapRecorder::failed(const std::exception& error) {
     // The disk is still full: the .part stays, and the next start finishes it. Its messages
     // are written all the same: messages_written must neither fall back nor leave them out.
     if (messages_closed_ == closed_before) {
-      struct stat part {};
       messages_closed_ += kept;
-      if (::stat(part_path_.c_str(), &part) == 0) {
-        bytes_closed_ += static_cast<std::uint64_t>(part.st_size);
-      }
+      bytes_closed_ += part_bytes();
     }
     spdlog::warn("{}: left unfinished after a failed write ({}); the next start finishes it",
                  part_path_, again.what());
@@ -296,11 +293,7 @@ void McapRecorder::place_finished(std::uint64_t messages) {
     ::unlink(part_path_.c_str());  // nothing worth keeping
     return;
   }
-  // stat(2) on the held name: std::filesystem::file_size would build a path (allocations on the
-  // writer's loop at every rotation).
-  struct stat status {};
-  const std::uint64_t bytes =
-      ::stat(part_path_.c_str(), &status) == 0 ? static_cast<std::uint64_t>(status.st_size) : 0;
+  const std::uint64_t bytes = part_bytes();
   messages_closed_ += messages;
   bytes_closed_ += bytes;
   finisher_.place(FinishOwner::kMcap, part_path_, final_path_, {.bytes = bytes, .items = messages});
@@ -334,6 +327,13 @@ void McapRecorder::rotate() {
     spdlog::info("SIGHUP: closing {}", name.substr(name.rfind('/') + 1));
   }
   close();
+}
+
+std::uint64_t McapRecorder::part_bytes() const noexcept {
+  // stat(2) on the held name: std::filesystem::file_size would build a path (allocations on the
+  // writer's loop at every rotation).
+  struct stat status {};
+  return ::stat(part_path_.c_str(), &status) == 0 ? static_cast<std::uint64_t>(status.st_size) : 0;
 }
 
 }  // namespace pandarcap

@@ -114,6 +114,8 @@ class McapRecorder {
   // final name, counted (listed for retention once in place); removed when it holds none. Throws
   // std::system_error.
   void place_finished(std::uint64_t messages);
+  // The size of the file at part_path_ (0 when it cannot be asked).
+  std::uint64_t part_bytes() const noexcept;
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
