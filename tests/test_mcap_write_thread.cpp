@@ -24,6 +24,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <system_error>
@@ -267,6 +268,66 @@ struct ToRecorder final : FinishReceiver {
   void finished(const FinishJob& job) override { recorder->finished(job); }
 };
 
+// A real McapRecorder in a scratch output directory, as the writer thread drives it: batches of
+// 100 datagrams, a flush after each.
+struct RecorderRig {
+  test::ScratchDir dir;
+  WriterOptions options;
+  OutputAccounting accounting;
+  std::unique_ptr<HealthRoom> space;
+  ToRecorder receiver;
+  std::unique_ptr<FileFinisher> finisher;
+  std::unique_ptr<McapRecorder> recorder;
+  RawBatch batch{100};
+  std::uint64_t sent = 0;
+
+  explicit RecorderRig(const char* name) : dir(name) {
+    options.output_dir = dir / "out";
+    options.mcap = true;
+    options.mcap_file = write_thread_options();
+    fs::create_directories(options.output_dir / "mcap");
+    fs::create_directories(options.output_dir / "health");
+    space = std::make_unique<HealthRoom>(options.output_dir / "health");
+    finisher = std::make_unique<FileFinisher>(receiver);
+    recorder = std::make_unique<McapRecorder>(options, accounting, *space, *finisher);
+    receiver.recorder = recorder.get();
+    recorder->adopt_earlier_files();
+    recorder->prepare();
+  }
+  ~RecorderRig() {
+    recorder->close();
+    finisher->drain();
+  }
+  void send_batch() {
+    batch.size = batch.capacity;
+    for (std::size_t i = 0; i < batch.size; ++i) {
+      RawPacket& packet = batch.packets[i];
+      const auto& payload = next_payload();
+      std::copy(payload.begin(), payload.end(), packet.payload);
+      packet.length = static_cast<std::uint16_t>(payload.size());
+      packet.receive_time_ns = static_cast<std::int64_t>(kWriteT0 + sent++ * 277'000);
+    }
+    recorder->write_packets(batch);
+    recorder->flush();
+  }
+  std::vector<fs::path> files(const char* ending) const {
+    return test::files_ending(options.output_dir / "mcap", ending);
+  }
+  // Every datagram sent is written, left out (no chunk buffer free) or not written (a
+  // failure): never two of these, never none.
+  std::uint64_t accounted() const {
+    return recorder->messages_written() + recorder->messages_not_written() +
+           recorder->messages_not_recorded();
+  }
+};
+
+// Waits (with a timeout) until the seam holds a write of the watched file.
+bool write_held() {
+  std::unique_lock lock(mcap_writes.mutex);
+  return mcap_writes.changed.wait_for(lock, std::chrono::seconds(30),
+                                      [] { return mcap_writes.held == 1; });
+}
+
 }  // namespace
 
 TEST_CASE("a chunk write fails and the disk stays full: the .part's messages still written",
@@ -274,52 +335,24 @@ TEST_CASE("a chunk write fails and the disk stays full: the .part's messages sti
   io::FileSyscalls calls = io::real_file_syscalls();
   calls.write = watching_write;
   const io::ScopedFileSyscalls seam(calls);
-  test::ScratchDir dir("mcap-stays-full");
-  WriterOptions options;
-  options.output_dir = dir / "out";
-  options.mcap = true;
-  options.mcap_file = write_thread_options();
-  fs::create_directories(options.output_dir / "mcap");
-  fs::create_directories(options.output_dir / "health");
-  OutputAccounting accounting;
-  HealthRoom space(options.output_dir / "health");
-  ToRecorder receiver;
-  FileFinisher finisher(receiver);
-  McapRecorder recorder(options, accounting, space, finisher);
-  receiver.recorder = &recorder;
-  recorder.adopt_earlier_files();
-  recorder.prepare();
-
-  RawBatch batch(100);
-  int sent = 0;
-  const auto send_batch = [&] {
-    batch.size = batch.capacity;
-    for (std::size_t i = 0; i < batch.size; ++i) {
-      RawPacket& packet = batch.packets[i];
-      const auto& payload = next_payload();
-      std::copy(payload.begin(), payload.end(), packet.payload);
-      packet.length = static_cast<std::uint16_t>(payload.size());
-      packet.receive_time_ns = static_cast<std::int64_t>(kWriteT0) + sent++ * 277'000;
-    }
-    recorder.write_packets(batch);
-    recorder.flush();
-  };
-  send_batch();
-  const auto parts = test::files_ending(options.output_dir / "mcap", ".mcap.part");
+  RecorderRig rig("mcap-stays-full");
+  McapRecorder& recorder = *rig.recorder;
+  rig.send_batch();
+  const auto parts = rig.files(".mcap.part");
   REQUIRE(parts.size() == 1);
   const fs::path part = parts.front();
   // The 4th chunk write fails, and so does every write to the file after it: the recovery's
   // tail too, so the file stays a .part.
   watch(part, /*hold=*/false, /*fail_at=*/4, /*stays_full=*/true);
   std::uint64_t written_before = 0;
-  for (int round = 0; round < 100 && accounting.write_errors() == 0; ++round) {
-    send_batch();
+  for (int round = 0; round < 100 && rig.accounting.write_errors() == 0; ++round) {
+    rig.send_batch();
     CHECK(recorder.messages_written() >= written_before);
     written_before = recorder.messages_written();
   }
-  REQUIRE(accounting.write_errors() > 0);
+  REQUIRE(rig.accounting.write_errors() > 0);
   CHECK(recorder.messages_written() >= written_before);  // never back, at the failure either
-  CHECK(accounting.bytes_not_written() > 0);             // the chunks lost, in bytes
+  CHECK(rig.accounting.bytes_not_written() > 0);         // the chunks lost, in bytes
   CHECK(recorder.messages_not_written() > 0);
   {
     std::lock_guard lock(mcap_writes.mutex);
@@ -330,6 +363,102 @@ TEST_CASE("a chunk write fails and the disk stays full: the .part's messages sti
   const McapRecovery recovered = finish_interrupted_mcap(part.string());
   CHECK(recovered.messages > 0);
   CHECK(recorder.messages_written() == recovered.messages);
+}
+
+TEST_CASE("a rotation while the MCAP disk is stalled returns at once: the file left finishes later",
+          "[mcap][outputs][threads]") {
+  // How the file left behind ends: its chunks written once the disk moves, or a chunk write of
+  // it failing then (ENOSPC), with the disk full for its recovery too or not.
+  enum class Ending { kWritten, kChunkFails, kChunkFailsStaysFull };
+  const Ending ending =
+      GENERATE(Ending::kWritten, Ending::kChunkFails, Ending::kChunkFailsStaysFull);
+  INFO("ending " << static_cast<int>(ending));
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = watching_write;
+  const io::ScopedFileSyscalls seam(calls);
+  RecorderRig rig("mcap-rotate-stall");
+  McapRecorder& recorder = *rig.recorder;
+  rig.send_batch();
+  REQUIRE(rig.files(".mcap.part").size() == 1);
+  const fs::path first = rig.files(".mcap.part").front();
+  // Its first chunk write is held; with a failing ending its second fails.
+  const bool fails = ending != Ending::kWritten;
+  watch(first, /*hold=*/true, /*fail_at=*/fails ? 2 : 0,
+        /*stays_full=*/ending == Ending::kChunkFailsStaysFull);
+  while (rig.sent < 1000)
+    rig.send_batch();
+  REQUIRE(write_held());
+  const std::uint64_t written_before = recorder.messages_written();
+
+  // SIGHUP's rotation: it returns while the write is still held (a rotation that waited would
+  // sit in the seam until its 30 s timeout, and timed_out would say so).
+  recorder.rotate();
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK(mcap_writes.held == 1);
+    CHECK_FALSE(mcap_writes.timed_out);
+  }
+  // The writer goes on: a new file opens for the next messages while the first is still held.
+  for (int round = 0; round < 5; ++round)
+    rig.send_batch();
+  CHECK(rig.files(".mcap.part").size() == 2);
+  CHECK(recorder.messages_written() >= written_before);
+  CHECK(rig.accounted() <= rig.sent);  // those in flight are not yet counted
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK(mcap_writes.held == 1);  // still: none of the above waited for the disk
+    CHECK_FALSE(mcap_writes.timed_out);
+  }
+
+  release_writes();
+  for (int round = 0; round < 5; ++round)
+    rig.send_batch();
+  recorder.drain();  // every chunk in flight back: the first file settled too
+  rig.finisher->drain();
+  CHECK(rig.accounted() == rig.sent);
+  CHECK(recorder.messages_written() >= written_before);
+  if (fails) {
+    CHECK(rig.accounting.write_errors() > 0);
+    CHECK(recorder.messages_not_written() > 0);
+  } else {
+    CHECK(recorder.messages_not_written() == 0);
+    CHECK(rig.accounting.write_errors() == 0);
+  }
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK_FALSE(mcap_writes.timed_out);
+    mcap_writes.inode = 0;  // the disk has room again
+  }
+  const std::uint64_t written = recorder.messages_written();
+  // The first file: in place under its final name, or, when the disk stayed full, a .part that
+  // the next start finishes with what was counted.
+  std::uint64_t on_disk = 0;
+  fs::path placed;
+  if (ending == Ending::kChunkFailsStaysFull) {
+    REQUIRE(fs::exists(first));
+    on_disk += finish_interrupted_mcap(first.string()).messages;
+  } else {
+    CHECK_FALSE(fs::exists(first));
+    REQUIRE(rig.files(".mcap").size() == 1);
+    placed = rig.files(".mcap").front();
+    // Finished: a reader of its own accepts it, with the count its summary gives.
+    const auto read = test::read_mcap_independently(placed);
+    if (!read.reader_missing) {
+      INFO(read.error);
+      REQUIRE(read.file);
+      on_disk += (*read.file)["statistics"]["message_count"].get<std::uint64_t>();
+    } else {
+      on_disk += finish_interrupted_mcap(placed.string()).messages;
+    }
+  }
+  // The second file, finished at the end.
   recorder.close();
-  finisher.drain();
+  rig.finisher->drain();
+  CHECK(rig.files(".mcap.part").size() == (ending == Ending::kChunkFailsStaysFull ? 1 : 0));
+  for (const fs::path& file : rig.files(".mcap")) {
+    if (file != placed) on_disk += finish_interrupted_mcap(file.string()).messages;
+  }
+  CHECK(recorder.messages_written() >= written);
+  CHECK(on_disk == recorder.messages_written());  // counted as written: exactly what is there
+  CHECK(rig.accounted() == rig.sent);
 }

@@ -24,6 +24,8 @@ constexpr std::string_view kHealthSchema =
 // Generous room for the records around a chunk, its indexes and a file's tail per chunk.
 constexpr std::size_t kRecordSlack = 64 * 1024;
 constexpr std::size_t kTailBytesPerChunk = 160;
+// Room for a file's path (PATH_MAX).
+constexpr std::size_t kPathReserve = 4096;
 
 }  // namespace
 
@@ -45,63 +47,78 @@ McapFile::McapFile(const McapFileOptions& options)
   std::size_t metadata_bytes = options.device_name.size();
   for (const auto& [key, value] : options.metadata)
     metadata_bytes += key.size() + value.size();
-  out_.reserve(kRecordSlack + options.calibration_csv.size() + metadata_bytes + kDirectIoBlock +
-               options.max_chunks * kTailBytesPerChunk);
+  const std::size_t opening_bytes =
+      kRecordSlack + options.calibration_csv.size() + metadata_bytes + kDirectIoBlock;
+  out_.reserve(opening_bytes + options.max_chunks * kTailBytesPerChunk);
+  opening_capacity_ = whole_direct_blocks(opening_bytes);
+  opening_.reset(static_cast<std::uint8_t*>(
+      ::operator new (opening_capacity_, std::align_val_t{kDirectIoBlock})));
   // What open() records, made here so that starting a file (a rotation) allocates nothing.
   for (const auto& [key, value] : options_.metadata)
     metadata_.emplace_back(key, value);
-  summary_.metadata.reserve(2);  // "pandarcap", "foxglove"
-  summary_.attachments.reserve(1);
-  summary_.chunks.reserve(options.max_chunks);
-  summary_.schemas.push_back(
+  mcap::Summary& summary = slots_[0].summary;
+  summary.schemas.push_back(
       {1, std::string(mcap::kPointCloud2Name), "ros2msg", std::string(mcap::kPointCloud2Schema)});
-  summary_.schemas.push_back({2, "pandarcap.Health", "jsonschema", std::string(kHealthSchema)});
-  summary_.channels.push_back({kPointsChannel, 1, options.points_topic, "cdr", {}});
-  summary_.channels.push_back({kHealthChannel, 2, options.health_topic, "json", {}});
+  summary.schemas.push_back({2, "pandarcap.Health", "jsonschema", std::string(kHealthSchema)});
+  summary.channels.push_back({kPointsChannel, 1, options.points_topic, "cdr", {}});
+  summary.channels.push_back({kHealthChannel, 2, options.health_topic, "json", {}});
   if (options.packets) {
-    summary_.schemas.push_back({3, std::string(mcap::kPandarPacketName), "ros2msg",
-                                std::string(mcap::kPandarPacketSchema)});
+    summary.schemas.push_back({3, std::string(mcap::kPandarPacketName), "ros2msg",
+                               std::string(mcap::kPandarPacketSchema)});
     mcap::ChannelInfo packets{kPacketsChannel, 3, options.packets_topic, "cdr", {}};
     if (!options.sensor_model.empty())
       packets.metadata.emplace_back("sensor_model", options.sensor_model);
-    summary_.channels.push_back(std::move(packets));
+    summary.channels.push_back(std::move(packets));
+  }
+  slots_[1].summary.schemas = summary.schemas;
+  slots_[1].summary.channels = summary.channels;
+  for (Slot& slot : slots_) {
+    // Either slot opens the next file (a rotation alternates them): neither allocates then.
+    slot.file.reserve_path(kPathReserve);
+    slot.summary.metadata.reserve(2);  // "pandarcap", "foxglove"
+    slot.summary.attachments.reserve(1);
+    slot.summary.chunks.reserve(options.max_chunks);
   }
 }
 
 void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
-  file_.open(path, direct_works_ ? OutputFile::Mode::kCreateDirect : OutputFile::Mode::kCreate);
-  ++file_number_;
-  summary_.chunks.clear();
-  summary_.attachments.clear();
-  summary_.metadata.clear();
-  summary_.message_count = 0;
-  summary_.channel_message_count.fill(0);
-  summary_.message_start_time = summary_.message_end_time = 0;
-  // close() and abandon() drained the chunks of the file before: none is in flight.
+  Slot& slot = *now_;
+  slot.file.open(path, direct_works_ ? OutputFile::Mode::kCreateDirect : OutputFile::Mode::kCreate);
+  slot.number = ++file_number_;
+  mcap::Summary& summary = slot.summary;
+  summary.chunks.clear();
+  summary.attachments.clear();
+  summary.metadata.clear();
+  summary.message_count = 0;
+  summary.channel_message_count.fill(0);
+  summary.message_start_time = summary.message_end_time = 0;
+  // close(), close_later() and abandon() handed over or dropped the open chunk, and this slot's
+  // chunks all came back before it was taken (take_closed) or left (abandon).
   if (open_ != nullptr) open_->clear();
-  messages_in_flight_ = 0;
-  bytes_in_flight_ = 0;
+  slot.messages_in_flight = 0;
+  slot.bytes_in_flight = 0;
+  slot.chunks_in_flight = 0;
   for (auto& s : sequence_)
     s = 0;
   out_.clear();
   mcap::ByteWriter w(out_);
   w.bytes(mcap::kMagic);
   mcap::write_header(w, "ros2", options_.library);
-  for (const auto& schema : summary_.schemas)
+  for (const auto& schema : summary.schemas)
     mcap::write_schema(w, schema);
-  for (const auto& channel : summary_.channels)
+  for (const auto& channel : summary.channels)
     mcap::write_channel(w, channel);
   {
     const std::size_t at = w.size();
     mcap::write_metadata(w, "pandarcap", metadata_);
-    summary_.metadata.push_back({at, w.size() - at, "pandarcap"});
+    summary.metadata.push_back({at, w.size() - at, "pandarcap"});
   }
   if (!options_.device_name.empty()) {
     const std::size_t at = w.size();
     const std::pair<std::string_view, std::string_view> device[] = {
         {"deviceName", options_.device_name}};
     mcap::write_metadata(w, "foxglove", device);
-    summary_.metadata.push_back({at, w.size() - at, "foxglove"});
+    summary.metadata.push_back({at, w.size() - at, "foxglove"});
   }
   {
     const std::size_t at = w.size();
@@ -109,27 +126,27 @@ void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
         std::span(reinterpret_cast<const std::uint8_t*>(options_.calibration_csv.data()),
                   options_.calibration_csv.size());
     mcap::write_attachment(w, create_time_ns, create_time_ns, "calibration.csv", "text/csv", csv);
-    summary_.attachments.push_back({at, w.size() - at, create_time_ns, create_time_ns, csv.size(),
-                                    "calibration.csv", "text/csv"});
+    summary.attachments.push_back({at, w.size() - at, create_time_ns, create_time_ns, csv.size(),
+                                   "calibration.csv", "text/csv"});
   }
   // Padded to a whole block, so every chunk after it starts on one.
   const std::size_t padding = mcap::padding_bytes(w.size(), kDirectIoBlock);
   out_.resize(out_.size() + padding);  // within the reserved capacity: no allocation
   mcap::write_padding(std::span(out_).last(padding));
-  whole_bytes_ = 0;
-  // Past the page cache too, from block-aligned memory (the open chunk's framed buffer, free
-  // until its chunk is handed over): were they in the page cache behind chunks on the disk, a
-  // power cut could leave a file whose chunks are there and whose header is not.
+  slot.whole_bytes = 0;
+  // Past the page cache too, from block-aligned memory: were they in the page cache behind
+  // chunks on the disk, a power cut could leave a file whose chunks are there and whose header
+  // is not.
+  if (slot.file.direct() && out_.size() > opening_capacity_) {
+    slot.file.end_direct();  // never expected (out_ outgrew its reserve): not direct
+  }
+  std::span<const std::uint8_t> opening(out_);
+  if (slot.file.direct()) {
+    std::memcpy(opening_.get(), out_.data(), out_.size());
+    opening = std::span<const std::uint8_t>(opening_.get(), out_.size());
+  }
+  if (const io::IoError error = write_out(slot, opening)) io::throw_io_error(error);
   if (open_ == nullptr) open_ = pipeline_.take_free();
-  if (file_.direct() && (open_ == nullptr || out_.size() > open_->framed_capacity)) {
-    file_.end_direct();  // never expected (opening records larger than a chunk): not direct
-  }
-  if (file_.direct()) {
-    std::memcpy(open_->framed.get(), out_.data(), out_.size());
-    write_out(std::span<const std::uint8_t>(open_->framed.get(), out_.size()));
-  } else {
-    write_out(out_);
-  }
 }
 
 bool McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
@@ -148,7 +165,7 @@ bool McapFile::make_room(std::size_t data_bytes, std::uint16_t channel) {
   }
   if (open_ == nullptr) open_ = pipeline_.take_free();
   if (open_ == nullptr && options_.wait_for_free_chunk) {
-    if (ChunkBuffer* oldest = pipeline_.wait_done()) count_chunk(*oldest);
+    if (ChunkBuffer* oldest = pipeline_.wait_done()) take_back(*oldest);
     open_ = pipeline_.take_free();
   }
   if (open_ != nullptr) return true;
@@ -170,10 +187,12 @@ bool McapFile::begin_message(std::uint16_t channel, std::uint64_t log_time,
 }
 
 void McapFile::submit_open() {
-  messages_in_flight_ += open_->messages;
-  bytes_in_flight_ += open_->records.size();
-  open_->fd = file_.fd();
-  open_->file = file_number_;
+  Slot& slot = *now_;
+  slot.messages_in_flight += open_->messages;
+  slot.bytes_in_flight += open_->records.size();
+  ++slot.chunks_in_flight;
+  open_->fd = slot.file.fd();
+  open_->file = slot.number;
   pipeline_.submit(open_);
   open_ = nullptr;
 }
@@ -227,33 +246,60 @@ bool McapFile::add_health(std::string_view json, std::uint64_t log_time) {
 
 void McapFile::count_done_chunks() {
   while (ChunkBuffer* chunk = pipeline_.take_done())
-    count_chunk(*chunk);
+    take_back(*chunk);
+}
+
+void McapFile::take_back(ChunkBuffer& chunk) {
+  if (closing_ != nullptr && chunk.file == closing_->number) {
+    take_closing(chunk);
+  } else {
+    count_chunk(chunk);
+  }
+}
+
+void McapFile::take_closing(ChunkBuffer& chunk) noexcept {
+  if (const io::IoError error = count_into(*closing_, chunk); error && !closed_.error) {
+    closed_.error = error;
+  }
+  settle_closing();
 }
 
 void McapFile::count_chunk(ChunkBuffer& chunk) {
-  // Whatever happens, the buffer is free again; its messages stay in messages_in_flight_ until
-  // counted as written, so a failure's abandon() counts them as lost.
+  if (chunk.failed) {
+    // Not written: the compressor threw (never expected). Its text before the buffer is free.
+    const std::runtime_error error(chunk.error.data());
+    (void)count_into(*now_, chunk);
+    throw error;
+  }
+  if (const io::IoError error = count_into(*now_, chunk)) io::throw_io_error(error);
+}
+
+io::IoError McapFile::count_into(Slot& slot, ChunkBuffer& chunk) noexcept {
+  // Whatever happens, the buffer is free again; its messages stay in slot.messages_in_flight
+  // until counted as written, so a failure counts them as lost.
   struct GiveBack {
     ChunkPipeline& pipeline;
     ChunkBuffer& chunk;
     ~GiveBack() { pipeline.give_back(&chunk); }
   } give_back{pipeline_, chunk};
-  if (chunk.failed) throw std::runtime_error(chunk.error.data());  // not written
+  --slot.chunks_in_flight;
+  OutputFile& file = slot.file;
+  if (chunk.failed) return {EIO, "cannot compress a chunk for", file.path()};
   if (chunk.write_error != 0) {
     // What the write thread wrote of it, if anything, is cut off: the file ends on the chunk
     // before, the last one counted (the write thread writes nothing of this file after it).
-    file_.truncate(whole_bytes_);
-    io::throw_io_error({chunk.write_error, "cannot write", file_.path()});
+    file.truncate(slot.whole_bytes);
+    return {chunk.write_error, "cannot write", file.path()};
   }
   if (chunk.direct_refused) {
     // Through the page cache from this chunk on (the write thread ended O_DIRECT on the
     // descriptor), and every later file from its start.
     direct_works_ = false;
-    file_.end_direct();
+    file.end_direct();
   }
   // The compression thread framed the chunk (its record, its indexes, the padding) and the write
   // thread appended it: it starts where the chunks before it, in the order submitted, ended.
-  const std::uint64_t chunk_start = file_.size();
+  const std::uint64_t chunk_start = file.size();
   mcap::ChunkInfo info;
   info.message_start_time = chunk.start_time;
   info.message_end_time = chunk.end_time;
@@ -266,75 +312,134 @@ void McapFile::count_chunk(ChunkBuffer& chunk) {
     if (chunk.index_at[c] != 0) info.message_index_offset[c] = chunk_start + chunk.index_at[c];
   }
   info.message_index_length = chunk.index_bytes;
-  file_.count_written(chunk.written_bytes);
-  whole_bytes_ = file_.size();
-  summary_.chunks.push_back(info);
+  file.count_written(chunk.written_bytes);
+  slot.whole_bytes = file.size();
+  slot.summary.chunks.push_back(info);  // within the reserved capacity (full())
   for (std::size_t c = 0; c < mcap::kMaxChannels; ++c) {
     for (const auto& entry : chunk.index[c])
-      summary_.count_message(static_cast<std::uint16_t>(c + 1), entry.log_time);
+      slot.summary.count_message(static_cast<std::uint16_t>(c + 1), entry.log_time);
   }
-  messages_in_flight_ -= chunk.messages;
-  bytes_in_flight_ -= chunk.records.size();
+  slot.messages_in_flight -= chunk.messages;
+  slot.bytes_in_flight -= chunk.records.size();
   if (chunk.uncompressed) ++chunks_uncompressed_;
+  return {};
 }
 
-void McapFile::write_out(std::span<const std::uint8_t> bytes) {
-  io::IoError error = file_.try_write(bytes);
-  if (error && error.code == EINVAL && file_.direct()) {
+io::IoError McapFile::write_out(Slot& slot, std::span<const std::uint8_t> bytes) noexcept {
+  OutputFile& file = slot.file;
+  io::IoError error = file.try_write(bytes);
+  if (error && error.code == EINVAL && file.direct()) {
     // A file system that opens with O_DIRECT but refuses the writes: the page cache, for this
     // file and every one after it.
     direct_works_ = false;
-    file_.end_direct();
-    file_.truncate(whole_bytes_);
-    error = file_.try_write(bytes);
+    file.end_direct();
+    file.truncate(slot.whole_bytes);
+    error = file.try_write(bytes);
   }
   if (error) {
-    file_.truncate(whole_bytes_);
-    io::throw_io_error(error);
+    file.truncate(slot.whole_bytes);
+    return error;
   }
-  whole_bytes_ = file_.size();
+  slot.whole_bytes = file.size();
+  return {};
+}
+
+void McapFile::make_tail(const Slot& slot) {
+  out_.clear();
+  mcap::ByteWriter w(out_);
+  mcap::write_tail(w, slot.file.size(), slot.summary);  // within out_'s reserve
+}
+
+void McapFile::settle_closing() noexcept {
+  if (closing_ == nullptr || closed_ready_ || closing_->chunks_in_flight != 0) return;
+  Slot& slot = *closing_;
+  if (!closed_.error) {
+    make_tail(slot);
+    slot.file.end_direct();  // the tail ends where it ends: through the page cache
+    closed_.error = write_out(slot, out_);
+  }
+  if (!closed_.error) closed_.error = slot.file.try_close();
+  if (closed_.error) {
+    // Unfinished: cut back to its last whole chunk (write_out did, for the tail), for the
+    // recovery to finish.
+    slot.file.truncate(slot.whole_bytes);
+    (void)slot.file.try_close();
+  }
+  closed_.messages = slot.summary.message_count;
+  closed_.messages_lost = slot.messages_in_flight;
+  closed_.bytes_lost = slot.bytes_in_flight;
+  closed_ready_ = true;
 }
 
 void McapFile::flush() {
-  if (!file_.is_open()) return;
+  if (!now_->file.is_open()) return;
   count_done_chunks();
   if (open_ != nullptr && open_->messages != 0) submit_open();
 }
 
 void McapFile::drain() {
-  if (!file_.is_open()) return;
+  if (!now_->file.is_open() && closing_ == nullptr) return;
   while (ChunkBuffer* chunk = pipeline_.wait_done())
-    count_chunk(*chunk);
+    take_back(*chunk);
 }
 
 void McapFile::close() {
-  if (!file_.is_open()) return;
+  if (!now_->file.is_open()) return;
   flush();
   drain();
-  out_.clear();
-  mcap::ByteWriter w(out_);
-  mcap::write_tail(w, file_.size(), summary_);
-  file_.end_direct();  // the tail ends where it ends: through the page cache
-  write_out(out_);
-  file_.close();
+  make_tail(*now_);
+  now_->file.end_direct();  // the tail ends where it ends: through the page cache
+  if (const io::IoError error = write_out(*now_, out_)) io::throw_io_error(error);
+  now_->file.close();
+}
+
+void McapFile::close_later() {
+  if (!now_->file.is_open()) return;
+  if (closing_ != nullptr) throw std::logic_error("McapFile::close_later: a file still closes");
+  flush();
+  closing_ = now_;
+  now_ = now_ == &slots_[0] ? &slots_[1] : &slots_[0];
+  closed_ = {};
+  closed_ready_ = false;
+  settle_closing();  // nothing in flight: finished now
+}
+
+void McapFile::finish_closing() noexcept {
+  // The chunks come back in the order submitted: the closing file's before any of the next.
+  while (closing_ != nullptr && !closed_ready_) {
+    ChunkBuffer* chunk = pipeline_.wait_done();
+    if (chunk == nullptr) break;  // never expected: its chunks counted as in flight
+    take_closing(*chunk);
+  }
+}
+
+bool McapFile::take_closed(McapClosedFile& closed) noexcept {
+  if (closing_ == nullptr || !closed_ready_) return false;
+  closed = closed_;
+  closing_ = nullptr;
+  closed_ready_ = false;
+  return true;
 }
 
 std::uint64_t McapFile::abandon() noexcept {
-  std::uint64_t lost = messages_in_flight_;
+  Slot& slot = *now_;
+  std::uint64_t lost = slot.messages_in_flight;
   if (open_ != nullptr) {
     lost += open_->messages;
     open_->clear();
   }
-  while (ChunkBuffer* chunk = pipeline_.wait_done())
-    pipeline_.give_back(chunk);
-  messages_in_flight_ = 0;
-  bytes_in_flight_ = 0;
-  file_.truncate(whole_bytes_);
-  try {
-    file_.close();
-  } catch (...) {
-    // Closing a file that failed already: nothing more to report.
+  while (ChunkBuffer* chunk = pipeline_.wait_done()) {
+    if (closing_ != nullptr && chunk->file == closing_->number) {
+      take_closing(*chunk);
+    } else {
+      pipeline_.give_back(chunk);
+    }
   }
+  slot.messages_in_flight = 0;
+  slot.bytes_in_flight = 0;
+  slot.chunks_in_flight = 0;
+  slot.file.truncate(slot.whole_bytes);
+  (void)slot.file.try_close();  // a file that failed already: nothing more to report
   return lost;
 }
 

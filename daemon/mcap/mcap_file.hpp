@@ -12,6 +12,16 @@
 // drain), then writes DataEnd, the summary (schemas, channels, statistics, chunk, attachment and
 // metadata indexes), the summary offsets and the footer.
 //
+// A rotation must not wait for the disk: close_later() hands the last chunk over and returns at
+// once, and the next file opens while that one's chunks are still in flight. Two files are then
+// written at once, each with its own descriptor, summary and chunk index (a Slot): the chunks
+// come back in the order submitted, so the closing file's are all back before the first of the
+// next file's, and as the last one is counted its tail is written (through the page cache, after
+// the disk took its chunks). take_closed() then gives its outcome. Only one file closes at a
+// time: close_later() again while one still closes waits for it (finish_closing()), so a
+// stalled disk holds the writer only at a second rotation inside the stall (issue 40's hostile
+// finding: a 2 s stall plus a SIGHUP held the writer, and dropped frames, for its whole length).
+//
 // When every chunk buffer is in flight (the compression thread is behind), a message is left
 // out at once and counted (messages_not_recorded()), or with wait_for_free_chunk (replays) the
 // oldest chunk in flight is waited for; otherwise the writer thread never waits for the
@@ -35,8 +45,10 @@
 // Not thread-safe: one thread (the writer) calls everything; the pipeline's threads are internal.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <string_view>
@@ -56,17 +68,29 @@ inline constexpr std::uint16_t kPointsChannel = 1, kHealthChannel = 2, kPacketsC
 // The health channel's JSON schema ("pandarcap.Health"), which the live view advertises too.
 extern const std::string_view kHealthJsonSchema;
 
+// How a file that closed while the next one was written ended (McapFile::take_closed).
+struct McapClosedFile {
+  std::uint64_t messages = 0;  // in its whole chunks, on the disk
+  // When it could not be finished: the first write that failed (a chunk, or the tail). The file
+  // is then cut back to its last whole chunk and closed without its tail (unfinished: the
+  // recovery's, mcap_recovery.hpp); `error.path` stays valid until the next open().
+  io::IoError error;
+  // What its failure lost: the messages of its chunks not written, and their records'
+  // uncompressed bytes.
+  std::uint64_t messages_lost = 0, bytes_lost = 0;
+};
+
 class McapFile {
  public:
   explicit McapFile(const McapFileOptions& options);
 
   // Creates `path` and writes the header, schemas, channels, metadata and calibration.
   void open(std::string_view path, std::uint64_t create_time_ns);
-  bool is_open() const noexcept { return file_.is_open(); }
+  bool is_open() const noexcept { return now_->file.is_open(); }
   // The open file is still where its path says (see OutputFile::at_its_path).
-  bool at_its_path() const noexcept { return file_.at_its_path(); }
+  bool at_its_path() const noexcept { return now_->file.at_its_path(); }
   bool full() const noexcept {
-    return summary_.chunks.size() + pipeline_.in_flight() + 1 >= options_.max_chunks;
+    return now_->summary.chunks.size() + now_->chunks_in_flight + 1 >= options_.max_chunks;
   }
 
   // Each returns false when the message was left out because every chunk buffer is in flight
@@ -83,21 +107,44 @@ class McapFile {
   void drain();
   // Writes the open chunk, every chunk in flight and the tail, and closes the file.
   void close();
+  // Hands the open chunk over and lets the file finish without waiting: is_open() is then false
+  // and open() may start the next file while this one's chunks are in flight; its tail is
+  // written once the last is back, as the writer counts chunks (flush(), the next messages,
+  // drain()). A failure of the file being left throws first (as flush() does), and leaves it
+  // open for abandon(). At most one file closes at a time: the caller takes the one before with
+  // take_closed() first.
+  void close_later();
+  // A file is closing, or closed and not yet taken.
+  bool closing() const noexcept { return closing_ != nullptr; }
+  // Waits for the closing file's chunks and writes its tail (never throws: its failure is its
+  // outcome). Then take_closed() gives it.
+  void finish_closing() noexcept;
+  // The closing file's outcome, once its last chunk is back and its tail written (or its
+  // failure met): true, with `closed` filled, and the slot free for a later close_later().
+  bool take_closed(McapClosedFile& closed) noexcept;
   // After a failure: the file cut back to its last whole chunk and closed, unfinished (a .part
   // for the next start's recovery). Returns the messages that were lost with the open chunk and
-  // the chunks in flight (waited for, and discarded).
+  // the chunks in flight (waited for, and discarded). A closing file's chunks are counted into
+  // it as they come back, and its tail written.
   std::uint64_t abandon() noexcept;
 
   // In the chunks written to the open file.
-  std::uint64_t messages() const noexcept { return summary_.message_count; }
-  std::uint64_t bytes() const noexcept { return file_.is_open() ? file_.size() : 0; }
+  std::uint64_t messages() const noexcept { return now_->summary.message_count; }
+  std::uint64_t bytes() const noexcept { return now_->file.is_open() ? now_->file.size() : 0; }
+  // The same, for the closing file until it is taken (0 when none).
+  std::uint64_t closing_messages() const noexcept {
+    return closing_ != nullptr ? closing_->summary.message_count : 0;
+  }
+  std::uint64_t closing_bytes() const noexcept {
+    return closing_ != nullptr ? closing_->file.size() : 0;
+  }
   // The chunks handed over and not yet written, uncompressed (an upper bound of what they add
   // to bytes(); rotation by size counts them).
-  std::uint64_t bytes_in_flight() const noexcept { return bytes_in_flight_; }
+  std::uint64_t bytes_in_flight() const noexcept { return now_->bytes_in_flight; }
   // The records of the open chunk and of the chunks in flight, uncompressed: what abandon()
   // would lose, in bytes.
   std::uint64_t bytes_not_in_file() const noexcept {
-    return bytes_in_flight_ + (open_ != nullptr ? open_->records.size() : 0);
+    return now_->bytes_in_flight + (open_ != nullptr ? open_->records.size() : 0);
   }
   // Left out because every chunk buffer was in flight; for the McapFile's life (monotonic).
   std::uint64_t messages_not_recorded() const noexcept { return not_recorded_; }
@@ -108,33 +155,63 @@ class McapFile {
  private:
   // Room in the open chunk for a message of `data_bytes`: the chunk handed over first when
   // needed; false when no chunk buffer is free.
+  // One file's own state: the one messages go to (now_), or the one closing (closing_).
+  struct Slot {
+    OutputFile file;
+    mcap::Summary summary;
+    std::uint64_t number = 0;              // the pipeline's name for it (ChunkBuffer::file)
+    std::uint64_t whole_bytes = 0;         // its length after its last whole chunk
+    std::uint64_t messages_in_flight = 0;  // in chunks handed over and not yet counted written
+    std::uint64_t bytes_in_flight = 0;     // their records, uncompressed
+    std::size_t chunks_in_flight = 0;      // handed over and not yet back
+  };
+
   bool make_room(std::size_t data_bytes, std::uint16_t channel);
   bool begin_message(std::uint16_t channel, std::uint64_t log_time, std::size_t data_bytes);
   void submit_open();
-  // Counts the chunks back from the pipeline, written, into the file's summary (never waits).
+  // Counts the chunks back from the pipeline, written, into their file's summary (never waits).
   void count_done_chunks();
-  // One chunk back: counted, or its failure thrown (std::system_error for a write, the file cut
-  // back to its last whole chunk).
+  // One chunk back, into the file it belongs to: the open file's failure thrown, the closing
+  // file's kept in its outcome.
+  void take_back(ChunkBuffer& chunk);
+  // One chunk of the closing file back: counted, or its failure kept; the file settled when it
+  // was the last.
+  void take_closing(ChunkBuffer& chunk) noexcept;
+  // One chunk of the open file back: counted, or its failure thrown (std::system_error for a
+  // write, the file cut back to its last whole chunk).
   void count_chunk(ChunkBuffer& chunk);
-  // `bytes` to the file (the opening records, the tail); on a failure the file is cut back to its
-  // last whole chunk and the error thrown (std::system_error).
-  void write_out(std::span<const std::uint8_t> bytes);
+  // One chunk back into `slot`'s summary; its buffer free again either way. The failure is
+  // returned (the file cut back to its last whole chunk): the chunk's messages then stay in
+  // slot.messages_in_flight, lost.
+  io::IoError count_into(Slot& slot, ChunkBuffer& chunk) noexcept;
+  // The closing file, once its last chunk is back: its tail written, or, after a failure, cut
+  // back; closed; its outcome ready.
+  void settle_closing() noexcept;
+  // `bytes` to `slot`'s file (the opening records, the tail); on a failure the file is cut back
+  // to its last whole chunk and the failure returned.
+  io::IoError write_out(Slot& slot, std::span<const std::uint8_t> bytes) noexcept;
+  // The file's tail (DataEnd, the summary, the footer) into out_.
+  void make_tail(const Slot& slot);
 
   McapFileOptions options_;
   std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_
   std::size_t max_message_bytes_;
   std::size_t max_index_entries_;
-  OutputFile file_;
-  mcap::Summary summary_;
+  std::array<Slot, 2> slots_;
+  Slot* now_ = &slots_[0];
+  Slot* closing_ = nullptr;  // closing, or closed and not yet taken
+  McapClosedFile closed_;    // closing_'s outcome so far
+  bool closed_ready_ = false;
   std::vector<std::uint8_t> out_;  // records on their way to the file
+  // The opening records copied to block-aligned memory, for their O_DIRECT write (a rotation's
+  // next file opens while every chunk buffer may be in flight).
+  std::unique_ptr<std::uint8_t[], AlignedFree> opening_;
+  std::size_t opening_capacity_ = 0;
   ChunkPipeline pipeline_;
-  ChunkBuffer* open_ = nullptr;           // the chunk messages go to; null when none was free
-  std::uint64_t messages_in_flight_ = 0;  // in chunks handed over and not yet written
-  std::uint64_t bytes_in_flight_ = 0;     // their records, uncompressed
+  ChunkBuffer* open_ = nullptr;  // the chunk messages go to; null when none was free
   std::uint64_t not_recorded_ = 0;
   std::uint64_t chunks_uncompressed_ = 0;
   std::uint32_t sequence_[mcap::kMaxChannels + 1]{};
-  std::uint64_t whole_bytes_ = 0;  // the file's length after its last whole chunk
   std::uint64_t file_number_ = 0;  // the files opened: the pipeline's name for the open one
   // False once a file system took O_DIRECT at open but refused its writes (EINVAL): the files
   // after it go through the page cache.

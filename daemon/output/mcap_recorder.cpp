@@ -45,8 +45,8 @@ void McapRecorder::adopt_earlier_files() {
   const std::size_t path_bytes = dir_.native().size() + 96;
   retention_.reserve(path_bytes);
   recorded_.reserve(kRecordedFilesReserved, path_bytes);
-  final_path_.reserve(path_bytes);
-  part_path_.reserve(path_bytes);
+  for (std::string* path : {&final_path_, &part_path_, &closing_final_, &closing_part_})
+    path->reserve(path_bytes);
   refusal_.reserve(1024);  // a refused write's reason (HealthRoom::allows) at any moment
 }
 
@@ -69,16 +69,17 @@ void McapRecorder::prepare() {
   o.device_name = options_.device_name;
   o.calibration_csv = options_.calibration_csv;
   file_ = std::make_unique<McapFile>(o);
-  final_path_.reserve(4096);
-  part_path_.reserve(4096);
+  for (std::string* path : {&final_path_, &part_path_, &closing_final_, &closing_part_})
+    path->reserve(4096);
 }
 
 std::uint64_t McapRecorder::messages_written() const noexcept {
-  return messages_closed_ + (file_ && file_->is_open() ? file_->messages() : 0);
+  if (!file_) return messages_closed_;
+  return messages_closed_ + (file_->is_open() ? file_->messages() : 0) + file_->closing_messages();
 }
 
 std::uint64_t McapRecorder::bytes_written() const noexcept {
-  return bytes_closed_ + (file_ ? file_->bytes() : 0);
+  return bytes_closed_ + (file_ ? file_->bytes() + file_->closing_bytes() : 0);
 }
 
 bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
@@ -86,11 +87,12 @@ bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
     accounting_.write_failed(refusal_, bytes);
     return false;
   }
+  settle_closed();
   if (file_->is_open() &&
       (file_->full() ||
        rotation_due(file_->bytes() + file_->bytes_in_flight(), opened_monotonic_ns_,
                     options_.mcap_rotate_bytes, options_.mcap_rotate_seconds))) {
-    close();
+    close_later();
   }
   if (file_->is_open()) return true;
   final_path_.assign(dir_.native());
@@ -127,21 +129,27 @@ void McapRecorder::failed(const std::exception& error) {
   // killed run's would be.
   const std::uint64_t kept = file_->messages();  // in whole chunks, on the disk
   const std::uint64_t lost_bytes = file_->bytes_not_in_file();
-  const std::uint64_t lost = file_->abandon();
+  const std::uint64_t lost = file_->abandon();  // a closing file finishes meanwhile
   messages_not_written_ += lost;
   accounting_.write_failed(error, lost_bytes);
+  finish_cut_back(part_path_, final_path_, kept);
+  settle_closed();
+}
+
+void McapRecorder::finish_cut_back(const std::string& part, const std::string& final_path,
+                                   std::uint64_t kept) {
   const std::uint64_t closed_before = messages_closed_;
   try {
-    place_finished(finish_interrupted_mcap(part_path_).messages);
+    place_finished(part, final_path, finish_interrupted_mcap(part).messages);
   } catch (const std::exception& again) {
     // The disk is still full: the .part stays, and the next start finishes it. Its messages
     // are written all the same: messages_written must neither fall back nor leave them out.
     if (messages_closed_ == closed_before) {
       messages_closed_ += kept;
-      bytes_closed_ += part_bytes();
+      bytes_closed_ += part_bytes(part);
     }
-    spdlog::warn("{}: left unfinished after a failed write ({}); the next start finishes it",
-                 part_path_, again.what());
+    spdlog::warn("{}: left unfinished after a failed write ({}); the next start finishes it", part,
+                 again.what());
   }
 }
 
@@ -224,6 +232,7 @@ void McapRecorder::lose_open_file() {
       "{} is gone (removed, or its directory replaced): its {} messages are lost; the "
       "next message starts a new file",
       part_path_, messages);
+  settle_closed();
 }
 
 void McapRecorder::verify_on_disk() {
@@ -243,60 +252,91 @@ void McapRecorder::verify_on_disk() {
 }
 
 void McapRecorder::flush() {
-  if (!file_ || !file_->is_open()) return;
-  if (!file_->at_its_path()) {
-    lose_open_file();
-    return;
+  if (!file_) return;
+  if (file_->is_open()) {
+    if (!file_->at_its_path()) {
+      lose_open_file();
+      return;
+    }
+    try {
+      file_->flush();
+    } catch (const std::exception& error) {
+      failed(error);
+    }
   }
-  try {
-    file_->flush();
-  } catch (const std::exception& error) {
-    failed(error);
-  }
+  settle_closed();
 }
 
 void McapRecorder::drain() {
   flush();
-  if (!file_ || !file_->is_open()) return;
+  if (!file_ || (!file_->is_open() && !file_->closing())) return;
   try {
-    file_->drain();
+    file_->drain();  // the closing file's chunks too: it finishes
   } catch (const std::exception& error) {
     failed(error);
   }
+  settle_closed();
 }
 
 void McapRecorder::close() {
-  if (!file_ || !file_->is_open()) return;
+  if (!file_) return;
+  close_later();
+  wait_closed();
+}
+
+void McapRecorder::close_later() {
+  if (!file_->is_open()) return;
   if (!file_->at_its_path()) {
     lose_open_file();
     return;
   }
+  // One file closes at a time: a rotation inside a stall that still holds the file before
+  // waits here for it (McapFile::close_later).
+  wait_closed();
   try {
-    file_->close();
+    file_->close_later();
   } catch (const std::exception& error) {
     failed(error);
     return;
   }
-  finish_file();
+  // Its names go with it (no allocation: both pairs are reserved alike); ready() names the next.
+  closing_part_.swap(part_path_);
+  closing_final_.swap(final_path_);
+  settle_closed();
 }
 
-void McapRecorder::finish_file() {
+void McapRecorder::wait_closed() {
+  if (!file_->closing()) return;
+  file_->finish_closing();
+  settle_closed();
+}
+
+void McapRecorder::settle_closed() {
+  McapClosedFile closed;
+  if (!file_ || !file_->take_closed(closed)) return;
+  if (closed.error) {
+    messages_not_written_ += closed.messages_lost;
+    accounting_.write_failed(closed.error, closed.bytes_lost);
+    finish_cut_back(closing_part_, closing_final_, closed.messages);
+    return;
+  }
   try {
-    place_finished(file_->messages());
+    place_finished(closing_part_, closing_final_, closed.messages);
   } catch (const std::exception& error) {
     accounting_.write_failed(error, 0);
   }
 }
 
-void McapRecorder::place_finished(std::uint64_t messages) {
+void McapRecorder::place_finished(const std::string& part, const std::string& final_path,
+                                  std::uint64_t messages) {
   if (messages == 0) {
-    ::unlink(part_path_.c_str());  // nothing worth keeping
+    ::unlink(part.c_str());  // nothing worth keeping
     return;
   }
-  const std::uint64_t bytes = part_bytes();
+  const std::uint64_t bytes = part_bytes(part);
   messages_closed_ += messages;
   bytes_closed_ += bytes;
-  finisher_.place(FinishOwner::kMcap, part_path_, final_path_, {.bytes = bytes, .items = messages});
+  finisher_.place(FinishOwner::kMcap, part, final_path, {.bytes = bytes, .items = messages});
 }
 
 void McapRecorder::sync_open_file() {
@@ -322,18 +362,17 @@ void McapRecorder::finished(const FinishJob& job) {
 }
 
 void McapRecorder::rotate() {
-  if (file_ && file_->is_open()) {
-    const std::string_view name(final_path_);
-    spdlog::info("SIGHUP: closing {}", name.substr(name.rfind('/') + 1));
-  }
-  close();
+  if (!file_ || !file_->is_open()) return;
+  const std::string_view name(final_path_);
+  spdlog::info("SIGHUP: closing {}", name.substr(name.rfind('/') + 1));
+  close_later();
 }
 
-std::uint64_t McapRecorder::part_bytes() const noexcept {
+std::uint64_t McapRecorder::part_bytes(const std::string& path) noexcept {
   // stat(2) on the held name: std::filesystem::file_size would build a path (allocations on the
   // writer's loop at every rotation).
   struct stat status {};
-  return ::stat(part_path_.c_str(), &status) == 0 ? static_cast<std::uint64_t>(status.st_size) : 0;
+  return ::stat(path.c_str(), &status) == 0 ? static_cast<std::uint64_t>(status.st_size) : 0;
 }
 
 }  // namespace pandarcap

@@ -13,13 +13,15 @@
 // the finisher thread once its data is synced (daemon/output/file_finisher.hpp), and synced
 // while open every output.sync_interval_seconds (sync_open_file()); a
 // new file at mcap_rotate_bytes / mcap_rotate_seconds, on SIGHUP, when a file's chunk index is
-// full, and at the end; retention (mcap_max_files / mcap_max_bytes) counts earlier runs' files;
-// N continues across runs; a leftover .part is finished at the next start
-// (daemon/mcap/mcap_recovery.hpp). A failed write cuts the file back to its last whole chunk,
-// finishes it there, and counts the messages lost (mcap_messages_not_written, write_errors); the
-// next message starts a new file. Owned by the writer thread; buffers are allocated in prepare(),
-// so recording a message allocates nothing; starting a file allocates only its name's time stamp
-// (as the pcap's does) and, with retention on, its entry in the retention list.
+// full, and at the end (a rotation never waits for the disk: the file left finishes while the
+// next one is written, McapFile::close_later, and is put in place once its tail is written);
+// retention (mcap_max_files / mcap_max_bytes) counts earlier runs' files; N continues across runs;
+// a leftover .part is finished at the next start (daemon/mcap/mcap_recovery.hpp). A failed write
+// cuts the file back to its last whole chunk, finishes it there, and counts the messages lost
+// (mcap_messages_not_written, write_errors); the next message starts a new file. Owned by the
+// writer thread; buffers are allocated in prepare(), so recording a message allocates nothing;
+// starting a file allocates only its name's time stamp (as the pcap's does) and, with retention on,
+// its entry in the retention list.
 //
 // As the pcap's: nothing is written while mcap/'s file system is down to the space kept for the
 // health files (HealthRoom; counted as not written), mcap/ removed while running is made again,
@@ -68,9 +70,10 @@ class McapRecorder {
   // The same, then waits for every chunk in flight and writes it (at the end, before the final
   // health record, so that record counts every message).
   void drain();
-  // Finishes the open file (if any); the next message starts a new one.
+  // Finishes the open file (if any), and one still closing, waiting for both; the next message
+  // starts a new file.
   void close();
-  // SIGHUP: the open file finished.
+  // SIGHUP: the open file finished, without waiting for its chunks in flight (close_later).
   void rotate();
   // The open file's data synced, off this thread (output.sync_interval_seconds).
   void sync_open_file();
@@ -109,13 +112,26 @@ class McapRecorder {
   // The open file is no longer at its path: its messages are lost, the file let go.
   void lose_open_file();
   void failed(const std::exception& error);
-  void finish_file();
-  // The finished .part holding `messages`: handed to the finisher to be put in place under its
-  // final name, counted (listed for retention once in place); removed when it holds none. Throws
-  // std::system_error.
-  void place_finished(std::uint64_t messages);
-  // The size of the file at part_path_ (0 when it cannot be asked).
-  std::uint64_t part_bytes() const noexcept;
+  // Starts finishing the open file without waiting for its chunks in flight (a rotation): it
+  // moves to closing_part_ / closing_final_ and is put in place by settle_closed(). A file still
+  // closing from the rotation before is waited for first.
+  void close_later();
+  // The closing file, once finished (its tail written, or its failure met): put in place, or,
+  // after a failure, cut back and finished by the recovery. Never waits.
+  void settle_closed();
+  // The same, after waiting for the closing file's chunks.
+  void wait_closed();
+  // A .part a failed write left cut back to its last whole chunk of `kept` messages: finished
+  // as the next start's recovery would, and put in place; left for that start when the disk
+  // refuses that too (its messages counted as written all the same).
+  void finish_cut_back(const std::string& part, const std::string& final_path, std::uint64_t kept);
+  // The finished `part` holding `messages`: handed to the finisher to be put in place under its
+  // final name `final_path`, counted (listed for retention once in place); removed when it holds
+  // none. Throws std::system_error.
+  void place_finished(const std::string& part, const std::string& final_path,
+                      std::uint64_t messages);
+  // The size of the file `path` (0 when it cannot be asked).
+  static std::uint64_t part_bytes(const std::string& path) noexcept;
 
   const WriterOptions& options_;
   OutputAccounting& accounting_;
@@ -128,7 +144,8 @@ class McapRecorder {
   std::string refusal_;
   std::unique_ptr<McapFile> file_;
   std::string final_path_, part_path_;
-  bool directory_synced_ = false;  // the open file's name is on the disk
+  std::string closing_final_, closing_part_;  // the file close_later() left, until placed
+  bool directory_synced_ = false;             // the open file's name is on the disk
   std::int64_t opened_monotonic_ns_ = 0;
   std::uint64_t next_index_ = 0;
   std::uint64_t last_log_time_ = 0;  // of the latest frame or packet: replays' health times
