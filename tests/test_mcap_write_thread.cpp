@@ -10,7 +10,12 @@
 //   - every chunk's bytes are written by that thread, none by the writer's;
 //   - the recorder, when a chunk write fails and the disk stays full so that the file cannot be
 //     finished either: the .part's messages still count as written (the next start finishes
-//     it), never falling back, and the bytes lost count as not written.
+//     it), never falling back, and the bytes lost count as not written;
+//   - a rotation while a chunk write is held (SIGHUP's): it returns, and the writer goes on with
+//     the next file, while the write is still held; the file left is finished once the disk
+//     moves (or cut back when its next chunk write fails, or left for the next start when the
+//     disk stays full), and every message is counted once; the next file lost meanwhile (its
+//     .part removed) is let go without waiting for the file before.
 // The stall is the test seam's write (daemon/io/syscalls.hpp) holding the calls made for the
 // MCAP file (known by its inode) until the test lets them go, waited for on a condition with a
 // timeout: a writer that wrote the chunks itself would wait there, and fail the test, not hang it.
@@ -460,5 +465,61 @@ TEST_CASE("a rotation while the MCAP disk is stalled returns at once: the file l
   }
   CHECK(recorder.messages_written() >= written);
   CHECK(on_disk == recorder.messages_written());  // counted as written: exactly what is there
+  CHECK(rig.accounted() == rig.sent);
+}
+
+TEST_CASE("the next MCAP file lost while the one before still closes: no wait for the stalled disk",
+          "[mcap][outputs][threads]") {
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = watching_write;
+  const io::ScopedFileSyscalls seam(calls);
+  RecorderRig rig("mcap-next-lost");
+  McapRecorder& recorder = *rig.recorder;
+  rig.send_batch();
+  REQUIRE(rig.files(".mcap.part").size() == 1);
+  const fs::path first = rig.files(".mcap.part").front();
+  watch(first, /*hold=*/true, /*fail_at=*/0);
+  while (rig.sent < 1000)
+    rig.send_batch();
+  REQUIRE(write_held());
+  recorder.rotate();
+  rig.send_batch();  // the next file opens
+  fs::path second;
+  for (const fs::path& part : rig.files(".mcap.part"))
+    if (part != first) second = part;
+  REQUIRE_FALSE(second.empty());
+  // The next file removed while the first is still held: it is let go (its messages lost) at
+  // the next flush, which must not wait for the first file's chunks.
+  fs::remove(second);
+  rig.send_batch();
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK(mcap_writes.held == 1);
+    CHECK_FALSE(mcap_writes.timed_out);
+  }
+  release_writes();
+  rig.send_batch();
+  recorder.drain();
+  rig.finisher->drain();
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK_FALSE(mcap_writes.timed_out);
+    mcap_writes.inode = 0;
+  }
+  CHECK(rig.accounted() == rig.sent);
+  CHECK_FALSE(fs::exists(first));  // finished and in place
+  recorder.close();
+  rig.finisher->drain();
+  CHECK(rig.files(".mcap.part").empty());
+  std::uint64_t on_disk = 0;
+  for (const fs::path& file : rig.files(".mcap")) {
+    const auto read = test::read_mcap_independently(file);
+    if (read.reader_missing) return;
+    INFO(file.string() << ": " << read.error);
+    REQUIRE(read.file);
+    on_disk += (*read.file)["statistics"]["message_count"].get<std::uint64_t>();
+  }
+  // What the lost file held is written and lost; everything else written is in the files.
+  CHECK(on_disk + recorder.messages_lost() == recorder.messages_written());
   CHECK(rig.accounted() == rig.sent);
 }

@@ -139,8 +139,10 @@ bool OutputFile::at_its_path() const noexcept {
   return named.st_ino == open_file.st_ino && named.st_dev == open_file.st_dev;
 }
 
-void OutputFile::truncate(std::uint64_t size) noexcept {
-  if (fd_ >= 0 && cut_back(fd_, size)) size_ = size;
+bool OutputFile::truncate(std::uint64_t size) noexcept {
+  if (fd_ < 0 || !cut_back(fd_, size)) return false;
+  size_ = size;
+  return true;
 }
 
 io::IoError OutputFile::try_close() noexcept {

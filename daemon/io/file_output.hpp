@@ -71,9 +71,9 @@ class OutputFile {
     if (const io::IoError error = try_close()) io::throw_io_error(error);
   }
   io::IoError try_close() noexcept;
-  // Cuts the file back to `size` bytes (after a failed write), best effort: no throw. The next
-  // write continues there.
-  void truncate(std::uint64_t size) noexcept;
+  // Cuts the file back to `size` bytes (after a failed write), best effort: no throw; false when
+  // the cut failed. The next write continues there.
+  bool truncate(std::uint64_t size) noexcept;
   std::uint64_t size() const noexcept { return size_; }
   const std::string& path() const noexcept { return path_; }
   // Whether the open file is still the one its path names: false once it was removed (with its

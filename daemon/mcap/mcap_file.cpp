@@ -350,20 +350,38 @@ void McapFile::make_tail(const Slot& slot) {
   mcap::write_tail(w, slot.file.size(), slot.summary);  // within out_'s reserve
 }
 
+io::IoError McapFile::finish_whole(Slot& slot, bool cut) noexcept {
+  OutputFile& file = slot.file;
+  if (!file.is_open()) return {EBADF, "cannot finish", file.path()};
+  // A failed chunk's bytes may be on the disk past the last whole chunk (size() never counted
+  // them): cut off, or the tail would not end the file.
+  if (cut && !file.truncate(slot.whole_bytes)) {
+    return {errno != 0 ? errno : EIO, "cannot cut back", file.path()};
+  }
+  try {
+    make_tail(slot);
+  } catch (...) {
+    return {ENOMEM, "cannot finish", file.path()};  // never expected: out_ holds the largest
+  }
+  file.end_direct();  // the tail ends where it ends: through the page cache
+  return write_out(slot, out_);
+}
+
 void McapFile::settle_closing() noexcept {
   if (closing_ == nullptr || closed_ready_ || closing_->chunks_in_flight != 0) return;
   Slot& slot = *closing_;
-  if (!closed_.error) {
-    make_tail(slot);
-    slot.file.end_direct();  // the tail ends where it ends: through the page cache
-    closed_.error = write_out(slot, out_);
+  // Its tail after its last whole chunk: after a chunk that failed too (cut back first), and a
+  // tail that failed once is tried again from there, as the next start's recovery would.
+  io::IoError error = finish_whole(slot, static_cast<bool>(closed_.error));
+  if (error && !closed_.error) {
+    closed_.error = error;
+    error = finish_whole(slot, true);
   }
-  if (!closed_.error) closed_.error = slot.file.try_close();
-  if (closed_.error) {
-    // Unfinished: cut back to its last whole chunk (write_out did, for the tail), for the
-    // recovery to finish.
-    slot.file.truncate(slot.whole_bytes);
-    (void)slot.file.try_close();
+  closed_.finished = !error;
+  if (const io::IoError close_error = slot.file.try_close()) {
+    // A close that reports a deferred write error: what was written may not all be there.
+    if (!closed_.error) closed_.error = close_error;
+    closed_.finished = false;
   }
   closed_.messages = slot.summary.message_count;
   closed_.messages_lost = slot.messages_in_flight;
@@ -421,24 +439,31 @@ bool McapFile::take_closed(McapClosedFile& closed) noexcept {
   return true;
 }
 
-std::uint64_t McapFile::abandon() noexcept {
+std::uint64_t McapFile::abandon(bool* finished) noexcept {
   Slot& slot = *now_;
   std::uint64_t lost = slot.messages_in_flight;
   if (open_ != nullptr) {
     lost += open_->messages;
     open_->clear();
   }
-  while (ChunkBuffer* chunk = pipeline_.wait_done()) {
+  // This file's chunks in flight are waited for (the write thread holds its descriptor until
+  // they are back); a closing file's before them are counted into it on the way.
+  while (slot.chunks_in_flight > 0) {
+    ChunkBuffer* chunk = pipeline_.wait_done();
+    if (chunk == nullptr) break;  // never expected: counted as in flight
     if (closing_ != nullptr && chunk->file == closing_->number) {
       take_closing(*chunk);
     } else {
+      --slot.chunks_in_flight;
       pipeline_.give_back(chunk);
     }
   }
   slot.messages_in_flight = 0;
   slot.bytes_in_flight = 0;
   slot.chunks_in_flight = 0;
-  slot.file.truncate(slot.whole_bytes);
+  const bool whole = finished != nullptr && !finish_whole(slot, true);
+  if (finished != nullptr) *finished = whole;
+  if (!whole) slot.file.truncate(slot.whole_bytes);
   (void)slot.file.try_close();  // a file that failed already: nothing more to report
   return lost;
 }

@@ -71,9 +71,12 @@ extern const std::string_view kHealthJsonSchema;
 // How a file that closed while the next one was written ended (McapFile::take_closed).
 struct McapClosedFile {
   std::uint64_t messages = 0;  // in its whole chunks, on the disk
-  // When it could not be finished: the first write that failed (a chunk, or the tail). The file
-  // is then cut back to its last whole chunk and closed without its tail (unfinished: the
-  // recovery's, mcap_recovery.hpp); `error.path` stays valid until the next open().
+  // Its tail written: a file every reader accepts. After a failure too, when the file could be
+  // cut back to its last whole chunk and the tail written there; otherwise it is left for the
+  // next start's recovery (mcap_recovery.hpp).
+  bool finished = false;
+  // The first write that failed (a chunk, the tail, the close), if any; `error.path` stays valid
+  // until the next open().
   io::IoError error;
   // What its failure lost: the messages of its chunks not written, and their records'
   // uncompressed bytes.
@@ -123,10 +126,13 @@ class McapFile {
   // failure met): true, with `closed` filled, and the slot free for a later close_later().
   bool take_closed(McapClosedFile& closed) noexcept;
   // After a failure: the file cut back to its last whole chunk and closed, unfinished (a .part
-  // for the next start's recovery). Returns the messages that were lost with the open chunk and
-  // the chunks in flight (waited for, and discarded). A closing file's chunks are counted into
-  // it as they come back, and its tail written.
-  std::uint64_t abandon() noexcept;
+  // for the next start's recovery), or, given `finished`, with its tail written there from the
+  // summary of its whole chunks when the disk takes it (*finished says which): what the recovery
+  // would write, without reading the file back on the writer thread. Returns the messages that
+  // were lost with the open chunk and the chunks in flight: this file's are waited for and
+  // discarded, a closing file's are not (they are counted into it as they come back, so a
+  // failure of the next file while a stalled disk holds the one before does not wait for it).
+  std::uint64_t abandon(bool* finished = nullptr) noexcept;
 
   // In the chunks written to the open file.
   std::uint64_t messages() const noexcept { return now_->summary.message_count; }
@@ -192,6 +198,9 @@ class McapFile {
   io::IoError write_out(Slot& slot, std::span<const std::uint8_t> bytes) noexcept;
   // The file's tail (DataEnd, the summary, the footer) into out_.
   void make_tail(const Slot& slot);
+  // `slot`'s tail written after its last whole chunk, from its summary (with `cut`, after a
+  // failure, the file cut back there first); the failure returned.
+  io::IoError finish_whole(Slot& slot, bool cut) noexcept;
 
   McapFileOptions options_;
   std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_

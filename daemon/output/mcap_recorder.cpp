@@ -12,7 +12,6 @@
 #include "core/utc_time.hpp"
 #include "daemon/clocks.hpp"
 #include "daemon/io/file_output.hpp"
-#include "daemon/mcap/mcap_recovery.hpp"
 #include "daemon/output/output_directories.hpp"
 #include "daemon/output/output_leftovers.hpp"
 #include "daemon/output/rotation.hpp"
@@ -125,32 +124,34 @@ bool McapRecorder::ready(std::uint64_t log_time, std::uint64_t bytes) {
 
 void McapRecorder::failed(const std::exception& error) {
   // The messages of the chunk being written are lost (counted, with their bytes as recorded);
-  // what the file holds up to its last whole chunk is finished as a file readers accept, as a
-  // killed run's would be.
+  // what the file holds up to its last whole chunk is finished as a file readers accept (its
+  // tail from the summary of those chunks: the file is not read back on this thread).
   const std::uint64_t kept = file_->messages();  // in whole chunks, on the disk
   const std::uint64_t lost_bytes = file_->bytes_not_in_file();
-  const std::uint64_t lost = file_->abandon();  // a closing file finishes meanwhile
+  bool finished = false;
+  const std::uint64_t lost = file_->abandon(&finished);
   messages_not_written_ += lost;
   accounting_.write_failed(error, lost_bytes);
-  finish_cut_back(part_path_, final_path_, kept);
+  settle_part(part_path_, final_path_, kept, finished);
   settle_closed();
 }
 
-void McapRecorder::finish_cut_back(const std::string& part, const std::string& final_path,
-                                   std::uint64_t kept) {
-  const std::uint64_t closed_before = messages_closed_;
-  try {
-    place_finished(part, final_path, finish_interrupted_mcap(part).messages);
-  } catch (const std::exception& again) {
-    // The disk is still full: the .part stays, and the next start finishes it. Its messages
-    // are written all the same: messages_written must neither fall back nor leave them out.
-    if (messages_closed_ == closed_before) {
-      messages_closed_ += kept;
-      bytes_closed_ += part_bytes(part);
+void McapRecorder::settle_part(const std::string& part, const std::string& final_path,
+                               std::uint64_t messages, bool finished) {
+  if (finished) {
+    try {
+      place_finished(part, final_path, messages);
+    } catch (const std::exception& error) {
+      accounting_.write_failed(error, 0);
     }
-    spdlog::warn("{}: left unfinished after a failed write ({}); the next start finishes it", part,
-                 again.what());
+    return;
   }
+  // The disk refused even the tail: the .part stays, and the next start's recovery finishes it.
+  // Its messages are written all the same: messages_written must neither fall back nor leave
+  // them out.
+  messages_closed_ += messages;
+  bytes_closed_ += part_bytes(part);
+  spdlog::warn("{}: left unfinished after a failed write; the next start finishes it", part);
 }
 
 void McapRecorder::write_frame(const FrameArena& arena) {
@@ -317,14 +318,8 @@ void McapRecorder::settle_closed() {
   if (closed.error) {
     messages_not_written_ += closed.messages_lost;
     accounting_.write_failed(closed.error, closed.bytes_lost);
-    finish_cut_back(closing_part_, closing_final_, closed.messages);
-    return;
   }
-  try {
-    place_finished(closing_part_, closing_final_, closed.messages);
-  } catch (const std::exception& error) {
-    accounting_.write_failed(error, 0);
-  }
+  settle_part(closing_part_, closing_final_, closed.messages, closed.finished);
 }
 
 void McapRecorder::place_finished(const std::string& part, const std::string& final_path,

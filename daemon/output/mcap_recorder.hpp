@@ -17,7 +17,8 @@
 // next one is written, McapFile::close_later, and is put in place once its tail is written);
 // retention (mcap_max_files / mcap_max_bytes) counts earlier runs' files; N continues across runs;
 // a leftover .part is finished at the next start (daemon/mcap/mcap_recovery.hpp). A failed write
-// cuts the file back to its last whole chunk, finishes it there, and counts the messages lost
+// cuts the file back to its last whole chunk, finishes it there (its tail from the summary of
+// those chunks, never by reading the file back on the writer thread), and counts the messages lost
 // (mcap_messages_not_written, write_errors); the next message starts a new file. Owned by the
 // writer thread; buffers are allocated in prepare(), so recording a message allocates nothing;
 // starting a file allocates only its name's time stamp (as the pcap's does) and, with retention on,
@@ -116,15 +117,16 @@ class McapRecorder {
   // moves to closing_part_ / closing_final_ and is put in place by settle_closed(). A file still
   // closing from the rotation before is waited for first.
   void close_later();
-  // The closing file, once finished (its tail written, or its failure met): put in place, or,
-  // after a failure, cut back and finished by the recovery. Never waits.
+  // The closing file, once done (its tail written, or its failure met): put in place, or left
+  // as a .part for the next start when even its tail could not be written. Never waits.
   void settle_closed();
   // The same, after waiting for the closing file's chunks.
   void wait_closed();
-  // A .part a failed write left cut back to its last whole chunk of `kept` messages: finished
-  // as the next start's recovery would, and put in place; left for that start when the disk
-  // refuses that too (its messages counted as written all the same).
-  void finish_cut_back(const std::string& part, const std::string& final_path, std::uint64_t kept);
+  // A file done with, holding `messages` in whole chunks: put in place when `finished` (its tail
+  // written: McapFile::abandon, McapClosedFile), else left as a .part for the next start's
+  // recovery, its messages counted as written all the same.
+  void settle_part(const std::string& part, const std::string& final_path, std::uint64_t messages,
+                   bool finished);
   // The finished `part` holding `messages`: handed to the finisher to be put in place under its
   // final name `final_path`, counted (listed for retention once in place); removed when it holds
   // none. Throws std::system_error.
