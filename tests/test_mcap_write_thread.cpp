@@ -105,6 +105,13 @@ ssize_t watching_write(int fd, const void* data, std::size_t size) {
   return ::write(fd, data, size);
 }
 
+// The real calls, but write(): the seam's view above.
+io::FileSyscalls watching_calls() {
+  io::FileSyscalls calls = io::real_file_syscalls();
+  calls.write = watching_write;
+  return calls;
+}
+
 // Starts watching `path`'s writes (made after its opening records).
 void watch(const fs::path& path, bool hold, int fail_at, bool stays_full = false) {
   std::lock_guard lock(mcap_writes.mutex);
@@ -166,9 +173,7 @@ std::uint64_t add_packets(McapFile& file, int packets, int first) {
 
 TEST_CASE("a stalled MCAP disk holds only MCAP: the writer never waits and counts what it left out",
           "[mcap][threads]") {
-  io::FileSyscalls calls = io::real_file_syscalls();
-  calls.write = watching_write;
-  const io::ScopedFileSyscalls seam(calls);
+  const io::ScopedFileSyscalls seam(watching_calls());
   test::ScratchDir dir("mcap-write-stall");
   const fs::path path = dir / "a.mcap";
   McapFile file(write_thread_options());
@@ -217,9 +222,7 @@ TEST_CASE(
     "[mcap][threads]") {
   const int fail_at = GENERATE(1, 2, 5);
   INFO("the chunk write that fails: #" << fail_at);
-  io::FileSyscalls calls = io::real_file_syscalls();
-  calls.write = watching_write;
-  const io::ScopedFileSyscalls seam(calls);
+  const io::ScopedFileSyscalls seam(watching_calls());
   test::ScratchDir dir("mcap-write-fails");
   const fs::path path = dir / "a.mcap.part";
   McapFileOptions options = write_thread_options();
@@ -273,6 +276,13 @@ struct ToRecorder final : FinishReceiver {
   void finished(const FinishJob& job) override { recorder->finished(job); }
 };
 
+// Waits (with a timeout) until the seam holds a write of the watched file.
+bool write_held() {
+  std::unique_lock lock(mcap_writes.mutex);
+  return mcap_writes.changed.wait_for(lock, std::chrono::seconds(30),
+                                      [] { return mcap_writes.held == 1; });
+}
+
 // A real McapRecorder in a scratch output directory, as the writer thread drives it: batches of
 // 100 datagrams, a flush after each.
 struct RecorderRig {
@@ -318,6 +328,19 @@ struct RecorderRig {
   std::vector<fs::path> files(const char* ending) const {
     return test::files_ending(options.output_dir / "mcap", ending);
   }
+  // 1000 datagrams, the first chunk's write held by the seam (watch()) before they are all in.
+  void send_until_held() {
+    while (sent < 1000)
+      send_batch();
+    REQUIRE(write_held());
+  }
+  // The first batch: the file it opens (the only .part).
+  fs::path first_part() {
+    send_batch();
+    const std::vector<fs::path> parts = files(".mcap.part");
+    REQUIRE(parts.size() == 1);
+    return parts.front();
+  }
   // Every datagram sent is written, left out (no chunk buffer free) or not written (a
   // failure): never two of these, never none.
   std::uint64_t accounted() const {
@@ -326,26 +349,14 @@ struct RecorderRig {
   }
 };
 
-// Waits (with a timeout) until the seam holds a write of the watched file.
-bool write_held() {
-  std::unique_lock lock(mcap_writes.mutex);
-  return mcap_writes.changed.wait_for(lock, std::chrono::seconds(30),
-                                      [] { return mcap_writes.held == 1; });
-}
-
 }  // namespace
 
 TEST_CASE("a chunk write fails and the disk stays full: the .part's messages still written",
           "[mcap][outputs][threads]") {
-  io::FileSyscalls calls = io::real_file_syscalls();
-  calls.write = watching_write;
-  const io::ScopedFileSyscalls seam(calls);
+  const io::ScopedFileSyscalls seam(watching_calls());
   RecorderRig rig("mcap-stays-full");
   McapRecorder& recorder = *rig.recorder;
-  rig.send_batch();
-  const auto parts = rig.files(".mcap.part");
-  REQUIRE(parts.size() == 1);
-  const fs::path part = parts.front();
+  const fs::path part = rig.first_part();
   // The 4th chunk write fails, and so does every write to the file after it: the recovery's
   // tail too, so the file stays a .part.
   watch(part, /*hold=*/false, /*fail_at=*/4, /*stays_full=*/true);
@@ -378,21 +389,15 @@ TEST_CASE("a rotation while the MCAP disk is stalled returns at once: the file l
   const Ending ending =
       GENERATE(Ending::kWritten, Ending::kChunkFails, Ending::kChunkFailsStaysFull);
   INFO("ending " << static_cast<int>(ending));
-  io::FileSyscalls calls = io::real_file_syscalls();
-  calls.write = watching_write;
-  const io::ScopedFileSyscalls seam(calls);
+  const io::ScopedFileSyscalls seam(watching_calls());
   RecorderRig rig("mcap-rotate-stall");
   McapRecorder& recorder = *rig.recorder;
-  rig.send_batch();
-  REQUIRE(rig.files(".mcap.part").size() == 1);
-  const fs::path first = rig.files(".mcap.part").front();
+  const fs::path first = rig.first_part();
   // Its first chunk write is held; with a failing ending its second fails.
   const bool fails = ending != Ending::kWritten;
   watch(first, /*hold=*/true, /*fail_at=*/fails ? 2 : 0,
         /*stays_full=*/ending == Ending::kChunkFailsStaysFull);
-  while (rig.sent < 1000)
-    rig.send_batch();
-  REQUIRE(write_held());
+  rig.send_until_held();
   const std::uint64_t written_before = recorder.messages_written();
 
   // SIGHUP's rotation: it returns while the write is still held (a rotation that waited would
@@ -470,18 +475,12 @@ TEST_CASE("a rotation while the MCAP disk is stalled returns at once: the file l
 
 TEST_CASE("the next MCAP file lost while the one before still closes: no wait for the stalled disk",
           "[mcap][outputs][threads]") {
-  io::FileSyscalls calls = io::real_file_syscalls();
-  calls.write = watching_write;
-  const io::ScopedFileSyscalls seam(calls);
+  const io::ScopedFileSyscalls seam(watching_calls());
   RecorderRig rig("mcap-next-lost");
   McapRecorder& recorder = *rig.recorder;
-  rig.send_batch();
-  REQUIRE(rig.files(".mcap.part").size() == 1);
-  const fs::path first = rig.files(".mcap.part").front();
+  const fs::path first = rig.first_part();
   watch(first, /*hold=*/true, /*fail_at=*/0);
-  while (rig.sent < 1000)
-    rig.send_batch();
-  REQUIRE(write_held());
+  rig.send_until_held();
   recorder.rotate();
   rig.send_batch();  // the next file opens
   fs::path second;
