@@ -405,9 +405,7 @@ void McapFile::close() {
   if (!now_->file.is_open()) return;
   flush();
   drain();
-  make_tail(*now_);
-  now_->file.end_direct();  // the tail ends where it ends: through the page cache
-  if (const io::IoError error = write_out(*now_, out_)) io::throw_io_error(error);
+  if (const io::IoError error = finish_whole(*now_, false)) io::throw_io_error(error);
   now_->file.close();
 }
 
