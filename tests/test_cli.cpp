@@ -195,9 +195,9 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
   const json s = inspect_json("--summary " + test::quoted(captures.front())).at("summary");
   // 1800 packets/s in single return whatever the RPM, sent in real time for about a second;
   // the recording holds exactly what the daemon says it received (sanitizer builds: less what
-  // it counted as not recorded or dropped, see kSanitizerBuild).
+  // it counted as not recorded or dropped, see kSlowBuild).
   const auto counted = [&](const char* name) {
-    return test::kSanitizerBuild ? counters.at(name).get<std::uint64_t>() : 0;
+    return test::kSlowBuild ? counters.at(name).get<std::uint64_t>() : 0;
   };
   const std::uint64_t not_recorded = counted("pcap_packets_not_recorded");
   const std::uint64_t frames_dropped = counted("frames_dropped_no_arena");
@@ -210,7 +210,7 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
   CHECK(s.at("sequence_present") == true);
   // A packet the daemon did not record leaves a gap in the recording's sequence, and a frame it
   // dropped a hole in its revolutions: counted losses a sanitizer build on a busy machine may
-  // have (kSanitizerBuild). Otherwise the recording is gapless and its frames whole.
+  // have (kSlowBuild). Otherwise the recording is gapless and its frames whole.
   const bool lossless = not_recorded == 0 && frames_dropped == 0;
   if (lossless) CHECK(s.at("sequence_gaps") == 0);
   CHECK(s.at("rpm_min").get<int>() >= 1198);

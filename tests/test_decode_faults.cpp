@@ -463,10 +463,10 @@ TEST_CASE(
   const auto motor = said("motor stopped", stop_sent_ns);
   REQUIRE(motor);
   CHECK(*motor >= 0);
-  CHECK(*motor <= (test::kSanitizerBuild ? 3.0 : 2.0));
+  CHECK(*motor <= (test::kSlowBuild ? 3.0 : 2.0));
   const auto second = said("packets from a second sensor at 127.0.0.2:", second_sensor_ns);
   REQUIRE(second);
-  CHECK(*second <= (test::kSanitizerBuild ? 3.0 : 2.0));
+  CHECK(*second <= (test::kSlowBuild ? 3.0 : 2.0));
   for (const json& record : records) {
     const std::string reason = record.at("reason").get<std::string>();
     if (reason.find("second sensor") != std::string::npos) {

@@ -116,9 +116,9 @@ TEST_CASE(
     CHECK(health_counter(h, "sequence_duplicates") == 0);
     // Sequence-exact: every datagram recorded once, in the order sent (sanitizer builds: or
     // counted as not recorded or overrun, and those recorded once each, in order; see
-    // kSanitizerBuild).
+    // kSlowBuild).
     const std::uint64_t not_recorded =
-        test::kSanitizerBuild ? health_counter(h, "pcap_packets_not_recorded") + overruns : 0;
+        test::kSlowBuild ? health_counter(h, "pcap_packets_not_recorded") + overruns : 0;
     REQUIRE(run->recorded.size() + not_recorded == run->sent);
     for (std::size_t i = 0; i < run->recorded.size(); ++i) {
       const bool in_place = not_recorded == 0 ? run->recorded[i] == i
@@ -170,10 +170,10 @@ TEST_CASE(
       dir, "udp_socket_receive_buffer_size_bytes = 200000\n[latency]\nbudget_ms = 1000\n", traffic);
   const json& h = run.final_record;
   INFO(h.dump());
-  // Sanitizer builds: a drop is counted rather than absent (see kSanitizerBuild).
+  // Sanitizer builds: a drop is counted rather than absent (see kSlowBuild).
   const std::uint64_t kernel_drops = health_counter(h, "kernel_drops");
   const std::uint64_t not_recorded = health_counter(h, "pcap_packets_not_recorded");
-  if (!test::kSanitizerBuild) {
+  if (!test::kSlowBuild) {
     CHECK(kernel_drops == 0);
     CHECK(not_recorded == 0);
   }
@@ -238,7 +238,7 @@ TEST_CASE("latency budget: a long budget neither fakes a silence nor drops frame
   for (const Case& c : cases) {
     DYNAMIC_SECTION(c.name) {
       bool whole = false;
-      const int attempts = test::kSanitizerBuild ? 1 : 3;
+      const int attempts = test::kSlowBuild ? 1 : 3;
       for (int attempt = 0; attempt < attempts && !whole; ++attempt) {
         CAPTURE(attempt);
         test::ScratchDir dir("latency-long-budget");
@@ -257,7 +257,7 @@ TEST_CASE("latency budget: a long budget neither fakes a silence nor drops frame
         INFO(last.dump());
         REQUIRE(health_counter(last, "datagrams_received") > 3000);
         // A sanitizer's threads may stall past a silence: the shortened wait is what is checked.
-        if (test::kSanitizerBuild) break;
+        if (test::kSlowBuild) break;
         whole = health_counter(last, "frames_dropped") == 0;
         bool flowing = false;
         for (const json& record : health_records(dir / "out")) {
@@ -271,7 +271,7 @@ TEST_CASE("latency budget: a long budget neither fakes a silence nor drops frame
         }
         if (!whole) WARN("attempt " << attempt << ": " << last.dump());
       }
-      if (!test::kSanitizerBuild) CHECK(whole);
+      if (!test::kSlowBuild) CHECK(whole);
     }
   }
 }

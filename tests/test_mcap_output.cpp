@@ -128,11 +128,11 @@ TEST_CASE(
   REQUIRE(pcaps.size() == 1);
   const auto [status, records] = test::read_capture(pcaps[0]);
   CHECK(file["topics"]["/pandar/packets"]["count"] == records);
-  // Sanitizer builds: less what was counted as not recorded (see kSanitizerBuild) and, under
+  // Sanitizer builds: less what was counted as not recorded (see kSlowBuild) and, under
   // ThreadSanitizer, overrun by the ring (check_ring_overruns).
   const std::uint64_t overruns = test::check_ring_overruns(h);
   CHECK(file["topics"]["/pandar/packets"]["count"].get<std::uint64_t>() +
-            (test::kSanitizerBuild ? test::health_counter(h, "pcap_packets_not_recorded") : 0) +
+            (test::kSlowBuild ? test::health_counter(h, "pcap_packets_not_recorded") : 0) +
             overruns ==
         test::health_counter(h, "datagrams_received"));
   CHECK(file["topics"]["/pandar/packets"]["messages"][0]["size"] == 1262);
@@ -386,7 +386,7 @@ TEST_CASE("every compression setting gives files the reader accepts",
     // (A sanitizer build's simulator sends less than a second's packets in its second.)
     CHECK(file["topics"]["/pandar/points"]["count"].get<std::uint64_t>() +
               test::health_counter(h, "mcap_messages_not_recorded") >=
-          (test::kSanitizerBuild ? 2u : 5u));
+          (test::kSlowBuild ? 2u : 5u));
     const bool slow = setting.find("= 19") != std::string::npos ||
                       setting.find("level = 12") != std::string::npos;
     if (!slow) {

@@ -211,7 +211,7 @@ const Mode kMcap{"mcap", {"--mcap", "--mcap-packets"}, "mcap", ".mcap"};
 const Mode kXfs{"default-xfs", {}, "raw", ".pcap", "xfs"};
 
 // Fewer under the sanitizers, whose runs are slower: the moments are random in every run.
-constexpr int kTrials = test::kSanitizerBuild ? 1 : 2;
+constexpr int kTrials = test::kSlowBuild ? 1 : 2;
 
 }  // namespace
 

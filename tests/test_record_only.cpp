@@ -175,7 +175,7 @@ TEST_CASE("recording only: the health counts what it can, leaves out points, the
 TEST_CASE("recording only: a small ring, raw pool and silence timeout hold as with frames",
           "[daemon][health][threads]") {
   bool whole = false;
-  const int attempts = test::kSanitizerBuild ? 1 : 3;
+  const int attempts = test::kSlowBuild ? 1 : 3;
   for (int attempt = 0; attempt < attempts && !whole; ++attempt) {
     CAPTURE(attempt);
     test::ScratchDir dir("record-only-small");
@@ -189,7 +189,9 @@ TEST_CASE("recording only: a small ring, raw pool and silence timeout hold as wi
     REQUIRE(r.exit_code == 0);
     const json last = test::last_health_record(dir / "out");
     INFO(last.dump());
-    REQUIRE(test::health_counter(last, "datagrams_received") > 3000);
+    // More than the ring and the raw batches hold, several times over (a slow build's simulated
+    // sensor sends fewer: see kSlowBuild).
+    REQUIRE(test::health_counter(last, "datagrams_received") > (test::kSlowBuild ? 1000u : 3000u));
     test::check_ring_overruns(last);
     check_record_only_identity(last);
     // Every accepted packet is recorded or counted as not recorded.
@@ -198,7 +200,7 @@ TEST_CASE("recording only: a small ring, raw pool and silence timeout hold as wi
           test::health_counter(last, "datagrams_received") -
               test::health_counter(last, "ring_overruns"));
     // A sanitizer's decoder may stall for 0.1 s: a true silence, and packets not recorded.
-    if (test::kSanitizerBuild) break;
+    if (test::kSlowBuild) break;
     whole = test::health_counter(last, "packets_not_recorded") == 0;
     bool flowing = false;
     for (const json& record : test::health_records(dir / "out")) {
@@ -212,7 +214,7 @@ TEST_CASE("recording only: a small ring, raw pool and silence timeout hold as wi
     }
     if (!whole) WARN("attempt " << attempt << " lost packets or said no_data: " << last.dump());
   }
-  if (!test::kSanitizerBuild) CHECK(whole);
+  if (!test::kSlowBuild) CHECK(whole);
 }
 
 namespace {
@@ -225,7 +227,7 @@ namespace {
 // times, and fails only when each attempt lost. (A sanitizer's writer may always fall behind.)
 void check_recorded_whole(const char* name, const bench::GeneratorOptions& traffic) {
   std::uint64_t lost_in_every_attempt = UINT64_MAX;
-  const int attempts = test::kSanitizerBuild ? 1 : 3;
+  const int attempts = test::kSlowBuild ? 1 : 3;
   for (int attempt = 0; attempt < attempts && lost_in_every_attempt > 0; ++attempt) {
     CAPTURE(attempt);
     test::ScratchDir dir(name);
@@ -249,7 +251,7 @@ void check_recorded_whole(const char* name, const bench::GeneratorOptions& traff
                 << not_recorded << " not recorded (counted)");
     }
   }
-  if (!test::kSanitizerBuild) CHECK(lost_in_every_attempt == 0);
+  if (!test::kSlowBuild) CHECK(lost_in_every_attempt == 0);
 }
 
 }  // namespace

@@ -28,7 +28,7 @@ std::uint64_t total_items() {
   if (const char* env = std::getenv("PANDARCAP_STRESS_ITEMS")) {
     return std::strtoull(env, nullptr, 10);
   }
-  return kSanitizerBuild ? 2'000'000 : 10'000'000;
+  return kSlowBuild ? 2'000'000 : 10'000'000;
 }
 
 // Splits the total over `rounds` random capacities 2^0..2^12 and random batch limits.

@@ -200,7 +200,7 @@ TEST_CASE(
             test::health_counter(last, "kernel_drops") +
             test::health_counter(last, "ring_overruns") ==
         sent.sent);
-  if (!test::kSanitizerBuild) CHECK(test::health_counter(last, "packets_accepted") == sent.sent);
+  if (!test::kSlowBuild) CHECK(test::health_counter(last, "packets_accepted") == sent.sent);
   CHECK(test::health_counter(last, "frames_written") > 0);
   CHECK(last["sensor_info"]["calibration_source"] == "file");
   CHECK(test::health_counter(last, "ptc_errors") >= 2);  // the start's and at least one poll's

@@ -263,7 +263,7 @@ TEST_CASE(
     REQUIRE(clean.stats.outliers == 0);
     for (const Glitch glitch : kGlitches) {
       for (const std::uint64_t length : kBurstLengths) {
-        if (test::kSanitizerBuild && length != 1 && length != 3 && length != 16) continue;
+        if (test::kSlowBuild && length != 1 && length != 3 && length != 16) continue;
         INFO(to_string(mode) << ": bursts of " << length << ", " << name(glitch));
         std::uint64_t glitched = 0;
         const FaultOutcome o =
