@@ -119,7 +119,7 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
   X(pcap_packets_written, "pcap_packets_written",                                                  \
     "Packets written to pcap files (those since lost with their file: pcap_packets_lost)")        \
   X(pcap_packets_not_recorded, "pcap_packets_not_recorded",                                        \
-    "Packets left out of the pcap because the writer was behind")                                  \
+    "Packets left out of the pcap because the writer was behind (0 without output.pcap)")         \
   X(pcap_packets_not_written, "pcap_packets_not_written",                                          \
     "Packets lost from the pcap to failed writes, or not written to keep space for health")       \
   X(pcap_packets_lost, "pcap_packets_lost",                                                        \
@@ -136,7 +136,7 @@ std::string_view to_string(HealthState state) noexcept;  // "ok", "no_data", "de
     "Messages lost from MCAP files to failed writes, or not written to keep space for health")    \
   X(mcap_messages_not_recorded, "mcap_messages_not_recorded",                                      \
     "Messages left out of MCAP files because every chunk buffer was in flight (compression or "  \
-    "the MCAP disk behind)")                                                                       \
+    "the MCAP disk behind), or packets because no raw batch was free (the writer behind)")        \
   X(mcap_chunks_uncompressed, "mcap_chunks_uncompressed",                                          \
     "MCAP chunks stored uncompressed because compression was a chunk behind")                     \
   X(mcap_messages_lost, "mcap_messages_lost",                                                      \

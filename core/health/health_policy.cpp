@@ -110,7 +110,7 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   grew(c.pcap_packets_not_recorded, p.pcap_packets_not_recorded, "packets not recorded");
   grew(c.pcap_packets_lost, p.pcap_packets_lost, "recorded packets lost (recording removed)");
   grew(c.mcap_messages_not_recorded, p.mcap_messages_not_recorded,
-       "MCAP messages not recorded (MCAP behind: compression or its disk)");
+       "MCAP messages not recorded (behind: compression, its disk or the writer)");
   grew(c.mcap_messages_lost, p.mcap_messages_lost, "MCAP messages lost (file removed)");
   if (c.files_removed_before_upload > p.files_removed_before_upload) {
     const UploadGauges& upload = g.storage.upload;

@@ -148,7 +148,11 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   c.frames_fragment = decode.frames_fragment;
   c.frames_written = sources.frames.frames_written();
   c.pcap_packets_written = sources.pcap.packets_written();
-  c.pcap_packets_not_recorded = decode.raw_packets_dropped;
+  // A datagram with no raw batch is missing from every recording of packets: the pcap's count,
+  // and the MCAP's (count_mcap). The decoder keeps raw batches only for those.
+  c.pcap_packets_not_recorded = options_.pcap ? decode.raw_packets_dropped : 0;
+  mcap_packets_not_recorded_ =
+      options_.mcap && options_.mcap_file.packets ? decode.raw_packets_dropped : 0;
   c.pcap_packets_not_written = sources.pcap.packets_not_written();
   c.pcap_packets_lost = sources.pcap.packets_lost();
   c.packets_not_recorded =
@@ -534,7 +538,7 @@ void HealthPublisher::count_mcap(const McapRecorder& mcap) noexcept {
   HealthCounters& c = health_.counters;
   c.mcap_messages_written = mcap.messages_written();
   c.mcap_messages_not_written = mcap.messages_not_written();
-  c.mcap_messages_not_recorded = mcap.messages_not_recorded();
+  c.mcap_messages_not_recorded = mcap.messages_not_recorded() + mcap_packets_not_recorded_;
   c.mcap_chunks_uncompressed = mcap.chunks_uncompressed();
   c.mcap_messages_lost = mcap.messages_lost();
   c.mcap_bytes_written = mcap.bytes_written();

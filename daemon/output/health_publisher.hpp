@@ -150,6 +150,9 @@ class HealthPublisher {
   DecodeSnapshot decode_prev_;              // the decoder's counters of the last record, for rates
   WriteRateWindow write_rates_;             // the outputs' bytes, a sample a second
   std::uint64_t jsonl_bytes_written_ = 0;
+  // Datagrams the decoder had no raw batch for (the writer behind), at the last build(), when
+  // the MCAP files hold the packets: they are missing from those as from the pcap.
+  std::uint64_t mcap_packets_not_recorded_ = 0;
   std::string prom_path_, jsonl_path_, jsonl_rotated_path_;
   std::array<std::string, 2> prom_temporary_paths_;
   std::string prom_text_, json_text_;
