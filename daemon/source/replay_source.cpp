@@ -149,6 +149,20 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
         break;
       }
     }
+    // A file never overruns: wait for the decoder to free a slot, before the record is counted
+    // as received. A stop during the wait leaves it unsent, as during the pace's wait above, and
+    // uncounted (counted first, it was in datagrams_received and in no count after it).
+    while (pending == slots.size()) {
+      publish();
+      slots = ring.reserve(64);
+      if (!slots.empty()) break;
+      if (stop.load(std::memory_order_relaxed)) break;
+      std::this_thread::sleep_for(std::chrono::microseconds(50));
+    }
+    if (slots.empty()) {
+      result.stopped = true;
+      break;
+    }
     ReceiveCounters::add(counters.datagrams, 1);
     ReceiveCounters::add(counters.bytes, record.udp_payload_length);
     // The sensor's address is IPv4: with sensor_ip set an IPv6 sender is not it; without, the
@@ -157,15 +171,6 @@ ReplayResult ReplaySource::run(PacketRing& ring, const std::atomic<bool>& stop,
       ReceiveCounters::add(counters.foreign, 1);
       continue;
     }
-    // A file never overruns: wait for the decoder to free a slot.
-    while (pending == slots.size()) {
-      publish();
-      slots = ring.reserve(64);
-      if (!slots.empty()) break;
-      if (stop.load(std::memory_order_relaxed)) break;
-      std::this_thread::sleep_for(std::chrono::microseconds(50));
-    }
-    if (slots.empty()) continue;  // stopping
     PacketSlot& slot = slots[pending++];
     const std::size_t kept = std::min(record.payload.size(), sizeof slot.payload);
     std::memcpy(slot.payload, record.payload.data(), kept);
