@@ -98,7 +98,7 @@ struct DecodeSnapshot {
   AssemblerStats frames;
   std::uint64_t frames_decimated = 0;
   std::uint64_t frames_fragment = 0;      // partial frames too small to write
-  std::uint64_t raw_packets_dropped = 0;  // no empty RawBatch: not recorded to pcap
+  std::uint64_t raw_packets_dropped = 0;  // no empty RawBatch: not in the pcap nor the MCAP
   std::int64_t monotonic_ns = 0;  // when it was taken (the last packet's time is in DecodeLive)
   LatencyHistogram latency;       // kernel receive timestamp -> decoded (live sources only)
   // The last accepted packet's time minus its receive time (see HealthGauges); none before one.
