@@ -599,9 +599,7 @@ TEST_CASE("a stalled writer: frames drop and are counted, the receiver never blo
   // The decoder may be up to a ring's length (about a second) behind the stream on a busy
   // machine under a sanitizer, so it still cuts twenty of them during the stall: 4 into the
   // arenas, the rest dropped.
-  std::ofstream(stall).put('\n');
-  REQUIRE(harness::wait_until(
-      [&] { return daemon.log().find("test hook: writer stalled") != std::string::npos; }, 5s));
+  REQUIRE(test::stall_writer(daemon, stall, 5s));
   const auto stalled_at = std::chrono::steady_clock::now();
   while (std::chrono::steady_clock::now() - stalled_at < 3s)
     CHECK(daemon.wait_exit(100ms) == std::nullopt);  // still running, the receiver included

@@ -1291,12 +1291,7 @@ TEST_CASE("writer wait: a sensor that stops while the decoder waits: no_data on 
       RingDaemon daemon(dir, veth, port, "", receiver,
                         {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
       // The writer stops at its next tick (a second at most) and stays stopped.
-      std::ofstream(stall).put('\n');
-      REQUIRE(wait_until(
-          [&] {
-            return daemon.process->log().find("test hook: writer stalled") != std::string::npos;
-          },
-          5s));
+      REQUIRE(test::stall_writer(*daemon.process, stall, 5s));
       // 0.6 s of the sensor: 4 arenas take the first 0.4 s, then the decoder waits.
       bench::GeneratorOptions traffic;
       traffic.rate_pps = 3600;
@@ -1376,12 +1371,7 @@ TEST_CASE("writer wait: a small receive ring and a stalled writer then a stop du
                         std::string("[latency]\nbudget_ms = 0\n[ring]\nslots = ") + k.slots +
                             "\n[arenas]\ncount = 2\n",
                         k.receiver, {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
-      std::ofstream(stall).put('\n');
-      REQUIRE(wait_until(
-          [&] {
-            return daemon.process->log().find("test hook: writer stalled") != std::string::npos;
-          },
-          5s));
+      REQUIRE(test::stall_writer(*daemon.process, stall, 5s));
       bench::GeneratorOptions traffic;
       traffic.rate_pps = 7200;
       traffic.seconds = 1.0;

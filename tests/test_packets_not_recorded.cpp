@@ -70,8 +70,7 @@ TEST_CASE("a held writer: each datagram left out is counted by every recording o
   // The writer held for 2 s (the experiment's variable, not a wait for the daemon): the raw
   // batches (4 x 512 datagrams, 0.57 s of the simulated sensor) run out, the decoder's wait for
   // one ends within a second, and from then on datagrams are not recorded.
-  std::ofstream(stall).put('\n');
-  REQUIRE(harness::wait_until([&] { return daemon.logged("test hook: writer stalled"); }, 10s));
+  REQUIRE(test::stall_writer(daemon, stall, 10s));
   const auto held_at = std::chrono::steady_clock::now();
   while (std::chrono::steady_clock::now() - held_at < 2s)
     REQUIRE(daemon.wait_exit(100ms) == std::nullopt);

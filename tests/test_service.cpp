@@ -67,9 +67,7 @@ TEST_CASE("watchdog: pings while healthy, stops while the writer is stalled, res
   }
 
   SECTION("a stalled writer silences the watchdog until it recovers") {
-    std::ofstream(stall_file).put('\n');
-    REQUIRE(harness::wait_until(
-        [&] { return daemon.log().find("test hook: writer stalled") != std::string::npos; }, 5s));
+    REQUIRE(test::stall_writer(daemon, stall_file, 5s));
     // A ping already due when the writer stopped may still go out; after that, none. Healthy,
     // 1.2 s would bring about six.
     notify.receive();

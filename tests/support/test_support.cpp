@@ -219,6 +219,12 @@ std::size_t open_descriptors(int pid) {
   return n;
 }
 
+bool stall_writer(const harness::ChildProcess& daemon, const std::filesystem::path& stall,
+                  std::chrono::milliseconds timeout) {
+  std::ofstream(stall).put('\n');
+  return harness::wait_until([&] { return daemon.logged("test hook: writer stalled"); }, timeout);
+}
+
 std::filesystem::path write_simulated_recording(const std::filesystem::path& path, int packets,
                                                 std::int64_t start_unix_ns, Endpoint from,
                                                 Endpoint to) {

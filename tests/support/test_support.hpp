@@ -17,6 +17,10 @@
 #include "core/frames/pcd.hpp"
 #include "daemon/pcap/capture_reader.hpp"
 
+namespace pandarcap::harness {
+class ChildProcess;
+}  // namespace pandarcap::harness
+
 namespace pandarcap::test {
 
 // 360° in the sensor's 0.01° units.
@@ -168,6 +172,12 @@ std::vector<std::filesystem::path> files_ending(const std::filesystem::path& dir
 
 // How many file descriptors process `pid` has open (/proc/PID/fd).
 std::size_t open_descriptors(int pid);
+
+// Holds the writer of `daemon`, a pandarcapd started with PANDARCAP_TEST_STALL_WRITER_FILE=`stall`:
+// creates `stall` and waits, up to `timeout`, for the daemon to say its writer stopped (at its
+// next tick, a second at most). True once it has; removing `stall` lets the writer go on.
+bool stall_writer(const harness::ChildProcess& daemon, const std::filesystem::path& stall,
+                  std::chrono::milliseconds timeout);
 
 // `packets` of the simulated sensor (dual return, 600 RPM) from `start_unix_ns` on, recorded at
 // `path` as a host received them: each record 300 us after the packet's own time (a synchronised
