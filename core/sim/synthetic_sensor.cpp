@@ -61,19 +61,23 @@ PacketContents SyntheticSensor::next_contents() {
     const double azimuth_cdeg =
         std::fmod(start_cdeg + static_cast<double>(round) * step_cdeg, 36000.0);
     const auto azimuth = static_cast<std::uint16_t>(std::lround(azimuth_cdeg) % 36000);
-    for (int echo = 0; echo < returns_per_firing(mode); ++echo) {
-      const int b = r * returns_per_firing(mode) + echo;
-      p.azimuth_cdeg[b] = azimuth;
-      for (int c = 0; c < kChannels; ++c) {
-        const double alpha = azimuth / 100.0 + calibration_.azimuth_offset_deg[c];
-        const Echoes echoes = trace(calibration_.elevation_deg[c], alpha);
+    const int returns = returns_per_firing(mode);
+    for (int echo = 0; echo < returns; ++echo)
+      p.azimuth_cdeg[r * returns + echo] = azimuth;
+    for (int c = 0; c < kChannels; ++c) {
+      // One ray a channel and firing, whatever the echoes taken from it: the trace is most of
+      // the simulated sensor's cost (twice over in dual return, when each echo traced it).
+      const double alpha = azimuth / 100.0 + calibration_.azimuth_offset_deg[c];
+      const Echoes echoes = trace(calibration_.elevation_deg[c], alpha);
+      // ±2 raw units (±8 mm) of noise, the same for both echoes of a firing.
+      const auto noise = static_cast<int>(scene_hash(config_.seed ^ (round * 64 + c)) % 5) - 2;
+      for (int echo = 0; echo < returns; ++echo) {
+        const int b = r * returns + echo;
         // Dual: even block = last echo, odd = strongest. Single: the mode's echo.
         const bool want_last =
             mode == ReturnMode::kLast || (mode == ReturnMode::kDual && echo == 0);
         Echo e = want_last ? echoes.last : echoes.strongest;
         if (e.distance_raw != 0) {
-          // ±2 raw units (±8 mm) of noise, the same for both echoes of a firing.
-          const auto noise = static_cast<int>(scene_hash(config_.seed ^ (round * 64 + c)) % 5) - 2;
           e.distance_raw = static_cast<std::uint16_t>(std::max(1, e.distance_raw + noise));
         }
         p.distance_raw[b][c] = e.distance_raw;
