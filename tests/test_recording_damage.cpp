@@ -274,6 +274,12 @@ TEST_CASE("a damaged MCAP chunk is skipped by the chunk index, the rest read",
       const char* const kinds[] = {"records flipped", "length absurd", "length into what follows",
                                    "opcode"};
       for (int k = 0; k < 4; ++k) {
+        // A slow build (sanitizers, emulation) checks the damage to a chunk's framing (its
+        // length, its opcode), which the chunk index mends the same way whatever the chunk
+        // holds, on one compression; the damage inside its records, which each codec meets in
+        // its own way, on all three. Every copy of the file costs there (36 of them took 44 s
+        // under TSan); release checks every case.
+        if (test::kSlowBuild && k != 0 && compression != "none") continue;
         const std::string kind = kinds[k];
         INFO(compression << " chunk " << c << " of " << chunks.size() << ": " << kind);
         std::string damaged = bytes;
