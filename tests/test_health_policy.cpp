@@ -145,7 +145,7 @@ TEST_CASE("Health: receive errors are an error, whatever else is wrong", "[healt
 
 TEST_CASE("Health: silence is no_data, before and after the first packet", "[health][policy]") {
   HealthCounters before, now;
-  now.kernel_drops = 2;  // a problem too, but silence wins over degraded
+  now.packets_rejected = 2;  // a problem too, but silence wins over degraded
   HealthGauges g = streaming();
   g.seconds_since_last_packet = -1;
   classify_health(now, before, kLast, true, "", g);
@@ -155,6 +155,41 @@ TEST_CASE("Health: silence is no_data, before and after the first packet", "[hea
   classify_health(now, before, kLast, true, "", g);
   CHECK(g.state == HealthState::kNoData);
   CHECK(g.reason == "no packet for 2.5 s");
+}
+
+TEST_CASE("Health: a silent second's losses follow the silence in its reason",
+          "[health][policy]") {
+  // A writer stalled, then a stop (SIGTERM): the receiver stopped, and the writer, released
+  // later, counted what it could not keep in a second that is silent by then. Each loss of
+  // each kind is said after the silence; what is about the packets (the motor, rejects, the
+  // tail's speed) is not, as no packet came.
+  HealthCounters before, now;
+  now.pcap_packets_not_recorded = 7;
+  now.mcap_messages_not_recorded = 6130;
+  now.frames_dropped_no_arena = 2;
+  now.write_errors = 1;
+  now.bytes_not_written = 4096;
+  now.packets_rejected = 3;
+  HealthGauges g = streaming();
+  g.seconds_since_last_packet = 2.14;
+  g.rpm_tail = 300;
+  classify_health(now, before, kLast, true, "cannot write 'x.pcd.part': No space left on device",
+                  g);
+  CHECK(g.state == HealthState::kNoData);
+  CHECK(g.reason ==
+        "no packet for 2.1 s; 1 write errors (4096 bytes not written): cannot write "
+        "'x.pcd.part': No space left on device; 2 frames dropped (no free arena); 7 packets not "
+        "recorded; 6130 MCAP messages not recorded (behind: compression, its disk or the "
+        "writer)");
+  // Nothing new in the next second: the silence alone.
+  classify_health(now, now, kLast, true, "", g);
+  CHECK(g.reason == "no packet for 2.1 s");
+  // Before the first packet too.
+  HealthCounters dropped;
+  dropped.kernel_drops = 5;
+  g.seconds_since_last_packet = -1;
+  classify_health(dropped, before, kLast, true, "", g);
+  CHECK(g.reason == "no packet received yet; 5 kernel drops");
 }
 
 TEST_CASE("Health: several problems are joined by semicolons, in a fixed order",
@@ -185,7 +220,7 @@ TEST_CASE("Health: the reason is rewritten in place, keeping its capacity", "[he
   CHECK(g.reason == "1 kernel drops");
   CHECK(g.reason.data() == storage);
   classify_health(now, before, kLast, true, "", g);
-  CHECK(g.reason == "no packet for 0.0 s");
+  CHECK(g.reason == "no packet for 0.0 s; 1 kernel drops");
   CHECK(g.reason.data() == storage);
 }
 

@@ -123,3 +123,68 @@ TEST_CASE("a held writer: each datagram left out is counted by every recording o
   CHECK_THAT(daemon.log(),
              Catch::Contains(fmt::format("not written, {} not recorded, ", mcap_left_out)));
 }
+
+namespace {
+
+// What the health's reasons said, over every record of `out`, of a loss `what` (" packets not
+// recorded"): the sum of each "N<what>" (a record's reason names its second's count).
+std::uint64_t said_in_reasons(const fs::path& out, const std::string& what) {
+  std::uint64_t said = 0;
+  for (const json& record : test::health_records(out)) {
+    const std::string reason = record.value("reason", "");
+    for (auto at = reason.find(what); at != std::string::npos; at = reason.find(what, at + 1)) {
+      std::size_t digits = at;
+      while (digits > 0 && reason[digits - 1] >= '0' && reason[digits - 1] <= '9')
+        --digits;
+      if (digits < at) said += std::stoull(reason.substr(digits, at - digits));
+    }
+  }
+  return said;
+}
+
+}  // namespace
+
+TEST_CASE("a stop while the writer is held: the last seconds' losses are said, not only counted",
+          "[daemon][mcap][reliability][threads]") {
+  // SIGTERM stops the receiver while the writer is held: the writer, released later, counts
+  // what it could not keep in seconds that are silent by then, which say no_data. Every
+  // datagram left out of the pcap and of the MCAP is in a record's reason, whatever the state.
+  test::ScratchDir dir("packets-not-recorded-stop");
+  const fs::path out = dir / "out";
+  const fs::path stall = dir / "stall-writer";
+  const fs::path config = dir / "both.toml";
+  std::ofstream(config) << "[output]\nmcap = true\nmcap_packets = true\n";
+  harness::ChildProcess daemon(
+      test::binary("pandarcapd"),
+      {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
+      dir / "log.txt", {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
+  REQUIRE(harness::wait_until(
+      [&] { return test::health_counter(test::last_health_record(out), "frames_written") >= 4; },
+      20s));
+  REQUIRE(test::stall_writer(daemon, stall, 10s));
+  // Held past the raw batches (0.57 s of the simulated sensor) and the decoder's wait for one:
+  // datagrams go unrecorded from then on. Then the stop, and the writer let go after it.
+  const auto held_at = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - held_at < 2s)
+    REQUIRE(daemon.wait_exit(100ms) == std::nullopt);
+  daemon.signal(SIGTERM);
+  // Held on past the no-data timeout (1 s): the writer's last record then finds the receiver
+  // silent, which is the case where the losses went unsaid.
+  const auto stopped_at = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - stopped_at < 1500ms)
+    REQUIRE(daemon.wait_exit(100ms) == std::nullopt);  // the writer is still held
+  fs::remove(stall);
+  INFO(daemon.log());
+  REQUIRE(daemon.wait_exit(15s) == 0);
+
+  const json h = test::last_health_record(out);
+  INFO(h.dump());
+  const std::uint64_t pcap_left_out = test::health_counter(h, "pcap_packets_not_recorded");
+  const std::uint64_t mcap_left_out = test::health_counter(h, "mcap_messages_not_recorded");
+  CHECK(pcap_left_out > 0);
+  CHECK(mcap_left_out >= pcap_left_out);
+  CHECK(said_in_reasons(out, " packets not recorded") == pcap_left_out);
+  CHECK(said_in_reasons(out, " MCAP messages not recorded") == mcap_left_out);
+  // The silence is said too: the receiver stopped while the writer was held.
+  CHECK(h.value("state", "") == "no_data");
+}

@@ -85,12 +85,32 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
   const auto grew = [&](std::uint64_t now_value, std::uint64_t before, const char* what) {
     if (now_value > before) problem("{} {}", now_value - before, what);
   };
-  if (c.write_errors > p.write_errors) {
-    problem("{} write errors ({} bytes not written): {}", c.write_errors - p.write_errors,
-            c.bytes_not_written - p.bytes_not_written, last_write_error);
-  }
-  grew(c.kernel_drops, p.kernel_drops, "kernel drops");
-  grew(c.ring_overruns, p.ring_overruns, "ring overruns");
+  // What was lost in the second, in this order: written first whatever the state (below).
+  const auto losses = [&] {
+    if (c.write_errors > p.write_errors) {
+      problem("{} write errors ({} bytes not written): {}", c.write_errors - p.write_errors,
+              c.bytes_not_written - p.bytes_not_written, last_write_error);
+    }
+    grew(c.kernel_drops, p.kernel_drops, "kernel drops");
+    grew(c.ring_overruns, p.ring_overruns, "ring overruns");
+    grew(c.frames_dropped_no_arena, p.frames_dropped_no_arena, "frames dropped (no free arena)");
+    grew(c.pcap_packets_not_recorded, p.pcap_packets_not_recorded, "packets not recorded");
+    grew(c.pcap_packets_lost, p.pcap_packets_lost, "recorded packets lost (recording removed)");
+    grew(c.mcap_messages_not_recorded, p.mcap_messages_not_recorded,
+         "MCAP messages not recorded (behind: compression, its disk or the writer)");
+    grew(c.mcap_messages_lost, p.mcap_messages_lost, "MCAP messages lost (file removed)");
+    if (c.files_removed_before_upload > p.files_removed_before_upload) {
+      const UploadGauges& upload = g.storage.upload;
+      const std::uint64_t files = c.files_removed_before_upload - p.files_removed_before_upload;
+      problem(
+          "{} file{} removed before {} uploaded ({:.1f} MB; the last by {}: {})", files,
+          files == 1 ? "" : "s", files == 1 ? "it was" : "they were",
+          static_cast<double>(c.bytes_removed_before_upload - p.bytes_removed_before_upload) / 1e6,
+          upload.last_removed_by_floor ? "the free-space floor" : "retention",
+          std::string_view(upload.last_removed));
+    }
+  };
+  losses();
   if (c.other_sensor_packets > p.other_sensor_packets) {
     // Two sensors sending to one port: the second is dropped, and named with the first.
     problem("{} packets from a second sensor at ", c.other_sensor_packets - p.other_sensor_packets);
@@ -105,22 +125,6 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
     problems += " (";
     append_ipv4_source(problems, g.other_sensor_source);
     problems += " silent)";
-  }
-  grew(c.frames_dropped_no_arena, p.frames_dropped_no_arena, "frames dropped (no free arena)");
-  grew(c.pcap_packets_not_recorded, p.pcap_packets_not_recorded, "packets not recorded");
-  grew(c.pcap_packets_lost, p.pcap_packets_lost, "recorded packets lost (recording removed)");
-  grew(c.mcap_messages_not_recorded, p.mcap_messages_not_recorded,
-       "MCAP messages not recorded (behind: compression, its disk or the writer)");
-  grew(c.mcap_messages_lost, p.mcap_messages_lost, "MCAP messages lost (file removed)");
-  if (c.files_removed_before_upload > p.files_removed_before_upload) {
-    const UploadGauges& upload = g.storage.upload;
-    const std::uint64_t files = c.files_removed_before_upload - p.files_removed_before_upload;
-    problem(
-        "{} file{} removed before {} uploaded ({:.1f} MB; the last by {}: {})", files,
-        files == 1 ? "" : "s", files == 1 ? "it was" : "they were",
-        static_cast<double>(c.bytes_removed_before_upload - p.bytes_removed_before_upload) / 1e6,
-        upload.last_removed_by_floor ? "the free-space floor" : "retention",
-        std::string_view(upload.last_removed));
   }
   grew(c.sequence_lost, p.sequence_lost, "packets lost (sequence)");
   grew(c.sequence_resets, p.sequence_resets, "sequence resets (the sensor restarted?)");
@@ -213,6 +217,10 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
     fmt::format_to(std::back_inserter(g.reason), "{} receive errors: the socket is failing",
                    c.receive_errors - p.receive_errors);
   } else if (silent) {
+    // Silence leads, and the second's losses follow it: a silence that a stop or a stalled
+    // writer ended said alone hid the losses counted in it (the writer's, catching up) from
+    // every reader of the reason. The rest (the sensor's, the packets') is about packets that
+    // no longer come, so it is not said.
     g.state = HealthState::kNoData;
     g.reason.clear();
     if (g.seconds_since_last_packet < 0) {
@@ -221,6 +229,7 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
       fmt::format_to(std::back_inserter(g.reason), "no packet for {:.1f} s",
                      g.seconds_since_last_packet);
     }
+    losses();
   } else if (!problems.empty()) {
     g.state = HealthState::kDegraded;
   } else {
