@@ -273,7 +273,9 @@ TEST_CASE("packet_ring: a burst the ring cannot hold is counted as kernel drops,
   const nlohmann::json h = daemon.stop_after(sent.sent);
   INFO(daemon.process->log());
   const auto c = [&](const char* name) { return test::health_counter(h, name); };
-  REQUIRE(sent.sent >= 3000);
+  // Twice what the ring holds, at least: a loaded machine's sender falls short of the 4000
+  // (2814 once, beside a build), and the burst still overflows the ring.
+  REQUIRE(sent.sent >= 1500);
   CHECK(c("kernel_drops") > 0);
   CHECK(c("kernel_drops") < sent.sent);
   // Every packet is either received or counted as dropped by the kernel: nothing unaccounted.
