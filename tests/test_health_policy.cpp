@@ -157,8 +157,7 @@ TEST_CASE("Health: silence is no_data, before and after the first packet", "[hea
   CHECK(g.reason == "no packet for 2.5 s");
 }
 
-TEST_CASE("Health: a silent second's losses follow the silence in its reason",
-          "[health][policy]") {
+TEST_CASE("Health: a silent second's losses follow the silence in its reason", "[health][policy]") {
   // A writer stalled, then a stop (SIGTERM): the receiver stopped, and the writer, released
   // later, counted what it could not keep in a second that is silent by then. Each loss of
   // each kind is said after the silence; what is about the packets (the motor, rejects, the
@@ -418,4 +417,28 @@ TEST_CASE("Health: a second sensor on the port is named with the first", "[healt
   moved.sensor_source_changes = 1;
   classify_health(moved, before, kLast, false, "", g);
   CHECK(g.reason == "the sensor's source changed to 127.0.0.1:10000 (127.0.0.2:10001 silent)");
+  // Both in one second: the packets dropped came from 127.0.0.1 before the change (a second
+  // sensor then) and from 127.0.0.2 after it, and neither is named as the other's role.
+  HealthCounters both = now;
+  both.sensor_source_changes = 1;
+  classify_health(both, before, kLast, false, "", g);
+  CHECK(g.reason ==
+        "3600 packets from a second sensor (127.0.0.1:10000 or 127.0.0.2:10001: the sensor "
+        "changed in this second): one sensor per daemon; the sensor's source changed to "
+        "127.0.0.1:10000 (127.0.0.2:10001 silent)");
+}
+
+TEST_CASE("Health: while silent, the host's side is said after the losses", "[health][policy]") {
+  // Where the health goes and the disk's time left are true whether packets come or not.
+  HealthCounters before, now;
+  now.packets_rejected = 4;  // about packets: not said while none come
+  HealthGauges g = streaming();
+  g.seconds_since_last_packet = 3.0;
+  g.health_fallback.active = true;
+  g.health_fallback.directory = "/run/pandarcap/pandar40p";
+  g.health_fallback.error = "Read-only file system";
+  classify_health(now, before, kLast, true, "", g);
+  CHECK(g.state == HealthState::kNoData);
+  CHECK(g.reason ==
+        "no packet for 3.0 s; health written to /run/pandarcap/pandar40p (Read-only file system)");
 }

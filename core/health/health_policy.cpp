@@ -111,7 +111,17 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
     }
   };
   losses();
-  if (c.other_sensor_packets > p.other_sensor_packets) {
+  const bool source_changed = c.sensor_source_changes > p.sensor_source_changes;
+  if (c.other_sensor_packets > p.other_sensor_packets && source_changed) {
+    // The sensor changed within the second: the packets dropped before the change came from
+    // the one that is the sensor now, those after it from the one that was; the two addresses
+    // as they stand now would name them the wrong way round, so both are named, no roles.
+    problem("{} packets from a second sensor (", c.other_sensor_packets - p.other_sensor_packets);
+    append_ipv4_source(problems, g.sensor_source);
+    problems += " or ";
+    append_ipv4_source(problems, g.other_sensor_source);
+    problems += ": the sensor changed in this second): one sensor per daemon";
+  } else if (c.other_sensor_packets > p.other_sensor_packets) {
     // Two sensors sending to one port: the second is dropped, and named with the first.
     problem("{} packets from a second sensor at ", c.other_sensor_packets - p.other_sensor_packets);
     append_ipv4_source(problems, g.other_sensor_source);
@@ -119,7 +129,7 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
     append_ipv4_source(problems, g.sensor_source);
     problems += "): one sensor per daemon";
   }
-  if (c.sensor_source_changes > p.sensor_source_changes) {
+  if (source_changed) {
     problem("the sensor's source changed to ");
     append_ipv4_source(problems, g.sensor_source);
     problems += " (";
@@ -195,20 +205,26 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
       problem("sensor status: motor at {:.0f} RPM (expected {})", sensor.motor_rpm, expected.rpm);
     }
   }
-  if (g.health_fallback.active && !g.health_fallback.directory.empty()) {
-    problem("health written to {} ({})", g.health_fallback.directory, g.health_fallback.error);
-  } else if (g.health_fallback.active) {
-    problem("health files cannot be written anywhere ({})", g.health_fallback.error);
-  }
-  const StorageGauges& storage = g.storage;
-  if (expected.min_hours_left > 0 && storage.free_known &&
-      storage.hours_left < expected.min_hours_left) {
-    problem(
-        "{:.1f} hours of disk left ({} MiB free at {:.1f} MB/s written; health.min_hours_left {})",
-        storage.hours_left, storage.free_bytes >> 20, storage.written_bytes_per_second_total / 1e6,
-        expected.min_hours_left);
-  }
-  if (!g.standing.empty()) problem("{}", g.standing);
+  // The host's side, said whatever the state too: where the health goes, the disk's time left,
+  // and what stands (a replay's damage, the live view's).
+  const auto host = [&] {
+    if (g.health_fallback.active && !g.health_fallback.directory.empty()) {
+      problem("health written to {} ({})", g.health_fallback.directory, g.health_fallback.error);
+    } else if (g.health_fallback.active) {
+      problem("health files cannot be written anywhere ({})", g.health_fallback.error);
+    }
+    const StorageGauges& storage = g.storage;
+    if (expected.min_hours_left > 0 && storage.free_known &&
+        storage.hours_left < expected.min_hours_left) {
+      problem(
+          "{:.1f} hours of disk left ({} MiB free at {:.1f} MB/s written; health.min_hours_left "
+          "{})",
+          storage.hours_left, storage.free_bytes >> 20,
+          storage.written_bytes_per_second_total / 1e6, expected.min_hours_left);
+    }
+    if (!g.standing.empty()) problem("{}", g.standing);
+  };
+  host();
   // Failing writes degrade (capture goes on, and every byte not written is counted; they lead
   // the reason). A failing socket is an error: the daemon is not capturing.
   if (c.receive_errors > p.receive_errors) {
@@ -217,10 +233,10 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
     fmt::format_to(std::back_inserter(g.reason), "{} receive errors: the socket is failing",
                    c.receive_errors - p.receive_errors);
   } else if (silent) {
-    // Silence leads, and the second's losses follow it: a silence that a stop or a stalled
-    // writer ended said alone hid the losses counted in it (the writer's, catching up) from
-    // every reader of the reason. The rest (the sensor's, the packets') is about packets that
-    // no longer come, so it is not said.
+    // Silence leads, and the second's losses and the host's side follow it: a silence that a
+    // stop or a stalled writer ended, said alone, hid the losses counted in it (the writer's,
+    // catching up) from every reader of the reason. What is about the packets or the sensor
+    // (rejects, the motor, the clock, its status) is not said: no packet came.
     g.state = HealthState::kNoData;
     g.reason.clear();
     if (g.seconds_since_last_packet < 0) {
@@ -230,6 +246,7 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
                      g.seconds_since_last_packet);
     }
     losses();
+    host();
   } else if (!problems.empty()) {
     g.state = HealthState::kDegraded;
   } else {
