@@ -26,6 +26,7 @@
 #include <map>
 #include <set>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <tuple>
 #include <vector>
@@ -1392,7 +1393,11 @@ TEST_CASE("writer wait: a small receive ring and a stalled writer then a stop du
       INFO("sent " << sent.sent << ", exit " << stop_s << " s after the writer came back");
       const auto c = [&](const char* name) { return test::health_counter(h, name); };
       CHECK(c("datagrams_received") + c("kernel_drops") == sent.sent);
-      CHECK(c("kernel_drops") == 0);
+      // The packet ring's blocks are its receive ring: a TSan build's decoder, which reads them
+      // itself, may not keep up with them either (204 of 7198 once, counted), as it may not with
+      // the 64 slots after them.
+      if (!(test::kThreadSanitizerBuild && std::string_view(k.receiver) == "packet_ring"))
+        CHECK(c("kernel_drops") == 0);
       test::check_ring_overruns(h);  // a TSan build's decoder may not keep up with 64 slots
       CHECK(c("frames_dropped_no_arena") > 0);
       CHECK(stop_s < 2.0);

@@ -11,9 +11,11 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "bench/child_process.hpp"
 #include "support/mcap_reader.hpp"
@@ -45,6 +47,38 @@ std::optional<std::uint64_t> mcap_packets_in_file(const fs::path& out) {
   return topics["/pandar/packets"]["count"].get<std::uint64_t>();
 }
 
+// Waits `how_long` (the experiment's variable, not a wait for the daemon), requiring that the
+// daemon does not exit meanwhile.
+void keep_running(harness::ChildProcess& daemon, std::chrono::milliseconds how_long) {
+  const auto from = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - from < how_long)
+    REQUIRE(daemon.wait_exit(100ms) == std::nullopt);
+}
+
+// The real daemon with its simulated sensor and `config` (TOML), writing to `out`, started with
+// the writer-stall hook at `stall`; once it has written 4 frames its writer is held (until
+// `stall` is removed) for 2 s: the raw batches (4 x 512 datagrams, 0.57 s of the simulated
+// sensor) run out, the decoder's wait for one ends within a second, and from then on datagrams
+// are not recorded.
+std::unique_ptr<harness::ChildProcess> held_daemon(const test::ScratchDir& dir,
+                                                   const std::string& config, const fs::path& out,
+                                                   const fs::path& stall) {
+  const fs::path config_file = dir / "held.toml";
+  std::ofstream(config_file) << config;
+  auto daemon = std::make_unique<harness::ChildProcess>(
+      test::binary("pandarcapd"),
+      std::vector<std::string>{"--allow-root", "-c", config_file.string(), "--simulate",
+                               "--output-dir", out.string()},
+      dir / "log.txt",
+      std::vector<std::string>{"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
+  REQUIRE(harness::wait_until(
+      [&] { return test::health_counter(test::last_health_record(out), "frames_written") >= 4; },
+      20s));
+  REQUIRE(test::stall_writer(*daemon, stall, 10s));
+  keep_running(*daemon, 2s);
+  return daemon;
+}
+
 }  // namespace
 
 TEST_CASE("a held writer: each datagram left out is counted by every recording of packets",
@@ -55,25 +89,12 @@ TEST_CASE("a held writer: each datagram left out is counted by every recording o
   INFO(outputs.name);
   test::ScratchDir dir("packets-not-recorded");
   const fs::path out = dir / "out";
-  const fs::path config = dir / "held.toml";
   const fs::path stall = dir / "stall-writer";
-  std::ofstream(config) << fmt::format("[output]\npcap = {}\nmcap = true\nmcap_packets = {}\n",
-                                       outputs.pcap, outputs.mcap_packets);
-  harness::ChildProcess daemon(
-      test::binary("pandarcapd"),
-      {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
-      dir / "log.txt", {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
-  REQUIRE(harness::wait_until(
-      [&] { return test::health_counter(test::last_health_record(out), "frames_written") >= 4; },
-      20s));
-
-  // The writer held for 2 s (the experiment's variable, not a wait for the daemon): the raw
-  // batches (4 x 512 datagrams, 0.57 s of the simulated sensor) run out, the decoder's wait for
-  // one ends within a second, and from then on datagrams are not recorded.
-  REQUIRE(test::stall_writer(daemon, stall, 10s));
-  const auto held_at = std::chrono::steady_clock::now();
-  while (std::chrono::steady_clock::now() - held_at < 2s)
-    REQUIRE(daemon.wait_exit(100ms) == std::nullopt);
+  const auto held = held_daemon(dir,
+                                fmt::format("[output]\npcap = {}\nmcap = true\nmcap_packets = {}\n",
+                                            outputs.pcap, outputs.mcap_packets),
+                                out, stall);
+  harness::ChildProcess& daemon = *held;
   fs::remove(stall);
   // What the decoder left out reaches the health once the writer is back.
   const char* counted_in =
@@ -152,27 +173,12 @@ TEST_CASE("a stop while the writer is held: the last seconds' losses are said, n
   test::ScratchDir dir("packets-not-recorded-stop");
   const fs::path out = dir / "out";
   const fs::path stall = dir / "stall-writer";
-  const fs::path config = dir / "both.toml";
-  std::ofstream(config) << "[output]\nmcap = true\nmcap_packets = true\n";
-  harness::ChildProcess daemon(
-      test::binary("pandarcapd"),
-      {"--allow-root", "-c", config.string(), "--simulate", "--output-dir", out.string()},
-      dir / "log.txt", {"PANDARCAP_TEST_STALL_WRITER_FILE=" + stall.string()});
-  REQUIRE(harness::wait_until(
-      [&] { return test::health_counter(test::last_health_record(out), "frames_written") >= 4; },
-      20s));
-  REQUIRE(test::stall_writer(daemon, stall, 10s));
-  // Held past the raw batches (0.57 s of the simulated sensor) and the decoder's wait for one:
-  // datagrams go unrecorded from then on. Then the stop, and the writer let go after it.
-  const auto held_at = std::chrono::steady_clock::now();
-  while (std::chrono::steady_clock::now() - held_at < 2s)
-    REQUIRE(daemon.wait_exit(100ms) == std::nullopt);
+  const auto held = held_daemon(dir, "[output]\nmcap = true\nmcap_packets = true\n", out, stall);
+  harness::ChildProcess& daemon = *held;
   daemon.signal(SIGTERM);
   // Held on past the no-data timeout (1 s): the writer's last record then finds the receiver
   // silent, which is the case where the losses went unsaid.
-  const auto stopped_at = std::chrono::steady_clock::now();
-  while (std::chrono::steady_clock::now() - stopped_at < 1500ms)
-    REQUIRE(daemon.wait_exit(100ms) == std::nullopt);  // the writer is still held
+  keep_running(daemon, 1500ms);  // the writer is still held
   fs::remove(stall);
   INFO(daemon.log());
   REQUIRE(daemon.wait_exit(15s) == 0);
