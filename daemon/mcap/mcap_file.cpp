@@ -70,10 +70,12 @@ McapFile::McapFile(const McapFileOptions& options)
       packets.metadata.emplace_back("sensor_model", options.sensor_model);
     summary.channels.push_back(std::move(packets));
   }
-  slots_[1].summary.schemas = summary.schemas;
-  slots_[1].summary.channels = summary.channels;
   for (Slot& slot : slots_) {
-    // Either slot opens the next file (a rotation alternates them): neither allocates then.
+    if (&slot != &slots_[0]) {
+      slot.summary.schemas = summary.schemas;
+      slot.summary.channels = summary.channels;
+    }
+    // Any slot opens the next file (a rotation takes a free one): none allocates then.
     slot.file.reserve_path(kPathReserve);
     slot.summary.metadata.reserve(2);  // "pandarcap", "foxglove"
     slot.summary.attachments.reserve(1);
@@ -252,6 +254,8 @@ void McapFile::count_done_chunks() {
 void McapFile::take_back(ChunkBuffer& chunk) {
   if (closing_ != nullptr && chunk.file == closing_->number) {
     take_closing(chunk);
+  } else if (leaving_ != nullptr && chunk.file == leaving_->number) {
+    take_leaving(chunk);
   } else {
     count_chunk(chunk);
   }
@@ -262,6 +266,23 @@ void McapFile::take_closing(ChunkBuffer& chunk) noexcept {
     closed_.error = error;
   }
   settle_closing();
+}
+
+void McapFile::take_leaving(ChunkBuffer& chunk) noexcept {
+  // Its messages were counted lost when it was let go: whether the chunk was written or not,
+  // it is not counted, and the file ends on its last whole chunk counted before.
+  pipeline_.give_back(&chunk);
+  if (--leaving_->chunks_in_flight != 0) return;
+  leaving_->file.truncate(leaving_->whole_bytes);
+  (void)leaving_->file.try_close();  // the file is gone: nothing more to report
+  leaving_ = nullptr;
+}
+
+McapFile::Slot* McapFile::free_slot() noexcept {
+  for (Slot& slot : slots_) {
+    if (&slot != now_ && &slot != closing_ && &slot != leaving_) return &slot;
+  }
+  return now_;  // never: three slots for at most three files
 }
 
 void McapFile::count_chunk(ChunkBuffer& chunk) {
@@ -396,7 +417,7 @@ void McapFile::flush() {
 }
 
 void McapFile::drain() {
-  if (!now_->file.is_open() && closing_ == nullptr) return;
+  if (!now_->file.is_open() && closing_ == nullptr && leaving_ == nullptr) return;
   while (ChunkBuffer* chunk = pipeline_.wait_done())
     take_back(*chunk);
 }
@@ -414,7 +435,7 @@ void McapFile::close_later() {
   if (closing_ != nullptr) throw std::logic_error("McapFile::close_later: a file still closes");
   flush();
   closing_ = now_;
-  now_ = now_ == &slots_[0] ? &slots_[1] : &slots_[0];
+  now_ = free_slot();
   closed_ = {};
   closed_ready_ = false;
   settle_closing();  // nothing in flight: finished now
@@ -425,7 +446,11 @@ void McapFile::finish_closing() noexcept {
   while (closing_ != nullptr && !closed_ready_) {
     ChunkBuffer* chunk = pipeline_.wait_done();
     if (chunk == nullptr) break;  // never expected: its chunks counted as in flight
-    take_closing(*chunk);
+    if (leaving_ != nullptr && chunk->file == leaving_->number) {
+      take_leaving(*chunk);  // a file let go before it
+    } else {
+      take_closing(*chunk);
+    }
   }
 }
 
@@ -451,6 +476,8 @@ std::uint64_t McapFile::abandon(bool* finished) noexcept {
     if (chunk == nullptr) break;  // never expected: counted as in flight
     if (closing_ != nullptr && chunk->file == closing_->number) {
       take_closing(*chunk);
+    } else if (leaving_ != nullptr && chunk->file == leaving_->number) {
+      take_leaving(*chunk);
     } else {
       --slot.chunks_in_flight;
       pipeline_.give_back(chunk);
@@ -463,6 +490,21 @@ std::uint64_t McapFile::abandon(bool* finished) noexcept {
   if (finished != nullptr) *finished = whole;
   if (!whole) slot.file.truncate(slot.whole_bytes);
   (void)slot.file.try_close();  // a file that failed already: nothing more to report
+  return lost;
+}
+
+std::uint64_t McapFile::let_go() noexcept {
+  Slot& slot = *now_;
+  if (slot.chunks_in_flight == 0 || leaving_ != nullptr) return abandon();
+  std::uint64_t lost = slot.messages_in_flight;
+  if (open_ != nullptr) {
+    lost += open_->messages;
+    open_->clear();
+  }
+  slot.messages_in_flight = 0;
+  slot.bytes_in_flight = 0;
+  leaving_ = now_;
+  now_ = free_slot();
   return lost;
 }
 

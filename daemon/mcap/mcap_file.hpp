@@ -133,6 +133,11 @@ class McapFile {
   // discarded, a closing file's are not (they are counted into it as they come back, so a
   // failure of the next file while a stalled disk holds the one before does not wait for it).
   std::uint64_t abandon(bool* finished = nullptr) noexcept;
+  // The open file is gone (removed): abandon()'s count, without waiting. Its chunks in flight
+  // may queue behind a closing file's held by a stalled disk; the file is let go as they come
+  // back (its descriptor kept until then), and open() may start the next one meanwhile. Waits
+  // as abandon() does only when a file let go before is still waiting for its own.
+  std::uint64_t let_go() noexcept;
 
   // In the chunks written to the open file.
   std::uint64_t messages() const noexcept { return now_->summary.message_count; }
@@ -161,7 +166,8 @@ class McapFile {
  private:
   // Room in the open chunk for a message of `data_bytes`: the chunk handed over first when
   // needed; false when no chunk buffer is free.
-  // One file's own state: the one messages go to (now_), or the one closing (closing_).
+  // One file's own state: the one messages go to (now_), the one closing (closing_), or one
+  // let go (leaving_).
   struct Slot {
     OutputFile file;
     mcap::Summary summary;
@@ -183,6 +189,10 @@ class McapFile {
   // One chunk of the closing file back: counted, or its failure kept; the file settled when it
   // was the last.
   void take_closing(ChunkBuffer& chunk) noexcept;
+  // One chunk of the file let go back: its buffer free; the file closed when it was the last.
+  void take_leaving(ChunkBuffer& chunk) noexcept;
+  // A slot neither open, closing nor let go: the next file's.
+  Slot* free_slot() noexcept;
   // One chunk of the open file back: counted, or its failure thrown (std::system_error for a
   // write, the file cut back to its last whole chunk).
   void count_chunk(ChunkBuffer& chunk);
@@ -206,9 +216,11 @@ class McapFile {
   std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_
   std::size_t max_message_bytes_;
   std::size_t max_index_entries_;
-  std::array<Slot, 2> slots_;
+  // The open file's, the closing one's, and one let go (let_go) whose chunks are in flight.
+  std::array<Slot, 3> slots_;
   Slot* now_ = &slots_[0];
   Slot* closing_ = nullptr;  // closing, or closed and not yet taken
+  Slot* leaving_ = nullptr;  // let go, its chunks not all back
   McapClosedFile closed_;    // closing_'s outcome so far
   bool closed_ready_ = false;
   std::vector<std::uint8_t> out_;  // records on their way to the file

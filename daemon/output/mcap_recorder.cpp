@@ -225,8 +225,9 @@ void McapRecorder::write_health(std::string_view json_line, std::int64_t realtim
 
 void McapRecorder::lose_open_file() {
   const std::uint64_t messages = file_->messages();
-  // Those not yet in it (the open chunk, the chunks in flight) were never written.
-  messages_not_written_ += file_->abandon();
+  // Those not yet in it (the open chunk, the chunks in flight) were never written. Its chunks
+  // may wait behind a closing file's on a stalled disk: let go, not waited for.
+  messages_not_written_ += file_->let_go();
   messages_closed_ += messages;  // written, and lost with the file: messages_written stays
   messages_lost_ += messages;
   spdlog::warn(
