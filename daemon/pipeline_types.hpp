@@ -183,6 +183,14 @@ struct ReceiveCounters {
   // receiver that fell behind, the newest arrival seen is not the sensor's last packet.
   std::atomic<std::int64_t> seen_until_monotonic_ns{0};
   std::atomic<std::int64_t> look_interval_ns{0};
+  // When the receiver saw the stop (CLOCK_MONOTONIC ns, 0 = running): it listens no further
+  // (a drain takes what the kernel holds), so a silence is measured up to it. A sensor that
+  // sent on is not known to have gone quiet because the daemon stopped listening.
+  std::atomic<std::int64_t> stopped_listening_monotonic_ns{0};
+  void note_stop(std::int64_t monotonic_ns) noexcept {
+    if (stopped_listening_monotonic_ns.load(std::memory_order_relaxed) == 0)
+      stopped_listening_monotonic_ns.store(monotonic_ns, std::memory_order_relaxed);
+  }
   // Release: a writer that sees it (acquire) sees the arrivals noted before it.
   void note_seen_until(std::int64_t monotonic_ns, std::int64_t interval_ns) noexcept {
     look_interval_ns.store(interval_ns, std::memory_order_relaxed);

@@ -89,6 +89,32 @@ TEST_CASE("Health: write errors quote the last error and lead the reason", "[hea
         "1 kernel drops");
 }
 
+TEST_CASE("Health: what a full disk kept out of the recordings is said per output",
+          "[health][policy]") {
+  // The bytes alone do not say how many packets or messages the recordings lack: each output's
+  // count follows them, also without a write error (the health's room kept).
+  for (const bool failed : {true, false}) {
+    HealthCounters before, now;
+    before.pcap_packets_not_written = 10;
+    before.mcap_messages_not_written = 20;
+    now = before;
+    now.write_errors = failed ? 3 : 0;
+    now.bytes_not_written = failed ? 9000 : 0;
+    now.pcap_packets_not_written = 17;
+    now.mcap_messages_not_written = 31;
+    HealthGauges g = streaming();
+    classify_health(now, before, kLast, false, "cannot write 'x': No space left on device", g);
+    INFO(g.reason);
+    CHECK(g.state == HealthState::kDegraded);
+    CHECK(g.reason ==
+          std::string(failed ? "3 write errors (9000 bytes not written): cannot write 'x': No "
+                               "space left on device; "
+                             : "") +
+              "7 packets not written to the pcap (failed writes or the health's room); 11 MCAP "
+              "messages not written (failed writes or the health's room)");
+  }
+}
+
 TEST_CASE("Health: the sensor's high-temperature flag degrades", "[health][policy]") {
   HealthCounters counters;
   HealthGauges g = streaming();

@@ -74,8 +74,8 @@ void motor_problems(const HealthCounters& c, const HealthCounters& p,
 void classify_health(const HealthCounters& c, const HealthCounters& p,
                      const HealthExpectations& expected, bool silent,
                      std::string_view last_write_error, HealthGauges& g) {
-  // The problems are written straight into the reason (cleared, its capacity kept), and the
-  // reason is cut back to what the winning state says.
+  // The problems are written straight into the reason (cleared, its capacity kept). A failing
+  // socket or a silence is decided first: each says only what is true of it (below).
   std::string& problems = g.reason;
   problems.clear();
   const auto problem = [&]<typename... Args>(fmt::format_string<Args...> format, Args&&... args) {
@@ -91,6 +91,11 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
       problem("{} write errors ({} bytes not written): {}", c.write_errors - p.write_errors,
               c.bytes_not_written - p.bytes_not_written, last_write_error);
     }
+    // What those writes held (or what was not written to keep the health's room), by output.
+    grew(c.pcap_packets_not_written, p.pcap_packets_not_written,
+         "packets not written to the pcap (failed writes or the health's room)");
+    grew(c.mcap_messages_not_written, p.mcap_messages_not_written,
+         "MCAP messages not written (failed writes or the health's room)");
     grew(c.kernel_drops, p.kernel_drops, "kernel drops");
     grew(c.ring_overruns, p.ring_overruns, "ring overruns");
     grew(c.frames_dropped_no_arena, p.frames_dropped_no_arena, "frames dropped (no free arena)");
@@ -110,6 +115,48 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
           std::string_view(upload.last_removed));
     }
   };
+  // The host's side, said whatever the state too: where the health goes, the disk's time left,
+  // and what stands (a replay's damage, the live view's).
+  const auto host = [&] {
+    if (g.health_fallback.active && !g.health_fallback.directory.empty()) {
+      problem("health written to {} ({})", g.health_fallback.directory, g.health_fallback.error);
+    } else if (g.health_fallback.active) {
+      problem("health files cannot be written anywhere ({})", g.health_fallback.error);
+    }
+    const StorageGauges& storage = g.storage;
+    if (expected.min_hours_left > 0 && storage.free_known &&
+        storage.hours_left < expected.min_hours_left) {
+      problem(
+          "{:.1f} hours of disk left ({} MiB free at {:.1f} MB/s written; health.min_hours_left "
+          "{})",
+          storage.hours_left, storage.free_bytes >> 20,
+          storage.written_bytes_per_second_total / 1e6, expected.min_hours_left);
+    }
+    if (!g.standing.empty()) problem("{}", g.standing);
+  };
+  // A failing socket is an error: the daemon is not capturing.
+  if (c.receive_errors > p.receive_errors) {
+    g.state = HealthState::kError;
+    fmt::format_to(std::back_inserter(g.reason), "{} receive errors: the socket is failing",
+                   c.receive_errors - p.receive_errors);
+    return;
+  }
+  if (silent) {
+    // Silence leads, and the second's losses and the host's side follow it: a silence that a
+    // stop or a stalled writer ended, said alone, hid the losses counted in it (the writer's,
+    // catching up) from every reader of the reason. What is about the packets or the sensor
+    // (rejects, the motor, the clock, its status) is not said: no packet came.
+    g.state = HealthState::kNoData;
+    if (g.seconds_since_last_packet < 0) {
+      g.reason += "no packet received yet";
+    } else {
+      fmt::format_to(std::back_inserter(g.reason), "no packet for {:.1f} s",
+                     g.seconds_since_last_packet);
+    }
+    losses();
+    host();
+    return;
+  }
   losses();
   const bool source_changed = c.sensor_source_changes > p.sensor_source_changes;
   if (c.other_sensor_packets > p.other_sensor_packets && source_changed) {
@@ -205,53 +252,10 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
       problem("sensor status: motor at {:.0f} RPM (expected {})", sensor.motor_rpm, expected.rpm);
     }
   }
-  // The host's side, said whatever the state too: where the health goes, the disk's time left,
-  // and what stands (a replay's damage, the live view's).
-  const auto host = [&] {
-    if (g.health_fallback.active && !g.health_fallback.directory.empty()) {
-      problem("health written to {} ({})", g.health_fallback.directory, g.health_fallback.error);
-    } else if (g.health_fallback.active) {
-      problem("health files cannot be written anywhere ({})", g.health_fallback.error);
-    }
-    const StorageGauges& storage = g.storage;
-    if (expected.min_hours_left > 0 && storage.free_known &&
-        storage.hours_left < expected.min_hours_left) {
-      problem(
-          "{:.1f} hours of disk left ({} MiB free at {:.1f} MB/s written; health.min_hours_left "
-          "{})",
-          storage.hours_left, storage.free_bytes >> 20,
-          storage.written_bytes_per_second_total / 1e6, expected.min_hours_left);
-    }
-    if (!g.standing.empty()) problem("{}", g.standing);
-  };
   host();
   // Failing writes degrade (capture goes on, and every byte not written is counted; they lead
-  // the reason). A failing socket is an error: the daemon is not capturing.
-  if (c.receive_errors > p.receive_errors) {
-    g.state = HealthState::kError;
-    g.reason.clear();
-    fmt::format_to(std::back_inserter(g.reason), "{} receive errors: the socket is failing",
-                   c.receive_errors - p.receive_errors);
-  } else if (silent) {
-    // Silence leads, and the second's losses and the host's side follow it: a silence that a
-    // stop or a stalled writer ended, said alone, hid the losses counted in it (the writer's,
-    // catching up) from every reader of the reason. What is about the packets or the sensor
-    // (rejects, the motor, the clock, its status) is not said: no packet came.
-    g.state = HealthState::kNoData;
-    g.reason.clear();
-    if (g.seconds_since_last_packet < 0) {
-      g.reason += "no packet received yet";
-    } else {
-      fmt::format_to(std::back_inserter(g.reason), "no packet for {:.1f} s",
-                     g.seconds_since_last_packet);
-    }
-    losses();
-    host();
-  } else if (!problems.empty()) {
-    g.state = HealthState::kDegraded;
-  } else {
-    g.state = HealthState::kOk;
-  }
+  // the reason).
+  g.state = problems.empty() ? HealthState::kOk : HealthState::kDegraded;
 }
 
 }  // namespace pandarcap

@@ -256,7 +256,15 @@ void Writer::log_fragments(std::int64_t now) {
   last_fragment_log_ns_ = now;
 }
 
+std::int64_t Writer::listened_until(std::int64_t now) const noexcept {
+  // A stop ends the listening, not the sensor's sending: the silence is measured up to it.
+  const std::int64_t stopped =
+      receive_.stopped_listening_monotonic_ns.load(std::memory_order_relaxed);
+  return stopped > 0 ? std::min(now, stopped) : now;
+}
+
 double Writer::seconds_since_last_packet(std::int64_t now) const noexcept {
+  now = listened_until(now);
   // Live, the receiver's note of the newest arrival; a replay's, the decoder's of its taking.
   const std::int64_t last =
       std::max(receive_.last_arrival_monotonic_ns.load(std::memory_order_relaxed),
@@ -281,7 +289,7 @@ bool Writer::silence_unconfirmed(std::int64_t now) noexcept {
   const std::int64_t seen_until = receive_.seen_until_monotonic_ns.load(std::memory_order_acquire);
   const std::int64_t interval = receive_.look_interval_ns.load(std::memory_order_relaxed);
   if (receive_.arrival_looks.load(std::memory_order_relaxed) == 0 || !silent(now) ||
-      now - seen_until <= interval + kLookSlackNs) {
+      listened_until(now) - seen_until <= interval + kLookSlackNs) {
     unconfirmed_since_ns_ = 0;
     holding_ = false;
     return false;

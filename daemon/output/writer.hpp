@@ -101,7 +101,10 @@ class Writer final : private FinishReceiver {
   // A finished job back from the finisher, to the part whose file it was.
   void finished(const FinishJob& job) override;
   void stall_while_test_file_exists() const;
-  // Seconds since the decoder's last packet (-1: none yet), and whether that is silence.
+  // `now`, or the moment the receiver saw a stop if that was earlier: it listened no longer.
+  std::int64_t listened_until(std::int64_t now_monotonic_ns) const noexcept;
+  // Seconds since the decoder's last packet (-1: none yet), until the listening ended, and
+  // whether that is silence.
   double seconds_since_last_packet(std::int64_t now_monotonic_ns) const noexcept;
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
   // At each turn of the loop: whether the health waits because it would say no_data and the

@@ -480,7 +480,10 @@ ReceiveTurn PacketRingReceiver::receive(PacketRing& ring, const std::atomic<bool
   // for that (twice its period) takes every frame the kernel accepted before the stop.
   const std::int64_t drain_ns = std::max<std::int64_t>(200'000'000, 3'000'000LL * retire_ms_);
   const std::int64_t now = coarse_monotonic_ns();
-  if (drain_until_ == 0 && stop.load(std::memory_order_relaxed)) drain_until_ = now + drain_ns;
+  if (drain_until_ == 0 && stop.load(std::memory_order_relaxed)) {
+    counters.note_stop(now);
+    drain_until_ = now + drain_ns;
+  }
   const bool draining = drain_until_ != 0;
   // The last block's datagrams were read in place; the caller has emptied the ring since (it
   // turns only then), so nothing reads the block any more. A caller that turns early is told

@@ -414,6 +414,7 @@ void UdpReceiver::run_per_datagram(PacketRing& ring, const std::atomic<bool>& st
   std::int64_t drain_until = 0;  // 0: not stopping
   for (;;) {
     if (drain_until == 0 && stop.load(std::memory_order_relaxed)) {
+      counters.note_stop(coarse_monotonic_ns());
       drain_until = coarse_monotonic_ns() + kDrainNs;
     }
     const bool draining = drain_until != 0;
@@ -458,7 +459,10 @@ void UdpReceiver::run_coalesced(PacketRing& ring, const std::atomic<bool>& stop,
   std::int64_t sleep_ns = kMinSleepNs;
   for (;;) {
     const std::int64_t wake_ns = monotonic_ns();
-    if (drain_until == 0 && stop.load(std::memory_order_relaxed)) drain_until = wake_ns + kDrainNs;
+    if (drain_until == 0 && stop.load(std::memory_order_relaxed)) {
+      counters.note_stop(wake_ns);
+      drain_until = wake_ns + kDrainNs;
+    }
     const bool draining = drain_until != 0;
     ReceiveCounters::add(heartbeat, 1);
     ReceiveCounters::add(counters.wakeups, 1);
