@@ -414,8 +414,9 @@ void UdpReceiver::run_per_datagram(PacketRing& ring, const std::atomic<bool>& st
   std::int64_t drain_until = 0;  // 0: not stopping
   for (;;) {
     if (drain_until == 0 && stop.load(std::memory_order_relaxed)) {
-      counters.note_stop(coarse_monotonic_ns());
-      drain_until = coarse_monotonic_ns() + kDrainNs;
+      const std::int64_t stopped_ns = coarse_monotonic_ns();
+      counters.note_stop(stopped_ns);
+      drain_until = stopped_ns + kDrainNs;
     }
     const bool draining = drain_until != 0;
     if (draining && coarse_monotonic_ns() >= drain_until) break;
