@@ -158,15 +158,22 @@ TEST_CASE("Health: a motor more than 10 % off the expected speed degrades", "[he
 }
 
 TEST_CASE("Health: receive errors are an error, whatever else is wrong", "[health][policy]") {
+  // The second's losses follow the error (as they follow a silence: a reader summing the
+  // reasons' counts finds them all); what is about the sensor does not.
   HealthCounters before, now;
   now.receive_errors = 4;
   now.kernel_drops = 7;
   now.write_errors = 1;
+  now.bytes_not_written = 100;
+  now.pcap_packets_not_written = 2;
   HealthGauges g = streaming();
   g.high_temperature = true;
   classify_health(now, before, kLast, true, "disk full", g);  // silent too: error still wins
   CHECK(g.state == HealthState::kError);
-  CHECK(g.reason == "4 receive errors: the socket is failing");
+  CHECK(g.reason ==
+        "4 receive errors: the socket is failing; 1 write errors (100 bytes not written): disk "
+        "full; 2 packets not written to the pcap (failed writes or the health's room); 7 kernel "
+        "drops");
 }
 
 TEST_CASE("Health: silence is no_data, before and after the first packet", "[health][policy]") {

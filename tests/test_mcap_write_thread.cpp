@@ -23,6 +23,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cerrno>
 #include <chrono>
@@ -535,4 +536,98 @@ TEST_CASE("the next MCAP file lost while the one before still closes: no wait fo
   // What the lost file held is written and lost; everything else written is in the files.
   CHECK(on_disk + recorder.messages_lost() == recorder.messages_written());
   CHECK(rig.accounted() == rig.sent);
+}
+
+namespace {
+
+// This process's descriptors open on a file named `name` (removed files included).
+int descriptors_to(const std::string& name) {
+  int n = 0;
+  for (const auto& entry : fs::directory_iterator("/proc/self/fd")) {
+    std::error_code error;
+    const fs::path target = fs::read_symlink(entry.path(), error);
+    if (!error && target.filename().string().rfind(name, 0) == 0) ++n;
+  }
+  return n;
+}
+
+// The .part that is not `but`, or none.
+fs::path other_part(const RecorderRig& rig, const std::vector<fs::path>& but) {
+  for (const fs::path& part : rig.files(".mcap.part"))
+    if (std::find(but.begin(), but.end(), part) == but.end()) return part;
+  return {};
+}
+
+}  // namespace
+
+TEST_CASE("files lost one after another while the one before still closes: none waits",
+          "[mcap][outputs][threads]") {
+  // The hostile tester's case: a second file lost while the first lost one still waits for its
+  // chunks (queued behind the closing file's held write) is let go too, not waited for.
+  const io::ScopedFileSyscalls seam(watching_calls());
+  RecorderRig rig("mcap-lost-twice", 8);
+  McapRecorder& recorder = *rig.recorder;
+  const fs::path first = rig.first_part();
+  watch(first, /*hold=*/true, /*fail_at=*/0);
+  rig.send_batch();
+  REQUIRE(write_held());
+  recorder.rotate();
+  std::vector<fs::path> lost;
+  for (int file = 0; file < 2; ++file) {
+    rig.send_batch();  // the next file opens, its chunks in flight behind the held write
+    const fs::path next = other_part(rig, {first});
+    REQUIRE_FALSE(next.empty());
+    fs::remove(next);
+    rig.send_batch();  // let go at its flush
+    lost.push_back(next);
+    INFO("file " << file << ": " << next);
+    CHECK(descriptors_to(next.filename().string()) == 1);  // kept until its chunks are back
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK(mcap_writes.held == 1);  // a flush that waited would still be in the seam
+    CHECK_FALSE(mcap_writes.timed_out);
+  }
+  release_writes();
+  rig.send_batch();
+  recorder.drain();
+  rig.finisher->drain();
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK_FALSE(mcap_writes.timed_out);
+    mcap_writes.inode = 0;
+  }
+  CHECK(rig.accounted() == rig.sent);
+  for (const fs::path& file : lost)
+    CHECK(descriptors_to(file.filename().string()) == 0);
+  recorder.close();
+  rig.finisher->drain();
+  std::uint64_t on_disk = 0;
+  for (const fs::path& file : rig.files(".mcap"))
+    on_disk += finish_interrupted_mcap(file.string()).messages;
+  CHECK(on_disk + recorder.messages_lost() == recorder.messages_written());
+}
+
+TEST_CASE("a file lost with its own write held: the drain at exit waits for it and closes it",
+          "[mcap][outputs][threads]") {
+  // The writer drains the recorder before its final record: a lost file's chunks still in
+  // flight are taken back there, and its descriptor closed, not left to the destructor.
+  const io::ScopedFileSyscalls seam(watching_calls());
+  RecorderRig rig("mcap-lost-own-held", 8);
+  McapRecorder& recorder = *rig.recorder;
+  const fs::path first = rig.first_part();
+  watch(first, /*hold=*/true, /*fail_at=*/0);
+  rig.send_batch();
+  REQUIRE(write_held());
+  fs::remove(first);
+  recorder.flush();  // let go: its own write is the one held
+  CHECK(descriptors_to(first.filename().string()) == 1);
+  release_writes();
+  recorder.drain();
+  CHECK(descriptors_to(first.filename().string()) == 0);
+  {
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK_FALSE(mcap_writes.timed_out);
+    mcap_writes.inode = 0;
+  }
+  CHECK(rig.accounted() == rig.sent);
+  CHECK(recorder.messages_written() == recorder.messages_lost());
 }

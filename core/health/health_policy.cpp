@@ -134,11 +134,14 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
     }
     if (!g.standing.empty()) problem("{}", g.standing);
   };
-  // A failing socket is an error: the daemon is not capturing.
+  // A failing socket is an error: the daemon is not capturing. The second's losses and the
+  // host's side follow, as they follow a silence.
   if (c.receive_errors > p.receive_errors) {
     g.state = HealthState::kError;
     fmt::format_to(std::back_inserter(g.reason), "{} receive errors: the socket is failing",
                    c.receive_errors - p.receive_errors);
+    losses();
+    host();
     return;
   }
   if (silent) {

@@ -45,6 +45,13 @@ class OutputFile {
   bool is_open() const noexcept { return fd_ >= 0; }
   // Room for a path of `bytes` made now (at start-up): the first open() allocates nothing.
   void reserve_path(std::size_t bytes) { path_.reserve(bytes); }
+  // Two files trade places, descriptor, path (and its reserve) and state: nothing allocated.
+  void swap(OutputFile& other) noexcept {
+    path_.swap(other.path_);
+    std::swap(fd_, other.fd_);
+    std::swap(size_, other.size_);
+    std::swap(direct_, other.direct_);
+  }
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
 

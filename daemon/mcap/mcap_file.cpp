@@ -38,6 +38,7 @@ McapFile::McapFile(const McapFileOptions& options)
           options.max_frame_points * pcd_point_bytes(options.format.layout) + 1),
       // A chunk holds chunk_bytes; its smallest messages (packets) are over 1 KB.
       max_index_entries_(options.chunk_bytes / 1024 + 64),
+      leaving_(std::max<std::size_t>(options.chunk_buffers, 1)),
       pipeline_(std::max<std::size_t>(options.chunk_buffers, 1),
                 options.chunk_bytes + mcap::kMessagePrefixBytes + max_message_bytes_,
                 max_index_entries_, options.compression, options.compression_level,
@@ -70,17 +71,17 @@ McapFile::McapFile(const McapFileOptions& options)
       packets.metadata.emplace_back("sensor_model", options.sensor_model);
     summary.channels.push_back(std::move(packets));
   }
+  slots_[1].summary.schemas = summary.schemas;
+  slots_[1].summary.channels = summary.channels;
   for (Slot& slot : slots_) {
-    if (&slot != &slots_[0]) {
-      slot.summary.schemas = summary.schemas;
-      slot.summary.channels = summary.channels;
-    }
-    // Any slot opens the next file (a rotation takes a free one): none allocates then.
+    // Either slot opens the next file (a rotation alternates them): neither allocates then.
     slot.file.reserve_path(kPathReserve);
     slot.summary.metadata.reserve(2);  // "pandarcap", "foxglove"
     slot.summary.attachments.reserve(1);
     slot.summary.chunks.reserve(options.max_chunks);
   }
+  for (Leaving& leaving : leaving_)
+    leaving.file.reserve_path(kPathReserve);  // a slot's file and this one trade places
 }
 
 void McapFile::open(std::string_view path, std::uint64_t create_time_ns) {
@@ -254,8 +255,8 @@ void McapFile::count_done_chunks() {
 void McapFile::take_back(ChunkBuffer& chunk) {
   if (closing_ != nullptr && chunk.file == closing_->number) {
     take_closing(chunk);
-  } else if (leaving_ != nullptr && chunk.file == leaving_->number) {
-    take_leaving(chunk);
+  } else if (Leaving* leaving = leaving_of(chunk)) {
+    take_leaving(*leaving, chunk);
   } else {
     count_chunk(chunk);
   }
@@ -268,21 +269,22 @@ void McapFile::take_closing(ChunkBuffer& chunk) noexcept {
   settle_closing();
 }
 
-void McapFile::take_leaving(ChunkBuffer& chunk) noexcept {
+McapFile::Leaving* McapFile::leaving_of(const ChunkBuffer& chunk) noexcept {
+  if (leaving_count_ == 0) return nullptr;
+  for (Leaving& leaving : leaving_) {
+    if (leaving.chunks_in_flight != 0 && leaving.number == chunk.file) return &leaving;
+  }
+  return nullptr;
+}
+
+void McapFile::take_leaving(Leaving& leaving, ChunkBuffer& chunk) noexcept {
   // Its messages were counted lost when it was let go: whether the chunk was written or not,
   // it is not counted, and the file ends on its last whole chunk counted before.
   pipeline_.give_back(&chunk);
-  if (--leaving_->chunks_in_flight != 0) return;
-  leaving_->file.truncate(leaving_->whole_bytes);
-  (void)leaving_->file.try_close();  // the file is gone: nothing more to report
-  leaving_ = nullptr;
-}
-
-McapFile::Slot* McapFile::free_slot() noexcept {
-  for (Slot& slot : slots_) {
-    if (&slot != now_ && &slot != closing_ && &slot != leaving_) return &slot;
-  }
-  return now_;  // never: three slots for at most three files
+  if (--leaving.chunks_in_flight != 0) return;
+  leaving.file.truncate(leaving.whole_bytes);
+  (void)leaving.file.try_close();  // the file is gone: nothing more to report
+  --leaving_count_;
 }
 
 void McapFile::count_chunk(ChunkBuffer& chunk) {
@@ -417,7 +419,7 @@ void McapFile::flush() {
 }
 
 void McapFile::drain() {
-  if (!now_->file.is_open() && closing_ == nullptr && leaving_ == nullptr) return;
+  if (!now_->file.is_open() && closing_ == nullptr && leaving_count_ == 0) return;
   while (ChunkBuffer* chunk = pipeline_.wait_done())
     take_back(*chunk);
 }
@@ -435,7 +437,7 @@ void McapFile::close_later() {
   if (closing_ != nullptr) throw std::logic_error("McapFile::close_later: a file still closes");
   flush();
   closing_ = now_;
-  now_ = free_slot();
+  now_ = now_ == &slots_[0] ? &slots_[1] : &slots_[0];
   closed_ = {};
   closed_ready_ = false;
   settle_closing();  // nothing in flight: finished now
@@ -446,8 +448,8 @@ void McapFile::finish_closing() noexcept {
   while (closing_ != nullptr && !closed_ready_) {
     ChunkBuffer* chunk = pipeline_.wait_done();
     if (chunk == nullptr) break;  // never expected: its chunks counted as in flight
-    if (leaving_ != nullptr && chunk->file == leaving_->number) {
-      take_leaving(*chunk);  // a file let go before it
+    if (Leaving* leaving = leaving_of(*chunk)) {
+      take_leaving(*leaving, *chunk);  // a file let go before it
     } else {
       take_closing(*chunk);
     }
@@ -476,8 +478,8 @@ std::uint64_t McapFile::abandon(bool* finished) noexcept {
     if (chunk == nullptr) break;  // never expected: counted as in flight
     if (closing_ != nullptr && chunk->file == closing_->number) {
       take_closing(*chunk);
-    } else if (leaving_ != nullptr && chunk->file == leaving_->number) {
-      take_leaving(*chunk);
+    } else if (Leaving* leaving = leaving_of(*chunk)) {
+      take_leaving(*leaving, *chunk);
     } else {
       --slot.chunks_in_flight;
       pipeline_.give_back(chunk);
@@ -495,16 +497,26 @@ std::uint64_t McapFile::abandon(bool* finished) noexcept {
 
 std::uint64_t McapFile::let_go() noexcept {
   Slot& slot = *now_;
-  if (slot.chunks_in_flight == 0 || leaving_ != nullptr) return abandon();
+  Leaving* free = nullptr;
+  for (Leaving& leaving : leaving_) {
+    if (leaving.chunks_in_flight == 0) free = &leaving;
+  }
+  if (slot.chunks_in_flight == 0 || free == nullptr) return abandon();  // nothing to wait for
   std::uint64_t lost = slot.messages_in_flight;
   if (open_ != nullptr) {
     lost += open_->messages;
     open_->clear();
   }
+  // The descriptor goes aside with what its chunks need; the slot keeps a closed file, ready
+  // for the next open().
+  free->file.swap(slot.file);
+  free->number = slot.number;
+  free->whole_bytes = slot.whole_bytes;
+  free->chunks_in_flight = slot.chunks_in_flight;
+  ++leaving_count_;
   slot.messages_in_flight = 0;
   slot.bytes_in_flight = 0;
-  leaving_ = now_;
-  now_ = free_slot();
+  slot.chunks_in_flight = 0;
   return lost;
 }
 

@@ -134,10 +134,12 @@ class McapFile {
   // failure of the next file while a stalled disk holds the one before does not wait for it).
   std::uint64_t abandon(bool* finished = nullptr) noexcept;
   // The open file is gone (removed): abandon()'s count, without waiting. Its chunks in flight
-  // may queue behind a closing file's held by a stalled disk; the file is let go as they come
-  // back (its descriptor kept until then), and open() may start the next one meanwhile. Waits
-  // as abandon() does only when a file let go before is still waiting for its own.
+  // may queue behind a closing file's held by a stalled disk; its descriptor is kept aside
+  // until they are back (then cut back to its last whole chunk and closed), and open() may
+  // start the next file meanwhile, which may be let go in turn.
   std::uint64_t let_go() noexcept;
+  // A file let go still has chunks in flight (drain() waits for them).
+  bool leaving() const noexcept { return leaving_count_ != 0; }
 
   // In the chunks written to the open file.
   std::uint64_t messages() const noexcept { return now_->summary.message_count; }
@@ -166,8 +168,7 @@ class McapFile {
  private:
   // Room in the open chunk for a message of `data_bytes`: the chunk handed over first when
   // needed; false when no chunk buffer is free.
-  // One file's own state: the one messages go to (now_), the one closing (closing_), or one
-  // let go (leaving_).
+  // One file's own state: the one messages go to (now_), or the one closing (closing_).
   struct Slot {
     OutputFile file;
     mcap::Summary summary;
@@ -189,10 +190,18 @@ class McapFile {
   // One chunk of the closing file back: counted, or its failure kept; the file settled when it
   // was the last.
   void take_closing(ChunkBuffer& chunk) noexcept;
-  // One chunk of the file let go back: its buffer free; the file closed when it was the last.
-  void take_leaving(ChunkBuffer& chunk) noexcept;
-  // A slot neither open, closing nor let go: the next file's.
-  Slot* free_slot() noexcept;
+  // A file let go (let_go) while its chunks were in flight: its descriptor, kept until the
+  // last is back, and where to cut it back to then.
+  struct Leaving {
+    OutputFile file;
+    std::uint64_t number = 0;
+    std::uint64_t whole_bytes = 0;
+    std::size_t chunks_in_flight = 0;  // 0: the entry is free
+  };
+  // The file let go that `chunk` belongs to, if any.
+  Leaving* leaving_of(const ChunkBuffer& chunk) noexcept;
+  // One chunk of a file let go back: its buffer free; the file closed when it was the last.
+  void take_leaving(Leaving& leaving, ChunkBuffer& chunk) noexcept;
   // One chunk of the open file back: counted, or its failure thrown (std::system_error for a
   // write, the file cut back to its last whole chunk).
   void count_chunk(ChunkBuffer& chunk);
@@ -216,12 +225,14 @@ class McapFile {
   std::vector<std::pair<std::string_view, std::string_view>> metadata_;  // into options_
   std::size_t max_message_bytes_;
   std::size_t max_index_entries_;
-  // The open file's, the closing one's, and one let go (let_go) whose chunks are in flight.
-  std::array<Slot, 3> slots_;
+  std::array<Slot, 2> slots_;
   Slot* now_ = &slots_[0];
   Slot* closing_ = nullptr;  // closing, or closed and not yet taken
-  Slot* leaving_ = nullptr;  // let go, its chunks not all back
-  McapClosedFile closed_;    // closing_'s outcome so far
+  // One entry per chunk buffer: a file let go holds one in flight at least, so there is always
+  // room for the next (made at start: letting go allocates nothing).
+  std::vector<Leaving> leaving_;
+  std::size_t leaving_count_ = 0;  // entries in use
+  McapClosedFile closed_;          // closing_'s outcome so far
   bool closed_ready_ = false;
   std::vector<std::uint8_t> out_;  // records on their way to the file
   // The opening records copied to block-aligned memory, for their O_DIRECT write (a rotation's

@@ -271,7 +271,7 @@ void McapRecorder::flush() {
 
 void McapRecorder::drain() {
   flush();
-  if (!file_ || (!file_->is_open() && !file_->closing())) return;
+  if (!file_ || (!file_->is_open() && !file_->closing() && !file_->leaving())) return;
   try {
     file_->drain();  // the closing file's chunks too: it finishes
   } catch (const std::exception& error) {

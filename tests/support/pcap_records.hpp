@@ -12,6 +12,8 @@
 #include <tuple>
 #include <vector>
 
+#include "bench/child_process.hpp"
+
 namespace pandarcap::test {
 
 struct PcapRecord {
@@ -28,8 +30,7 @@ struct PcapRecord {
 // resolution, native order). `magic`, when given, gets the header's magic number.
 inline std::vector<PcapRecord> read_pcap_records(const std::filesystem::path& file,
                                                  std::uint32_t* magic = nullptr) {
-  std::ifstream in(file, std::ios::binary);
-  const std::string data((std::istreambuf_iterator<char>(in)), {});
+  const std::string data = harness::read_file(file);  // one read, not a character at a time
   INFO(file.string());
   REQUIRE(data.size() >= 24);
   std::uint32_t m = 0;
