@@ -118,8 +118,8 @@ PauseResult run_pause(const PauseCase& c) {
   // Past the first records (a sensor just found), at ok.
   REQUIRE(wait_until(
       [&] {
-        const auto records = test::health_records(daemon.out);
-        return !records.empty() && records.back().value("state", "") == "ok";
+        const nlohmann::json last = test::last_health_record(daemon.out);
+        return !last.is_null() && last.value("state", "") == "ok";
       },
       5s));
   const std::size_t records_before = test::health_records(daemon.out).size();
@@ -318,8 +318,8 @@ void foreign_after_stop(const char* receiver, bool pause) {
   });
   REQUIRE(wait_until(
       [&] {
-        const auto records = test::health_records(daemon.out);
-        return !records.empty() && test::health_counter(records.back(), "datagrams_received") > 0;
+        const nlohmann::json last = test::last_health_record(daemon.out);
+        return !last.is_null() && test::health_counter(last, "datagrams_received") > 0;
       },
       5s));
   std::thread foreign([&] {
@@ -351,8 +351,8 @@ void foreign_after_stop(const char* receiver, bool pause) {
   // count what it leaves as kernel drops, not as foreign.
   wait_until(
       [&] {
-        const auto records = test::health_records(daemon.out);
-        return !records.empty() && test::health_counter(records.back(), "foreign_datagrams") >= 200;
+        const nlohmann::json last = test::last_health_record(daemon.out);
+        return !last.is_null() && test::health_counter(last, "foreign_datagrams") >= 200;
       },
       20s);
   daemon.process->signal(SIGTERM);

@@ -108,8 +108,8 @@ TEST_CASE("an unprivileged user captures with no capability (CapEff 0)",
   // Capturing: packets from the simulated sensor arrive over its UDP socket.
   const bool receiving = harness::wait_until(
       [&] {
-        const auto records = test::health_records(out);
-        return !records.empty() && test::health_counter(records.back(), "packets_accepted") > 0;
+        const nlohmann::json last = test::last_health_record(out);
+        return !last.is_null() && test::health_counter(last, "packets_accepted") > 0;
       },
       15s);
   INFO(daemon.log());
