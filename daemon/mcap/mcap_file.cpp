@@ -279,7 +279,11 @@ McapFile::Leaving* McapFile::leaving_of(const ChunkBuffer& chunk) noexcept {
 
 void McapFile::take_leaving(Leaving& leaving, ChunkBuffer& chunk) noexcept {
   // Its messages were counted lost when it was let go: whether the chunk was written or not,
-  // it is not counted, and the file ends on its last whole chunk counted before.
+  // it is not counted, and the file ends on its last whole chunk counted before. What it says
+  // of the pipeline and the disk still counts, as for any chunk written.
+  const bool written = !chunk.failed && chunk.write_error == 0;
+  if (written && chunk.uncompressed) ++chunks_uncompressed_;
+  if (written && chunk.direct_refused) direct_works_ = false;  // the next file from its start
   pipeline_.give_back(&chunk);
   if (--leaving.chunks_in_flight != 0) return;
   leaving.file.truncate(leaving.whole_bytes);
