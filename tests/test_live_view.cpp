@@ -298,6 +298,27 @@ TEST_CASE("[live] keys: ranges and addresses checked at their line", "[live][con
   CHECK(r.out.find("live.port") != std::string::npos);
 }
 
+namespace {
+
+// Whether every part of a health reason is one a slowed build's load can cause: the kernel's
+// buffer, the ring or the arenas overrun, or the packet rate behind for a second.
+bool only_load_reasons(const std::string& reason) {
+  if (reason.empty()) return false;
+  std::size_t at = 0;
+  while (at < reason.size()) {
+    const std::size_t end = std::min(reason.find("; ", at), reason.size());
+    const std::string part = reason.substr(at, end - at);
+    const bool load = part.ends_with(" kernel drops") || part.ends_with(" ring overruns") ||
+                      part.ends_with(" frames dropped (no free arena)") ||
+                      part.starts_with("packet rate ");
+    if (!load) return false;
+    at = end + 2;
+  }
+  return true;
+}
+
+}  // namespace
+
 TEST_CASE("Foxglove's client sees every channel live: PointCloud2 equal to the PCD frames, health",
           "[live][daemon][threads]") {
   if (!client_installed()) return;
@@ -327,7 +348,17 @@ TEST_CASE("Foxglove's client sees every channel live: PointCloud2 equal to the P
   // Each cloud is the PCD file of its revolution, byte for byte.
   CHECK(seen["matched"] == 3);
   CHECK(seen["health"].get<int>() >= 1);
-  CHECK(seen["health_state"] == "ok");
+  // The last health the viewer saw: ok. A TSan build's simulated sensor and pipeline, slowed
+  // many times over on a busy machine, may fall behind the sensor's rate for a moment (one CI
+  // run's viewer saw "degraded"): there, a reason made only of what that load can cause.
+  const std::string state = seen["health_state"].is_string() ? seen["health_state"] : "";
+  const std::string reason = seen["health_reason"].is_string() ? seen["health_reason"] : "";
+  INFO("the last health seen: " << state << ": " << reason);
+  if (test::kThreadSanitizerBuild && state == "degraded") {
+    CHECK(only_load_reasons(reason));
+  } else {
+    CHECK(state == "ok");
+  }
   CHECK(seen["status"].get<int>() >= 1);
   CHECK(seen["statuses"].empty());
   run.daemon.signal(SIGTERM);

@@ -92,6 +92,7 @@ if (mode === "stall") {
   const clouds = [];
   let health = 0;
   let healthState = null;
+  let healthReason = null;
   let status = 0;
   let serverInfo = null;
   client.on("serverInfo", (info) => (serverInfo = info));
@@ -110,6 +111,7 @@ if (mode === "stall") {
       const record = JSON.parse(new TextDecoder().decode(bytes));
       health += 1;
       healthState = record.state;
+      healthReason = record.reason;
     } else if (channel.encoding === "json") {
       JSON.parse(new TextDecoder().decode(bytes));
       status += 1;
@@ -154,6 +156,7 @@ if (mode === "stall") {
         mismatches,
         health,
         health_state: healthState,
+        health_reason: healthReason,
         status,
         statuses,
       }),
