@@ -336,6 +336,15 @@ struct RecorderRig {
       send_batch();
     REQUIRE(write_held());
   }
+  // The first file, its first chunk write held by the seam after one more batch (two chunks):
+  // a pool of more than 3 buffers keeps room for the next file's chunks.
+  fs::path hold_first_write() {
+    const fs::path first = first_part();
+    watch(first, /*hold=*/true, /*fail_at=*/0);
+    send_batch();
+    REQUIRE(write_held());
+    return first;
+  }
   // The first batch: the file it opens (the only .part).
   fs::path first_part() {
     send_batch();
@@ -485,14 +494,9 @@ TEST_CASE("the next MCAP file lost while the one before still closes: no wait fo
   const io::ScopedFileSyscalls seam(watching_calls());
   RecorderRig rig("mcap-next-lost", buffers);
   McapRecorder& recorder = *rig.recorder;
-  const fs::path first = rig.first_part();
-  watch(first, /*hold=*/true, /*fail_at=*/0);
-  if (buffers == 3) {
-    rig.send_until_held();
-  } else {
-    rig.send_batch();  // two chunks: the first write is held, the pool has room left
-    REQUIRE(write_held());
-  }
+  const fs::path first = rig.hold_first_write();
+  while (buffers == 3 && rig.sent < 1000)
+    rig.send_batch();  // the daemon's pool: every buffer taken
   recorder.rotate();
   const std::uint64_t not_written_before = recorder.messages_not_written();
   rig.send_batch();  // the next file opens
@@ -567,10 +571,7 @@ TEST_CASE("files lost one after another while the one before still closes: none 
   const io::ScopedFileSyscalls seam(watching_calls());
   RecorderRig rig("mcap-lost-twice", 8);
   McapRecorder& recorder = *rig.recorder;
-  const fs::path first = rig.first_part();
-  watch(first, /*hold=*/true, /*fail_at=*/0);
-  rig.send_batch();
-  REQUIRE(write_held());
+  const fs::path first = rig.hold_first_write();
   recorder.rotate();
   std::vector<fs::path> lost;
   for (int file = 0; file < 2; ++file) {
@@ -613,10 +614,7 @@ TEST_CASE("a file lost with its own write held: the drain at exit waits for it a
   const io::ScopedFileSyscalls seam(watching_calls());
   RecorderRig rig("mcap-lost-own-held", 8);
   McapRecorder& recorder = *rig.recorder;
-  const fs::path first = rig.first_part();
-  watch(first, /*hold=*/true, /*fail_at=*/0);
-  rig.send_batch();
-  REQUIRE(write_held());
+  const fs::path first = rig.hold_first_write();
   fs::remove(first);
   recorder.flush();  // let go: its own write is the one held
   CHECK(descriptors_to(first.filename().string()) == 1);
