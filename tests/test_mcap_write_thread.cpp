@@ -345,6 +345,17 @@ struct RecorderRig {
     REQUIRE(write_held());
     return first;
   }
+  // The disk moves again: one more batch, every chunk back and every file settled; no held
+  // write timed out meanwhile, and the seam watches no file from here on.
+  void release_and_settle() {
+    release_writes();
+    send_batch();
+    recorder->drain();
+    finisher->drain();
+    std::lock_guard lock(mcap_writes.mutex);
+    CHECK_FALSE(mcap_writes.timed_out);
+    mcap_writes.inode = 0;
+  }
   // The first batch: the file it opens (the only .part).
   fs::path first_part() {
     send_batch();
@@ -515,15 +526,7 @@ TEST_CASE("the next MCAP file lost while the one before still closes: no wait fo
   }
   // With room in the pool, the next file's chunks were in flight: counted as not written.
   if (buffers == 8) CHECK(recorder.messages_not_written() > not_written_before);
-  release_writes();
-  rig.send_batch();
-  recorder.drain();
-  rig.finisher->drain();
-  {
-    std::lock_guard lock(mcap_writes.mutex);
-    CHECK_FALSE(mcap_writes.timed_out);
-    mcap_writes.inode = 0;
-  }
+  rig.release_and_settle();
   CHECK(rig.accounted() == rig.sent);
   CHECK_FALSE(fs::exists(first));  // finished and in place
   recorder.close();
@@ -587,15 +590,7 @@ TEST_CASE("files lost one after another while the one before still closes: none 
     CHECK(mcap_writes.held == 1);  // a flush that waited would still be in the seam
     CHECK_FALSE(mcap_writes.timed_out);
   }
-  release_writes();
-  rig.send_batch();
-  recorder.drain();
-  rig.finisher->drain();
-  {
-    std::lock_guard lock(mcap_writes.mutex);
-    CHECK_FALSE(mcap_writes.timed_out);
-    mcap_writes.inode = 0;
-  }
+  rig.release_and_settle();
   CHECK(rig.accounted() == rig.sent);
   for (const fs::path& file : lost)
     CHECK(descriptors_to(file.filename().string()) == 0);
