@@ -2,17 +2,20 @@
 // and the arenas the pipeline lays out in it.
 #include <sys/mman.h>
 #include <sys/prctl.h>
+#include <unistd.h>
 
 #if defined(__SANITIZE_ADDRESS__)
 #include <sanitizer/asan_interface.h>
 #endif
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <cstdint>
 #include <fstream>
 #include <set>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "config/daemon_config.hpp"
 #include "daemon/arena_memory.hpp"
@@ -80,6 +83,21 @@ TEST_CASE("ArenaMemory: aligned to huge pages, zero-filled, and as long as asked
     // Writable to its last byte (a mapping trimmed short would fault here).
     memory.data()[memory.size() - 1] = 0xAB;
     CHECK(memory.data()[memory.size() - 1] == 0xAB);
+  }
+}
+
+TEST_CASE("ArenaMemory: every page asked for is resident at construction", "[io]") {
+  // Populated at once (MADV_POPULATE_WRITE, or stores where the kernel lacks it): the decode
+  // thread's first store into an arena takes no page fault. mincore says which pages are there.
+  for (const std::size_t bytes : {std::size_t{4096}, std::size_t{16'560'000}}) {
+    CAPTURE(bytes);
+    ArenaMemory memory(bytes);
+    const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+    const std::size_t pages = (bytes + page - 1) / page;
+    std::vector<unsigned char> resident(pages, 0);
+    REQUIRE(::mincore(memory.data(), pages * page, resident.data()) == 0);
+    CHECK(std::ranges::count_if(resident, [](unsigned char r) { return (r & 1) != 0; }) ==
+          static_cast<std::ptrdiff_t>(pages));
   }
 }
 

@@ -20,7 +20,6 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -105,8 +104,7 @@ bool prometheus_file_parses(const fs::path& file) {
 
 // How many bytes follow a file's last newline: a line cut short, when nothing is writing it.
 std::uintmax_t bytes_after_last_newline(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  const std::string text = harness::read_file(file);  // one read, not a character at a time
   const auto newline = text.rfind('\n');
   return newline == std::string::npos ? text.size() : text.size() - newline - 1;
 }
