@@ -20,7 +20,7 @@ class ArenaMemory {
   // `bytes`, zero-filled and touched: no page fault waits in the decode thread later. The mapping
   // is rounded up to whole huge pages; what lies past `bytes` is never touched (with huge pages,
   // the last one is whole: at most 2 MiB more than asked). Throws std::system_error (the
-  // mapping refused: a memory limit, ENOMEM).
+  // mapping or its pages refused: a memory limit, ENOMEM).
   explicit ArenaMemory(std::size_t bytes);
   ~ArenaMemory();
   ArenaMemory(const ArenaMemory&) = delete;
