@@ -71,16 +71,7 @@ std::vector<fs::path> pcds_of_messages(const json& messages, const std::vector<f
     const double stamp = message_stamp(messages[i]);
     bool found = false;
     for (; next < pcds.size() && !found; ++next) {
-      // The header only: the stamp is in its first lines (a whole frame is megabytes, read a
-      // character at a time by an -O0 test under TSan).
-      std::ifstream in(pcds[next], std::ios::binary);
-      std::string text(512, '\0');
-      in.read(text.data(), static_cast<std::streamsize>(text.size()));
-      text.resize(static_cast<std::size_t>(in.gcount()));
-      const auto at = text.find("frame_reference_time ");
-      INFO(pcds[next].string());
-      REQUIRE(at != std::string::npos);
-      found = std::abs(std::stod(text.substr(at + 21, 30)) - stamp) <= 1e-6;
+      found = std::abs(test::pcd_reference_time(pcds[next]) - stamp) <= 1e-6;
       if (found) matched.push_back(pcds[next]);
     }
     INFO("message " << i << " at " << fmt::format("{:.9f}", stamp));

@@ -162,14 +162,6 @@ fs::path replay_frame(const fs::path& capture, const fs::path& out, const std::s
   return largest;
 }
 
-double reference_time(const fs::path& file) {
-  const std::string bytes = harness::read_file(file);
-  const std::string key = "# pandarcap frame_reference_time ";
-  const auto at = bytes.find(key);
-  REQUIRE(at != std::string::npos);
-  return std::stod(bytes.substr(at + key.size(), 30));
-}
-
 // The points the readers' values are compared at: every kStride-th, from the first. The counts
 // and the types are checked for the whole file; the values at these points, and what reads
 // every value (the earliest time) in the reader itself. Every point's values, parsed in the
@@ -291,7 +283,7 @@ TEST_CASE("PCD layouts load in PCL and Open3D with the fields, types and values 
 
   SECTION("velodyne: PointXYZIRT, time in seconds since the frame's reference") {
     const fs::path file = replay_frame(*capture, dir / "velodyne", "velodyne");
-    const double t0 = reference_time(file);
+    const double t0 = test::pcd_reference_time(file);
     const PclView pcl = read_with_pcl(file, dir / "velodyne.ascii.pcd");
     CHECK(pcl.fields == std::vector<std::string>{"x", "y", "z", "intensity", "ring", "time"});
     REQUIRE(pcl.count == n);
@@ -310,7 +302,7 @@ TEST_CASE("PCD layouts load in PCL and Open3D with the fields, types and values 
 
   SECTION("autoware: nebula's PointXYZIRCAEDT names, units and return-type codes") {
     const fs::path file = replay_frame(*capture, dir / "autoware", "autoware");
-    const double t0 = reference_time(file);
+    const double t0 = test::pcd_reference_time(file);
     const PclView pcl = read_with_pcl(file, dir / "autoware.ascii.pcd");
     CHECK(pcl.fields == std::vector<std::string>{"x", "y", "z", "intensity", "return_type",
                                                  "channel", "azimuth", "elevation", "distance",

@@ -188,6 +188,18 @@ std::map<std::string, std::string> prom_samples(const std::string& text) {
   return out;
 }
 
+double pcd_reference_time(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  std::string header(512, '\0');
+  in.read(header.data(), static_cast<std::streamsize>(header.size()));
+  header.resize(static_cast<std::size_t>(in.gcount()));
+  const std::string key = "# pandarcap frame_reference_time ";
+  const auto at = header.find(key);
+  INFO(file.string());
+  REQUIRE(at != std::string::npos);
+  return std::stod(header.substr(at + key.size(), 30));
+}
+
 std::vector<PcdPoint> pandarcap_pcd_points(const std::filesystem::path& file) {
   const std::string bytes = harness::read_file(file);
   const std::size_t data = bytes.find("DATA binary\n");

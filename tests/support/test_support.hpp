@@ -160,6 +160,11 @@ std::map<std::string, std::string> prom_samples(const std::string& text);
 // layout), decoded. Fails the test when the file has no data section or a partial point.
 std::vector<PcdPoint> pandarcap_pcd_points(const std::filesystem::path& file);
 
+// A PCD file's frame_reference_time, in seconds (the comment pandarcap writes on the header's
+// second line), read from the header alone: a whole frame is megabytes, and a test under TSan
+// pays for every byte it copies. Fails the test when the header has none.
+double pcd_reference_time(const std::filesystem::path& file);
+
 // Every packet of a capture decoded with the calibration file `calibration_csv` (a
 // StreamDecoder with the default configuration), its frames into `frames`, flushed at the end.
 void decode_capture(const std::filesystem::path& capture,
