@@ -42,8 +42,7 @@ ArenaMemory::ArenaMemory(std::size_t bytes)
   if (::madvise(data_, bytes, MADV_POPULATE_WRITE) != 0) {
     if (errno != EINVAL) {
       const int error = errno;
-      ::munmap(data_, size_);
-      data_ = nullptr;
+      ::munmap(data_, size_);  // no destructor runs for an object that never was
       throw std::system_error(error, std::generic_category(),
                               fmt::format("cannot populate {} bytes of memory", bytes));
     }
