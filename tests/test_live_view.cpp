@@ -301,7 +301,9 @@ TEST_CASE("[live] keys: ranges and addresses checked at their line", "[live][con
 namespace {
 
 // Whether every part of a health reason is one a slowed build's load can cause: the kernel's
-// buffer, the ring or the arenas overrun, or the packet rate behind for a second.
+// buffer, the ring or the arenas overrun, the packet rate behind for a second, or the simulated
+// sensor's clock behind the host's (starved, it sends its packets late: five TSan daemons on
+// two busy cores said "sensor clock off by 1.4 s (behind the host)" within 1.5 s).
 bool only_load_reasons(const std::string& reason) {
   if (reason.empty()) return false;
   std::size_t at = 0;
@@ -310,7 +312,9 @@ bool only_load_reasons(const std::string& reason) {
     const std::string part = reason.substr(at, end - at);
     const bool load = part.ends_with(" kernel drops") || part.ends_with(" ring overruns") ||
                       part.ends_with(" frames dropped (no free arena)") ||
-                      part.starts_with("packet rate ");
+                      part.starts_with("packet rate ") ||
+                      (part.starts_with("sensor clock off by ") &&
+                       part.find(" (behind the host)") != std::string::npos);
     if (!load) return false;
     at = end + 2;
   }

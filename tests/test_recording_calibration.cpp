@@ -74,6 +74,8 @@ struct CalibrationRecorded {
     const json live = test::last_health_record(dir / "live");
     mcap_left_out = test::health_counter(live, "mcap_messages_not_recorded") +
                     test::health_counter(live, "mcap_messages_not_written");
+    pcap_left_out = test::health_counter(live, "packets_not_recorded");
+    live_health = live;
     // The daemon put the recording's calibration beside it (STEM.calibration.csv: the table
     // of raw/calibration.csv); the uncompressed copy the test made gets a copy of it.
     const fs::path sidecar = recording_sidecars(pcap_zst.string())->calibration_csv;
@@ -88,6 +90,10 @@ struct CalibrationRecorded {
   // MCAP messages the live run left out and counted: on a loaded machine (a sanitizer's) its
   // compression can fall a pool behind, and the MCAP then lacks the packets of a few frames.
   std::uint64_t mcap_left_out = 0;
+  // The same for the pcap: packets received that no raw batch was free for (or not written),
+  // counted. Those frames are whole in the live run and have holes in the pcap's replay.
+  std::uint64_t pcap_left_out = 0;
+  json live_health;
 };
 
 CalibrationRecorded& recorded() {
@@ -101,7 +107,11 @@ namespace {
 
 void replay_the_three(CalibrationRecorded& r) {
   const auto live = complete_frames(r.dir / "live");
-  REQUIRE(live.size() >= 5);
+  // 1.5 s of the simulated sensor: about 14 complete frames. A sanitizer build's simulated sensor,
+  // starved on a loaded machine, sends as little as a third of that in the time (its clock then
+  // behind the host's): two frames still compare the replays with the live run.
+  INFO("the live run's last health: " << r.live_health.dump());
+  REQUIRE(live.size() >= (test::kSlowBuild ? 2U : 5U));
   const std::string nominal = harness::read_file(r.dir / "live" / "raw" / "calibration.csv");
   REQUIRE(nominal.find("15.118") != std::string::npos);  // not the nominal table (15)
 
@@ -117,10 +127,22 @@ void replay_the_three(CalibrationRecorded& r) {
     const auto frames = complete_frames(out);
     // Every complete frame of the replay is the live run's, byte for byte (the replay may cut
     // one more or one fewer at the ends, where the live run's frames were partial). Where the
-    // live run left MCAP packets out (counted), that replay lacks the frames they were in: its
-    // frames are compared, not counted.
-    const bool all_recorded = recording != r.mcap || r.mcap_left_out == 0;
-    INFO("MCAP messages the live run left out: " << r.mcap_left_out);
+    // live run left packets out of the recording (counted: a sanitizer build's writer and
+    // compression fall behind on a loaded machine), that replay lacks the frames they were in:
+    // its frames are compared, not counted.
+    const bool is_mcap = recording == r.mcap;
+    const std::uint64_t left_out = is_mcap ? r.mcap_left_out : r.pcap_left_out;
+    const bool all_recorded = left_out == 0;
+    INFO("messages or packets the live run left out of it: " << left_out);
+    // A pcap holds every datagram the live run received but those it counted as left out (and,
+    // under ThreadSanitizer, those the ring overran: check_ring_overruns), and a build that is
+    // not slowed keeps up with the simulated sensor.
+    if (!is_mcap) {
+      if (!test::kSlowBuild) CHECK(left_out == 0);
+      CHECK(test::health_counter(last, "datagrams_received") + left_out +
+                test::check_ring_overruns(r.live_health) ==
+            test::health_counter(r.live_health, "datagrams_received"));
+    }
     const std::size_t expected = all_recorded ? live.size() - 1 : 1;
     REQUIRE(frames.size() >= expected);
     std::size_t same = 0;
