@@ -203,7 +203,9 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
   const std::uint64_t frames_dropped = counted("frames_dropped_no_arena");
   CHECK(s.at("packets").get<std::uint64_t>() + not_recorded == counters.at("datagrams_received"));
   CHECK(s.at("packets") == counters.at("pcap_packets_written"));
-  CHECK(s.at("packets").get<int>() >= 1500);
+  // (A sanitizer build's simulated sensor, starved on a loaded machine, sends fewer in the time.)
+  const int packets = s.at("packets").get<int>();
+  CHECK(packets >= (test::kSlowBuild ? 600 : 1500));
   CHECK(s.at("packets").get<int>() <= 1900);
   CHECK(s.at("rejected") == 0);
   CHECK(s.at("return_mode") == "last");
@@ -218,7 +220,9 @@ TEST_CASE("pandarcapd --simulate records a capture that inspect decodes",
   // About 1 s at 20 Hz: 20 revolutions, of which the first and last are partial (channels with
   // a positive azimuth offset crossed the cut before the stream began; channels with a negative
   // one have not reached it when the stream ends).
-  if (lossless) CHECK(s.at("frames_complete").get<int>() >= 15);
+  // Starved, fewer revolutions were sent: 90 packets each.
+  if (lossless)
+    CHECK(s.at("frames_complete").get<int>() >= (test::kSlowBuild ? packets / 90 - 2 : 15));
   CHECK(s.at("frames_complete").get<int>() <= 20);
   if (lossless) CHECK(s.at("frames_complete") == counters.at("frames_complete"));
   for (const json& points : s.at("points_per_complete_frame")) {

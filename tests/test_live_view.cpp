@@ -518,7 +518,10 @@ TEST_CASE("the live view under abuse: churn, garbage, oversize frames, too many 
   run.daemon.signal(SIGTERM);
   REQUIRE(run.daemon.wait_exit(30s) == 0);
   const std::string log = run.daemon.log();
-  CHECK(log.find("0 ring overruns, 0 kernel drops") != std::string::npos);
+  // The abuse cost the capture nothing (a TSan build may lose packets to its own load, counted).
+  if (!test::kThreadSanitizerBuild) {
+    CHECK(log.find("0 ring overruns, 0 kernel drops") != std::string::npos);
+  }
   CHECK(log.find("refused: 2 viewers connected already (live.max_clients)") != std::string::npos);
 }
 
@@ -610,10 +613,16 @@ TEST_CASE("a live view port in use: the capture runs, degraded naming it, until 
   CHECK(record["live"]["listening"] == false);
   CHECK(daemon.log().find("[warning] live view: cannot listen on 127.0.0.1:" +
                           std::to_string(port)) != std::string::npos);
-  // Freed: bound at the next try, and the state is ok again.
+  // Freed: bound at the next try, and the state is ok again (under TSan on a loaded machine:
+  // degraded for load alone, only_load_reasons, the port no longer said).
   ::close(fd);
   REQUIRE(harness::wait_until(
-      [&] { return last() && record["live"]["listening"] == true && record["state"] == "ok"; },
+      [&] {
+        if (!last() || record["live"]["listening"] != true) return false;
+        const std::string state = record.value("state", "");
+        return state == "ok" || (test::kThreadSanitizerBuild && state == "degraded" &&
+                                 only_load_reasons(record.value("reason", "")));
+      },
       30s));
   CHECK(daemon.log().find("live view: port " + std::to_string(port) + " is free now") !=
         std::string::npos);

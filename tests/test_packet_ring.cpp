@@ -541,12 +541,16 @@ TEST_CASE(
   REQUIRE(r.exit_code == 0);
   const nlohmann::json h = test::last_health_record(dir / "out");
   const auto c = [&](const char* name) { return test::health_counter(h, name); };
-  CHECK(c("datagrams_received") > 3000);
+  // 2 s at 3600/s: a sanitizer build's simulated sensor, starved on a loaded machine, may send a
+  // third of that, and its receiver and writer may lose some to the load (counted).
+  CHECK(c("datagrams_received") > (test::kSlowBuild ? 1000U : 3000U));
   // Loopback shows each datagram twice (sent, received): taken once.
   CHECK(c("duplicate_packets") == 0);
   CHECK(c("sequence_duplicate_packets") == 0);
-  CHECK(c("kernel_drops") == 0);
-  CHECK(c("pcap_packets_written") == c("datagrams_received"));
+  if (!test::kSlowBuild) CHECK(c("kernel_drops") == 0);
+  CHECK(c("pcap_packets_written") + (test::kSlowBuild ? c("pcap_packets_not_recorded") : 0) +
+            test::check_ring_overruns(h) ==
+        c("datagrams_received"));
   CHECK(r.out.find("TPACKET_V3 ring") != std::string::npos);
 }
 
@@ -1398,7 +1402,11 @@ TEST_CASE("writer wait: a small receive ring and a stalled writer then a stop du
       if (!(test::kThreadSanitizerBuild && std::string_view(k.receiver) == "packet_ring"))
         CHECK(c("kernel_drops") == 0);
       test::check_ring_overruns(h);  // a TSan build's decoder may not keep up with 64 slots
-      CHECK(c("frames_dropped_no_arena") > 0);
+      // The two arenas the stalled writer holds: more than three revolutions' packets (360 each)
+      // must drop frames. A TSan build's packet_ring receiver, starved on a loaded machine, may
+      // take fewer than that (782 of 7199 once: the rest counted as kernel drops above).
+      if (!test::kThreadSanitizerBuild || c("packets_accepted") > 4 * 360)
+        CHECK(c("frames_dropped_no_arena") > 0);
       CHECK(stop_s < 2.0);
       check_identities(h);
       // The threads the wait is on (the writer's first frame after its warm-up allocates: see
@@ -1475,8 +1483,15 @@ TEST_CASE("socket receiver: the stop's count with a sender that goes on through 
   INFO("sent " << sent.sent << ", the stop took " << stop_s << " s");
   const auto c = [&](const char* name) { return test::health_counter(h, name); };
   CHECK(sent.send_errors == 0);
-  CHECK(sender_still_going);  // the stop ended while the sender went on
-  CHECK(stop_s < 1.5);
+  if (!test::kSlowBuild) {
+    CHECK(sender_still_going);  // the stop ended while the sender went on
+    CHECK(stop_s < 1.5);
+  } else {
+    // A sanitizer build's sender and daemon, starved on a loaded machine, may take the 2 s to
+    // reach the backlog and stop (2.6 s once under TSan): the stop still ends, the counts hold.
+    if (!sender_still_going) WARN("the sender ended before the stop: its promptness not tried");
+    CHECK(stop_s < 5.0);
+  }
   CHECK(c("datagrams_received") + c("kernel_drops") <= sent.sent);
   // The backlog was received or counted: at least its bytes' worth of datagrams at the most
   // the kernel charges one (a 1 266-byte datagram: under 4 KiB).

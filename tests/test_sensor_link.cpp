@@ -135,7 +135,12 @@ TEST_CASE("pandarcapd --simulate decodes with the simulated sensor's own calibra
   // Calibration, inventory, config at start, then a config and a status per poll.
   CHECK(test::health_counter(last, "ptc_requests") >= 5);
   CHECK(test::health_counter(last, "ptc_errors") == 0);
-  CHECK_THAT(reason(last), !Catch::Contains("sensor"));
+  // Nothing the unit says over PTC raises a problem. (A slowed build's simulated sensor, starved
+  // on a loaded machine, sends its packets late: the reason may then say its clock is behind the
+  // host's, which is the packets' and not PTC's.)
+  for (const char* ptc : {"sensor status", "sensor clock source", "over PTC"})
+    CHECK_THAT(reason(last), !Catch::Contains(ptc));
+  if (!test::kSlowBuild) CHECK_THAT(reason(last), !Catch::Contains("sensor"));
   const std::string prom = harness::read_file(out / "health" / "pandarcap.prom");
   CHECK_THAT(prom, Catch::Contains("pandarcap_sensor_info{sensor=\"pandar40p\",serial="
                                    "\"PCSIM40P00000001\",firmware=\"sim-fw-1.0\","
