@@ -196,7 +196,8 @@ TEST_CASE("the simulated sensor of each model: its packets arrive, frames whole,
     const std::uint64_t drops = health_counter(health, "kernel_drops");
     if (!kThreadSanitizerBuild) CHECK(drops == 0);
     CHECK(health_counter(health, "packets_rejected") == 0);
-    if (drops == 0) CHECK(health_counter(health, "sequence_gaps") == 0);
+    // Every gap is a datagram lost where it was counted (none in release).
+    CHECK(health_counter(health, "sequence_gaps") <= drops + overruns);
     CHECK(health_counter(health, "packets_accepted") + overruns > 1000);
     std::size_t partial = 0;
     for (const auto& f : files_ending(dir / "frames", ".pcd"))

@@ -4,10 +4,13 @@
 // capture unaffected), PTP not locked and a status gone stale reaching the health state.
 #include <signal.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <optional>
+#include <string_view>
 
 #include "core/decode/decoder.hpp"
 #include "core/sim/simulated_unit.hpp"
@@ -102,10 +105,13 @@ TEST_CASE("pandarcapd --simulate decodes with the simulated sensor's own calibra
           "[ptc][daemon][threads]") {
   test::ScratchDir dir("ptc-simulate");
   const std::filesystem::path out = dir / "out";
+  const auto started = std::chrono::steady_clock::now();
   const test::CommandResult run =
       test::run_command(test::pandarcapd_command() +
                         " --simulate --duration 2.5 --status-interval 0.5 --output-dir " +
                         test::quoted(out) + " 2>&1");
+  const double ran_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   INFO(run.out);
   REQUIRE(run.exit_code == 0);
   CHECK_THAT(run.out, Catch::Contains("calibration: from sensor (serial PCSIM40P00000001, "
@@ -135,12 +141,18 @@ TEST_CASE("pandarcapd --simulate decodes with the simulated sensor's own calibra
   // Calibration, inventory, config at start, then a config and a status per poll.
   CHECK(test::health_counter(last, "ptc_requests") >= 5);
   CHECK(test::health_counter(last, "ptc_errors") == 0);
-  // Nothing the unit says over PTC raises a problem. (A slowed build's simulated sensor, starved
-  // on a loaded machine, sends its packets late: the reason may then say its clock is behind the
-  // host's, which is the packets' and not PTC's.)
-  for (const char* ptc : {"sensor status", "sensor clock source", "over PTC"})
-    CHECK_THAT(reason(last), !Catch::Contains(ptc));
-  if (!test::kSlowBuild) CHECK_THAT(reason(last), !Catch::Contains("sensor"));
+  // Nothing of the sensor's raises a problem. (A slowed build's simulated sensor, starved on a
+  // loaded machine, sends its packets late: the reason may then say its clock is behind the
+  // host's, by no more than the run lasted: clock_behind_by_at_most.)
+  const std::string said = reason(last);
+  INFO("reason: " << said);
+  for (std::size_t at = 0; at < said.size();) {
+    const std::size_t end = std::min(said.find("; ", at), said.size());
+    const std::string_view part = std::string_view(said).substr(at, end - at);
+    const bool slow_clock = test::kSlowBuild && test::clock_behind_by_at_most(part, ran_s);
+    CHECK((part.find("sensor") == std::string_view::npos || slow_clock));
+    at = end + 2;
+  }
   const std::string prom = harness::read_file(out / "health" / "pandarcap.prom");
   CHECK_THAT(prom, Catch::Contains("pandarcap_sensor_info{sensor=\"pandar40p\",serial="
                                    "\"PCSIM40P00000001\",firmware=\"sim-fw-1.0\","

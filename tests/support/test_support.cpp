@@ -139,6 +139,18 @@ std::uint64_t check_ring_overruns(const nlohmann::json& record) {
   return allowed;
 }
 
+bool clock_behind_by_at_most(std::string_view part, double max_s) {
+  constexpr std::string_view kStart = "sensor clock off by ";
+  constexpr std::string_view kBehind = " s (behind the host): not synchronised?";
+  if (!part.starts_with(kStart) || !part.ends_with(kBehind)) return false;
+  const std::string number(
+      part.substr(kStart.size(), part.size() - kStart.size() - kBehind.size()));
+  char* end = nullptr;
+  const double seconds = std::strtod(number.c_str(), &end);
+  return end == number.c_str() + number.size() && !number.empty() && seconds >= 0 &&
+         seconds <= max_s;
+}
+
 std::uint64_t health_counter(const nlohmann::json& record, std::string_view name) {
   if (!record.is_object() || !record.contains("counters")) return 0;
   return record["counters"].value(std::string(name), std::uint64_t{0});

@@ -130,6 +130,12 @@ std::string pandarcapd_command();
 // A counter of a health record (its "counters" object); 0 when absent or not a record.
 std::uint64_t health_counter(const nlohmann::json& record, std::string_view name);
 
+// Whether a part of a health reason says the sensor's clock is behind the host's by no more than
+// `max_s` seconds ("sensor clock off by 1.354 s (behind the host): not synchronised?"): what a
+// simulated sensor starved on a loaded machine says, its packets sent late. It can be behind by
+// no more than the time it has run; ahead of the host, or further behind, is a clock fault.
+bool clock_behind_by_at_most(std::string_view part, double max_s);
+
 // Waits (`timeout` at most) until the newest health record of OUTPUT_DIR counts `total`
 // datagrams received or dropped by the kernel; whether it did.
 bool wait_until_counted(const std::filesystem::path& output_dir, std::uint64_t total,
