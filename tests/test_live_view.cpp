@@ -312,16 +312,12 @@ namespace {
 // 1.4 s (behind the host)" within 1.5 s).
 bool only_load_reasons(const std::string& reason, double running_s) {
   if (reason.empty()) return false;
-  std::size_t at = 0;
-  while (at < reason.size()) {
-    const std::size_t end = std::min(reason.find("; ", at), reason.size());
-    const std::string part = reason.substr(at, end - at);
+  for (const std::string_view part : test::reason_parts(reason)) {
     const bool load = part.ends_with(" kernel drops") || part.ends_with(" ring overruns") ||
                       part.ends_with(" frames dropped (no free arena)") ||
                       part.starts_with("packet rate ") ||
                       test::clock_behind_by_at_most(part, running_s);
     if (!load) return false;
-    at = end + 2;
   }
   return true;
 }

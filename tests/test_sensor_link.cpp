@@ -4,7 +4,6 @@
 // capture unaffected), PTP not locked and a status gone stale reaching the health state.
 #include <signal.h>
 
-#include <algorithm>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
@@ -146,12 +145,9 @@ TEST_CASE("pandarcapd --simulate decodes with the simulated sensor's own calibra
   // host's, by no more than the run lasted: clock_behind_by_at_most.)
   const std::string said = reason(last);
   INFO("reason: " << said);
-  for (std::size_t at = 0; at < said.size();) {
-    const std::size_t end = std::min(said.find("; ", at), said.size());
-    const std::string_view part = std::string_view(said).substr(at, end - at);
+  for (const std::string_view part : test::reason_parts(said)) {
     const bool slow_clock = test::kSlowBuild && test::clock_behind_by_at_most(part, ran_s);
     CHECK((part.find("sensor") == std::string_view::npos || slow_clock));
-    at = end + 2;
   }
   const std::string prom = harness::read_file(out / "health" / "pandarcap.prom");
   CHECK_THAT(prom, Catch::Contains("pandarcap_sensor_info{sensor=\"pandar40p\",serial="

@@ -139,6 +139,16 @@ std::uint64_t check_ring_overruns(const nlohmann::json& record) {
   return allowed;
 }
 
+std::vector<std::string_view> reason_parts(std::string_view reason) {
+  std::vector<std::string_view> parts;
+  for (std::size_t at = 0; at < reason.size();) {
+    const std::size_t end = std::min(reason.find("; ", at), reason.size());
+    parts.push_back(reason.substr(at, end - at));
+    at = end + 2;
+  }
+  return parts;
+}
+
 bool clock_behind_by_at_most(std::string_view part, double max_s) {
   constexpr std::string_view kStart = "sensor clock off by ";
   constexpr std::string_view kBehind = " s (behind the host): not synchronised?";

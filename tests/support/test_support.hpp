@@ -130,6 +130,10 @@ std::string pandarcapd_command();
 // A counter of a health record (its "counters" object); 0 when absent or not a record.
 std::uint64_t health_counter(const nlohmann::json& record, std::string_view name);
 
+// The parts of a health reason, each problem it names ("3 kernel drops; packet rate ..."): views
+// into `reason`.
+std::vector<std::string_view> reason_parts(std::string_view reason);
+
 // Whether a part of a health reason says the sensor's clock is behind the host's by no more than
 // `max_s` seconds ("sensor clock off by 1.354 s (behind the host): not synchronised?"): what a
 // simulated sensor starved on a loaded machine says, its packets sent late. It can be behind by
