@@ -71,11 +71,7 @@ struct CalibrationRecorded {
     const auto mcaps = test::files_ending(dir / "live" / "mcap", ".mcap");
     REQUIRE(mcaps.size() == 1);
     mcap = mcaps.front();
-    const json live = test::last_health_record(dir / "live");
-    mcap_left_out = test::health_counter(live, "mcap_messages_not_recorded") +
-                    test::health_counter(live, "mcap_messages_not_written");
-    pcap_left_out = test::health_counter(live, "packets_not_recorded");
-    live_health = live;
+    live_health = test::last_health_record(dir / "live");
     // The daemon put the recording's calibration beside it (STEM.calibration.csv: the table
     // of raw/calibration.csv); the uncompressed copy the test made gets a copy of it.
     const fs::path sidecar = recording_sidecars(pcap_zst.string())->calibration_csv;
@@ -87,13 +83,20 @@ struct CalibrationRecorded {
   test::ScratchDir dir;
   fs::path pcap, pcap_zst, mcap;
   std::string printed_config;
-  // MCAP messages the live run left out and counted: on a loaded machine (a sanitizer's) its
-  // compression can fall a pool behind, and the MCAP then lacks the packets of a few frames.
-  std::uint64_t mcap_left_out = 0;
-  // The same for the pcap: packets received that no raw batch was free for (or not written),
-  // counted. Those frames are whole in the live run and have holes in the pcap's replay.
-  std::uint64_t pcap_left_out = 0;
+  // The live run's last health record: what it left out of each recording, counted (left_out).
   json live_health;
+
+  // What the live run left out of `recording` and counted. On a loaded machine (a sanitizer's)
+  // the MCAP's compression can fall a pool behind, and the MCAP then lacks the packets of a few
+  // frames; the writer can run out of raw batches, and the pcap lacks packets (or lost them to
+  // failed writes). Those frames are whole in the live run and have holes in the replay.
+  std::uint64_t left_out(const fs::path& recording) const {
+    if (recording == mcap) {
+      return test::health_counter(live_health, "mcap_messages_not_recorded") +
+             test::health_counter(live_health, "mcap_messages_not_written");
+    }
+    return test::health_counter(live_health, "packets_not_recorded");
+  }
 };
 
 CalibrationRecorded& recorded() {
@@ -131,7 +134,7 @@ void replay_the_three(CalibrationRecorded& r) {
     // compression fall behind on a loaded machine), that replay lacks the frames they were in:
     // its frames are compared, not counted.
     const bool is_mcap = recording == r.mcap;
-    const std::uint64_t left_out = is_mcap ? r.mcap_left_out : r.pcap_left_out;
+    const std::uint64_t left_out = r.left_out(recording);
     const bool all_recorded = left_out == 0;
     INFO("messages or packets the live run left out of it: " << left_out);
     // A pcap holds every datagram the live run received but those it counted as left out (and,
