@@ -22,6 +22,7 @@
 
 #include "bench/child_process.hpp"
 #include "config/config_loader.hpp"
+#include "core/sensors/packet.hpp"
 #include "daemon/live/foxglove_protocol.hpp"
 #include "daemon/live/latest_message.hpp"
 #include "support/test_support.hpp"
@@ -345,13 +346,15 @@ bool names_losses(const std::string& reason) {
 // kernel's or the ring's): a simulated sensor on loopback loses nothing else. `record`: the
 // run's last health record; `lost`: a reason seen during the run named losses, so some packet
 // must have been counted dropped. Each lost packet leaves its channel slots missing, 400 (10
-// blocks x 40 channels) on the simulated Pandar40P.
+// blocks x 40 channels, core/sensors/packet.hpp) on the simulated Pandar40P.
 bool losses_counted(const json& record, bool lost) {
+  constexpr std::uint64_t kSlotsPerPacket = kBlocks * kChannels;
   const std::uint64_t dropped =
       test::health_counter(record, "kernel_drops") + test::health_counter(record, "ring_overruns");
   INFO("points missing " << test::health_counter(record, "points_missing") << ", packets dropped "
                          << dropped);
-  return test::health_counter(record, "points_missing") <= 400 * dropped && (!lost || dropped > 0);
+  return test::health_counter(record, "points_missing") <= kSlotsPerPacket * dropped &&
+         (!lost || dropped > 0);
 }
 
 }  // namespace
