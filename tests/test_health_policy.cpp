@@ -190,6 +190,37 @@ TEST_CASE("Health: silence is no_data, before and after the first packet", "[hea
   CHECK(g.reason == "no packet for 2.5 s");
 }
 
+TEST_CASE("Health: a silence while the receiver is behind is degraded, not no_data",
+          "[health][policy]") {
+  // The receiver has not seen what arrived in the last 2.3 s (its thread starved, a backlog):
+  // the sensor is not blamed. The second's losses and the host's side follow, as after a
+  // silence; what is about the packets does not (none was seen).
+  HealthCounters before, now;
+  now.kernel_drops = 12;
+  now.packets_rejected = 2;
+  HealthGauges g = streaming();
+  g.seconds_since_last_packet = 3.14;
+  g.high_temperature = true;
+  classify_health(now, before, kLast, Silence(true, 2.34), "", g);
+  CHECK(g.state == HealthState::kDegraded);
+  CHECK(g.reason ==
+        "the receiver is 2.3 s behind: no packet seen for 3.1 s, whether the sensor sent is not "
+        "known; 12 kernel drops");
+  g.seconds_since_last_packet = -1;
+  classify_health(now, now, kLast, Silence(true, 1.2), "", g);
+  CHECK(g.reason ==
+        "the receiver is 1.2 s behind: no packet seen yet, whether the sensor sent is not known");
+  // Not silent: the packets speak for themselves, however late the receiver's last look.
+  g.seconds_since_last_packet = 0.2;
+  g.high_temperature = false;
+  classify_health(now, now, kLast, Silence(false, 2.0), "", g);
+  CHECK(g.state == HealthState::kOk);
+  // Receive errors still win.
+  now.receive_errors = 1;
+  classify_health(now, before, kLast, Silence(true, 2.0), "", g);
+  CHECK(g.state == HealthState::kError);
+}
+
 TEST_CASE("Health: a silent second's losses follow the silence in its reason", "[health][policy]") {
   // A writer stalled, then a stop (SIGTERM): the receiver stopped, and the writer, released
   // later, counted what it could not keep in a second that is silent by then. Each loss of

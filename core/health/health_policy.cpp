@@ -72,7 +72,7 @@ void motor_problems(const HealthCounters& c, const HealthCounters& p,
 }  // namespace
 
 void classify_health(const HealthCounters& c, const HealthCounters& p,
-                     const HealthExpectations& expected, bool silent,
+                     const HealthExpectations& expected, Silence silence,
                      std::string_view last_write_error, HealthGauges& g) {
   // The problems are written straight into the reason (cleared, its capacity kept). A failing
   // socket or a silence is decided first: each says only what is true of it (below).
@@ -144,7 +144,24 @@ void classify_health(const HealthCounters& c, const HealthCounters& p,
     host();
     return;
   }
-  if (silent) {
+  if (silence.silent && silence.receiver_behind_seconds > 0) {
+    // The receiver has not seen what the kernel holds: a silence here may be its own, and the
+    // sensor is not blamed for it. What follows a silence follows this too.
+    g.state = HealthState::kDegraded;
+    fmt::format_to(std::back_inserter(g.reason),
+                   "the receiver is {:.1f} s behind: ", silence.receiver_behind_seconds);
+    if (g.seconds_since_last_packet < 0) {
+      g.reason += "no packet seen yet";
+    } else {
+      fmt::format_to(std::back_inserter(g.reason), "no packet seen for {:.1f} s",
+                     g.seconds_since_last_packet);
+    }
+    g.reason += ", whether the sensor sent is not known";
+    losses();
+    host();
+    return;
+  }
+  if (silence.silent) {
     // Silence leads, and the second's losses and the host's side follow it: a silence that a
     // stop or a stalled writer ended, said alone, hid the losses counted in it (the writer's,
     // catching up) from every reader of the reason. What is about the packets or the sensor

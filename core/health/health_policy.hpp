@@ -5,7 +5,10 @@
 // Precedence: error > no_data > degraded > ok.
 //   - error:    receive_errors grew ("3 receive errors: the socket is failing"): not capturing.
 //   - no_data:  no packet yet, or none for longer than the no-data timeout (`silent`):
-//               "no packet received yet" / "no packet for 2.5 s".
+//               "no packet received yet" / "no packet for 2.5 s". Not while the receiver is
+//               behind (Silence below): then degraded, "the receiver is 2.3 s behind: no packet
+//               seen for 3.1 s, whether the sensor sent is not known", and the second's losses
+//               and the host's side, as after a silence.
 //   - degraded: data flows but something grew or looks wrong; every problem is named, joined by
 //               "; " in a fixed order: write errors first (with the last error's text), then
 //               kernel drops, ring overruns, a second sensor on the port ("3600 packets from a
@@ -69,13 +72,26 @@ struct HealthExpectations {
   int inventory_lasers = 0;
 };
 
+// What the writer knows of a silence. `silent`: no packet yet, or none for longer than the
+// no-data timeout. `receiver_behind_seconds` (0: its looks are current): how long ago the moment
+// was up to which the receiver has seen everything the kernel took, when that is further back
+// than it looks. A silence is then the receiver's as much as the sensor's (a receive thread
+// starved of CPU, a backlog it works through): the record says degraded and how far behind,
+// never no_data, which would blame the sensor. Made from a bool where that is all there is.
+struct Silence {
+  bool silent = false;
+  double receiver_behind_seconds = 0;
+  Silence(bool silent_now, double behind_seconds = 0) noexcept
+      : silent(silent_now), receiver_behind_seconds(behind_seconds) {}
+};
+
 // Sets gauges.state and gauges.reason from `now` against `before` (the counters of the previous
 // health record) and the gauges' return_mode, high_temperature, rpm_tail and
-// seconds_since_last_packet (-1: no packet yet). `silent`: no packet yet or none for longer than
-// the no-data timeout. `last_write_error` is quoted when write_errors grew. The reason is
-// rewritten in place: once its capacity has grown to the longest reason, nothing is allocated.
+// seconds_since_last_packet (-1: no packet yet). `silence`: above. `last_write_error` is quoted
+// when write_errors grew. The reason is rewritten in place: once its capacity has grown to the
+// longest reason, nothing is allocated.
 void classify_health(const HealthCounters& now, const HealthCounters& before,
-                     const HealthExpectations& expected, bool silent,
+                     const HealthExpectations& expected, Silence silence,
                      std::string_view last_write_error, HealthGauges& gauges);
 
 }  // namespace pandarcap

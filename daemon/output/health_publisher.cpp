@@ -250,7 +250,7 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   fill_storage(write_rates_, sources.storage, g.storage);
 
   describe_standing_problems(receive, sources.live, g.standing);
-  silent_ = sources.silent;
+  silence_ = Silence(sources.silent, sources.receiver_behind_seconds);
   reclassify();
 }
 
@@ -263,7 +263,7 @@ void HealthPublisher::reclassify() {
       HealthExpectations{options_.expected_return_mode, options_.expected_rpm,
                          options_.max_sensor_clock_offset_seconds, options_.min_hours_left, model_,
                          options_.calibration_channels, options_.inventory_lasers},
-      silent_, accounting_.last_error(), health_.gauges);
+      silence_, accounting_.last_error(), health_.gauges);
   json_text_current_ = false;
 }
 

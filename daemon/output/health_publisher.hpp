@@ -34,6 +34,7 @@
 #include <string>
 
 #include "core/health/health.hpp"
+#include "core/health/health_policy.hpp"
 #include "core/health/storage_rate.hpp"
 #include "daemon/io/file_output.hpp"
 #include "daemon/live/live_handover.hpp"
@@ -61,6 +62,7 @@ struct HealthSources {
   std::uint64_t writer_wakeups;
   double seconds_since_last_packet;         // -1: none yet
   bool silent;                              // no packet yet, or none for the no-data timeout
+  double receiver_behind_seconds;           // 0: the receiver's looks are current (Silence)
   const SensorStatusSample* sensor_status;  // the sensor's latest status over PTC; null: none
   std::uint64_t ptc_requests;
   std::uint64_t ptc_errors;
@@ -142,7 +144,7 @@ class HealthPublisher {
   HealthRoom& space_;
   FileFinisher& finisher_;
   HealthSnapshot health_;
-  bool silent_ = true;  // the last build()'s, for reclassify()
+  Silence silence_{true};  // the last build()'s, for reclassify()
   std::int64_t start_monotonic_ns_ = 0;
   std::int64_t last_tick_ns_ = 0;
   HealthCounters counters_a_second_ago_{};  // for the per-second wake-up rates

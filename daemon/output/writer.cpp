@@ -184,6 +184,7 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
       .writer_wakeups = wakeups_,
       .seconds_since_last_packet = seconds_since_last_packet(now),
       .silent = silent(now),
+      .receiver_behind_seconds = receiver_behind_seconds(now),
       .sensor_status = latest_sensor_status_ ? &*latest_sensor_status_ : nullptr,
       .ptc_requests = sensor_status_.requests.load(std::memory_order_relaxed),
       .ptc_errors = sensor_status_.errors.load(std::memory_order_relaxed),
@@ -277,6 +278,14 @@ bool Writer::silent(std::int64_t now) const noexcept {
   return since < 0 || since > options_.no_data_timeout_seconds;
 }
 
+double Writer::receiver_behind_seconds(std::int64_t now) const noexcept {
+  if (receive_.arrival_looks.load(std::memory_order_relaxed) == 0 || !silent(now)) return 0;
+  const std::int64_t seen_until = receive_.seen_until_monotonic_ns.load(std::memory_order_acquire);
+  const std::int64_t interval = receive_.look_interval_ns.load(std::memory_order_relaxed);
+  const std::int64_t behind = listened_until(now) - seen_until;
+  return behind <= interval + kLookSlackNs ? 0.0 : static_cast<double>(behind) / 1e9;
+}
+
 bool Writer::silence_unconfirmed(std::int64_t now) noexcept {
   // A silence is the sensor's only while the receiver's looks are current: every packet that
   // arrived until a moment no further back than its own interval between looks has been seen
@@ -285,11 +294,9 @@ bool Writer::silence_unconfirmed(std::int64_t now) noexcept {
   // works through a queue that filled (its packets are from before it filled; the kernel
   // dropped the later ones, and their count is noted as an arrival when read). Then the record
   // waits, kSilenceHoldNs at most: past that the receiver itself is behind, and the record goes
-  // out with what is known. A source that makes no looks (a replay) is not waited for.
-  const std::int64_t seen_until = receive_.seen_until_monotonic_ns.load(std::memory_order_acquire);
-  const std::int64_t interval = receive_.look_interval_ns.load(std::memory_order_relaxed);
-  if (receive_.arrival_looks.load(std::memory_order_relaxed) == 0 || !silent(now) ||
-      listened_until(now) - seen_until <= interval + kLookSlackNs) {
+  // out saying so (degraded, Silence in core/health/health_policy.hpp), not no_data. A source
+  // that makes no looks (a replay) is not waited for.
+  if (!(receiver_behind_seconds(now) > 0)) {
     unconfirmed_since_ns_ = 0;
     holding_ = false;
     return false;

@@ -107,6 +107,9 @@ class Writer final : private FinishReceiver {
   // whether that is silence.
   double seconds_since_last_packet(std::int64_t now_monotonic_ns) const noexcept;
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
+  // While silent: how far the moment up to which the receiver has seen everything lies behind
+  // the listening, when further than its looks can explain (seconds; 0: its looks are current).
+  double receiver_behind_seconds(std::int64_t now_monotonic_ns) const noexcept;
   // At each turn of the loop: whether the health waits because it would say no_data and the
   // receiver's looks are not current (a pause of the process, a backlog).
   bool silence_unconfirmed(std::int64_t now_monotonic_ns) noexcept;
