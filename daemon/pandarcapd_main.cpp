@@ -44,6 +44,7 @@
 #include "core/health/health_state_log.hpp"
 #include "core/log_text.hpp"
 #include "core/progress_line.hpp"
+#include "daemon/clocks.hpp"
 #include "daemon/daemon_options.hpp"
 #include "daemon/decode_worker.hpp"
 #include "daemon/live/foxglove_server.hpp"
@@ -425,6 +426,9 @@ int run(const CommandLine& command_line) {
         "pc-sensorstat", {}, [&] { status_poller->run(); }, [&] { status_poller->stop(); });
   }
   bool decoder_started = false;
+  // From now on a live receiver is listening, before its thread's first look: a writer that
+  // finds no look by its first record holds it, and then says the receiver is behind.
+  if (!source->replay()) pipe.receive.listening_since_monotonic_ns.store(monotonic_ns());
   try {
     threads.start(
         "pc-writer",

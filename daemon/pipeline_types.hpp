@@ -169,20 +169,21 @@ struct ReceiveCounters {
   std::atomic<std::uint64_t> wakeups{0};  // returns from the receive thread's wait
   // Live sources: when the newest datagram taken from the kernel arrived (CLOCK_MONOTONIC ns, 0 =
   // none yet; from its kernel timestamp, see arrival_on_monotonic), for the health's last packet:
-  // the receiver sees arrivals as they come, a decoder working through a backlog would not. And
-  // the receiver's looks at the kernel since the start: after a pause of the whole process the
-  // writer says no_data only once one has been made (what waited in the kernel is then known).
+  // the receiver sees arrivals as they come, a decoder working through a backlog would not.
   std::atomic<std::int64_t> last_arrival_monotonic_ns{0};
-  std::atomic<std::uint64_t> arrival_looks{0};
   // Every datagram that arrived before `seen_until` (CLOCK_MONOTONIC ns, 0 = none yet) has been
   // seen by a look, or its arrival noted from the kernel's drop count (a queue that filled holds
   // only what arrived until then). Set at each look that leaves nothing unseen behind it, less
   // what the kernel may still hold unseen (the packet ring's block being filled); the receiver
   // looks again within `look_interval_ns` while it runs. The writer says no_data only while
-  // this is that current (Writer::silence_unconfirmed): after a pause of the process, or a
-  // receiver that fell behind, the newest arrival seen is not the sensor's last packet.
+  // this is that current (Writer::silence_at): after a pause of the process, or a receiver that
+  // fell behind, the newest arrival seen is not the sensor's last packet; the record then waits
+  // a second for a look, and past that says the receiver is behind.
   std::atomic<std::int64_t> seen_until_monotonic_ns{0};
   std::atomic<std::int64_t> look_interval_ns{0};
+  // A live source's start (CLOCK_MONOTONIC ns; 0: a replay, which makes no looks), set before
+  // the writer starts: until the receiver's first look, what it has seen reaches back to here.
+  std::atomic<std::int64_t> listening_since_monotonic_ns{0};
   // When the receiver saw the stop (CLOCK_MONOTONIC ns, 0 = running): it listens no further
   // (a drain takes what the kernel holds), so a silence is measured up to it. A sensor that
   // sent on is not known to have gone quiet because the daemon stopped listening.
@@ -199,12 +200,6 @@ struct ReceiveCounters {
   void note_arrival(std::int64_t monotonic_ns) noexcept {
     if (monotonic_ns > last_arrival_monotonic_ns.load(std::memory_order_relaxed))
       last_arrival_monotonic_ns.store(monotonic_ns, std::memory_order_relaxed);
-  }
-  // After the arrivals a look found are noted: release, so that a writer that sees the look
-  // (acquire) sees them.
-  void count_arrival_look() noexcept {
-    arrival_looks.store(arrival_looks.load(std::memory_order_relaxed) + 1,
-                        std::memory_order_release);
   }
   // A replay's damage (daemon/source/replay_source.hpp), for the health: a replay that met any
   // says so in every record from then on, the last one included. Records whose headers are

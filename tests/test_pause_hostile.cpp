@@ -95,21 +95,7 @@ PauseResult run_pause(const PauseCase& c) {
   test::ScratchDir dir("pause-hostile");
   const std::uint16_t port = harness::free_udp_port();
   Daemon daemon(dir, veth, port, c.toml, c.receiver);
-  std::atomic<bool> sending{true};
-  std::atomic<std::int64_t> silent_from_ns{0};
-  bench::GeneratorResult sent;
-  std::thread sender([&] {
-    test::FarNamespace far(veth.ns());
-    bench::GeneratorOptions traffic;
-    traffic.destination_ip = veth.near_ip();
-    traffic.port = port;
-    traffic.rate_pps = 3600;
-    traffic.seconds = c.sensor_seconds;
-    traffic.batch = c.batch;
-    sent = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}), traffic);
-    silent_from_ns = realtime_now_ns();
-    sending = false;
-  });
+  test::FarSensor sensor(veth, port, c.sensor_seconds, c.batch);
   const auto received = [&] {
     const auto records = test::health_records(daemon.out);
     return records.empty() ? 0 : test::health_counter(records.back(), "datagrams_received");
@@ -125,7 +111,7 @@ PauseResult run_pause(const PauseCase& c) {
   const std::size_t records_before = test::health_records(daemon.out).size();
   daemon.process->signal(SIGSTOP);
   if (c.resume_after_sensor_stop) {
-    REQUIRE(wait_until([&] { return !sending.load(); }, 30s));
+    REQUIRE(wait_until([&] { return !sensor.sending(); }, 30s));
     std::this_thread::sleep_for(*c.resume_after_sensor_stop);  // the fault: its length
   } else {
     const auto resume_at = std::chrono::steady_clock::now() + c.pause;  // the fault: its length
@@ -133,7 +119,7 @@ PauseResult run_pause(const PauseCase& c) {
   }
   if (c.sigterm_in_pause) daemon.process->signal(SIGTERM);
   PauseResult r;
-  r.sending_at_resume = sending.load();
+  r.sending_at_resume = sensor.sending();
   daemon.process->signal(SIGCONT);
   r.resumed_ns = realtime_now_ns();
   if (c.sigterm_in_pause) {
@@ -144,9 +130,9 @@ PauseResult run_pause(const PauseCase& c) {
     daemon.process->signal(SIGTERM);
     REQUIRE(daemon.process->wait_exit(30s) == 0);
   }
-  r.sending_at_end = sending.load();
-  sender.join();
-  r.silent_from_ns = silent_from_ns.load();
+  r.sending_at_end = sensor.sending();
+  sensor.join();
+  r.silent_from_ns = sensor.silent_from_ns();
   const auto records = test::health_records(daemon.out);
   r.after.assign(
       records.begin() + static_cast<std::ptrdiff_t>(std::min(records_before, records.size())),
@@ -161,7 +147,7 @@ PauseResult run_pause(const PauseCase& c) {
   }
   r.log = daemon.process->log();
   r.arrivals = recorded_arrivals(daemon.out);
-  r.kept_pace = sent.achieved_pps >= 0.9 * 3600;
+  r.kept_pace = sensor.sent().achieved_pps >= 0.9 * 3600;
   r.timeout_seconds = c.timeout_seconds;
   return r;
 }

@@ -2,14 +2,15 @@
 // writer thread hands it the counters of now and of the previous health record, the gauges and
 // what the operator expects; nothing here reads a clock or a file.
 //
-// Precedence: error > no_data > degraded > ok.
+// Precedence: error > no_data > degraded > ok (a silence the receiver is behind on: degraded).
 //   - error:    receive_errors grew ("3 receive errors: the socket is failing"): not capturing.
 //   - no_data:  no packet yet, or none for longer than the no-data timeout (`silent`):
 //               "no packet received yet" / "no packet for 2.5 s". Not while the receiver is
 //               behind (Silence below): then degraded, "the receiver is 2.3 s behind: no packet
 //               seen for 3.1 s, whether the sensor sent is not known", and the second's losses
 //               and the host's side, as after a silence.
-//   - degraded: data flows but something grew or looks wrong; every problem is named, joined by
+//   - degraded: data flows but something grew or looks wrong (or a silence the receiver cannot
+//               vouch for, above); every problem is named, joined by
 //               "; " in a fixed order: write errors first (with the last error's text), then
 //               kernel drops, ring overruns, a second sensor on the port ("3600 packets from a
 //               second sensor at 127.0.0.2:2368 (the sensor is 127.0.0.1:2368): one sensor per

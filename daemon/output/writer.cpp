@@ -173,6 +173,7 @@ void Writer::tend_floor(std::int64_t now) noexcept {
 }
 
 HealthSources Writer::sources(std::int64_t now) const noexcept {
+  const Silence silence = silence_at(now);
   return HealthSources{
       .receive = receive_,
       .decode = decode_,
@@ -183,8 +184,8 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
       .decode_wakeups = live_.wakeups.load(std::memory_order_relaxed),
       .writer_wakeups = wakeups_,
       .seconds_since_last_packet = seconds_since_last_packet(now),
-      .silent = silent(now),
-      .receiver_behind_seconds = receiver_behind_seconds(now),
+      .silent = silence.silent,
+      .receiver_behind_seconds = silence.receiver_behind_seconds,
       .sensor_status = latest_sensor_status_ ? &*latest_sensor_status_ : nullptr,
       .ptc_requests = sensor_status_.requests.load(std::memory_order_relaxed),
       .ptc_errors = sensor_status_.errors.load(std::memory_order_relaxed),
@@ -219,8 +220,7 @@ void Writer::finished(const FinishJob& job) {
   }
 }
 
-void Writer::write_health() {
-  const std::int64_t now = monotonic_ns();
+void Writer::write_health(std::int64_t now) {
   pcap_.flush();  // the recordings on disk are at most a second behind
   if (options_.mcap) mcap_.flush();
   // ... and on the disk at most output.sync_interval_seconds behind (the finisher syncs them).
@@ -278,12 +278,19 @@ bool Writer::silent(std::int64_t now) const noexcept {
   return since < 0 || since > options_.no_data_timeout_seconds;
 }
 
-double Writer::receiver_behind_seconds(std::int64_t now) const noexcept {
-  if (receive_.arrival_looks.load(std::memory_order_relaxed) == 0 || !silent(now)) return 0;
-  const std::int64_t seen_until = receive_.seen_until_monotonic_ns.load(std::memory_order_acquire);
+Silence Writer::silence_at(std::int64_t now) const noexcept {
+  // seen_until first (acquire): the arrivals a look noted before it are read with it, so a
+  // look found current is never paired with an older last packet.
+  std::int64_t seen_until = receive_.seen_until_monotonic_ns.load(std::memory_order_acquire);
   const std::int64_t interval = receive_.look_interval_ns.load(std::memory_order_relaxed);
+  const bool is_silent = silent(now);
+  // Before the receiver's first look that left nothing unseen: since it began to listen. A
+  // replay makes no looks, and its silence is the decoder's own.
+  if (seen_until == 0)
+    seen_until = receive_.listening_since_monotonic_ns.load(std::memory_order_relaxed);
+  if (!is_silent || seen_until == 0) return Silence(is_silent);
   const std::int64_t behind = listened_until(now) - seen_until;
-  return behind <= interval + kLookSlackNs ? 0.0 : static_cast<double>(behind) / 1e9;
+  return Silence(true, behind <= interval + kLookSlackNs ? 0.0 : static_cast<double>(behind) / 1e9);
 }
 
 bool Writer::silence_unconfirmed(std::int64_t now) noexcept {
@@ -296,7 +303,7 @@ bool Writer::silence_unconfirmed(std::int64_t now) noexcept {
   // waits, kSilenceHoldNs at most: past that the receiver itself is behind, and the record goes
   // out saying so (degraded, Silence in core/health/health_policy.hpp), not no_data. A source
   // that makes no looks (a replay) is not waited for.
-  if (!(receiver_behind_seconds(now) > 0)) {
+  if (!(silence_at(now).receiver_behind_seconds > 0)) {
     unconfirmed_since_ns_ = 0;
     holding_ = false;
     return false;
@@ -384,7 +391,7 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
     const bool silence_changed = silent(now) != reported_silent_;
     if (!held && (now >= next_tick || silence_changed)) {
       if (!options_.test_stall_file.empty()) stall_while_test_file_exists();
-      write_health();
+      write_health(now);
       StatusLine status;
       const HealthSnapshot& h = health_.snapshot();
       const HealthCounters& c = h.counters;
@@ -413,7 +420,8 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
   // removed while it ran are counted as lost.
   pcap_.verify_on_disk();
   if (options_.mcap) mcap_.drain();  // every message handed over counted in the final record
-  write_health();  // the final record goes into the MCAP file too, before it is closed
+  // The final record goes into the MCAP file too, before it is closed.
+  write_health(monotonic_ns());
   mcap_.close();
   finisher_.drain();  // the last MCAP file and the final .prom synced and in place
   mcap_.verify_on_disk();

@@ -88,8 +88,9 @@ class Writer final : private FinishReceiver {
   const HealthSnapshot& final_health() const noexcept { return health_.snapshot(); }
 
  private:
-  // The health record now: built from everything's counters, published.
-  void write_health();
+  // The health record at `now` (the moment the loop decided on it): built from everything's
+  // counters, published.
+  void write_health(std::int64_t now_monotonic_ns);
   HealthSources sources(std::int64_t now_monotonic_ns) const noexcept;
   // The floor held and the free space asked, and the upload backlog read on (once a second, and
   // at start-up).
@@ -107,9 +108,10 @@ class Writer final : private FinishReceiver {
   // whether that is silence.
   double seconds_since_last_packet(std::int64_t now_monotonic_ns) const noexcept;
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
-  // While silent: how far the moment up to which the receiver has seen everything lies behind
-  // the listening, when further than its looks can explain (seconds; 0: its looks are current).
-  double receiver_behind_seconds(std::int64_t now_monotonic_ns) const noexcept;
+  // Whether silent, and then how far the moment up to which the receiver has seen everything
+  // lies behind the listening, when further than its looks can explain (0: they are current).
+  // One reading, for the hold and the record alike.
+  Silence silence_at(std::int64_t now_monotonic_ns) const noexcept;
   // At each turn of the loop: whether the health waits because it would say no_data and the
   // receiver's looks are not current (a pause of the process, a backlog).
   bool silence_unconfirmed(std::int64_t now_monotonic_ns) noexcept;

@@ -55,7 +55,6 @@ void PacketRingReceiver::note_arrivals(ReceiveCounters& counters) noexcept {
     const std::int64_t retire_ns = 2'000'000LL * retire_ms_;
     counters.note_seen_until(before_ns - retire_ns, 100'000'000 + retire_ns);
   }
-  counters.count_arrival_look();
 }
 
 std::int64_t PacketRingReceiver::newest_sensor_arrival(

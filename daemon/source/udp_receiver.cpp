@@ -291,12 +291,12 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
   const int received =
       ::recvmmsg(fd_, batch.headers.data(), static_cast<unsigned>(n), flags | MSG_TRUNC, nullptr);
   if (received <= 0) {
-    counters.count_arrival_look();
     if (received < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
       ReceiveCounters::add(counters.receive_errors, 1);
     } else if (received == 0 || errno == EAGAIN || errno == EWOULDBLOCK) {
       empty_at_ns_ = before_ns;
-      counters.note_seen_until(before_ns, look_interval_ns());
+      // Empty until the call gave up (its 100 ms timeout, when it waits): all seen until then.
+      counters.note_seen_until(monotonic_ns(), look_interval_ns());
     }
     return {0, n, overrun};
   }
@@ -361,7 +361,6 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
     }
     counters.note_seen_until(before_ns, look_interval_ns());
   }
-  counters.count_arrival_look();
   ReceiveCounters::add(counters.datagrams, static_cast<std::uint64_t>(received));
   ReceiveCounters::add(counters.bytes, bytes);
   if (overrun) {
@@ -433,7 +432,11 @@ void UdpReceiver::run_per_datagram(PacketRing& ring, const std::atomic<bool>& st
     if (ring.size_approx() == ring.capacity()) {
       // Ring full. Wait (briefly) for a datagram, then drop what is waiting and count it.
       pollfd pfd{fd_, POLLIN, 0};
-      if (::poll(&pfd, 1, draining ? 0 : 1) <= 0) {
+      const int ready = ::poll(&pfd, 1, draining ? 0 : 1);
+      // Nothing came while it waited: the socket is seen empty (the decoder is behind, not this
+      // thread), and a silence then is the sensor's.
+      if (ready == 0) counters.note_seen_until(monotonic_ns(), look_interval_ns());
+      if (ready <= 0) {
         if (draining) break;
         continue;
       }

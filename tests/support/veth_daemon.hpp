@@ -5,6 +5,7 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cstdint>
@@ -13,9 +14,11 @@
 #include <fstream>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "bench/child_process.hpp"
+#include "bench/udp_traffic.hpp"
 #include "support/test_support.hpp"
 #include "support/veth_pair.hpp"
 
@@ -79,6 +82,45 @@ struct VethDaemon {
   }
   std::filesystem::path out;
   std::optional<harness::ChildProcess> process;
+};
+
+// The simulated sensor at the far end of `veth`, sending to the near end's `port` at 3600/s
+// for `seconds`, `batch` datagrams a sendmmsg (1: evenly, as a sensor sends), on a thread of its
+// own from the far end's namespace. sending() until it stops; then silent_from_ns() (Unix ns)
+// is its last packet's moment, and after join() sent() what it sent.
+class FarSensor {
+ public:
+  FarSensor(const VethPair& veth, std::uint16_t port, double seconds, int batch)
+      : thread_([this, &veth, port, seconds, batch] {
+          FarNamespace far(veth.ns());
+          bench::GeneratorOptions traffic;
+          traffic.destination_ip = veth.near_ip();
+          traffic.port = port;
+          traffic.rate_pps = 3600;
+          traffic.seconds = seconds;
+          traffic.batch = batch;
+          sent_ = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}),
+                                       traffic);
+          silent_from_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                std::chrono::system_clock::now().time_since_epoch())
+                                .count();
+          sending_ = false;
+        }) {}
+  ~FarSensor() { join(); }
+  FarSensor(const FarSensor&) = delete;
+  FarSensor& operator=(const FarSensor&) = delete;
+  void join() {
+    if (thread_.joinable()) thread_.join();
+  }
+  bool sending() const noexcept { return sending_.load(); }
+  std::int64_t silent_from_ns() const noexcept { return silent_from_ns_.load(); }
+  const bench::GeneratorResult& sent() const noexcept { return sent_; }
+
+ private:
+  std::atomic<bool> sending_{true};
+  std::atomic<std::int64_t> silent_from_ns_{0};
+  bench::GeneratorResult sent_;
+  std::thread thread_;  // last: it starts once the rest is made
 };
 
 }  // namespace pandarcap::test
