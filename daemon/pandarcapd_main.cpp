@@ -428,7 +428,7 @@ int run(const CommandLine& command_line) {
   bool decoder_started = false;
   // From now on a live receiver is listening, before its thread's first look: a writer that
   // finds no look by its first record holds it, and then says the receiver is behind.
-  if (!source->replay()) pipe.receive.listening_since_monotonic_ns.store(monotonic_ns());
+  if (!source->replayed()) pipe.receive.listening_since_monotonic_ns.store(monotonic_ns());
   try {
     threads.start(
         "pc-writer",
@@ -502,6 +502,8 @@ int run(const CommandLine& command_line) {
           [&] { stop_simulator.store(true, std::memory_order_relaxed); });
     }
   } catch (const std::system_error& error) {
+    // No receiver may be listening: the final record is not to say it fell behind.
+    pipe.receive.note_stop(monotonic_ns());
     // The threads that did start end when their input does: the decoder's is the source's end,
     // the writer's the decoder's. One that never started cannot give it, so it is given here
     // (the writer's queue has no other producer until the decoder runs), and stop_all() joins.

@@ -132,6 +132,7 @@ PauseResult run_pause(const PauseCase& c) {
   }
   r.sending_at_end = sensor.sending();
   sensor.join();
+  REQUIRE(sensor.error().empty());
   r.silent_from_ns = sensor.silent_from_ns();
   const auto records = test::health_records(daemon.out);
   r.after.assign(

@@ -138,6 +138,7 @@ void receiver_stalls(const char* receiver, const char* thread) {
   const Stall sending_stall = hold_thread(daemon, thread, 3000ms);
   const bool sent_through = sensor.sending();
   sensor.join();
+  REQUIRE(sensor.error().empty());
   // The backlog taken (or dropped, counted) before the sensor's silence is stalled on.
   REQUIRE(wait_until(
       [&] {

@@ -313,13 +313,14 @@ bool Writer::silence_unconfirmed(std::int64_t now) noexcept {
   return holding_;
 }
 
-void Writer::stall_while_test_file_exists() const {
-  if (::access(options_.test_stall_file.c_str(), F_OK) != 0) return;
+bool Writer::stall_while_test_file_exists() const {
+  if (::access(options_.test_stall_file.c_str(), F_OK) != 0) return false;
   spdlog::warn("test hook: writer stalled while {} exists", options_.test_stall_file);
   const timespec pause{0, 20'000'000};
   while (::access(options_.test_stall_file.c_str(), F_OK) == 0)
     ::nanosleep(&pause, nullptr);
   spdlog::warn("test hook: writer resumed");
+  return true;
 }
 
 void Writer::run(std::atomic<std::uint64_t>& heartbeat,
@@ -390,7 +391,8 @@ void Writer::run(std::atomic<std::uint64_t>& heartbeat,
     // Packets stopped or started again since the last health: say so now, not at the next tick.
     const bool silence_changed = silent(now) != reported_silent_;
     if (!held && (now >= next_tick || silence_changed)) {
-      if (!options_.test_stall_file.empty()) stall_while_test_file_exists();
+      // A stalled writer's record is decided again after the stall, as after a slow write.
+      if (!options_.test_stall_file.empty() && stall_while_test_file_exists()) continue;
       write_health(now);
       StatusLine status;
       const HealthSnapshot& h = health_.snapshot();

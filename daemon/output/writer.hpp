@@ -101,7 +101,8 @@ class Writer final : private FinishReceiver {
   void log_fragments(std::int64_t now_monotonic_ns);
   // A finished job back from the finisher, to the part whose file it was.
   void finished(const FinishJob& job) override;
-  void stall_while_test_file_exists() const;
+  // Whether it stalled: the loop then decides again, at a later moment.
+  bool stall_while_test_file_exists() const;
   // `now`, or the moment the receiver saw a stop if that was earlier: it listened no longer.
   std::int64_t listened_until(std::int64_t now_monotonic_ns) const noexcept;
   // Seconds since the decoder's last packet (-1: none yet), until the listening ended, and
@@ -110,7 +111,7 @@ class Writer final : private FinishReceiver {
   bool silent(std::int64_t now_monotonic_ns) const noexcept;
   // Whether silent, and then how far the moment up to which the receiver has seen everything
   // lies behind the listening, when further than its looks can explain (0: they are current).
-  // One reading, for the hold and the record alike.
+  // The hold and the record each read it at the one moment the loop decided on.
   Silence silence_at(std::int64_t now_monotonic_ns) const noexcept;
   // At each turn of the loop: whether the health waits because it would say no_data and the
   // receiver's looks are not current (a pause of the process, a backlog).

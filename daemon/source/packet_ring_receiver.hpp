@@ -151,7 +151,7 @@ class PacketRingReceiver {
   // Notes in `counters` when the sensor's newest packet of the blocks handed over since the
   // last call arrived (the health's last packet; receive() calls it each turn, and a reader that
   // waits for its consumer meanwhile should too), how far that is complete (seen_until: not
-  // while every block is handed over, when the kernel drops what arrives), and counts the look.
+  // while every block is handed over, when the kernel drops what arrives).
   void note_arrivals(ReceiveCounters& counters) noexcept;
 
  private:

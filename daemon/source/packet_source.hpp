@@ -36,7 +36,6 @@ class PacketSource {
 
   const char* thread_name() const noexcept { return replay_ ? "pc-replay" : "pc-receive"; }
   bool simulated() const noexcept { return simulator_ != nullptr; }
-  bool replay() const noexcept { return replay_ != nullptr; }
 
   // The source thread (not for read_by_decoder(): that source ends at once, with an error
   // logged): receives (or replays) into `ring` until `stop`, or the end of the file; then sets

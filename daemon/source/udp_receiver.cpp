@@ -295,7 +295,9 @@ UdpReceiver::Received UdpReceiver::receive_batch(PacketRing& ring, int flags,
       ReceiveCounters::add(counters.receive_errors, 1);
     } else if (received == 0 || errno == EAGAIN || errno == EWOULDBLOCK) {
       empty_at_ns_ = before_ns;
-      // Empty until the call gave up (its 100 ms timeout, when it waits): all seen until then.
+      // Empty until the call gave up (its 100 ms timeout, when it waits): all seen until it
+      // returned, which the clock read next stands for (a datagram in between is taken at the
+      // next look; the record's hold covers a look that is late).
       counters.note_seen_until(monotonic_ns(), look_interval_ns());
     }
     return {0, n, overrun};

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -92,15 +93,21 @@ class FarSensor {
  public:
   FarSensor(const VethPair& veth, std::uint16_t port, double seconds, int batch)
       : thread_([this, &veth, port, seconds, batch] {
-          FarNamespace far(veth.ns());
-          bench::GeneratorOptions traffic;
-          traffic.destination_ip = veth.near_ip();
-          traffic.port = port;
-          traffic.rate_pps = 3600;
-          traffic.seconds = seconds;
-          traffic.batch = batch;
-          sent_ = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}),
-                                       traffic);
+          // What fails here (the namespace, the generator) is said by error(), not thrown out
+          // of the thread, which would end the test binary without a report.
+          try {
+            FarNamespace far(veth.ns());
+            bench::GeneratorOptions traffic;
+            traffic.destination_ip = veth.near_ip();
+            traffic.port = port;
+            traffic.rate_pps = 3600;
+            traffic.seconds = seconds;
+            traffic.batch = batch;
+            sent_ = bench::run_generator(bench::TrafficSource::synthetic(SyntheticSensorConfig{}),
+                                         traffic);
+          } catch (const std::exception& e) {
+            error_ = e.what();
+          }
           silent_from_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(
                                 std::chrono::system_clock::now().time_since_epoch())
                                 .count();
@@ -115,11 +122,13 @@ class FarSensor {
   bool sending() const noexcept { return sending_.load(); }
   std::int64_t silent_from_ns() const noexcept { return silent_from_ns_.load(); }
   const bench::GeneratorResult& sent() const noexcept { return sent_; }
+  const std::string& error() const noexcept { return error_; }  // after join(): "" if it sent
 
  private:
   std::atomic<bool> sending_{true};
   std::atomic<std::int64_t> silent_from_ns_{0};
   bench::GeneratorResult sent_;
+  std::string error_;
   std::thread thread_;  // last: it starts once the rest is made
 };
 
