@@ -25,6 +25,7 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
+#include "daemon/clocks.hpp"
 #include "support/test_support.hpp"
 #include "support/veth_daemon.hpp"
 #include "support/veth_pair.hpp"
@@ -35,12 +36,6 @@ using pandarcap::harness::wait_until;
 
 namespace pandarcap {
 namespace {
-
-std::int64_t stall_now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
 
 // The thread of `pid` named `name` (/proc/PID/task/TID/comm), or 0.
 pid_t thread_named(int pid, const std::string& name) {
@@ -91,9 +86,9 @@ Stall hold_thread(const test::VethDaemon& daemon, const std::string& thread,
     ThreadHeld held(tid);
     INFO("ptrace of " << thread << " (" << tid << "): " << std::strerror(errno));
     REQUIRE(held.held());
-    s.from_ns = stall_now_ns();
+    s.from_ns = realtime_ns();
     std::this_thread::sleep_for(length);  // the fault: its length
-    s.to_ns = stall_now_ns();
+    s.to_ns = realtime_ns();
   }
   return s;
 }

@@ -250,7 +250,7 @@ void HealthPublisher::build(const HealthSources& sources, std::int64_t now) {
   fill_storage(write_rates_, sources.storage, g.storage);
 
   describe_standing_problems(receive, sources.live, g.standing);
-  silence_ = Silence(sources.silent, sources.receiver_behind_seconds);
+  silence_ = sources.silence;
   reclassify();
 }
 

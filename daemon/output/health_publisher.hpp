@@ -61,8 +61,7 @@ struct HealthSources {
   std::uint64_t decode_wakeups;  // DecodeLive's, read at this tick
   std::uint64_t writer_wakeups;
   double seconds_since_last_packet;         // -1: none yet
-  bool silent;                              // no packet yet, or none for the no-data timeout
-  double receiver_behind_seconds;           // 0: the receiver's looks are current (Silence)
+  Silence silence;                          // no packet for the timeout; the receiver's lag
   const SensorStatusSample* sensor_status;  // the sensor's latest status over PTC; null: none
   std::uint64_t ptc_requests;
   std::uint64_t ptc_errors;

@@ -173,7 +173,6 @@ void Writer::tend_floor(std::int64_t now) noexcept {
 }
 
 HealthSources Writer::sources(std::int64_t now) const noexcept {
-  const Silence silence = silence_at(now);
   return HealthSources{
       .receive = receive_,
       .decode = decode_,
@@ -184,8 +183,7 @@ HealthSources Writer::sources(std::int64_t now) const noexcept {
       .decode_wakeups = live_.wakeups.load(std::memory_order_relaxed),
       .writer_wakeups = wakeups_,
       .seconds_since_last_packet = seconds_since_last_packet(now),
-      .silent = silence.silent,
-      .receiver_behind_seconds = silence.receiver_behind_seconds,
+      .silence = silence_at(now),
       .sensor_status = latest_sensor_status_ ? &*latest_sensor_status_ : nullptr,
       .ptc_requests = sensor_status_.requests.load(std::memory_order_relaxed),
       .ptc_errors = sensor_status_.errors.load(std::memory_order_relaxed),

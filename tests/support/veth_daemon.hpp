@@ -20,6 +20,7 @@
 
 #include "bench/child_process.hpp"
 #include "bench/udp_traffic.hpp"
+#include "daemon/clocks.hpp"
 #include "support/test_support.hpp"
 #include "support/veth_pair.hpp"
 
@@ -108,9 +109,7 @@ class FarSensor {
           } catch (const std::exception& e) {
             error_ = e.what();
           }
-          silent_from_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                std::chrono::system_clock::now().time_since_epoch())
-                                .count();
+          silent_from_ns_ = realtime_ns();
           sending_ = false;
         }) {}
   ~FarSensor() { join(); }
